@@ -1,0 +1,39 @@
+//! The `servo` command-line tool. One file per subcommand in [`cmd`], each a `clap::Parser`
+//! struct with `run(self) -> anyhow::Result<()>`.
+
+pub mod cmd;
+pub mod io;
+pub mod model_file;
+pub mod plot;
+
+use clap::Parser;
+
+/// servo: from datasheet to a tuned, identified and understood DC-servomotor position loop.
+#[derive(Debug, Parser)]
+#[command(name = "servo", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: cmd::Command,
+}
+
+/// Parses `args` and runs the command; errors are printed with their context chain.
+pub fn main_with_args<I, T>(args: I) -> std::process::ExitCode
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let cli = match Cli::try_parse_from(args) {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() { std::process::ExitCode::from(2) } else { std::process::ExitCode::SUCCESS };
+        }
+    };
+    match cli.command.run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

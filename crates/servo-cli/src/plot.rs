@@ -1,0 +1,110 @@
+//! Small SVG charts (plotters, SVG backend, no system fonts needed).
+
+use anyhow::anyhow;
+use plotters::prelude::*;
+
+/// One line of a chart.
+pub struct Series<'a> {
+    pub label: &'a str,
+    pub x: &'a [f64],
+    pub y: &'a [f64],
+}
+
+/// Options of a line chart.
+pub struct Chart<'a> {
+    pub title: &'a str,
+    pub x_label: &'a str,
+    pub y_label: &'a str,
+    /// Logarithmic x axis (Bode plots).
+    pub log_x: bool,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Default for Chart<'_> {
+    fn default() -> Self {
+        Chart { title: "", x_label: "", y_label: "", log_x: false, width: 900, height: 400 }
+    }
+}
+
+const COLORS: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(127, 127, 127),
+];
+
+fn bounds(series: &[Series], log_x: bool) -> ((f64, f64), (f64, f64)) {
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    for s in series {
+        for (&x, &y) in s.x.iter().zip(s.y) {
+            if !x.is_finite() || !y.is_finite() || (log_x && x <= 0.0) {
+                continue;
+            }
+            x0 = x0.min(x);
+            x1 = x1.max(x);
+            y0 = y0.min(y);
+            y1 = y1.max(y);
+        }
+    }
+    if !x0.is_finite() {
+        return ((0.0, 1.0), (0.0, 1.0));
+    }
+    if x1 <= x0 {
+        x1 = x0 + 1.0;
+    }
+    let pad = if y1 > y0 { 0.05 * (y1 - y0) } else { 1.0 };
+    ((x0, x1), (y0 - pad, y1 + pad))
+}
+
+/// Renders a line chart to an SVG string.
+pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (chart.width, chart.height)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| anyhow!("plot: {e}"))?;
+        let ((x0, x1), (y0, y1)) = bounds(series, chart.log_x);
+        let mut builder = ChartBuilder::on(&root);
+        builder.caption(chart.title, ("sans-serif", 16)).margin(10).x_label_area_size(35).y_label_area_size(60);
+        macro_rules! draw {
+            ($ctx:expr) => {{
+                let mut ctx = $ctx;
+                ctx.configure_mesh()
+                    .x_desc(chart.x_label)
+                    .y_desc(chart.y_label)
+                    .draw()
+                    .map_err(|e| anyhow!("plot: {e}"))?;
+                for (i, s) in series.iter().enumerate() {
+                    let color = COLORS[i % COLORS.len()];
+                    let pts = s.x.iter().zip(s.y).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(&x, &y)| (x, y));
+                    ctx.draw_series(LineSeries::new(pts, color.stroke_width(1)))
+                        .map_err(|e| anyhow!("plot: {e}"))?
+                        .label(s.label)
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], color));
+                }
+                if series.len() > 1 {
+                    ctx.configure_series_labels()
+                        .background_style(WHITE.mix(0.8))
+                        .border_style(BLACK)
+                        .draw()
+                        .map_err(|e| anyhow!("plot: {e}"))?;
+                }
+            }};
+        }
+        if chart.log_x {
+            draw!(builder.build_cartesian_2d((x0..x1).log_scale(), y0..y1).map_err(|e| anyhow!("plot: {e}"))?);
+        } else {
+            draw!(builder.build_cartesian_2d(x0..x1, y0..y1).map_err(|e| anyhow!("plot: {e}"))?);
+        }
+        root.present().map_err(|e| anyhow!("plot: {e}"))?;
+    }
+    Ok(svg)
+}
+
+/// Renders a line chart to an SVG file.
+pub fn line_chart(path: &std::path::Path, chart: &Chart, series: &[Series]) -> anyhow::Result<()> {
+    let svg = line_chart_svg(chart, series)?;
+    std::fs::write(path, svg).map_err(|e| anyhow!("writing plot {}: {e}", path.display()))
+}

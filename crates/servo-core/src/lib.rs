@@ -1,0 +1,29 @@
+//! servo-core: the physics and the algorithms of the servo toolchain.
+//!
+//! * [`params`]: the gearmotor parameters of the handout's Table 2 and the derived quantities
+//!   (eqs. 10, 22, 30).
+//! * [`effects`]: the effect catalogue, the one definition of every physical mechanism that the
+//!   simulator, the model fit and the diagnosis use.
+//! * [`plant`]: a parameter set together with its active effects: the model of one gearmotor.
+//! * [`sim`]: integration of the plant with its effects (truth for the simulator, model for
+//!   `compare`).
+//!
+//! The crate is `no_std` without the default `std` feature; modules that need a heap are behind
+//! the `alloc` feature. Units are SI unless a name says otherwise; "motor side" and "load side"
+//! are as in the handout (omega_l = omega_m / N).
+#![cfg_attr(not(feature = "std"), no_std)]
+
+#[cfg(feature = "alloc")]
+extern crate alloc;
+
+pub mod effects;
+pub mod math;
+pub mod params;
+pub mod plant;
+#[cfg(feature = "alloc")]
+pub mod record;
+pub mod sim;
+
+pub use effects::{Effect, EffectKind, Effects};
+pub use params::{ParamError, PlantParams};
+pub use plant::Plant;

@@ -1,0 +1,84 @@
+//! Scalar maths that works with and without `std` (libm underneath).
+//!
+//! Core code calls these instead of the inherent `f64` methods, which do not exist in `no_std`.
+
+#[inline]
+pub fn sqrt(x: f64) -> f64 {
+    libm::sqrt(x)
+}
+#[inline]
+pub fn sin(x: f64) -> f64 {
+    libm::sin(x)
+}
+#[inline]
+pub fn cos(x: f64) -> f64 {
+    libm::cos(x)
+}
+#[inline]
+pub fn tan(x: f64) -> f64 {
+    libm::tan(x)
+}
+#[inline]
+pub fn atan(x: f64) -> f64 {
+    libm::atan(x)
+}
+#[inline]
+pub fn atan2(y: f64, x: f64) -> f64 {
+    libm::atan2(y, x)
+}
+#[inline]
+pub fn exp(x: f64) -> f64 {
+    libm::exp(x)
+}
+#[inline]
+pub fn ln(x: f64) -> f64 {
+    libm::log(x)
+}
+#[inline]
+pub fn log10(x: f64) -> f64 {
+    libm::log10(x)
+}
+#[inline]
+pub fn pow(x: f64, y: f64) -> f64 {
+    libm::pow(x, y)
+}
+#[inline]
+pub fn tanh(x: f64) -> f64 {
+    libm::tanh(x)
+}
+#[inline]
+pub fn floor(x: f64) -> f64 {
+    libm::floor(x)
+}
+#[inline]
+pub fn round(x: f64) -> f64 {
+    libm::round(x)
+}
+#[inline]
+pub fn hypot(x: f64, y: f64) -> f64 {
+    libm::hypot(x, y)
+}
+/// Sign with sign(0) = 0 (the handout's sign function).
+#[inline]
+pub fn sign(x: f64) -> f64 {
+    if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
+}
+/// Remainder of `x / m` in [0, m).
+#[inline]
+pub fn rem_euclid(x: f64, m: f64) -> f64 {
+    let r = libm::fmod(x, m);
+    if r < 0.0 {
+        r + m
+    } else {
+        r
+    }
+}
+pub use core::f64::consts::PI;
+/// 2 pi.
+pub const TAU: f64 = core::f64::consts::TAU;

@@ -1,0 +1,69 @@
+//! A measured or simulated record: sampled signals on a common time base.
+//!
+//! Log convention (servo's own logs and the simulator): row k holds the measurements taken at
+//! `time_s[k]` and the voltage `u_v[k]` applied from then until row k+1. Measurements therefore lag
+//! the input by one sample.
+
+use alloc::string::String;
+use alloc::vec::Vec;
+
+/// Sampled signals, SI units. Every present signal has the length of `time_s`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Record {
+    /// Where it came from (file path or description), for messages and provenance.
+    pub source: String,
+    /// Sample times [s], strictly increasing.
+    pub time_s: Vec<f64>,
+    /// Driver input voltage u [V] (before the driver gain k_drv), applied from this row to the next.
+    pub u_v: Option<Vec<f64>>,
+    /// Load angle theta_l [rad].
+    pub theta_l_rad: Option<Vec<f64>>,
+    /// Motor angle theta_m [rad].
+    pub theta_m_rad: Option<Vec<f64>>,
+    /// Load speed omega_l [rad/s].
+    pub omega_l_rad_s: Option<Vec<f64>>,
+    /// Motor speed omega_m [rad/s].
+    pub omega_m_rad_s: Option<Vec<f64>>,
+    /// Armature current i_a [A].
+    pub i_a_a: Option<Vec<f64>>,
+    /// Position reference [rad] at the load.
+    pub ref_rad: Option<Vec<f64>>,
+}
+
+impl Record {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.time_s.len()
+    }
+    /// True when there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.time_s.is_empty()
+    }
+    /// Median sample period [s] (NaN with fewer than two samples).
+    pub fn sample_period_s(&self) -> f64 {
+        if self.time_s.len() < 2 {
+            return f64::NAN;
+        }
+        let mut d: Vec<f64> = self.time_s.windows(2).map(|w| w[1] - w[0]).collect();
+        d.sort_by(|a, b| a.total_cmp(b));
+        d[d.len() / 2]
+    }
+    /// Names of the signals present, in the names users type (`u`, `theta_l`, ...).
+    pub fn signals(&self) -> Vec<&'static str> {
+        let mut v = Vec::new();
+        for (name, present) in [
+            ("u", self.u_v.is_some()),
+            ("theta_l", self.theta_l_rad.is_some()),
+            ("theta_m", self.theta_m_rad.is_some()),
+            ("omega_l", self.omega_l_rad_s.is_some()),
+            ("omega_m", self.omega_m_rad_s.is_some()),
+            ("i_a", self.i_a_a.is_some()),
+            ("ref", self.ref_rad.is_some()),
+        ] {
+            if present {
+                v.push(name);
+            }
+        }
+        v
+    }
+}

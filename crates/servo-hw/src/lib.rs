@@ -1,0 +1,12 @@
+//! servo-hw: the backends that run a position loop.
+//!
+//! * [`Backend`]: the small trait every backend implements (sample the sensors, apply a voltage).
+//! * [`sim::SimBackend`]: the simulated gearmotor with a simulated clock (deterministic, faster
+//!   than real time by default).
+//! * The serial board backend and the virtual board live beside it.
+
+pub mod backend;
+pub mod sim;
+
+pub use backend::{Backend, BoardInfo, HwError, Sample};
+pub use sim::SimBackend;

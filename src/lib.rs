@@ -1,0 +1,65 @@
+//! Helpers shared by the end-to-end tests in `tests/`.
+//!
+//! The real lab measurements live outside the repository, in `../shared/realdata` (they carry no
+//! licence and are never copied here). Tests that need them call [`realdata_dir`] and skip with a
+//! clear message when the folder is absent, as it is in a user's clone.
+
+use std::path::PathBuf;
+
+/// Path of `../shared/realdata` relative to the workspace root, if it exists.
+///
+/// The environment variable `SERVO_REALDATA` overrides the location.
+pub fn realdata_dir() -> Option<PathBuf> {
+    let dir = match std::env::var_os("SERVO_REALDATA") {
+        Some(p) => PathBuf::from(p),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/realdata"),
+    };
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        eprintln!(
+            "SKIP: real lab data not found at {} (set SERVO_REALDATA or place shared/realdata beside the checkout)",
+            dir.display()
+        );
+        None
+    }
+}
+
+/// Path of the `servo` binary for the end-to-end tests, building it first when needed.
+///
+/// `cargo test` at the workspace root builds it already (servo-cli has integration tests); the
+/// fallback runs `cargo build -p servo-cli --bin servo` with the same profile.
+pub fn servo_bin() -> PathBuf {
+    static BUILT: std::sync::Once = std::sync::Once::new();
+    // Integration tests live in target/<profile>/deps; the binary sits in target/<profile>/.
+    let mut dir = std::env::current_exe().expect("test executable path");
+    dir.pop();
+    if dir.ends_with("deps") {
+        dir.pop();
+    }
+    let bin = dir.join(format!("servo{}", std::env::consts::EXE_SUFFIX));
+    BUILT.call_once(|| {
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let mut cmd = std::process::Command::new(cargo);
+        cmd.args(["build", "-q", "-p", "servo-cli", "--bin", "servo"]);
+        if dir.ends_with("release") {
+            cmd.arg("--release");
+        }
+        let status = cmd.status().expect("run cargo build for the servo binary");
+        assert!(status.success(), "building the servo binary failed");
+    });
+    bin
+}
+
+/// Runs `servo` with `args`, returning (exit success, stdout, stderr).
+pub fn servo(args: &[&str]) -> (bool, String, String) {
+    let out = std::process::Command::new(servo_bin())
+        .args(args)
+        .output()
+        .expect("spawn servo");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
