@@ -2,6 +2,7 @@
 //! struct with `run(self) -> anyhow::Result<()>`.
 
 pub mod cmd;
+pub mod gains_file;
 pub mod io;
 pub mod model_file;
 pub mod plot;

@@ -1,0 +1,142 @@
+//! The controller file (TOML) that `servo design -o gains.toml` writes and `servo run --gains`
+//! reads. The controller acts on the load-angle error [rad] and outputs the driver input u [V].
+//!
+//! ```toml
+//! [pid]
+//! kp = 7.0476      # K_P [V/rad]
+//! ki = 86.121      # K_I [V/(rad s)]
+//! kd = 0.14418     # K_D [V s/rad]
+//! tl_s = 6.67e-3   # real-derivative time constant T_L [s] (eq. 53); 0 = ideal derivative
+//! ts_s = 1e-3      # sample period T_s [s]
+//! # kw = 30.0      # optional back-calculation anti-windup gain K_w [1/s]
+//! # u_limit_v = 10 # optional output limit [V]
+//! [design]         # optional, informational (spec the gains were designed for)
+//! ```
+
+use anyhow::{anyhow, bail, Context};
+use std::path::Path;
+
+/// PID gains in parallel form C(s) = K_P + K_I/s + K_D s/(T_L s + 1).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PidSection {
+    /// Proportional gain K_P [V/rad].
+    pub kp: f64,
+    /// Integral gain K_I [V/(rad s)].
+    #[serde(default)]
+    pub ki: f64,
+    /// Derivative gain K_D [V s/rad].
+    #[serde(default)]
+    pub kd: f64,
+    /// Real-derivative time constant T_L [s] (eq. 53); 0 means an ideal derivative.
+    #[serde(default)]
+    pub tl_s: f64,
+    /// Sample period T_s [s] the gains were designed for.
+    #[serde(default = "default_ts")]
+    pub ts_s: f64,
+    /// Back-calculation anti-windup gain K_w [1/s], if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kw: Option<f64>,
+    /// Controller output limit [V] (symmetric), if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub u_limit_v: Option<f64>,
+}
+
+fn default_ts() -> f64 {
+    1e-3
+}
+
+/// The whole gains file.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GainsFile {
+    pub pid: PidSection,
+    /// Free-form description of the design (spec, method, date).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub design: Option<toml::Table>,
+}
+
+impl GainsFile {
+    /// Reads and validates a gains file.
+    pub fn load(path: &Path) -> anyhow::Result<GainsFile> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading gains file {}", path.display()))?;
+        Self::parse(&text).with_context(|| format!("in gains file {}", path.display()))
+    }
+
+    /// Parses and validates TOML text.
+    pub fn parse(text: &str) -> anyhow::Result<GainsFile> {
+        let g: GainsFile = toml::from_str(text).map_err(|e| anyhow!("{}", e.to_string().trim_end()))?;
+        g.validate()?;
+        Ok(g)
+    }
+
+    /// Checks signs and finiteness.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        let p = &self.pid;
+        for (k, v) in [("kp", p.kp), ("ki", p.ki), ("kd", p.kd), ("tl_s", p.tl_s)] {
+            if !v.is_finite() || v < 0.0 {
+                bail!("[pid] `{k}` must be a finite number >= 0, got {v}");
+            }
+        }
+        if !(p.ts_s.is_finite() && p.ts_s > 0.0) {
+            bail!("[pid] `ts_s` (sample period [s]) must be > 0, got {}", p.ts_s);
+        }
+        if let Some(kw) = p.kw {
+            if !(kw.is_finite() && kw >= 0.0) {
+                bail!("[pid] `kw` (anti-windup gain [1/s]) must be >= 0, got {kw}");
+            }
+        }
+        if let Some(u) = p.u_limit_v {
+            if !(u.is_finite() && u > 0.0) {
+                bail!("[pid] `u_limit_v` must be > 0 V, got {u}");
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes the file with units in comments.
+    pub fn save(&self, path: &Path) -> anyhow::Result<()> {
+        std::fs::write(path, self.to_toml_commented()).with_context(|| format!("writing gains file {}", path.display()))
+    }
+
+    /// TOML with units in comments.
+    pub fn to_toml_commented(&self) -> String {
+        let p = &self.pid;
+        let mut s = format!(
+            "# servo controller: PID on the load-angle error [rad], output driver input u [V]\n\
+             # C(s) = kp + ki/s + kd s/(tl_s s + 1)\n[pid]\n\
+             kp = {:e}  # K_P [V/rad]\nki = {:e}  # K_I [V/(rad s)]\nkd = {:e}  # K_D [V s/rad]\n\
+             tl_s = {:e}  # real-derivative time constant T_L [s]\nts_s = {:e}  # sample period [s]\n",
+            p.kp, p.ki, p.kd, p.tl_s, p.ts_s
+        );
+        if let Some(kw) = p.kw {
+            s.push_str(&format!("kw = {kw:e}  # back-calculation anti-windup gain K_w [1/s]\n"));
+        }
+        if let Some(u) = p.u_limit_v {
+            s.push_str(&format!("u_limit_v = {u:e}  # output limit [V]\n"));
+        }
+        if let Some(d) = &self.design {
+            s.push_str("\n[design]\n");
+            s.push_str(&toml::to_string(d).unwrap_or_default());
+        }
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_and_rejects() {
+        let g = GainsFile {
+            pid: PidSection { kp: 7.0476, ki: 86.121, kd: 0.14418, tl_s: 6.7e-3, ts_s: 1e-3, kw: Some(30.0), u_limit_v: None },
+            design: None,
+        };
+        assert_eq!(GainsFile::parse(&g.to_toml_commented()).unwrap(), g);
+        let e = format!("{:#}", GainsFile::parse("[pid]\nkp = -1\n").unwrap_err());
+        assert!(e.contains("kp"), "{e}");
+        let e = format!("{:#}", GainsFile::parse("[pid]\nkp = 1\nkq = 2\n").unwrap_err());
+        assert!(e.contains("kq"), "{e}");
+    }
+}
