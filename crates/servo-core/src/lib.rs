@@ -16,6 +16,7 @@
 #[cfg(feature = "alloc")]
 extern crate alloc;
 
+pub mod design;
 pub mod effects;
 pub mod math;
 pub mod params;
@@ -24,6 +25,7 @@ pub mod plant;
 pub mod record;
 pub mod sim;
 
+pub use design::DesignError;
 pub use effects::{Effect, EffectKind, Effects};
 pub use params::{ParamError, PlantParams};
 pub use plant::Plant;
