@@ -17,6 +17,8 @@
 extern crate alloc;
 
 pub mod effects;
+#[cfg(feature = "alloc")]
+pub mod ident;
 pub mod math;
 pub mod params;
 pub mod plant;
