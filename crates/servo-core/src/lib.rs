@@ -18,6 +18,8 @@ extern crate alloc;
 
 pub mod design;
 pub mod effects;
+#[cfg(feature = "alloc")]
+pub mod ident;
 pub mod math;
 pub mod params;
 pub mod plant;
