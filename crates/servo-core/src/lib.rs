@@ -16,7 +16,11 @@
 #[cfg(feature = "alloc")]
 extern crate alloc;
 
+#[cfg(feature = "alloc")]
+pub mod diagnose;
 pub mod effects;
+#[cfg(feature = "alloc")]
+pub mod fit;
 pub mod math;
 pub mod params;
 pub mod plant;
