@@ -51,6 +51,32 @@ impl RecData {
         let u_in: Vec<f64> = self.u_v.iter().map(|&u| transform(u)).collect();
         shift_hold(&u_in, shift_s / self.dt_s)
     }
+
+    /// The input as a point sample at each row: what drives the current measured at t_k. The
+    /// transformed input, delayed by `delay_s`, held, then passed through the first-order lag
+    /// `lag_s` (driver and armature) exactly for a zero-order-hold input: with no delay and a lag
+    /// much shorter than the sample period, row k sees u[k-1].
+    pub fn input_point(
+        &self,
+        transform: impl Fn(f64) -> f64,
+        delay_s: f64,
+        lag_s: f64,
+    ) -> Vec<f64> {
+        let u_in: Vec<f64> = self.u_v.iter().map(|&u| transform(u)).collect();
+        let held = shift_hold(&u_in, 0.5 + delay_s / self.dt_s);
+        let a = if lag_s > 0.0 {
+            math::exp(-self.dt_s / lag_s)
+        } else {
+            0.0
+        };
+        let mut y = held.first().copied().unwrap_or(0.0);
+        held.iter()
+            .map(|&x| {
+                y = a * y + (1.0 - a) * x;
+                y
+            })
+            .collect()
+    }
 }
 
 /// Box-averaged zero-order hold of `u` shifted by `m` samples, evaluated at every row.

@@ -372,15 +372,28 @@ impl Dataset {
                 let g: Vec<f64> = if log_scale {
                     grid.iter().map(|v| math::ln(*v)).collect()
                 } else {
-                    grid
+                    grid.clone()
                 };
-                let (x, _) = search::grid_then_golden(&g, &mut f, if integer { 0 } else { 30 })
+                let (x, fx) = search::grid_then_golden(&g, &mut f, if integer { 0 } else { 30 })
                     .ok_or_else(|| {
                         FitError::Singular(alloc::format!(
                             "{kind}: no finite cost over the search grid"
                         ))
                     })?;
-                cfg.slots[i].set(key, if log_scale { math::exp(x) } else { x });
+                let mut x = if log_scale { math::exp(x) } else { x };
+                // Ties go to the "no effect" end (a saturation limit above every logged input, a
+                // zero dead band or delay): data that do not reach an effect cannot size it.
+                let none = match kind {
+                    EffectKind::Saturation => grid.last().copied(),
+                    EffectKind::Deadzone | EffectKind::Delay => grid.first().copied(),
+                    _ => None,
+                };
+                if let Some(none) = none {
+                    if f(none) <= fx * (1.0 + 1e-4) {
+                        x = none;
+                    }
+                }
+                cfg.slots[i].set(key, x);
             }
         }
         let mut solved = self.solve_config(&cfg)?;
@@ -432,7 +445,7 @@ impl Dataset {
             (EffectKind::Cogging, _) => (1..=self.opts.max_cogging_harmonic.max(1))
                 .map(f64::from)
                 .collect(),
-            (EffectKind::Saturation, _) => search::linspace(0.2 * umax, umax, 33),
+            (EffectKind::Saturation, _) => search::linspace(0.2 * umax, umax * 1.001, 33),
             (EffectKind::Deadzone, _) => search::linspace(0.0, (0.4 * umax).min(3.0), 31),
             (EffectKind::Delay, _) => {
                 let n = ((self.opts.max_delay_s / (0.5 * dt)).ceil() as usize).clamp(2, 200);

@@ -15,7 +15,8 @@ use alloc::vec::Vec;
 pub enum Equation {
     /// k_t i_a = J_eq dw_m/dt + B_eq w_m + friction/N + cogging + imbalance/N (current logged) [N m].
     Torque,
-    /// k_drv u_in = R_eq i_a + L_a di_a/dt + k_e w_m, written per unit k_drv (current logged) [V].
+    /// k_drv u_in = R_eq i_a + k_e w_m with u_in seen through the driver and armature lags,
+    /// written per unit k_drv (current logged) [V].
     Electrical,
     /// k_drv k_t u_in / R_eq = J_eq dw_m/dt + (B_eq + k_t k_e / R_eq) w_m + friction/N + ... (no
     /// current logged) [N m].
@@ -363,15 +364,9 @@ pub fn solve_elec(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
     }
     let rows = &ds.elec_rows;
     let p = &cfg.base.params;
-    let shift = cfg.delay_s() + p.t_drv();
+    let (delay, lag) = (cfg.delay_s(), p.t_drv() + p.l_a / p.r_eq());
     let tr = cfg.input_transform();
-    let useen = ds.column(rows, |r: &RecData| r.input_seen(&tr, shift));
-    let di = ds.sample(rows, |r| r.di_f.as_deref().unwrap_or(&[]));
-    let y: Vec<f64> = useen
-        .iter()
-        .zip(&di)
-        .map(|(u, d)| u - p.l_a / p.k_drv * d)
-        .collect();
+    let y = ds.column(rows, |r: &RecData| r.input_point(&tr, delay, lag));
     let fixed = |v: f64| if cfg.refit_base { None } else { Some(v) };
     let terms = alloc::vec![
         Term {
