@@ -16,10 +16,18 @@
 #[cfg(feature = "alloc")]
 extern crate alloc;
 
+<<<<<<< HEAD
 pub mod design;
 pub mod effects;
 #[cfg(feature = "alloc")]
 pub mod ident;
+=======
+#[cfg(feature = "alloc")]
+pub mod diagnose;
+pub mod effects;
+#[cfg(feature = "alloc")]
+pub mod fit;
+>>>>>>> diagnose
 pub mod math;
 pub mod params;
 pub mod plant;
