@@ -20,6 +20,7 @@ pub mod effects;
 pub mod math;
 pub mod params;
 pub mod plant;
+pub mod protocol;
 #[cfg(feature = "alloc")]
 pub mod record;
 pub mod sim;
