@@ -21,6 +21,7 @@ pub mod math;
 pub mod params;
 pub mod plant;
 pub mod protocol;
+pub mod safety;
 #[cfg(feature = "alloc")]
 pub mod record;
 pub mod sim;

@@ -6,6 +6,7 @@
 //! * The serial board backend and the virtual board live beside it.
 
 pub mod backend;
+pub mod board;
 pub mod sim;
 
 pub use backend::{Backend, BoardInfo, HwError, Sample};

@@ -399,3 +399,13 @@ pub fn fixed_text<const N: usize>(text: &str) -> [u8; N] {
     buf[..n].copy_from_slice(&text.as_bytes()[..n]);
     buf
 }
+
+impl From<crate::safety::Trip> for FaultCode {
+    fn from(t: crate::safety::Trip) -> FaultCode {
+        match t {
+            crate::safety::Trip::OverCurrent { .. } => FaultCode::OverCurrent,
+            crate::safety::Trip::PositionLimit { .. } => FaultCode::PositionLimit,
+            crate::safety::Trip::NonFinite => FaultCode::Other,
+        }
+    }
+}

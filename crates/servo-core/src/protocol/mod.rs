@@ -19,7 +19,8 @@ pub mod message;
 pub use decoder::{Decoder, DecoderStats, FrameError};
 pub use frame::{encode_frame, Frame, MAX_FRAME};
 pub use message::{
-    fixed_text, Fault, FaultCode, HelloAck, LoopGains, Message, ParseError, Sample, PROTOCOL_VERSION,
+    fixed_text, flags, kind, Fault, FaultCode, HelloAck, LoopGains, Message, ParseError, Sample,
+    PROTOCOL_VERSION,
 };
 
 #[cfg(test)]
