@@ -31,6 +31,8 @@ pub mod fit;
 pub mod math;
 pub mod params;
 pub mod plant;
+pub mod protocol;
+pub mod safety;
 #[cfg(feature = "alloc")]
 pub mod record;
 pub mod sim;
