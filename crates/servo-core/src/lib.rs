@@ -16,25 +16,21 @@
 #[cfg(feature = "alloc")]
 extern crate alloc;
 
-<<<<<<< HEAD
 pub mod design;
-pub mod effects;
-#[cfg(feature = "alloc")]
-pub mod ident;
-=======
 #[cfg(feature = "alloc")]
 pub mod diagnose;
 pub mod effects;
 #[cfg(feature = "alloc")]
 pub mod fit;
->>>>>>> diagnose
+#[cfg(feature = "alloc")]
+pub mod ident;
 pub mod math;
 pub mod params;
 pub mod plant;
 pub mod protocol;
-pub mod safety;
 #[cfg(feature = "alloc")]
 pub mod record;
+pub mod safety;
 pub mod sim;
 
 pub use design::DesignError;
