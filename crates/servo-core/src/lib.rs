@@ -5,6 +5,7 @@
 //! * [`effects`]: the effect catalogue, the one definition of every physical mechanism that the
 //!   simulator, the model fit and the diagnosis use.
 //! * [`plant`]: a parameter set together with its active effects: the model of one gearmotor.
+//! * [`control`]: discrete PID, feedforward compensation, reference generators and sequences.
 //! * [`sim`]: integration of the plant with its effects (truth for the simulator, model for
 //!   `compare`).
 //!
@@ -16,6 +17,7 @@
 #[cfg(feature = "alloc")]
 extern crate alloc;
 
+pub mod control;
 pub mod effects;
 pub mod math;
 pub mod params;
