@@ -5,6 +5,7 @@
 //! * [`effects`]: the effect catalogue, the one definition of every physical mechanism that the
 //!   simulator, the model fit and the diagnosis use.
 //! * [`plant`]: a parameter set together with its active effects: the model of one gearmotor.
+//! * [`control`]: discrete PID, feedforward compensation, reference generators and sequences.
 //! * [`sim`]: integration of the plant with its effects (truth for the simulator, model for
 //!   `compare`).
 //!
@@ -19,6 +20,7 @@ extern crate alloc;
 pub mod design;
 #[cfg(feature = "alloc")]
 pub mod diagnose;
+pub mod control;
 pub mod effects;
 #[cfg(feature = "alloc")]
 pub mod fit;
