@@ -46,6 +46,7 @@ pub enum DesignModel {
 /// --settling-time-1pct or --rise-time) translated by eqs. 36, 39-41.
 /// Example: servo design --wc 30 --pm 60 ; servo design --overshoot 0.1 --settling-time 0.15
 #[derive(Debug, clap::Parser)]
+#[command(allow_negative_numbers = true)]
 pub struct Design {
     /// Gain crossover frequency w_gc [rad/s].
     #[arg(long, value_name = "RAD_S", conflicts_with_all = ["settling_time", "settling_time_1pct", "rise_time"])]
@@ -235,15 +236,16 @@ impl Design {
             write_step_plot(path, &report).with_context(|| format!("--step-plot {}", path.display()))?;
         }
         if self.json {
-            println!("{}", serde_json::to_string_pretty(&self.json_report(&report, &tr, &src))?);
+            emit(&format!("{}\n", serde_json::to_string_pretty(&self.json_report(&report, &tr, &src))?))?;
         } else {
-            print!("{}", self.text_report(&report, &tr, &translation_lines, &src));
+            let mut text = self.text_report(&report, &tr, &translation_lines, &src);
             if let Some(p) = &self.output {
-                println!("wrote controller to {}", p.display());
+                let _ = writeln!(text, "wrote controller to {}", p.display());
             }
             for p in [&self.plot, &self.step_plot].into_iter().flatten() {
-                println!("wrote {}", p.display());
+                let _ = writeln!(text, "wrote {}", p.display());
             }
+            emit(&text)?;
         }
         Ok(())
     }
@@ -414,6 +416,16 @@ impl Design {
             }
         }
         s
+    }
+}
+
+/// Writes to stdout; a closed pipe (`servo design | head`) is not an error.
+fn emit(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|_| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        r => r.context("writing to stdout"),
     }
 }
 
