@@ -15,7 +15,9 @@ fn json(args: &[&str]) -> serde_json::Value {
 }
 
 fn f(v: &serde_json::Value, key: &str) -> f64 {
-    v[key].as_f64().unwrap_or_else(|| panic!("`{key}` missing or not a number in {v}"))
+    v[key]
+        .as_f64()
+        .unwrap_or_else(|| panic!("`{key}` missing or not a number in {v}"))
 }
 
 fn rel(a: f64, b: f64) -> f64 {
@@ -25,7 +27,13 @@ fn rel(a: f64, b: f64) -> f64 {
 #[test]
 fn reference_point_table2_and_json_shape() {
     let v = json(&["--wc", "30", "--pm", "60"]);
-    for (k, want) in [("kp", 7.0476), ("ki", 86.121), ("kd", 0.14418), ("td", 0.020458), ("ti", 0.081834)] {
+    for (k, want) in [
+        ("kp", 7.0476),
+        ("ki", 86.121),
+        ("kd", 0.14418),
+        ("td", 0.020458),
+        ("ti", 0.081834),
+    ] {
         assert!(rel(f(&v, k), want) < 1e-4, "{k} = {} want {want}", f(&v, k));
     }
     assert!(rel(f(&v, "tl"), 1.0 / 150.0) < 1e-12);
@@ -33,10 +41,20 @@ fn reference_point_table2_and_json_shape() {
     assert!((f(&v, "pm_deg") - 60.0).abs() < 1e-12);
     for model in ["reduced", "full", "discrete"] {
         let a = &v["achieved"][model];
-        for k in ["pm_deg", "wgc", "overshoot_pct", "rise_time_s", "settling_time_5pct_s", "settling_time_1pct_s"] {
+        for k in [
+            "pm_deg",
+            "wgc",
+            "overshoot_pct",
+            "rise_time_s",
+            "settling_time_5pct_s",
+            "settling_time_1pct_s",
+        ] {
             assert!(f(a, k).is_finite(), "{model}.{k}");
         }
-        assert!(a.get("gm_db").is_some(), "{model}.gm_db present (null = infinite)");
+        assert!(
+            a.get("gm_db").is_some(),
+            "{model}.gm_db present (null = infinite)"
+        );
         assert_eq!(a["stable"], true, "{model}");
         // the handout formulas ignore the derivative filter (and the ZOH): the margin falls short
         assert!(f(a, "pm_deg") < 60.0, "{model}");
@@ -51,7 +69,18 @@ fn published_savian_design_is_reproduced() {
     // padova2021-savian (SOURCE.txt): nominal k_m = 77.8628, T_m = 0.0296687, t_s,5% = 0.15 s,
     // M_p = 0.1 -> delta = 0.59116, phi_m = 1.02264 rad, w_gc = 33.8321 rad/s,
     // P(j w_gc) = -0.082194 - 0.081887j, DeltaK = 8.61899, DeltaPhi = 0.239117 rad.
-    let base = ["--km", "77.8628", "--tm", "0.0296687", "--overshoot", "0.1", "--settling-time", "0.15", "--tl-factor", "4"];
+    let base = [
+        "--km",
+        "77.8628",
+        "--tm",
+        "0.0296687",
+        "--overshoot",
+        "0.1",
+        "--settling-time",
+        "0.15",
+        "--tl-factor",
+        "4",
+    ];
     let mut a6 = base.to_vec();
     a6.extend_from_slice(&["--alpha", "6"]);
     let v = json(&a6);
@@ -68,15 +97,29 @@ fn published_savian_design_is_reproduced() {
         ("ti", 0.097176),
         ("tl", 0.0073894),
     ] {
-        assert!(rel(f(&v, k), want) < 1e-3, "{k} = {} published {want}", f(&v, k));
+        assert!(
+            rel(f(&v, k), want) < 1e-3,
+            "{k} = {} published {want}",
+            f(&v, k)
+        );
     }
-    assert!(rel(f(&v["p_jwgc"], "re"), -0.082194) < 1e-3 && rel(f(&v["p_jwgc"], "im"), -0.081887) < 1e-3);
-    assert!(v["achieved"]["full"].is_null(), "no full model from a bare k_m, T_m");
+    assert!(
+        rel(f(&v["p_jwgc"], "re"), -0.082194) < 1e-3
+            && rel(f(&v["p_jwgc"], "im"), -0.081887) < 1e-3
+    );
+    assert!(
+        v["achieved"]["full"].is_null(),
+        "no full model from a bare k_m, T_m"
+    );
     let mut a4 = base.to_vec();
     a4.extend_from_slice(&["--alpha", "4"]);
     let v = json(&a4);
     for (k, want) in [("kp", 8.3738), ("ki", 111.2674), ("kd", 0.1575)] {
-        assert!(rel(f(&v, k), want) < 1e-3, "alpha 4: {k} = {} published {want}", f(&v, k));
+        assert!(
+            rel(f(&v, k), want) < 1e-3,
+            "alpha 4: {k} = {} published {want}",
+            f(&v, k)
+        );
     }
 }
 
@@ -87,8 +130,21 @@ fn exact_achieves_the_spec_measured_independently() {
     let (km, tm, n, ts): (f64, f64, f64, f64) = (78.125, 0.029661, 14.0, 1e-3);
     for (wc, pm, alpha) in [(30.0, 60.0, 4.0), (20.0, 50.0, 6.0), (45.0, 65.0, 4.0)] {
         let v = json(&[
-            "--km", &km.to_string(), "--tm", &tm.to_string(), "--wc", &wc.to_string(), "--pm", &pm.to_string(),
-            "--alpha", &alpha.to_string(), "--ts", &ts.to_string(), "--discretization", "tustin", "--exact",
+            "--km",
+            &km.to_string(),
+            "--tm",
+            &tm.to_string(),
+            "--wc",
+            &wc.to_string(),
+            "--pm",
+            &pm.to_string(),
+            "--alpha",
+            &alpha.to_string(),
+            "--ts",
+            &ts.to_string(),
+            "--discretization",
+            "tustin",
+            "--exact",
         ]);
         let (kp, ki, kd, tl) = (f(&v, "kp"), f(&v, "ki"), f(&v, "kd"), f(&v, "tl"));
         assert!(rel(ki, kp / (alpha * kd / kp)) < 1e-9, "T_I = alpha T_D");
@@ -104,9 +160,18 @@ fn exact_achieves_the_spec_measured_independently() {
         let (b1, b0) = (k * (ts - tm * (1.0 - e)), k * (tm * (1.0 - e) - ts * e));
         let loop_at = |w: f64| -> C {
             let z = ((w * ts).cos(), (w * ts).sin());
-            let p = div(add(mul((b1, 0.0), z), (b0, 0.0)), mul(add(z, (-1.0, 0.0)), add(z, (-e, 0.0))));
-            let s = mul((2.0 / ts, 0.0), div(add(z, (-1.0, 0.0)), add(z, (1.0, 0.0))));
-            let c = add(add((kp, 0.0), div((ki, 0.0), s)), div(mul((kd, 0.0), s), add(mul((tl, 0.0), s), (1.0, 0.0))));
+            let p = div(
+                add(mul((b1, 0.0), z), (b0, 0.0)),
+                mul(add(z, (-1.0, 0.0)), add(z, (-e, 0.0))),
+            );
+            let s = mul(
+                (2.0 / ts, 0.0),
+                div(add(z, (-1.0, 0.0)), add(z, (1.0, 0.0))),
+            );
+            let c = add(
+                add((kp, 0.0), div((ki, 0.0), s)),
+                div(mul((kd, 0.0), s), add(mul((tl, 0.0), s), (1.0, 0.0))),
+            );
             mul(c, p)
         };
         let mut found = None;
@@ -126,7 +191,10 @@ fn exact_achieves_the_spec_measured_independently() {
         assert!(rel(wgc, wc) < 0.005, "achieved w_gc {wgc} vs {wc}");
         assert!((pmx - pm).abs() < 0.1, "achieved pm {pmx} vs {pm}");
         let d = &v["achieved"]["discrete"];
-        assert!((f(d, "pm_deg") - pmx).abs() < 0.01 && rel(f(d, "wgc"), wgc) < 1e-4, "report agrees: {d}");
+        assert!(
+            (f(d, "pm_deg") - pmx).abs() < 0.01 && rel(f(d, "wgc"), wgc) < 1e-4,
+            "report agrees: {d}"
+        );
     }
 }
 
@@ -150,13 +218,32 @@ fn meaningless_or_infeasible_requests_fail_with_explanations() {
         (&["--wc", "-3", "--pm", "60"], &["w_gc"]),
         (&["--wc", "30", "--pm", "95"], &["(0, 90)"]),
         (&["--wc", "30", "--pm", "0"], &["(0, 90)"]),
-        (&["--wc", "30", "--pm", "60", "--controller", "pi"], &["PI", "lag", "--controller pid", "between"]),
-        (&["--wc", "5", "--pm", "30", "--controller", "pd"], &["PD", "lead"]),
-        (&["--overshoot", "1.5", "--settling-time", "0.2"], &["overshoot", "(0, 1)"]),
+        (
+            &["--wc", "30", "--pm", "60", "--controller", "pi"],
+            &["PI", "lag", "--controller pid", "between"],
+        ),
+        (
+            &["--wc", "5", "--pm", "30", "--controller", "pd"],
+            &["PD", "lead"],
+        ),
+        (
+            &["--overshoot", "1.5", "--settling-time", "0.2"],
+            &["overshoot", "(0, 1)"],
+        ),
         (&["--wc", "30"], &["--pm", "--overshoot"]),
         (&["--pm", "60"], &["--wc"]),
         (&["--wc", "30", "--pm", "60", "--alpha", "0"], &["alpha"]),
-        (&["--wc", "30", "--pm", "60", "--params", "/nonexistent/plant.toml"], &["/nonexistent/plant.toml"]),
+        (
+            &[
+                "--wc",
+                "30",
+                "--pm",
+                "60",
+                "--params",
+                "/nonexistent/plant.toml",
+            ],
+            &["/nonexistent/plant.toml"],
+        ),
         (&["--wc", "2000", "--pm", "60"], &["Nyquist"]),
     ];
     for (args, needles) in cases {
@@ -174,25 +261,62 @@ fn meaningless_or_infeasible_requests_fail_with_explanations() {
 #[test]
 fn writes_gains_file_and_plots() {
     let dir = tempfile::tempdir().unwrap();
-    let (gains, bode, step) = (dir.path().join("gains.toml"), dir.path().join("bode.svg"), dir.path().join("step.svg"));
+    let (gains, bode, step) = (
+        dir.path().join("gains.toml"),
+        dir.path().join("bode.svg"),
+        dir.path().join("step.svg"),
+    );
     let v = json(&[
-        "--wc", "30", "--pm", "60", "-o", gains.to_str().unwrap(), "--plot", bode.to_str().unwrap(), "--step-plot",
-        step.to_str().unwrap(), "--ts", "0.002",
+        "--wc",
+        "30",
+        "--pm",
+        "60",
+        "-o",
+        gains.to_str().unwrap(),
+        "--plot",
+        bode.to_str().unwrap(),
+        "--step-plot",
+        step.to_str().unwrap(),
+        "--ts",
+        "0.002",
     ]);
     let g = GainsFile::load(&gains).unwrap();
-    assert!(rel(g.pid.kp, f(&v, "kp")) < 1e-12 && rel(g.pid.ki, f(&v, "ki")) < 1e-12 && rel(g.pid.kd, f(&v, "kd")) < 1e-12);
+    assert!(
+        rel(g.pid.kp, f(&v, "kp")) < 1e-12
+            && rel(g.pid.ki, f(&v, "ki")) < 1e-12
+            && rel(g.pid.kd, f(&v, "kd")) < 1e-12
+    );
     assert!(rel(g.pid.tl_s, f(&v, "tl")) < 1e-12);
     assert_eq!(g.pid.ts_s, 0.002);
     for p in [&bode, &step] {
         let s = std::fs::read_to_string(p).unwrap();
-        assert!(s.contains("<svg") && s.len() > 5000, "{} looks empty", p.display());
+        assert!(
+            s.contains("<svg") && s.len() > 5000,
+            "{} looks empty",
+            p.display()
+        );
     }
     let b = std::fs::read_to_string(&bode).unwrap();
-    assert!(b.contains("PM =") && b.contains("w_gc ="), "margins marked in the Bode plot");
+    assert!(
+        b.contains("PM =") && b.contains("w_gc ="),
+        "margins marked in the Bode plot"
+    );
     // human report also works and shows the table
     let (ok, out, err) = servo(&["design", "--wc", "30", "--pm", "60"]);
     assert!(ok, "{err}");
-    for n in ["K_P", "K_I", "K_D", "T_I", "T_D", "T_L", "phase margin", "reduced", "full", "discrete", "stable"] {
+    for n in [
+        "K_P",
+        "K_I",
+        "K_D",
+        "T_I",
+        "T_D",
+        "T_L",
+        "phase margin",
+        "reduced",
+        "full",
+        "discrete",
+        "stable",
+    ] {
         assert!(out.contains(n), "report lacks {n}: {out}");
     }
 }
@@ -204,7 +328,10 @@ fn params_file_is_used() {
     assert!(ok);
     // double the disc inertia: T_m grows, so the gains change
     let heavy = text.replace("j_d = 3e-5", "j_d = 6e-5");
-    assert_ne!(heavy, text, "params output should contain `j_d = 3e-5`: {text}");
+    assert_ne!(
+        heavy, text,
+        "params output should contain `j_d = 3e-5`: {text}"
+    );
     let p = dir.path().join("plant.toml");
     std::fs::write(&p, heavy).unwrap();
     let a = json(&["--wc", "30", "--pm", "60"]);

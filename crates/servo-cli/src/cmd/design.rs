@@ -61,7 +61,11 @@ pub struct Design {
     #[arg(long, value_name = "S", conflicts_with_all = ["settling_time_1pct", "rise_time"])]
     pub settling_time: Option<f64>,
     /// 1 % settling time t_s,1% [s]: w_gc = 4.6/(delta t_s) (eq. 40).
-    #[arg(long = "settling-time-1pct", value_name = "S", conflicts_with = "rise_time")]
+    #[arg(
+        long = "settling-time-1pct",
+        value_name = "S",
+        conflicts_with = "rise_time"
+    )]
     pub settling_time_1pct: Option<f64>,
     /// 10-90 % rise time t_r [s]: w_gc = 1.8/t_r (eq. 39).
     #[arg(long, value_name = "S")]
@@ -73,7 +77,12 @@ pub struct Design {
     #[arg(long, default_value_t = 4.0)]
     pub alpha: f64,
     /// Real derivative (eq. 53): 1/T_L = factor x w_gc.
-    #[arg(long, value_name = "FACTOR", default_value_t = 5.0, conflicts_with = "tl")]
+    #[arg(
+        long,
+        value_name = "FACTOR",
+        default_value_t = 5.0,
+        conflicts_with = "tl"
+    )]
     pub tl_factor: f64,
     /// Real derivative time constant T_L [s] (overrides --tl-factor; 0 = ideal derivative, not
     /// verifiable in simulation).
@@ -132,7 +141,11 @@ impl Design {
             }
             None => (PlantParams::TABLE2, "Table 2 (nominal)".to_string()),
         };
-        Ok(PlantSource { params, label, bare_reduced: self.km.is_some() })
+        Ok(PlantSource {
+            params,
+            label,
+            bare_reduced: self.km.is_some(),
+        })
     }
 
     fn translation(&self) -> anyhow::Result<(Translation, Vec<String>)> {
@@ -172,28 +185,41 @@ impl Design {
         }
         match speed {
             SpeedSpec::OmegaGc(w) => lines.push(format!("w_gc = {w:.4} rad/s (given)")),
-            SpeedSpec::Settling5(ts) => {
-                lines.push(format!("t_s,5% = {ts} s -> w_gc = 3/(delta t_s,5%) = {:.4} rad/s (eq. 40)", t.spec.omega_gc))
-            }
-            SpeedSpec::Settling1(ts) => {
-                lines.push(format!("t_s,1% = {ts} s -> w_gc = 4.6/(delta t_s,1%) = {:.4} rad/s (eq. 40)", t.spec.omega_gc))
-            }
-            SpeedSpec::RiseTime(tr) => lines.push(format!("t_r = {tr} s -> w_gc = 1.8/t_r = {:.4} rad/s (eq. 39)", t.spec.omega_gc)),
+            SpeedSpec::Settling5(ts) => lines.push(format!(
+                "t_s,5% = {ts} s -> w_gc = 3/(delta t_s,5%) = {:.4} rad/s (eq. 40)",
+                t.spec.omega_gc
+            )),
+            SpeedSpec::Settling1(ts) => lines.push(format!(
+                "t_s,1% = {ts} s -> w_gc = 4.6/(delta t_s,1%) = {:.4} rad/s (eq. 40)",
+                t.spec.omega_gc
+            )),
+            SpeedSpec::RiseTime(tr) => lines.push(format!(
+                "t_r = {tr} s -> w_gc = 1.8/t_r = {:.4} rad/s (eq. 39)",
+                t.spec.omega_gc
+            )),
         }
         Ok((t, lines))
     }
 
     pub fn run(self) -> anyhow::Result<()> {
         if !(self.alpha.is_finite() && self.alpha > 0.0) {
-            bail!("--alpha must be > 0 (T_I = alpha T_D; the handout uses alpha >= 4), got {}", self.alpha);
+            bail!(
+                "--alpha must be > 0 (T_I = alpha T_D; the handout uses alpha >= 4), got {}",
+                self.alpha
+            );
         }
         let src = self.plant_source()?;
         let (tr, translation_lines) = self.translation()?;
         let reduced = match (self.km, self.tm) {
-            (Some(km), Some(tm)) => PlantModel::reduced_from(km, tm, src.params.n).map_err(|e| anyhow!("--km/--tm: {e}"))?,
+            (Some(km), Some(tm)) => PlantModel::reduced_from(km, tm, src.params.n)
+                .map_err(|e| anyhow!("--km/--tm: {e}"))?,
             _ => PlantModel::reduced(&src.params),
         };
-        let full = if src.bare_reduced { None } else { Some(PlantModel::full(&src.params)) };
+        let full = if src.bare_reduced {
+            None
+        } else {
+            Some(PlantModel::full(&src.params))
+        };
         if self.model == DesignModel::Full && full.is_none() {
             bail!("--model full needs the full plant parameters (--params), not --km/--tm");
         }
@@ -224,19 +250,26 @@ impl Design {
             design_on_full: self.model == DesignModel::Full,
             exact: self.exact,
         };
-        let report = design(&req).map_err(|e| anyhow!("{e}")).context("design failed")?;
+        let report = design(&req)
+            .map_err(|e| anyhow!("{e}"))
+            .context("design failed")?;
 
         if let Some(path) = &self.output {
             self.gains_file(&report, &tr).save(path)?;
         }
         if let Some(path) = &self.plot {
-            bode_plot::write(path, &report).with_context(|| format!("--plot {}", path.display()))?;
+            bode_plot::write(path, &report)
+                .with_context(|| format!("--plot {}", path.display()))?;
         }
         if let Some(path) = &self.step_plot {
-            write_step_plot(path, &report).with_context(|| format!("--step-plot {}", path.display()))?;
+            write_step_plot(path, &report)
+                .with_context(|| format!("--step-plot {}", path.display()))?;
         }
         if self.json {
-            emit(&format!("{}\n", serde_json::to_string_pretty(&self.json_report(&report, &tr, &src))?))?;
+            emit(&format!(
+                "{}\n",
+                serde_json::to_string_pretty(&self.json_report(&report, &tr, &src))?
+            ))?;
         } else {
             let mut text = self.text_report(&report, &tr, &translation_lines, &src);
             if let Some(p) = &self.output {
@@ -266,7 +299,10 @@ impl Design {
         d.insert("wgc_rad_s".into(), tr.spec.omega_gc.into());
         d.insert("pm_deg".into(), deg(tr.spec.phase_margin).into());
         d.insert("alpha".into(), self.alpha.into());
-        d.insert("discretization".into(), r.request.discretization.name().into());
+        d.insert(
+            "discretization".into(),
+            r.request.discretization.name().into(),
+        );
         d.insert("exact".into(), self.exact.into());
         let m = &r.discrete.margins;
         if m.phase_margin_deg.is_finite() {
@@ -274,7 +310,15 @@ impl Design {
             d.insert("achieved_discrete_wgc_rad_s".into(), m.omega_gc.into());
         }
         GainsFile {
-            pid: PidSection { kp: g.kp, ki: g.ki, kd: g.kd, tl_s: g.tl_s, ts_s: r.request.ts_s, kw: None, u_limit_v: None },
+            pid: PidSection {
+                kp: g.kp,
+                ki: g.ki,
+                kd: g.kd,
+                tl_s: g.tl_s,
+                ts_s: r.request.ts_s,
+                kw: None,
+                u_limit_v: None,
+            },
             design: Some(d),
         }
     }
@@ -310,7 +354,13 @@ impl Design {
         })
     }
 
-    fn text_report(&self, r: &DesignReport, tr: &Translation, translation: &[String], src: &PlantSource) -> String {
+    fn text_report(
+        &self,
+        r: &DesignReport,
+        tr: &Translation,
+        translation: &[String],
+        src: &PlantSource,
+    ) -> String {
         let mut s = String::new();
         let g = &r.gains;
         let model = self.design_model(r);
@@ -347,20 +397,51 @@ impl Design {
             dk,
             deg(dphi)
         );
-        let _ = writeln!(s, "\ngains{}:", if self.exact { " (--exact: achieved figures on the discrete loop match the spec)" } else { "" });
-        let _ = writeln!(s, "  K_P = {:<12.6} V/rad        T_I = {} s", g.kp, fmt_s(g.ti_s()));
-        let _ = writeln!(s, "  K_I = {:<12.6} V/(rad s)    T_D = {} s", g.ki, fmt_s(g.td_s()));
+        let _ = writeln!(
+            s,
+            "\ngains{}:",
+            if self.exact {
+                " (--exact: achieved figures on the discrete loop match the spec)"
+            } else {
+                ""
+            }
+        );
+        let _ = writeln!(
+            s,
+            "  K_P = {:<12.6} V/rad        T_I = {} s",
+            g.kp,
+            fmt_s(g.ti_s())
+        );
+        let _ = writeln!(
+            s,
+            "  K_I = {:<12.6} V/(rad s)    T_D = {} s",
+            g.ki,
+            fmt_s(g.td_s())
+        );
         let tl_note = match (self.tl, r.request.kind) {
             (_, ControllerKind::Pi) => "(no derivative)".to_string(),
             (Some(_), _) => "(given)".to_string(),
             (None, _) => format!("(1/T_L = {} w_gc, eq. 53)", self.tl_factor),
         };
-        let _ = writeln!(s, "  K_D = {:<12.6} V s/rad      T_L = {} s {tl_note}", g.kd, fmt_s(g.tl_s));
+        let _ = writeln!(
+            s,
+            "  K_D = {:<12.6} V s/rad      T_L = {} s {tl_note}",
+            g.kd,
+            fmt_s(g.tl_s)
+        );
         if self.exact {
             let h = &r.handout_gains;
-            let _ = writeln!(s, "  (handout formulas would give K_P = {:.6}, K_I = {:.6}, K_D = {:.6})", h.kp, h.ki, h.kd);
+            let _ = writeln!(
+                s,
+                "  (handout formulas would give K_P = {:.6}, K_I = {:.6}, K_D = {:.6})",
+                h.kp, h.ki, h.kd
+            );
         }
-        let disc_plant = if r.request.full.is_some() { "full" } else { "reduced" };
+        let disc_plant = if r.request.full.is_some() {
+            "full"
+        } else {
+            "reduced"
+        };
         let _ = writeln!(
             s,
             "\nverification (real derivative; discrete = {} model, ZOH at T_s = {} s, {} PID):",
@@ -368,22 +449,60 @@ impl Design {
             r.request.ts_s,
             r.request.discretization.name()
         );
-        let loops: Vec<&Achieved> = [Some(&r.reduced), r.full.as_ref(), Some(&r.discrete)].into_iter().flatten().collect();
+        let loops: Vec<&Achieved> = [Some(&r.reduced), r.full.as_ref(), Some(&r.discrete)]
+            .into_iter()
+            .flatten()
+            .collect();
         let _ = write!(s, "  {:<22}{:>12}", "", "spec");
         for a in &loops {
             let _ = write!(s, "{:>12}", a.name);
         }
         let _ = writeln!(s);
         let d = tr.delta;
-        let rows: [(&str, String, Box<dyn Fn(&Achieved) -> String>); 8] = [
-            ("w_gc [rad/s]", format!("{w:.4}"), Box::new(|a: &Achieved| fmt_f(a.margins.omega_gc, 4))),
-            ("phase margin [deg]", format!("{:.3}", deg(tr.spec.phase_margin)), Box::new(|a: &Achieved| fmt_f(a.margins.phase_margin_deg, 3))),
-            ("gain margin [dB]", "-".into(), Box::new(|a: &Achieved| fmt_gm(a.margins.gain_margin_db))),
-            ("overshoot [%]", format!("~{:.2}", 100.0 * tr.overshoot), Box::new(|a: &Achieved| a.step.map_or("-".into(), |m| format!("{:.2}", m.overshoot_pct)))),
-            ("rise 10-90 % [s]", format!("~{:.4}", 1.8 / w), Box::new(|a: &Achieved| a.step.map_or("-".into(), |m| opt(m.rise_time_s)))),
-            ("settling 5 % [s]", format!("~{:.4}", 3.0 / (d * w)), Box::new(|a: &Achieved| a.step.map_or("-".into(), |m| opt(m.settling_time_5pct_s)))),
-            ("settling 1 % [s]", format!("~{:.4}", 4.6 / (d * w)), Box::new(|a: &Achieved| a.step.map_or("-".into(), |m| opt(m.settling_time_1pct_s)))),
-            ("closed loop", "".into(), Box::new(|a: &Achieved| stability_name(a.stability).into())),
+        let rows: [Row; 8] = [
+            (
+                "w_gc [rad/s]",
+                format!("{w:.4}"),
+                Box::new(|a: &Achieved| fmt_f(a.margins.omega_gc, 4)),
+            ),
+            (
+                "phase margin [deg]",
+                format!("{:.3}", deg(tr.spec.phase_margin)),
+                Box::new(|a: &Achieved| fmt_f(a.margins.phase_margin_deg, 3)),
+            ),
+            (
+                "gain margin [dB]",
+                "-".into(),
+                Box::new(|a: &Achieved| fmt_gm(a.margins.gain_margin_db)),
+            ),
+            (
+                "overshoot [%]",
+                format!("~{:.2}", 100.0 * tr.overshoot),
+                Box::new(|a: &Achieved| {
+                    a.step
+                        .map_or("-".into(), |m| format!("{:.2}", m.overshoot_pct))
+                }),
+            ),
+            (
+                "rise 10-90 % [s]",
+                format!("~{:.4}", 1.8 / w),
+                Box::new(|a: &Achieved| a.step.map_or("-".into(), |m| opt(m.rise_time_s))),
+            ),
+            (
+                "settling 5 % [s]",
+                format!("~{:.4}", 3.0 / (d * w)),
+                Box::new(|a: &Achieved| a.step.map_or("-".into(), |m| opt(m.settling_time_5pct_s))),
+            ),
+            (
+                "settling 1 % [s]",
+                format!("~{:.4}", 4.6 / (d * w)),
+                Box::new(|a: &Achieved| a.step.map_or("-".into(), |m| opt(m.settling_time_1pct_s))),
+            ),
+            (
+                "closed loop",
+                "".into(),
+                Box::new(|a: &Achieved| stability_name(a.stability).into()),
+            ),
         ];
         for (name, spec, f) in rows.iter() {
             let _ = write!(s, "  {name:<22}{spec:>12}");
@@ -392,11 +511,22 @@ impl Design {
             }
             let _ = writeln!(s);
         }
-        let _ = writeln!(s, "  (spec column: time figures are the 2nd-order estimates of eqs. 32-33, 39-40)");
+        let _ = writeln!(
+            s,
+            "  (spec column: time figures are the 2nd-order estimates of eqs. 32-33, 39-40)"
+        );
         let _ = writeln!(s, "\nclosed-loop poles:");
         for a in &loops {
-            let unit = if a.name == "discrete" { "z" } else { "s [rad/s]" };
-            let poles: Vec<String> = a.poles.iter().map(|p| format!("{:.4}{:+.4}j", p.re, p.im)).collect();
+            let unit = if a.name == "discrete" {
+                "z"
+            } else {
+                "s [rad/s]"
+            };
+            let poles: Vec<String> = a
+                .poles
+                .iter()
+                .map(|p| format!("{:.4}{:+.4}j", p.re, p.im))
+                .collect();
             let _ = writeln!(s, "  {:<9} {unit}: {}", a.name, poles.join(", "));
         }
         let pm_short = deg(tr.spec.phase_margin) - r.discrete.margins.phase_margin_deg;
@@ -408,16 +538,27 @@ impl Design {
             );
         }
         if self.alpha < 4.0 && r.request.kind == ControllerKind::Pid {
-            let _ = writeln!(s, "note: alpha < 4 gives complex PID zeros (the handout recommends alpha >= 4).");
+            let _ = writeln!(
+                s,
+                "note: alpha < 4 gives complex PID zeros (the handout recommends alpha >= 4)."
+            );
         }
         for a in &loops {
             if a.stability != Stability::Stable {
-                let _ = writeln!(s, "WARNING: the {} loop is {}.", a.name, stability_name(a.stability));
+                let _ = writeln!(
+                    s,
+                    "WARNING: the {} loop is {}.",
+                    a.name,
+                    stability_name(a.stability)
+                );
             }
         }
         s
     }
 }
+
+/// One row of the verification table: name, spec column, value per loop.
+type Row = (&'static str, String, Box<dyn Fn(&Achieved) -> String>);
 
 /// Writes to stdout; a closed pipe (`servo design | head`) is not an error.
 fn emit(text: &str) -> anyhow::Result<()> {
@@ -495,8 +636,11 @@ fn achieved_json(a: &Achieved) -> Value {
 
 fn write_step_plot(path: &std::path::Path, r: &DesignReport) -> anyhow::Result<()> {
     use crate::plot::{line_chart, Chart, Series};
-    let loops: Vec<&Achieved> =
-        [Some(&r.reduced), r.full.as_ref(), Some(&r.discrete)].into_iter().flatten().filter(|a| !a.response.time_s.is_empty()).collect();
+    let loops: Vec<&Achieved> = [Some(&r.reduced), r.full.as_ref(), Some(&r.discrete)]
+        .into_iter()
+        .flatten()
+        .filter(|a| !a.response.time_s.is_empty())
+        .collect();
     if loops.is_empty() {
         bail!("no loop is stable, there is no step response to plot");
     }
@@ -510,19 +654,38 @@ fn write_step_plot(path: &std::path::Path, r: &DesignReport) -> anyhow::Result<(
     let cut: Vec<(String, Vec<f64>, Vec<f64>)> = loops
         .iter()
         .map(|a| {
-            let n = a.response.time_s.iter().take_while(|&&t| t <= t_end).count().max(2);
-            (format!("{} loop", a.name), a.response.time_s[..n].to_vec(), a.response.y_rad[..n].to_vec())
+            let n = a
+                .response
+                .time_s
+                .iter()
+                .take_while(|&&t| t <= t_end)
+                .count()
+                .max(2);
+            (
+                format!("{} loop", a.name),
+                a.response.time_s[..n].to_vec(),
+                a.response.y_rad[..n].to_vec(),
+            )
         })
         .collect();
     let t_ref = vec![0.0, t_end];
     let y_ref = vec![1.0, 1.0];
-    let mut series = vec![Series { label: "reference 1 rad", x: &t_ref, y: &y_ref }];
+    let mut series = vec![Series {
+        label: "reference 1 rad",
+        x: &t_ref,
+        y: &y_ref,
+    }];
     for (label, t, y) in &cut {
         series.push(Series { label, x: t, y });
     }
     line_chart(
         path,
-        &Chart { title: "closed-loop step response (r = 1 rad)", x_label: "time [s]", y_label: "theta_l [rad]", ..Chart::default() },
+        &Chart {
+            title: "closed-loop step response (r = 1 rad)",
+            x_label: "time [s]",
+            y_label: "theta_l [rad]",
+            ..Chart::default()
+        },
         &series,
     )
 }

@@ -21,7 +21,12 @@ pub struct SensorConfig {
 
 impl Default for SensorConfig {
     fn default() -> Self {
-        SensorConfig { counts_per_rev: 4096, current_noise_a: 2e-3, current_offset_a: 0.0, seed: 1 }
+        SensorConfig {
+            counts_per_rev: 4096,
+            current_noise_a: 2e-3,
+            current_offset_a: 0.0,
+            seed: 1,
+        }
     }
 }
 
@@ -45,7 +50,10 @@ pub struct Sensors {
 
 impl Sensors {
     pub fn new(cfg: SensorConfig) -> Sensors {
-        Sensors { cfg, rng: SplitMix64(cfg.seed) }
+        Sensors {
+            cfg,
+            rng: SplitMix64(cfg.seed),
+        }
     }
     pub fn config(&self) -> &SensorConfig {
         &self.cfg
@@ -60,7 +68,11 @@ impl Sensors {
             (0, s.theta_l_rad)
         };
         let noise = self.cfg.current_noise_a * self.rng.normal();
-        Measurement { theta_l_rad: theta, encoder_count: count, i_a_a: s.i_a_a + self.cfg.current_offset_a + noise }
+        Measurement {
+            theta_l_rad: theta,
+            encoder_count: count,
+            i_a_a: s.i_a_a + self.cfg.current_offset_a + noise,
+        }
     }
 }
 

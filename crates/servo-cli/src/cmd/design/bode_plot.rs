@@ -5,7 +5,11 @@ use plotters::prelude::*;
 use servo_core::design::verify::DesignReport;
 use servo_core::design::{c_abs, c_arg, deg};
 
-const COLORS: [RGBColor; 3] = [RGBColor(31, 119, 180), RGBColor(214, 39, 40), RGBColor(44, 160, 44)];
+const COLORS: [RGBColor; 3] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+];
 
 /// Writes the SVG.
 pub fn write(path: &std::path::Path, r: &DesignReport) -> anyhow::Result<()> {
@@ -29,8 +33,15 @@ fn curves(r: &DesignReport) -> Vec<Curve> {
     let nyq = std::f64::consts::PI / r.request.ts_s;
     let (lo, hi) = (wgc * 1e-2, (wgc * 1e3).min(1e5));
     let mut out = Vec::new();
-    for a in [Some(&r.reduced), r.full.as_ref(), Some(&r.discrete)].into_iter().flatten() {
-        let top = if a.name == "discrete" { hi.min(0.999 * nyq) } else { hi };
+    for a in [Some(&r.reduced), r.full.as_ref(), Some(&r.discrete)]
+        .into_iter()
+        .flatten()
+    {
+        let top = if a.name == "discrete" {
+            hi.min(0.999 * nyq)
+        } else {
+            hi
+        };
         let n = 600;
         let mut c = Curve {
             name: a.name,
@@ -45,7 +56,9 @@ fn curves(r: &DesignReport) -> Vec<Curve> {
         let mut prev = -90.0 * (1 + i32::from(r.gains.ki != 0.0)) as f64;
         for k in 0..n {
             let w = lo * (top / lo).powf(k as f64 / (n - 1) as f64);
-            let Some(l) = r.loop_response(a.name, w) else { continue };
+            let Some(l) = r.loop_response(a.name, w) else {
+                continue;
+            };
             let p = deg(c_arg(l));
             let p = p - 360.0 * ((p - prev) / 360.0).round();
             prev = p;
@@ -61,9 +74,18 @@ fn curves(r: &DesignReport) -> Vec<Curve> {
 fn render(r: &DesignReport) -> anyhow::Result<String> {
     let cs = curves(r);
     let e = |e: &dyn std::fmt::Display| anyhow!("plot: {e}");
-    let (w0, w1) = cs.iter().flat_map(|c| c.w.iter()).fold((f64::INFINITY, 0.0f64), |(a, b), &w| (a.min(w), b.max(w)));
+    let (w0, w1) = cs
+        .iter()
+        .flat_map(|c| c.w.iter())
+        .fold((f64::INFINITY, 0.0f64), |(a, b), &w| (a.min(w), b.max(w)));
     let range = |f: &dyn Fn(&Curve) -> &Vec<f64>| {
-        let (a, b) = cs.iter().flat_map(|c| f(c).iter()).filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let (a, b) = cs
+            .iter()
+            .flat_map(|c| f(c).iter())
+            .filter(|v| v.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
         (a - 5.0, b + 5.0)
     };
     let (m0, m1) = range(&|c| &c.mag_db);
@@ -91,23 +113,48 @@ fn render(r: &DesignReport) -> anyhow::Result<String> {
             .y_label_area_size(60)
             .build_cartesian_2d((w0..w1).log_scale(), m0..m1)
             .map_err(|x| e(&x))?;
-        mag.configure_mesh().y_desc("|L| [dB]").draw().map_err(|x| e(&x))?;
-        mag.draw_series(LineSeries::new([(w0, 0.0), (w1, 0.0)], BLACK.mix(0.5))).map_err(|x| e(&x))?;
+        mag.configure_mesh()
+            .y_desc("|L| [dB]")
+            .draw()
+            .map_err(|x| e(&x))?;
+        mag.draw_series(LineSeries::new([(w0, 0.0), (w1, 0.0)], BLACK.mix(0.5)))
+            .map_err(|x| e(&x))?;
         for (i, c) in cs.iter().enumerate() {
             let col = COLORS[i % 3];
-            let label = format!("{}: w_gc = {:.3} rad/s, GM = {}", c.name, c.wgc, if c.gm.is_finite() { format!("{:.2} dB at {:.1} rad/s", c.gm, c.wpc) } else { "inf".into() });
-            mag.draw_series(LineSeries::new(c.w.iter().copied().zip(c.mag_db.iter().copied()), col.stroke_width(1)))
-                .map_err(|x| e(&x))?
-                .label(label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], col));
+            let label = format!(
+                "{}: w_gc = {:.3} rad/s, GM = {}",
+                c.name,
+                c.wgc,
+                if c.gm.is_finite() {
+                    format!("{:.2} dB at {:.1} rad/s", c.gm, c.wpc)
+                } else {
+                    "inf".into()
+                }
+            );
+            mag.draw_series(LineSeries::new(
+                c.w.iter().copied().zip(c.mag_db.iter().copied()),
+                col.stroke_width(1),
+            ))
+            .map_err(|x| e(&x))?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], col));
             if c.wgc.is_finite() {
-                mag.draw_series([Circle::new((c.wgc, 0.0), 4, col.filled())]).map_err(|x| e(&x))?;
+                mag.draw_series([Circle::new((c.wgc, 0.0), 4, col.filled())])
+                    .map_err(|x| e(&x))?;
             }
             if c.gm.is_finite() && c.wpc > w0 && c.wpc < w1 {
-                mag.draw_series(LineSeries::new([(c.wpc, 0.0), (c.wpc, -c.gm)], col.stroke_width(2))).map_err(|x| e(&x))?;
+                mag.draw_series(LineSeries::new(
+                    [(c.wpc, 0.0), (c.wpc, -c.gm)],
+                    col.stroke_width(2),
+                ))
+                .map_err(|x| e(&x))?;
             }
         }
-        mag.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(|x| e(&x))?;
+        mag.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|x| e(&x))?;
 
         let mut ph = ChartBuilder::on(&bottom)
             .margin(10)
@@ -115,19 +162,38 @@ fn render(r: &DesignReport) -> anyhow::Result<String> {
             .y_label_area_size(60)
             .build_cartesian_2d((w0..w1).log_scale(), p0..p1)
             .map_err(|x| e(&x))?;
-        ph.configure_mesh().x_desc("w [rad/s]").y_desc("angle L [deg]").draw().map_err(|x| e(&x))?;
-        ph.draw_series(LineSeries::new([(w0, -180.0), (w1, -180.0)], BLACK.mix(0.5))).map_err(|x| e(&x))?;
+        ph.configure_mesh()
+            .x_desc("w [rad/s]")
+            .y_desc("angle L [deg]")
+            .draw()
+            .map_err(|x| e(&x))?;
+        ph.draw_series(LineSeries::new(
+            [(w0, -180.0), (w1, -180.0)],
+            BLACK.mix(0.5),
+        ))
+        .map_err(|x| e(&x))?;
         for (i, c) in cs.iter().enumerate() {
             let col = COLORS[i % 3];
-            ph.draw_series(LineSeries::new(c.w.iter().copied().zip(c.phase_deg.iter().copied()), col.stroke_width(1)))
-                .map_err(|x| e(&x))?
-                .label(format!("{}: PM = {:.2} deg", c.name, c.pm))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], col));
+            ph.draw_series(LineSeries::new(
+                c.w.iter().copied().zip(c.phase_deg.iter().copied()),
+                col.stroke_width(1),
+            ))
+            .map_err(|x| e(&x))?
+            .label(format!("{}: PM = {:.2} deg", c.name, c.pm))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], col));
             if c.wgc.is_finite() {
-                ph.draw_series(LineSeries::new([(c.wgc, -180.0), (c.wgc, -180.0 + c.pm)], col.stroke_width(2))).map_err(|x| e(&x))?;
+                ph.draw_series(LineSeries::new(
+                    [(c.wgc, -180.0), (c.wgc, -180.0 + c.pm)],
+                    col.stroke_width(2),
+                ))
+                .map_err(|x| e(&x))?;
             }
         }
-        ph.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(|x| e(&x))?;
+        ph.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|x| e(&x))?;
         root.present().map_err(|x| e(&x))?;
     }
     Ok(svg)
