@@ -141,8 +141,7 @@ pub fn synthesize(
         ControllerKind::Pd => (0.0, math::PI / 2.0),
     };
     let strict_ok = delta_phi > lo && delta_phi < hi;
-    let edge_ok = (kind == ControllerKind::Pi && delta_phi == 0.0)
-        || (kind == ControllerKind::Pd && delta_phi == 0.0);
+    let edge_ok = delta_phi == 0.0 && kind != ControllerKind::Pid;
     if !(strict_ok || edge_ok) {
         return Err(infeasible(kind, spec, p_gc, delta_phi, lo, hi));
     }

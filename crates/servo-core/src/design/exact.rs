@@ -86,7 +86,11 @@ pub fn solve(
                 // a genuine root, not a jump of the wrapped phase across +-pi
                 if (prev.1 > 0.0) != (fx > 0.0) && (prev.1 - fx).abs() < 1.0 {
                     let dist = (0.5 * (prev.0 + x) - math::ln(td0)).abs();
-                    if best.map_or(true, |b| dist < b.2) {
+                    let better = match best {
+                        None => true,
+                        Some(b) => dist < b.2,
+                    };
+                    if better {
                         best = Some((prev.0, x, dist));
                     }
                 }
