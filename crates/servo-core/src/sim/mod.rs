@@ -66,7 +66,12 @@ impl PlantSim {
             e.check_complete()?;
         }
         let substeps = math::floor(dt_s / 10e-6).max(1.0) as u32;
-        Ok(PlantSim { plant: *plant, dt_s, substeps, state: PlantState::default() })
+        Ok(PlantSim {
+            plant: *plant,
+            dt_s,
+            substeps,
+            state: PlantState::default(),
+        })
     }
 
     /// The plant being simulated.
@@ -130,5 +135,10 @@ impl PlantSim {
 }
 
 fn add(x: [f64; 4], k: [f64; 4], h: f64) -> [f64; 4] {
-    [x[0] + h * k[0], x[1] + h * k[1], x[2] + h * k[2], x[3] + h * k[3]]
+    [
+        x[0] + h * k[0],
+        x[1] + h * k[1],
+        x[2] + h * k[2],
+        x[3] + h * k[3],
+    ]
 }
