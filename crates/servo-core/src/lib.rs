@@ -17,10 +17,12 @@
 #[cfg(feature = "alloc")]
 extern crate alloc;
 
+#[cfg(feature = "alloc")]
+pub mod compare;
+pub mod control;
 pub mod design;
 #[cfg(feature = "alloc")]
 pub mod diagnose;
-pub mod control;
 pub mod effects;
 #[cfg(feature = "alloc")]
 pub mod fit;
