@@ -62,8 +62,8 @@ impl Default for FitOptions {
     fn default() -> Self {
         FitOptions {
             filter_hz: 25.0,
-            min_speed_rad_s: 2.0,
-            margin_s: 0.02,
+            min_speed_rad_s: 1.0,
+            margin_s: 0.01,
             refit_base: true,
             max_delay_s: 0.02,
             max_cogging_harmonic: 40,
