@@ -308,9 +308,9 @@ fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecDat
 fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec: &mut Rows) {
     let n = r.omega_f.len();
     let fs = 1.0 / r.dt_s;
-    let edge = ((2.0 / opts.filter_hz) * fs).ceil() as usize + 2;
-    let dec = ((fs / (4.0 * opts.filter_hz)).floor() as usize).max(1);
-    let margin = (opts.margin_s * fs).ceil() as usize;
+    let edge = libm::ceil((2.0 / opts.filter_hz) * fs) as usize + 2;
+    let dec = (math::floor(fs / (4.0 * opts.filter_hz)) as usize).max(1);
+    let margin = libm::ceil(opts.margin_s * fs) as usize;
     // Stuck samples, dilated by the margin.
     let mut near_stuck = alloc::vec![false; n];
     let mut last_stuck: Option<usize> = None;
@@ -339,6 +339,27 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
             }
         }
     }
+    // With the load angle measured, the motor speed is not observable near velocity reversals
+    // when the gears have play: keep the electrical balance (which uses it) away from them.
+    let rev_win = libm::ceil(0.05 * fs) as usize;
+    let mut near_rev = alloc::vec![false; n];
+    if r.angle_is_load {
+        let mut last: Option<(usize, f64)> = None;
+        for k in 0..n {
+            let w = r.omega_f[k];
+            if w.abs() > opts.min_speed_rad_s {
+                let s = math::sign(w);
+                if let Some((k0, s0)) = last {
+                    if s0 != s {
+                        for f in near_rev.iter_mut().take((k + rev_win).min(n)).skip(k0.saturating_sub(rev_win)) {
+                            *f = true;
+                        }
+                    }
+                }
+                last = Some((k, s));
+            }
+        }
+    }
     // Fit / held-out blocks: the record is cut in blocks of `holdout_block_s`; every
     // `holdout_every`-th block is held out.
     let block = ((opts.holdout_block_s * fs) as usize).max(1);
@@ -351,9 +372,11 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
             mech.k.push(k);
             mech.fit.push(fit);
         }
-        elec.rec.push(ri);
-        elec.k.push(k);
-        elec.fit.push(fit);
+        if !near_rev[k] {
+            elec.rec.push(ri);
+            elec.k.push(k);
+            elec.fit.push(fit);
+        }
         k += dec;
     }
 }

@@ -29,7 +29,7 @@ pub fn segments(ds: &Dataset, part: Part) -> Vec<(usize, usize)> {
     for (ri, r) in ds.recs.iter().enumerate() {
         let fs = 1.0 / r.dt_s;
         let h = ((o.oe_horizon_s * fs) as usize).max(2);
-        let edge = ((2.0 / o.filter_hz) * fs).ceil() as usize + 2;
+        let edge = libm::ceil((2.0 / o.filter_hz) * fs) as usize + 2;
         let block = ((o.holdout_block_s * fs) as usize).max(1);
         let n = r.u_v.len();
         let mut k = edge.max(1);
