@@ -6,6 +6,7 @@ pub mod gains_file;
 pub mod io;
 pub mod model_file;
 pub mod plot;
+pub mod reference_file;
 
 use clap::Parser;
 
