@@ -17,15 +17,27 @@
 #[cfg(feature = "alloc")]
 extern crate alloc;
 
+#[cfg(feature = "alloc")]
+pub mod compare;
 pub mod control;
+pub mod design;
+#[cfg(feature = "alloc")]
+pub mod diagnose;
 pub mod effects;
+#[cfg(feature = "alloc")]
+pub mod fit;
+#[cfg(feature = "alloc")]
+pub mod ident;
 pub mod math;
 pub mod params;
 pub mod plant;
+pub mod protocol;
 #[cfg(feature = "alloc")]
 pub mod record;
+pub mod safety;
 pub mod sim;
 
+pub use design::DesignError;
 pub use effects::{Effect, EffectKind, Effects};
 pub use params::{ParamError, PlantParams};
 pub use plant::Plant;
