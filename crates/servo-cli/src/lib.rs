@@ -5,6 +5,7 @@ pub mod cmd;
 pub mod gains_file;
 pub mod io;
 pub mod model_file;
+pub mod plant_args;
 pub mod plot;
 
 use clap::Parser;

@@ -30,6 +30,28 @@ impl Default for SensorConfig {
     }
 }
 
+/// Why a sensor configuration was rejected.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SensorError {
+    #[error("current_noise_a must be a finite standard deviation >= 0 A, got {0}")]
+    Noise(f64),
+    #[error("current_offset_a must be a finite current in A, got {0}")]
+    Offset(f64),
+}
+
+impl SensorConfig {
+    /// Checks that the noise is a finite non-negative standard deviation and the offset finite.
+    pub fn validate(&self) -> Result<(), SensorError> {
+        if !(self.current_noise_a.is_finite() && self.current_noise_a >= 0.0) {
+            return Err(SensorError::Noise(self.current_noise_a));
+        }
+        if !self.current_offset_a.is_finite() {
+            return Err(SensorError::Offset(self.current_offset_a));
+        }
+        Ok(())
+    }
+}
+
 /// What the board measures at one sample.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Measurement {
