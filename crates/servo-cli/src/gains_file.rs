@@ -59,13 +59,15 @@ pub struct GainsFile {
 impl GainsFile {
     /// Reads and validates a gains file.
     pub fn load(path: &Path) -> anyhow::Result<GainsFile> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading gains file {}", path.display()))?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading gains file {}", path.display()))?;
         Self::parse(&text).with_context(|| format!("in gains file {}", path.display()))
     }
 
     /// Parses and validates TOML text.
     pub fn parse(text: &str) -> anyhow::Result<GainsFile> {
-        let g: GainsFile = toml::from_str(text).map_err(|e| anyhow!("{}", e.to_string().trim_end()))?;
+        let g: GainsFile =
+            toml::from_str(text).map_err(|e| anyhow!("{}", e.to_string().trim_end()))?;
         g.validate()?;
         Ok(g)
     }
@@ -79,7 +81,10 @@ impl GainsFile {
             }
         }
         if !(p.ts_s.is_finite() && p.ts_s > 0.0) {
-            bail!("[pid] `ts_s` (sample period [s]) must be > 0, got {}", p.ts_s);
+            bail!(
+                "[pid] `ts_s` (sample period [s]) must be > 0, got {}",
+                p.ts_s
+            );
         }
         if let Some(kw) = p.kw {
             if !(kw.is_finite() && kw >= 0.0) {
@@ -96,7 +101,8 @@ impl GainsFile {
 
     /// Writes the file with units in comments.
     pub fn save(&self, path: &Path) -> anyhow::Result<()> {
-        std::fs::write(path, self.to_toml_commented()).with_context(|| format!("writing gains file {}", path.display()))
+        std::fs::write(path, self.to_toml_commented())
+            .with_context(|| format!("writing gains file {}", path.display()))
     }
 
     /// TOML with units in comments.
@@ -110,7 +116,9 @@ impl GainsFile {
             p.kp, p.ki, p.kd, p.tl_s, p.ts_s
         );
         if let Some(kw) = p.kw {
-            s.push_str(&format!("kw = {kw:e}  # back-calculation anti-windup gain K_w [1/s]\n"));
+            s.push_str(&format!(
+                "kw = {kw:e}  # back-calculation anti-windup gain K_w [1/s]\n"
+            ));
         }
         if let Some(u) = p.u_limit_v {
             s.push_str(&format!("u_limit_v = {u:e}  # output limit [V]\n"));
@@ -130,13 +138,24 @@ mod tests {
     #[test]
     fn round_trip_and_rejects() {
         let g = GainsFile {
-            pid: PidSection { kp: 7.0476, ki: 86.121, kd: 0.14418, tl_s: 6.7e-3, ts_s: 1e-3, kw: Some(30.0), u_limit_v: None },
+            pid: PidSection {
+                kp: 7.0476,
+                ki: 86.121,
+                kd: 0.14418,
+                tl_s: 6.7e-3,
+                ts_s: 1e-3,
+                kw: Some(30.0),
+                u_limit_v: None,
+            },
             design: None,
         };
         assert_eq!(GainsFile::parse(&g.to_toml_commented()).unwrap(), g);
         let e = format!("{:#}", GainsFile::parse("[pid]\nkp = -1\n").unwrap_err());
         assert!(e.contains("kp"), "{e}");
-        let e = format!("{:#}", GainsFile::parse("[pid]\nkp = 1\nkq = 2\n").unwrap_err());
+        let e = format!(
+            "{:#}",
+            GainsFile::parse("[pid]\nkp = 1\nkq = 2\n").unwrap_err()
+        );
         assert!(e.contains("kq"), "{e}");
     }
 }

@@ -5,6 +5,7 @@ pub mod cmd;
 pub mod gains_file;
 pub mod io;
 pub mod model_file;
+pub mod plant_args;
 pub mod plot;
 
 use clap::Parser;
@@ -27,7 +28,11 @@ where
         Ok(c) => c,
         Err(e) => {
             let _ = e.print();
-            return if e.use_stderr() { std::process::ExitCode::from(2) } else { std::process::ExitCode::SUCCESS };
+            return if e.use_stderr() {
+                std::process::ExitCode::from(2)
+            } else {
+                std::process::ExitCode::SUCCESS
+            };
         }
     };
     match cli.command.run() {

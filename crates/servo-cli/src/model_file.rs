@@ -47,21 +47,29 @@ pub struct ModelFile {
 impl Default for ModelFile {
     /// Table 2, no effects.
     fn default() -> Self {
-        ModelFile { params: PlantParams::TABLE2, effects: Effects::NONE, sensors: None, provenance: None }
+        ModelFile {
+            params: PlantParams::TABLE2,
+            effects: Effects::NONE,
+            sensors: None,
+            provenance: None,
+        }
     }
 }
 
 impl ModelFile {
     /// Reads and validates `path`; errors name the file, the key and what was expected.
     pub fn load(path: &Path) -> anyhow::Result<ModelFile> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading model file {}", path.display()))?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading model file {}", path.display()))?;
         Self::parse(&text).with_context(|| format!("in model file {}", path.display()))
     }
 
     /// Parses and validates TOML text.
     pub fn parse(text: &str) -> anyhow::Result<ModelFile> {
         let raw: Raw = toml::from_str(text).map_err(|e| anyhow!("{}", e.to_string().trim_end()))?;
-        raw.params.validate().map_err(|e| anyhow!("[params]: {e}"))?;
+        raw.params
+            .validate()
+            .map_err(|e| anyhow!("[params]: {e}"))?;
         let mut effects = Effects::NONE;
         for (name, kv) in &raw.effects {
             let kind = EffectKind::from_name(name).ok_or_else(|| {
@@ -72,12 +80,19 @@ impl ModelFile {
             })?;
             let mut e = Effect::unset(kind);
             for (k, v) in kv {
-                e.set(k, *v).map_err(|err| anyhow!("[effects.{name}]: {err}"))?;
+                e.set(k, *v)
+                    .map_err(|err| anyhow!("[effects.{name}]: {err}"))?;
             }
-            e.check_complete().map_err(|err| anyhow!("[effects.{name}]: {err}"))?;
+            e.check_complete()
+                .map_err(|err| anyhow!("[effects.{name}]: {err}"))?;
             effects.insert(e);
         }
-        Ok(ModelFile { params: raw.params, effects, sensors: raw.sensors, provenance: raw.provenance })
+        Ok(ModelFile {
+            params: raw.params,
+            effects,
+            sensors: raw.sensors,
+            provenance: raw.provenance,
+        })
     }
 
     /// The plant: friction from the params (B_eq, tau_sf), then the file's effects on top (an
@@ -92,7 +107,12 @@ impl ModelFile {
 
     /// A model file describing `plant` (friction written as effects).
     pub fn from_plant(plant: &Plant) -> ModelFile {
-        ModelFile { params: plant.params, effects: plant.effects, sensors: None, provenance: None }
+        ModelFile {
+            params: plant.params,
+            effects: plant.effects,
+            sensors: None,
+            provenance: None,
+        }
     }
 
     /// Serialises to TOML (machine form).
@@ -102,7 +122,12 @@ impl ModelFile {
             let kv: BTreeMap<String, f64> = e.iter().map(|(p, v)| (p.key.to_string(), v)).collect();
             effects.insert(e.kind.name().to_string(), kv);
         }
-        let raw = Raw { params: self.params, effects, sensors: self.sensors, provenance: self.provenance.clone() };
+        let raw = Raw {
+            params: self.params,
+            effects,
+            sensors: self.sensors,
+            provenance: self.provenance.clone(),
+        };
         Ok(toml::to_string(&raw)?)
     }
 
@@ -127,11 +152,19 @@ impl ModelFile {
             ("j_m", p.j_m, "rotor moment of inertia J_m [kg m^2]"),
             ("b_m", p.b_m, "rotor viscous friction B_m [N m s/rad]"),
             ("n", p.n, "gearbox ratio N [-]"),
-            ("j_72", p.j_72, "inertia of one external 72-tooth gear J_72 [kg m^2] (3 fitted)"),
+            (
+                "j_72",
+                p.j_72,
+                "inertia of one external 72-tooth gear J_72 [kg m^2] (3 fitted)",
+            ),
             ("j_d", p.j_d, "inertia of the extra disc J_d [kg m^2]"),
             ("b_l", p.b_l, "load viscous friction B_l [N m s/rad]"),
             ("k_drv", p.k_drv, "voltage driver static gain k_drv [V/V]"),
-            ("f_c_drv", p.f_c_drv, "voltage driver cut-off frequency f_c,drv [Hz]"),
+            (
+                "f_c_drv",
+                p.f_c_drv,
+                "voltage driver cut-off frequency f_c,drv [Hz]",
+            ),
             ("r_s", p.r_s, "shunt resistance R_s [ohm]"),
         ];
         for (k, v, doc) in rows {
@@ -149,9 +182,16 @@ impl ModelFile {
             }
         }
         for e in self.effects.iter() {
-            s.push_str(&format!("\n[effects.{}]  # {}\n", e.kind.name(), e.kind.description()));
+            s.push_str(&format!(
+                "\n[effects.{}]  # {}\n",
+                e.kind.name(),
+                e.kind.description()
+            ));
             for (spec, v) in e.iter() {
-                s.push_str(&format!("{} = {:e}  # {} [{}]\n", spec.key, v, spec.doc, spec.unit));
+                s.push_str(&format!(
+                    "{} = {:e}  # {} [{}]\n",
+                    spec.key, v, spec.doc, spec.unit
+                ));
             }
         }
         if let Some(sn) = &self.sensors {
@@ -189,7 +229,11 @@ mod tests {
         let negative = good.replace("j_m = 3.9e-7", "j_m = -3.9e-7");
         let e = format!("{:#}", ModelFile::parse(&negative).unwrap_err());
         assert!(e.contains("j_m"), "{e}");
-        let missing: String = good.lines().filter(|l| !l.starts_with("k_t")).map(|l| format!("{l}\n")).collect();
+        let missing: String = good
+            .lines()
+            .filter(|l| !l.starts_with("k_t"))
+            .map(|l| format!("{l}\n"))
+            .collect();
         let e = format!("{:#}", ModelFile::parse(&missing).unwrap_err());
         assert!(e.contains("k_t"), "{e}");
         let wrong_type = good.replace("n = 1.4e1", "n = \"fourteen\"");

@@ -23,7 +23,14 @@ pub struct Chart<'a> {
 
 impl Default for Chart<'_> {
     fn default() -> Self {
-        Chart { title: "", x_label: "", y_label: "", log_x: false, width: 900, height: 400 }
+        Chart {
+            title: "",
+            x_label: "",
+            y_label: "",
+            log_x: false,
+            width: 900,
+            height: 400,
+        }
     }
 }
 
@@ -37,7 +44,12 @@ const COLORS: [RGBColor; 6] = [
 ];
 
 fn bounds(series: &[Series], log_x: bool) -> ((f64, f64), (f64, f64)) {
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
     for s in series {
         for (&x, &y) in s.x.iter().zip(s.y) {
             if !x.is_finite() || !y.is_finite() || (log_x && x <= 0.0) {
@@ -63,11 +75,16 @@ fn bounds(series: &[Series], log_x: bool) -> ((f64, f64), (f64, f64)) {
 pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String> {
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (chart.width, chart.height)).into_drawing_area();
+        let root =
+            SVGBackend::with_string(&mut svg, (chart.width, chart.height)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| anyhow!("plot: {e}"))?;
         let ((x0, x1), (y0, y1)) = bounds(series, chart.log_x);
         let mut builder = ChartBuilder::on(&root);
-        builder.caption(chart.title, ("sans-serif", 16)).margin(10).x_label_area_size(35).y_label_area_size(60);
+        builder
+            .caption(chart.title, ("sans-serif", 16))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(60);
         macro_rules! draw {
             ($ctx:expr) => {{
                 let mut ctx = $ctx;
@@ -78,7 +95,11 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
                     .map_err(|e| anyhow!("plot: {e}"))?;
                 for (i, s) in series.iter().enumerate() {
                     let color = COLORS[i % COLORS.len()];
-                    let pts = s.x.iter().zip(s.y).filter(|(x, y)| x.is_finite() && y.is_finite()).map(|(&x, &y)| (x, y));
+                    let pts =
+                        s.x.iter()
+                            .zip(s.y)
+                            .filter(|(x, y)| x.is_finite() && y.is_finite())
+                            .map(|(&x, &y)| (x, y));
                     ctx.draw_series(LineSeries::new(pts, color.stroke_width(1)))
                         .map_err(|e| anyhow!("plot: {e}"))?
                         .label(s.label)
@@ -94,9 +115,13 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
             }};
         }
         if chart.log_x {
-            draw!(builder.build_cartesian_2d((x0..x1).log_scale(), y0..y1).map_err(|e| anyhow!("plot: {e}"))?);
+            draw!(builder
+                .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
+                .map_err(|e| anyhow!("plot: {e}"))?);
         } else {
-            draw!(builder.build_cartesian_2d(x0..x1, y0..y1).map_err(|e| anyhow!("plot: {e}"))?);
+            draw!(builder
+                .build_cartesian_2d(x0..x1, y0..y1)
+                .map_err(|e| anyhow!("plot: {e}"))?);
         }
         root.present().map_err(|e| anyhow!("plot: {e}"))?;
     }

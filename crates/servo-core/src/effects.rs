@@ -17,6 +17,8 @@
 //! | `deadzone` | `width` V: dead band (half width) on the driver input u |
 //! | `delay` | `delay` s: input transport delay beyond the one-sample zero-order hold |
 
+pub mod torque;
+
 use core::fmt;
 
 /// One parameter of a catalogue effect.
@@ -45,7 +47,14 @@ const fn spec(
     min: f64,
     nonlinear: bool,
 ) -> ParamSpec {
-    ParamSpec { key, unit, doc, default, min, nonlinear }
+    ParamSpec {
+        key,
+        unit,
+        doc,
+        default,
+        min,
+        nonlinear,
+    }
 }
 
 /// The kinds of effect in the catalogue.
@@ -120,27 +129,84 @@ impl EffectKind {
     /// The equation where the effect lives: true for the torque balance (mechanical), false for the
     /// electrical/input side.
     pub const fn is_mechanical(self) -> bool {
-        !matches!(self, EffectKind::Saturation | EffectKind::Deadzone | EffectKind::Delay)
+        !matches!(
+            self,
+            EffectKind::Saturation | EffectKind::Deadzone | EffectKind::Delay
+        )
     }
 
     /// The parameters of this kind, in order.
     pub const fn params(self) -> &'static [ParamSpec] {
-        const VISCOUS: [ParamSpec; 1] =
-            [spec("b_eq", "N m s/rad", "viscous friction coefficient, motor side", None, 0.0, false)];
-        const COULOMB: [ParamSpec; 1] =
-            [spec("tau_sf", "N m", "Coulomb friction torque, load side", None, 0.0, false)];
+        const VISCOUS: [ParamSpec; 1] = [spec(
+            "b_eq",
+            "N m s/rad",
+            "viscous friction coefficient, motor side",
+            None,
+            0.0,
+            false,
+        )];
+        const COULOMB: [ParamSpec; 1] = [spec(
+            "tau_sf",
+            "N m",
+            "Coulomb friction torque, load side",
+            None,
+            0.0,
+            false,
+        )];
         const STRIBECK: [ParamSpec; 2] = [
-            spec("tau_s", "N m", "breakaway (static) friction torque, load side, > tau_sf", None, 0.0, false),
-            spec("omega_s", "rad/s", "Stribeck speed, load side", Some(0.5), 1e-6, true),
+            spec(
+                "tau_s",
+                "N m",
+                "breakaway (static) friction torque, load side, > tau_sf",
+                None,
+                0.0,
+                false,
+            ),
+            spec(
+                "omega_s",
+                "rad/s",
+                "Stribeck speed, load side",
+                Some(0.5),
+                1e-6,
+                true,
+            ),
         ];
         const ASYMMETRY: [ParamSpec; 2] = [
-            spec("tau_sf_pos", "N m", "Coulomb friction for omega_l > 0, load side", None, 0.0, false),
-            spec("tau_sf_neg", "N m", "Coulomb friction for omega_l < 0, load side (magnitude)", None, 0.0, false),
+            spec(
+                "tau_sf_pos",
+                "N m",
+                "Coulomb friction for omega_l > 0, load side",
+                None,
+                0.0,
+                false,
+            ),
+            spec(
+                "tau_sf_neg",
+                "N m",
+                "Coulomb friction for omega_l < 0, load side (magnitude)",
+                None,
+                0.0,
+                false,
+            ),
         ];
         const BACKLASH: [ParamSpec; 4] = [
             spec("gap", "rad", "total play seen at the load", None, 0.0, true),
-            spec("stiffness", "N m/rad", "contact stiffness at the load", Some(20.0), 1e-9, true),
-            spec("damping", "N m s/rad", "contact damping at the load", Some(0.02), 0.0, true),
+            spec(
+                "stiffness",
+                "N m/rad",
+                "contact stiffness at the load",
+                Some(20.0),
+                1e-9,
+                true,
+            ),
+            spec(
+                "damping",
+                "N m s/rad",
+                "contact damping at the load",
+                Some(0.02),
+                0.0,
+                true,
+            ),
             spec(
                 "load_inertia_fraction",
                 "-",
@@ -151,20 +217,73 @@ impl EffectKind {
             ),
         ];
         const COGGING: [ParamSpec; 3] = [
-            spec("amplitude", "N m", "cogging torque amplitude at the motor", None, 0.0, false),
-            spec("harmonic", "1/rev", "cycles per motor revolution", None, 1.0, true),
-            spec("phase", "rad", "phase in motor angle", Some(0.0), f64::NEG_INFINITY, false),
+            spec(
+                "amplitude",
+                "N m",
+                "cogging torque amplitude at the motor",
+                None,
+                0.0,
+                false,
+            ),
+            spec(
+                "harmonic",
+                "1/rev",
+                "cycles per motor revolution",
+                None,
+                1.0,
+                true,
+            ),
+            spec(
+                "phase",
+                "rad",
+                "phase in motor angle",
+                Some(0.0),
+                f64::NEG_INFINITY,
+                false,
+            ),
         ];
         const IMBALANCE: [ParamSpec; 2] = [
-            spec("amplitude", "N m", "imbalance torque amplitude at the load", None, 0.0, false),
-            spec("phase", "rad", "phase in load angle", Some(0.0), f64::NEG_INFINITY, false),
+            spec(
+                "amplitude",
+                "N m",
+                "imbalance torque amplitude at the load",
+                None,
+                0.0,
+                false,
+            ),
+            spec(
+                "phase",
+                "rad",
+                "phase in load angle",
+                Some(0.0),
+                f64::NEG_INFINITY,
+                false,
+            ),
         ];
-        const SATURATION: [ParamSpec; 1] =
-            [spec("limit", "V", "symmetric limit on the driver input u", None, 1e-9, true)];
-        const DEADZONE: [ParamSpec; 1] =
-            [spec("width", "V", "dead band half width on the driver input u", None, 0.0, true)];
-        const DELAY: [ParamSpec; 1] =
-            [spec("delay", "s", "input transport delay beyond the zero-order hold", None, 0.0, true)];
+        const SATURATION: [ParamSpec; 1] = [spec(
+            "limit",
+            "V",
+            "symmetric limit on the driver input u",
+            None,
+            1e-9,
+            true,
+        )];
+        const DEADZONE: [ParamSpec; 1] = [spec(
+            "width",
+            "V",
+            "dead band half width on the driver input u",
+            None,
+            0.0,
+            true,
+        )];
+        const DELAY: [ParamSpec; 1] = [spec(
+            "delay",
+            "s",
+            "input transport delay beyond the zero-order hold",
+            None,
+            0.0,
+            true,
+        )];
         match self {
             EffectKind::Viscous => &VISCOUS,
             EffectKind::Coulomb => &COULOMB,
@@ -316,7 +435,8 @@ impl Effect {
             Some((n, r)) => (n.trim(), Some(r)),
             None => (spec.trim(), None),
         };
-        let kind = EffectKind::from_name(name).ok_or(EffectError::UnknownEffect(EffectName::new(name)))?;
+        let kind =
+            EffectKind::from_name(name).ok_or(EffectError::UnknownEffect(EffectName::new(name)))?;
         let mut e = Effect::unset(kind);
         if let Some(rest) = rest {
             for item in rest.split(',').map(str::trim).filter(|s| !s.is_empty()) {
@@ -351,11 +471,15 @@ impl Effect {
     /// Sets `key`, checking that it exists, is finite and respects its physical minimum.
     pub fn set(&mut self, key: &str, value: f64) -> Result<(), EffectError> {
         let kind = self.kind;
-        let i = kind.params().iter().position(|p| p.key == key).ok_or(EffectError::UnknownKey {
-            effect: kind.name(),
-            key: EffectName::new(key),
-            expected: ParamList(kind),
-        })?;
+        let i = kind
+            .params()
+            .iter()
+            .position(|p| p.key == key)
+            .ok_or(EffectError::UnknownKey {
+                effect: kind.name(),
+                key: EffectName::new(key),
+                expected: ParamList(kind),
+            })?;
         let p = &kind.params()[i];
         if !value.is_finite() || value < p.min {
             return Err(EffectError::OutOfRange {
@@ -388,7 +512,11 @@ impl Effect {
     /// Error if any required parameter is unset.
     pub fn check_complete(&self) -> Result<(), EffectError> {
         match self.missing().next() {
-            Some(p) => Err(EffectError::Missing { effect: self.kind.name(), key: p.key, unit: p.unit }),
+            Some(p) => Err(EffectError::Missing {
+                effect: self.kind.name(),
+                key: p.key,
+                unit: p.unit,
+            }),
             None => Ok(()),
         }
     }
@@ -471,14 +599,28 @@ mod tests {
 
     #[test]
     fn parse_errors_name_the_problem() {
-        assert!(matches!(Effect::parse("friction"), Err(EffectError::UnknownEffect(_))));
+        assert!(matches!(
+            Effect::parse("friction"),
+            Err(EffectError::UnknownEffect(_))
+        ));
         let err = Effect::parse("backlash:gapp=1").unwrap_err();
         assert!(std::format!("{err}").contains("gap [rad]"));
-        assert!(matches!(Effect::parse("delay:delay=abc"), Err(EffectError::NotANumber { .. })));
-        assert!(matches!(Effect::parse("backlash:gap=-1"), Err(EffectError::OutOfRange { .. })));
         assert!(matches!(
-            Effect::parse("cogging:amplitude=1e-3").unwrap().check_complete(),
-            Err(EffectError::Missing { key: "harmonic", .. })
+            Effect::parse("delay:delay=abc"),
+            Err(EffectError::NotANumber { .. })
+        ));
+        assert!(matches!(
+            Effect::parse("backlash:gap=-1"),
+            Err(EffectError::OutOfRange { .. })
+        ));
+        assert!(matches!(
+            Effect::parse("cogging:amplitude=1e-3")
+                .unwrap()
+                .check_complete(),
+            Err(EffectError::Missing {
+                key: "harmonic",
+                ..
+            })
         ));
     }
 

@@ -60,13 +60,22 @@ pub struct PlantParams {
     /// Shunt resistance R_s [ohm].
     pub r_s: f64,
     /// Identified total inertia at motor side J_eq [kg m^2]; overrides eq. 10 when set.
-    #[cfg_attr(feature = "serde", serde(default, skip_serializing_if = "Option::is_none"))]
+    #[cfg_attr(
+        feature = "serde",
+        serde(default, skip_serializing_if = "Option::is_none")
+    )]
     pub j_eq: Option<f64>,
     /// Identified total viscous friction at motor side B_eq [N m s/rad]; overrides eq. 10 when set.
-    #[cfg_attr(feature = "serde", serde(default, skip_serializing_if = "Option::is_none"))]
+    #[cfg_attr(
+        feature = "serde",
+        serde(default, skip_serializing_if = "Option::is_none")
+    )]
     pub b_eq: Option<f64>,
     /// Identified Coulomb friction at load side tau_sf [N m] (eq. 8); 0 when not set.
-    #[cfg_attr(feature = "serde", serde(default, skip_serializing_if = "Option::is_none"))]
+    #[cfg_attr(
+        feature = "serde",
+        serde(default, skip_serializing_if = "Option::is_none")
+    )]
     pub tau_sf: Option<f64>,
 }
 
@@ -108,7 +117,8 @@ impl PlantParams {
     }
     /// Total inertia at motor side J_eq [kg m^2]: the identified value if set, else eq. 10.
     pub fn j_eq(&self) -> f64 {
-        self.j_eq.unwrap_or(self.j_m + self.j_l() / (self.n * self.n))
+        self.j_eq
+            .unwrap_or(self.j_m + self.j_l() / (self.n * self.n))
     }
     /// Total viscous friction at motor side B_eq [N m s/rad]: identified if set, else eq. 10.
     pub fn b_eq(&self) -> f64 {
@@ -147,8 +157,16 @@ impl PlantParams {
             ("k_drv", "V/V", self.k_drv),
             ("f_c_drv", "Hz", self.f_c_drv),
             ("j_eq", "kg m^2", self.j_eq.unwrap_or(1.0)),
-            ("j_72", "kg m^2", if self.j_72 == 0.0 { 1.0 } else { self.j_72 }),
-            ("j_d", "kg m^2", if self.j_d == 0.0 { 1.0 } else { self.j_d }),
+            (
+                "j_72",
+                "kg m^2",
+                if self.j_72 == 0.0 { 1.0 } else { self.j_72 },
+            ),
+            (
+                "j_d",
+                "kg m^2",
+                if self.j_d == 0.0 { 1.0 } else { self.j_d },
+            ),
         ];
         let non_negative: [(&'static str, &'static str, f64); 5] = [
             ("b_m", "N m s/rad", self.b_m),
@@ -198,11 +216,29 @@ mod tests {
 
     #[test]
     fn rejects_negative_inertia_and_friction() {
-        let p = PlantParams { j_m: -1.0, ..PlantParams::TABLE2 };
-        assert!(matches!(p.validate(), Err(ParamError::NotPositive { key: "j_m", .. })));
-        let p = PlantParams { b_eq: Some(-1e-6), ..PlantParams::TABLE2 };
-        assert!(matches!(p.validate(), Err(ParamError::Negative { key: "b_eq", .. })));
-        let p = PlantParams { r_a: f64::NAN, ..PlantParams::TABLE2 };
-        assert!(matches!(p.validate(), Err(ParamError::NotFinite { key: "r_a", .. })));
+        let p = PlantParams {
+            j_m: -1.0,
+            ..PlantParams::TABLE2
+        };
+        assert!(matches!(
+            p.validate(),
+            Err(ParamError::NotPositive { key: "j_m", .. })
+        ));
+        let p = PlantParams {
+            b_eq: Some(-1e-6),
+            ..PlantParams::TABLE2
+        };
+        assert!(matches!(
+            p.validate(),
+            Err(ParamError::Negative { key: "b_eq", .. })
+        ));
+        let p = PlantParams {
+            r_a: f64::NAN,
+            ..PlantParams::TABLE2
+        };
+        assert!(matches!(
+            p.validate(),
+            Err(ParamError::NotFinite { key: "r_a", .. })
+        ));
     }
 }

@@ -36,17 +36,24 @@ impl Plant {
 
     /// The nominal Table 2 plant (viscous friction 0, no Coulomb friction).
     pub fn nominal() -> Plant {
-        Plant { params: PlantParams::TABLE2, effects: Effects::NONE }
+        Plant {
+            params: PlantParams::TABLE2,
+            effects: Effects::NONE,
+        }
     }
 
     /// Viscous friction at motor side B_eq [N m s/rad] from the `viscous` effect (0 if absent).
     pub fn b_eq(&self) -> f64 {
-        self.effects.value(EffectKind::Viscous, "b_eq").unwrap_or(0.0)
+        self.effects
+            .value(EffectKind::Viscous, "b_eq")
+            .unwrap_or(0.0)
     }
 
     /// Coulomb friction at load side tau_sf [N m] from the `coulomb` effect (0 if absent).
     pub fn tau_sf(&self) -> f64 {
-        self.effects.value(EffectKind::Coulomb, "tau_sf").unwrap_or(0.0)
+        self.effects
+            .value(EffectKind::Coulomb, "tau_sf")
+            .unwrap_or(0.0)
     }
 
     /// The parameters with B_eq and tau_sf taken from the effects (for linear analysis: design,

@@ -21,7 +21,34 @@ pub struct SensorConfig {
 
 impl Default for SensorConfig {
     fn default() -> Self {
-        SensorConfig { counts_per_rev: 4096, current_noise_a: 2e-3, current_offset_a: 0.0, seed: 1 }
+        SensorConfig {
+            counts_per_rev: 4096,
+            current_noise_a: 2e-3,
+            current_offset_a: 0.0,
+            seed: 1,
+        }
+    }
+}
+
+/// Why a sensor configuration was rejected.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SensorError {
+    #[error("current_noise_a must be a finite standard deviation >= 0 A, got {0}")]
+    Noise(f64),
+    #[error("current_offset_a must be a finite current in A, got {0}")]
+    Offset(f64),
+}
+
+impl SensorConfig {
+    /// Checks that the noise is a finite non-negative standard deviation and the offset finite.
+    pub fn validate(&self) -> Result<(), SensorError> {
+        if !(self.current_noise_a.is_finite() && self.current_noise_a >= 0.0) {
+            return Err(SensorError::Noise(self.current_noise_a));
+        }
+        if !self.current_offset_a.is_finite() {
+            return Err(SensorError::Offset(self.current_offset_a));
+        }
+        Ok(())
     }
 }
 
@@ -45,7 +72,10 @@ pub struct Sensors {
 
 impl Sensors {
     pub fn new(cfg: SensorConfig) -> Sensors {
-        Sensors { cfg, rng: SplitMix64(cfg.seed) }
+        Sensors {
+            cfg,
+            rng: SplitMix64(cfg.seed),
+        }
     }
     pub fn config(&self) -> &SensorConfig {
         &self.cfg
@@ -60,7 +90,11 @@ impl Sensors {
             (0, s.theta_l_rad)
         };
         let noise = self.cfg.current_noise_a * self.rng.normal();
-        Measurement { theta_l_rad: theta, encoder_count: count, i_a_a: s.i_a_a + self.cfg.current_offset_a + noise }
+        Measurement {
+            theta_l_rad: theta,
+            encoder_count: count,
+            i_a_a: s.i_a_a + self.cfg.current_offset_a + noise,
+        }
     }
 }
 

@@ -1,0 +1,187 @@
+//! The simulated plant on the command line: `--plant FILE`, `--plant-effect`, sensor options.
+//!
+//! Commands that simulate (`run`, `demo`, `identify`, `board`) flatten [`PlantArgs`]:
+//!
+//! ```text
+//! --plant truth.toml                          model file: [params], [effects.<name>], [sensors]
+//! --plant-effect backlash:gap=0.04            repeatable; catalogue syntax name:key=value,...
+//! --seed 7 --counts-per-rev 4096 --current-noise-a 2e-3
+//! ```
+//!
+//! Precedence: Table 2 (no friction) when no file is given; the file's params and effects; then
+//! each `--plant-effect` activates or replaces its effect; the sensor flags override `[sensors]`.
+
+use crate::model_file::ModelFile;
+use anyhow::{bail, Context};
+use servo_core::effects::Effect;
+use servo_core::sim::SensorConfig;
+use servo_core::Plant;
+use std::path::PathBuf;
+
+/// Options that define the simulated plant ("truth") and its sensors.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct PlantArgs {
+    /// Plant file (TOML model file: [params], [effects.<name>], [sensors]); default: Table 2.
+    #[arg(long = "plant", value_name = "FILE")]
+    pub plant: Option<PathBuf>,
+
+    /// Activate or replace a physical effect of the simulated plant, e.g. `backlash:gap=0.04`,
+    /// `coulomb:tau_sf=0.006`, `cogging:amplitude=2e-4,harmonic=12`. Repeatable. Effects:
+    /// viscous b_eq [N m s/rad]; coulomb tau_sf [N m]; stribeck tau_s [N m], omega_s [rad/s];
+    /// asymmetry tau_sf_pos, tau_sf_neg [N m]; backlash gap [rad], stiffness [N m/rad],
+    /// damping [N m s/rad], load_inertia_fraction [-]; cogging amplitude [N m], harmonic
+    /// [1/rev], phase [rad]; imbalance amplitude [N m], phase [rad]; saturation limit [V];
+    /// deadzone width [V]; delay delay [s].
+    #[arg(long = "plant-effect", value_name = "NAME[:KEY=VALUE,...]", value_parser = parse_plant_effect)]
+    pub plant_effect: Vec<Effect>,
+
+    /// Seed of the simulated sensor noise (overrides [sensors] seed).
+    #[arg(long = "seed", value_name = "N")]
+    pub seed: Option<u64>,
+
+    /// Simulated encoder resolution [counts/rev] at the load; 0 = no quantisation (default 4096).
+    #[arg(long = "counts-per-rev", value_name = "COUNTS")]
+    pub counts_per_rev: Option<u32>,
+
+    /// Standard deviation of the simulated current-sensor noise [A] (default 2e-3).
+    #[arg(long = "current-noise-a", value_name = "AMPS")]
+    pub current_noise_a: Option<f64>,
+}
+
+/// Parses one `--plant-effect` value; every parameter must end up set (given or defaulted).
+fn parse_plant_effect(s: &str) -> Result<Effect, String> {
+    let e = Effect::parse(s).map_err(|e| e.to_string())?;
+    e.check_complete().map_err(|e| e.to_string())?;
+    Ok(e)
+}
+
+impl PlantArgs {
+    /// The plant and sensor configuration these options describe.
+    pub fn load(&self) -> anyhow::Result<(Plant, SensorConfig)> {
+        let file = match &self.plant {
+            Some(path) => ModelFile::load(path).context("--plant")?,
+            None => ModelFile::default(),
+        };
+        let mut plant = file.plant().with_context(|| match &self.plant {
+            Some(p) => format!("--plant {}", p.display()),
+            None => "default plant (Table 2)".to_string(),
+        })?;
+        for e in &self.plant_effect {
+            e.check_complete()
+                .with_context(|| format!("--plant-effect {e}"))?;
+            plant.effects.insert(*e);
+        }
+        let mut sensors = file.sensors.unwrap_or_default();
+        if let Some(seed) = self.seed {
+            sensors.seed = seed;
+        }
+        if let Some(c) = self.counts_per_rev {
+            sensors.counts_per_rev = c;
+        }
+        if let Some(n) = self.current_noise_a {
+            if !(n.is_finite() && n >= 0.0) {
+                bail!("--current-noise-a must be a finite standard deviation >= 0 A, got {n}");
+            }
+            sensors.current_noise_a = n;
+        }
+        sensors
+            .validate()
+            .context("simulated sensors ([sensors] or sensor flags)")?;
+        // Build a simulator once so that every effect combination is checked here (e.g. a delay
+        // longer than the delay line, a backlash inertia fraction outside (0, 1)).
+        servo_core::sim::PlantSim::new(&plant, 1e-3).context("simulated plant")?;
+        Ok((plant, sensors))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+    use servo_core::EffectKind;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        plant: PlantArgs,
+    }
+
+    #[test]
+    fn effects_and_sensor_flags_apply() {
+        let cli = Cli::try_parse_from([
+            "x",
+            "--plant-effect",
+            "backlash:gap=0.04",
+            "--plant-effect",
+            "coulomb:tau_sf=0.006",
+            "--seed",
+            "9",
+            "--counts-per-rev",
+            "1024",
+            "--current-noise-a",
+            "0",
+        ])
+        .unwrap();
+        let (plant, sensors) = cli.plant.load().unwrap();
+        assert_eq!(plant.effects.value(EffectKind::Backlash, "gap"), Some(0.04));
+        assert_eq!(plant.tau_sf(), 0.006);
+        assert_eq!(sensors.seed, 9);
+        assert_eq!(sensors.counts_per_rev, 1024);
+        assert_eq!(sensors.current_noise_a, 0.0);
+    }
+
+    #[test]
+    fn plant_file_then_flags_override() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("truth.toml");
+        let mut text = ModelFile::default().to_toml_commented();
+        text.push_str("\n[effects.cogging]\namplitude = 1e-4\nharmonic = 12\n\n[sensors]\ncounts_per_rev = 2048\ncurrent_noise_a = 1e-3\ncurrent_offset_a = 0.01\nseed = 3\n");
+        std::fs::write(&path, text).unwrap();
+        let cli = Cli::try_parse_from([
+            "x",
+            "--plant",
+            path.to_str().unwrap(),
+            "--plant-effect",
+            "cogging:amplitude=2e-4,harmonic=6",
+            "--seed",
+            "5",
+        ])
+        .unwrap();
+        let (plant, sensors) = cli.plant.load().unwrap();
+        assert_eq!(
+            plant.effects.value(EffectKind::Cogging, "amplitude"),
+            Some(2e-4)
+        );
+        assert_eq!(
+            plant.effects.value(EffectKind::Cogging, "harmonic"),
+            Some(6.0)
+        );
+        assert_eq!(sensors.counts_per_rev, 2048);
+        assert_eq!(sensors.current_offset_a, 0.01);
+        assert_eq!(sensors.seed, 5);
+    }
+
+    #[test]
+    fn bad_input_names_the_flag() {
+        let err = Cli::try_parse_from(["x", "--plant-effect", "backlash:gapp=1"])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("--plant-effect") && err.contains("gap [rad]"),
+            "{err}"
+        );
+        let err = Cli::try_parse_from(["x", "--plant-effect", "cogging:amplitude=1e-3"])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("harmonic"), "{err}");
+        let cli = Cli::try_parse_from(["x", "--current-noise-a=-1"]).unwrap();
+        let err = format!("{:#}", cli.plant.load().unwrap_err());
+        assert!(err.contains("--current-noise-a"), "{err}");
+        let cli = Cli::try_parse_from(["x", "--plant", "/nonexistent/truth.toml"]).unwrap();
+        let err = format!("{:#}", cli.plant.load().unwrap_err());
+        assert!(
+            err.contains("--plant") && err.contains("/nonexistent/truth.toml"),
+            "{err}"
+        );
+    }
+}
