@@ -13,7 +13,10 @@ fn request(exact: bool) -> DesignRequest {
     let p = PlantParams::TABLE2;
     DesignRequest {
         kind: ControllerKind::Pid,
-        spec: LoopSpec { omega_gc: 30.0, phase_margin: rad(60.0) },
+        spec: LoopSpec {
+            omega_gc: 30.0,
+            phase_margin: rad(60.0),
+        },
         alpha: 4.0,
         filter: DerivativeFilter::Factor(5.0),
         ts_s: 1e-3,
@@ -28,8 +31,12 @@ fn request(exact: bool) -> DesignRequest {
 fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("design");
     g.sample_size(10);
-    g.bench_function("pid_wc30_pm60_verify_all", |b| b.iter(|| design(black_box(&request(false))).map(|r| r.gains.kp)));
-    g.bench_function("pid_wc30_pm60_exact_verify_all", |b| b.iter(|| design(black_box(&request(true))).map(|r| r.gains.kp)));
+    g.bench_function("pid_wc30_pm60_verify_all", |b| {
+        b.iter(|| design(black_box(&request(false))).map(|r| r.gains.kp))
+    });
+    g.bench_function("pid_wc30_pm60_exact_verify_all", |b| {
+        b.iter(|| design(black_box(&request(true))).map(|r| r.gains.kp))
+    });
     g.finish();
 }
 

@@ -20,7 +20,10 @@ impl Biquad {
         let s2 = core::f64::consts::SQRT_2;
         let norm = 1.0 / (1.0 + s2 * k + k * k);
         let b0 = k * k * norm;
-        Biquad { b: [b0, 2.0 * b0, b0], a: [2.0 * (k * k - 1.0) * norm, (1.0 - s2 * k + k * k) * norm] }
+        Biquad {
+            b: [b0, 2.0 * b0, b0],
+            a: [2.0 * (k * k - 1.0) * norm, (1.0 - s2 * k + k * k) * norm],
+        }
     }
 
     /// Filters `x` in place, starting from the steady state of its first sample.
@@ -103,18 +106,26 @@ mod tests {
         assert!(w.iter().all(|v| (v - 2.0).abs() < 1e-5), "{:?}", &w[..5]);
         // A 2 Hz sine well below the cut-off keeps amplitude and phase.
         let f = 2.0;
-        let th: Vec<f64> = (0..3000).map(|i| (math::TAU * f * i as f64 * dt).sin()).collect();
+        let th: Vec<f64> = (0..3000)
+            .map(|i| (math::TAU * f * i as f64 * dt).sin())
+            .collect();
         let w = speed_from_position(&th, dt, 30.0);
         for i in 500..2500 {
             let exact = math::TAU * f * (math::TAU * f * i as f64 * dt).cos();
-            assert!((w[i] - exact).abs() < 0.02 * math::TAU * f, "{i}: {} vs {exact}", w[i]);
+            assert!(
+                (w[i] - exact).abs() < 0.02 * math::TAU * f,
+                "{i}: {} vs {exact}",
+                w[i]
+            );
         }
     }
 
     #[test]
     fn lowpass_removes_high_frequency() {
         let dt = 1e-3;
-        let x: Vec<f64> = (0..2000).map(|i| if i % 2 == 0 { 1.0 } else { -1.0 }).collect();
+        let x: Vec<f64> = (0..2000)
+            .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
         let y = lowpass_zero_phase(&x, dt, 20.0);
         assert!(y[100..1900].iter().all(|v| v.abs() < 1e-3));
     }

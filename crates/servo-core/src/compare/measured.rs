@@ -28,10 +28,17 @@ pub struct Measured {
 
 fn check(name: &'static str, v: &[f64], n: usize) -> Result<(), CompareError> {
     if v.len() != n {
-        return Err(CompareError::Length { signal: name, len: v.len(), expected: n });
+        return Err(CompareError::Length {
+            signal: name,
+            len: v.len(),
+            expected: n,
+        });
     }
     if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-        return Err(CompareError::NotFinite { signal: name, row: i });
+        return Err(CompareError::NotFinite {
+            signal: name,
+            row: i,
+        });
     }
     Ok(())
 }
@@ -39,7 +46,11 @@ fn check(name: &'static str, v: &[f64], n: usize) -> Result<(), CompareError> {
 impl Measured {
     /// Extracts and checks the signals of `rec`; `n_gear` is the gear ratio N (theta_l =
     /// theta_m / N); a speed derived from position uses the zero-phase filter at `speed_filter_hz`.
-    pub fn from_record(rec: &Record, n_gear: f64, speed_filter_hz: f64) -> Result<Measured, CompareError> {
+    pub fn from_record(
+        rec: &Record,
+        n_gear: f64,
+        speed_filter_hz: f64,
+    ) -> Result<Measured, CompareError> {
         let n = rec.len();
         if n < 10 {
             return Err(CompareError::TooShort { samples: n });
@@ -50,10 +61,17 @@ impl Measured {
         }
         let dt_s = rec.sample_period_s();
         // Tolerate jitter, not gaps: the simulator advances a fixed period.
-        if let Some(i) = rec.time_s.windows(2).position(|w| (w[1] - w[0]) > 1.5 * dt_s || (w[1] - w[0]) < 0.5 * dt_s) {
+        if let Some(i) = rec
+            .time_s
+            .windows(2)
+            .position(|w| (w[1] - w[0]) > 1.5 * dt_s || (w[1] - w[0]) < 0.5 * dt_s)
+        {
             return Err(CompareError::NonUniform { row: i + 1, dt_s });
         }
-        let u_v = rec.u_v.clone().ok_or(CompareError::Missing("u (driver input voltage)"))?;
+        let u_v = rec
+            .u_v
+            .clone()
+            .ok_or(CompareError::Missing("u (driver input voltage)"))?;
         check("u", &u_v, n)?;
         let theta_l_rad = match (&rec.theta_l_rad, &rec.theta_m_rad) {
             (Some(t), _) => Some(t.clone()),
@@ -63,12 +81,17 @@ impl Measured {
         if let Some(t) = &theta_l_rad {
             check("theta_l", t, n)?;
         }
-        let (omega_l_rad_s, speed_derived) = match (&rec.omega_l_rad_s, &rec.omega_m_rad_s, &theta_l_rad) {
-            (Some(w), _, _) => (w.clone(), false),
-            (None, Some(wm), _) => (wm.iter().map(|v| v / n_gear).collect(), false),
-            (None, None, Some(t)) => (speed_from_position(t, dt_s, speed_filter_hz), true),
-            (None, None, None) => return Err(CompareError::Missing("a position or speed signal (theta_l, theta_m, omega_l or omega_m)")),
-        };
+        let (omega_l_rad_s, speed_derived) =
+            match (&rec.omega_l_rad_s, &rec.omega_m_rad_s, &theta_l_rad) {
+                (Some(w), _, _) => (w.clone(), false),
+                (None, Some(wm), _) => (wm.iter().map(|v| v / n_gear).collect(), false),
+                (None, None, Some(t)) => (speed_from_position(t, dt_s, speed_filter_hz), true),
+                (None, None, None) => {
+                    return Err(CompareError::Missing(
+                        "a position or speed signal (theta_l, theta_m, omega_l or omega_m)",
+                    ))
+                }
+            };
         check("omega_l", &omega_l_rad_s, n)?;
         if let Some(i) = &rec.i_a_a {
             check("i_a", i, n)?;

@@ -36,7 +36,11 @@ pub enum CompareError {
     #[error("the log has {samples} samples; at least 10 are needed")]
     TooShort { samples: usize },
     #[error("signal `{signal}` has {len} samples but the time column has {expected}")]
-    Length { signal: &'static str, len: usize, expected: usize },
+    Length {
+        signal: &'static str,
+        len: usize,
+        expected: usize,
+    },
     #[error("signal `{signal}` is not a finite number at row {row}")]
     NotFinite { signal: &'static str, row: usize },
     #[error("time does not increase at row {row}")]

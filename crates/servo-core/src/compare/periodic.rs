@@ -64,7 +64,12 @@ pub fn effective_samples(e: &[f64]) -> f64 {
     }
     let mut tau = 1.0;
     for k in 1..n.min(1000) {
-        let r = c[..n - k].iter().zip(&c[k..]).map(|(a, b)| a * b).sum::<f64>() / c0;
+        let r = c[..n - k]
+            .iter()
+            .zip(&c[k..])
+            .map(|(a, b)| a * b)
+            .sum::<f64>()
+            / c0;
         if r < 0.05 {
             break;
         }
@@ -75,19 +80,31 @@ pub fn effective_samples(e: &[f64]) -> f64 {
 
 /// Searches harmonics 1..=`max_harmonic` of `theta` [rad] (already the motor or load angle) in
 /// residual `e`; returns the best one, or `None` when no harmonic has two cycles of coverage.
-pub fn best_harmonic(e: &[f64], theta: &[f64], source: AngleSource, max_harmonic: u32, n_eff: f64) -> Option<PeriodicFinding> {
+pub fn best_harmonic(
+    e: &[f64],
+    theta: &[f64],
+    source: AngleSource,
+    max_harmonic: u32,
+    n_eff: f64,
+) -> Option<PeriodicFinding> {
     let n = e.len().min(theta.len());
     if n < 10 {
         return None;
     }
-    let (lo, hi) = theta[..n].iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
+    let (lo, hi) = theta[..n]
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(*v), b.max(*v))
+        });
     let span = hi - lo;
     let me = e[..n].iter().sum::<f64>() / n as f64;
     let var: f64 = e[..n].iter().map(|v| (v - me) * (v - me)).sum();
     if !(var > 0.0) {
         return None;
     }
-    let tried: Vec<u32> = (1..=max_harmonic).filter(|h| *h as f64 * span >= 2.0 * math::TAU).collect();
+    let tried: Vec<u32> = (1..=max_harmonic)
+        .filter(|h| *h as f64 * span >= 2.0 * math::TAU)
+        .collect();
     let mut best: Option<PeriodicFinding> = None;
     for &h in &tried {
         // Least squares on centred sin/cos (2x2 normal equations).
@@ -147,13 +164,21 @@ mod tests {
         let mut rng = SplitMix64(11);
         // Motor turns at constant speed through 20 revolutions; residual has 7 cycles per rev.
         let n = 4000;
-        let th_m: Vec<f64> = (0..n).map(|k| 20.0 * math::TAU * k as f64 / n as f64).collect();
-        let e: Vec<f64> = th_m.iter().map(|t| 0.5 * math::sin(7.0 * t + 0.3) + 0.5 * rng.normal()).collect();
+        let th_m: Vec<f64> = (0..n)
+            .map(|k| 20.0 * math::TAU * k as f64 / n as f64)
+            .collect();
+        let e: Vec<f64> = th_m
+            .iter()
+            .map(|t| 0.5 * math::sin(7.0 * t + 0.3) + 0.5 * rng.normal())
+            .collect();
         let ne = effective_samples(&e);
         let f = best_harmonic(&e, &th_m, AngleSource::Motor, 30, ne).unwrap();
         assert_eq!(f.harmonic, 7);
         assert!(f.significant && f.share_pct > 20.0, "{f:?}");
-        assert!((f.amplitude - 0.5).abs() < 0.05 && (f.phase_rad - 0.3).abs() < 0.1, "{f:?}");
+        assert!(
+            (f.amplitude - 0.5).abs() < 0.05 && (f.phase_rad - 0.3).abs() < 0.1,
+            "{f:?}"
+        );
         // Pure noise: nothing significant.
         let e: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
         let f = best_harmonic(&e, &th_m, AngleSource::Motor, 30, effective_samples(&e)).unwrap();

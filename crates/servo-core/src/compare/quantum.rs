@@ -9,7 +9,11 @@ use alloc::vec::Vec;
 /// The grid spacing [rad] of `theta` if at least 98 % of the nonzero sample-to-sample changes are
 /// integer multiples of the smallest one (within 2 %), and there are at least 20 such changes.
 pub fn encoder_quantum(theta: &[f64]) -> Option<f64> {
-    let d: Vec<f64> = theta.windows(2).map(|w| libm::fabs(w[1] - w[0])).filter(|v| *v > 1e-12).collect();
+    let d: Vec<f64> = theta
+        .windows(2)
+        .map(|w| libm::fabs(w[1] - w[0]))
+        .filter(|v| *v > 1e-12)
+        .collect();
     if d.len() < 20 {
         return None;
     }
@@ -44,7 +48,9 @@ mod tests {
     #[test]
     fn detects_grid_and_rejects_continuous() {
         let q = core::f64::consts::TAU / 4096.0;
-        let th: Vec<f64> = (0..500).map(|i| quantize(0.3 * (i as f64 * 0.01).sin(), q)).collect();
+        let th: Vec<f64> = (0..500)
+            .map(|i| quantize(0.3 * (i as f64 * 0.01).sin(), q))
+            .collect();
         let got = encoder_quantum(&th).unwrap();
         assert!((got - q).abs() < 1e-12, "{got}");
         let cont: Vec<f64> = (0..500).map(|i| 0.3 * (i as f64 * 0.01).sin()).collect();

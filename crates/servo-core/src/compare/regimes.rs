@@ -26,8 +26,13 @@ pub enum Regime {
 }
 
 impl Regime {
-    pub const ALL: [Regime; 5] =
-        [Regime::Reversal, Regime::Standstill, Regime::VoltageLimit, Regime::Acceleration, Regime::ConstantSpeed];
+    pub const ALL: [Regime; 5] = [
+        Regime::Reversal,
+        Regime::Standstill,
+        Regime::VoltageLimit,
+        Regime::Acceleration,
+        Regime::ConstantSpeed,
+    ];
 
     /// Machine name (JSON).
     pub fn name(self) -> &'static str {
@@ -47,7 +52,9 @@ impl Regime {
             Regime::Standstill => "stiction (Stribeck), Coulomb friction, dead zone, cogging",
             Regime::VoltageLimit => "saturation of the driver or the board, the driver gain k_drv",
             Regime::Acceleration => "the inertia J_eq, delay, backlash",
-            Regime::ConstantSpeed => "viscous friction B_eq, k_e/k_drv/R_eq, Coulomb friction level",
+            Regime::ConstantSpeed => {
+                "viscous friction B_eq, k_e/k_drv/R_eq, Coulomb friction level"
+            }
         }
     }
 }
@@ -122,7 +129,11 @@ pub struct RegimeStats {
 
 /// Percentile `p` (0..1) of |x| (0 for empty input).
 pub fn abs_percentile(x: &[f64], p: f64) -> f64 {
-    let mut a: Vec<f64> = x.iter().map(|v| libm::fabs(*v)).filter(|v| v.is_finite()).collect();
+    let mut a: Vec<f64> = x
+        .iter()
+        .map(|v| libm::fabs(*v))
+        .filter(|v| v.is_finite())
+        .collect();
     if a.is_empty() {
         return 0.0;
     }
@@ -138,13 +149,22 @@ pub fn detect_u_limit(u: &[f64]) -> Option<f64> {
     if !(umax > 0.0) {
         return None;
     }
-    let at = u.iter().filter(|v| libm::fabs(**v) >= umax * (1.0 - 1e-6)).count();
+    let at = u
+        .iter()
+        .filter(|v| libm::fabs(**v) >= umax * (1.0 - 1e-6))
+        .count();
     (at >= 5).then_some(umax)
 }
 
 /// Classifies every sample from the measured load speed `omega_l` [rad/s], the input `u` [V] and
 /// the voltage limit `u_limit_v` (none: the voltage-limit regime is empty).
-pub fn classify(omega_l: &[f64], u: &[f64], u_limit_v: Option<f64>, dt_s: f64, opts: &RegimeOptions) -> Classification {
+pub fn classify(
+    omega_l: &[f64],
+    u: &[f64],
+    u_limit_v: Option<f64>,
+    dt_s: f64,
+    opts: &RegimeOptions,
+) -> Classification {
     let n = omega_l.len();
     let w_scale = abs_percentile(omega_l, 0.99);
     let w_still = (opts.standstill_fraction * w_scale).max(opts.standstill_min_rad_s);
@@ -169,7 +189,11 @@ pub fn classify(omega_l: &[f64], u: &[f64], u_limit_v: Option<f64>, dt_s: f64, o
     let half = (opts.reversal_window_s / dt_s) as usize;
     let mut near_rev = alloc::vec![false; n];
     for &r in &reversals {
-        for f in near_rev.iter_mut().take((r + half + 1).min(n)).skip(r.saturating_sub(half)) {
+        for f in near_rev
+            .iter_mut()
+            .take((r + half + 1).min(n))
+            .skip(r.saturating_sub(half))
+        {
             *f = true;
         }
     }
@@ -206,7 +230,11 @@ pub fn regime_stats(residual: &[f64], c: &Classification) -> Vec<RegimeStats> {
         .iter()
         .map(|&r| {
             let (mut cnt, mut se, mut s) = (0usize, 0.0, 0.0);
-            for (e, _) in residual[..n].iter().zip(&c.regime[..n]).filter(|(_, g)| **g == r) {
+            for (e, _) in residual[..n]
+                .iter()
+                .zip(&c.regime[..n])
+                .filter(|(_, g)| **g == r)
+            {
                 cnt += 1;
                 se += e * e;
                 s += e;
@@ -218,9 +246,17 @@ pub fn regime_stats(residual: &[f64], c: &Classification) -> Vec<RegimeStats> {
                 samples: cnt,
                 time_share_pct,
                 error_share_pct,
-                rms: if cnt > 0 { crate::math::sqrt(se / cnt as f64) } else { 0.0 },
+                rms: if cnt > 0 {
+                    crate::math::sqrt(se / cnt as f64)
+                } else {
+                    0.0
+                },
                 mean: if cnt > 0 { s / cnt as f64 } else { 0.0 },
-                concentration: if time_share_pct > 0.0 { error_share_pct / time_share_pct } else { 0.0 },
+                concentration: if time_share_pct > 0.0 {
+                    error_share_pct / time_share_pct
+                } else {
+                    0.0
+                },
             }
         })
         .collect()
@@ -251,10 +287,16 @@ mod tests {
                 }
             })
             .collect();
-        let u: Vec<f64> = (0..6000).map(|k| if (1000..1200).contains(&k) { 10.0 } else { 3.0 }).collect();
+        let u: Vec<f64> = (0..6000)
+            .map(|k| if (1000..1200).contains(&k) { 10.0 } else { 3.0 })
+            .collect();
         let c = classify(&w, &u, detect_u_limit(&u), dt, &RegimeOptions::default());
         assert_eq!(c.reversals.len(), 1);
-        assert!((c.reversals[0] as i64 - 4500).abs() <= 2, "{:?}", c.reversals);
+        assert!(
+            (c.reversals[0] as i64 - 4500).abs() <= 2,
+            "{:?}",
+            c.reversals
+        );
         assert_eq!(c.regime[500], Regime::Standstill);
         assert_eq!(c.regime[1100], Regime::VoltageLimit);
         assert_eq!(c.regime[1500], Regime::Acceleration);
@@ -264,18 +306,34 @@ mod tests {
         assert_eq!(c.regime[4300], Regime::Acceleration);
         assert_eq!(c.regime[5500], Regime::ConstantSpeed);
         // An error only near the reversal: all of it there, in 101 ms of 6 s.
-        let e: Vec<f64> = (0..6000).map(|k| if (4480..4520).contains(&k) { 1.0 } else { 0.0 }).collect();
+        let e: Vec<f64> = (0..6000)
+            .map(|k| if (4480..4520).contains(&k) { 1.0 } else { 0.0 })
+            .collect();
         let st = regime_stats(&e, &c);
         let rev = st.iter().find(|s| s.regime == Regime::Reversal).unwrap();
         assert!((rev.error_share_pct - 100.0).abs() < 1e-9);
-        assert!((rev.time_share_pct - 100.0 * 101.0 / 6000.0).abs() < 0.05, "{}", rev.time_share_pct);
+        assert!(
+            (rev.time_share_pct - 100.0 * 101.0 / 6000.0).abs() < 0.05,
+            "{}",
+            rev.time_share_pct
+        );
         assert!(rev.concentration > 50.0);
     }
 
     #[test]
     fn stop_and_restart_is_not_a_reversal() {
         let dt = 1e-3;
-        let w: Vec<f64> = (0..3000).map(|k| if k < 1000 { 5.0 } else if k < 2000 { 0.0 } else { -5.0 }).collect();
+        let w: Vec<f64> = (0..3000)
+            .map(|k| {
+                if k < 1000 {
+                    5.0
+                } else if k < 2000 {
+                    0.0
+                } else {
+                    -5.0
+                }
+            })
+            .collect();
         let c = classify(&w, &[0.0; 3000], None, dt, &RegimeOptions::default());
         assert!(c.reversals.is_empty());
         assert_eq!(detect_u_limit(&[1.0, 2.0, 3.0]), None);

@@ -110,6 +110,7 @@ pub fn measured_state(plant: &Plant, m: &Measured, k: usize) -> PlantState {
         theta_m_rad: theta_l * n,
         omega_l_rad_s: omega_l,
         theta_l_rad: theta_l,
+        ..PlantState::default()
     }
 }
 
@@ -122,7 +123,12 @@ struct Out {
 
 impl Out {
     fn new(n: usize) -> Out {
-        Out { th: Vec::with_capacity(n), w: Vec::with_capacity(n), i: Vec::with_capacity(n), u: Vec::with_capacity(n) }
+        Out {
+            th: Vec::with_capacity(n),
+            w: Vec::with_capacity(n),
+            i: Vec::with_capacity(n),
+            u: Vec::with_capacity(n),
+        }
     }
     fn push(&mut self, s: &PlantState, u: f64) {
         self.th.push(s.theta_l_rad);
@@ -145,9 +151,14 @@ pub fn replay(
     match mode {
         ReplayMode::ClosedLoop => {
             let cl = closed_loop.ok_or(CompareError::NoController)?;
-            let reference = m.ref_rad.as_ref().ok_or(CompareError::Missing("ref (position reference)"))?;
+            let reference = m
+                .ref_rad
+                .as_ref()
+                .ok_or(CompareError::Missing("ref (position reference)"))?;
             if m.theta_l_rad.is_none() {
-                return Err(CompareError::Missing("theta_l (load angle) for a closed-loop replay"));
+                return Err(CompareError::Missing(
+                    "theta_l (load angle) for a closed-loop replay",
+                ));
             }
             let mut s0 = measured_state(plant, m, 0);
             // The log starts with the motor as measured; the driver state follows the first input.
@@ -210,5 +221,11 @@ pub fn replay(
     if let Some(i) = out.th.iter().chain(&out.w).position(|v| !v.is_finite()) {
         return Err(CompareError::SimDiverged { row: i % n });
     }
-    Ok(Replay { mode, theta_l_rad: out.th, omega_l_rad_s: out.w, i_a_a: out.i, u_v: out.u })
+    Ok(Replay {
+        mode,
+        theta_l_rad: out.th,
+        omega_l_rad_s: out.w,
+        i_a_a: out.i,
+        u_v: out.u,
+    })
 }

@@ -5,7 +5,9 @@ use super::derivative::speed_from_position;
 use super::figures::Figures;
 use super::measured::Measured;
 use super::periodic::{best_harmonic, effective_samples, AngleSource, PeriodicFinding};
-use super::regimes::{classify, detect_u_limit, regime_stats, Classification, Regime, RegimeOptions, RegimeStats};
+use super::regimes::{
+    classify, detect_u_limit, regime_stats, Classification, Regime, RegimeOptions, RegimeStats,
+};
 use super::replay::{Replay, ReplayMode};
 use super::whiteness::{cross_correlation, whiteness, CrossCorrelation, Whiteness};
 use super::windows::{worst_windows, Window};
@@ -105,11 +107,20 @@ pub struct SignalComparison {
 impl SignalComparison {
     fn new(kind: SignalKind, measured: Vec<f64>, model: Vec<f64>) -> SignalComparison {
         let figures = Figures::of(&measured, &model);
-        SignalComparison { kind, measured, model, figures }
+        SignalComparison {
+            kind,
+            measured,
+            model,
+            figures,
+        }
     }
     /// Residual e = measurement - model.
     pub fn residual(&self) -> Vec<f64> {
-        self.measured.iter().zip(&self.model).map(|(a, b)| a - b).collect()
+        self.measured
+            .iter()
+            .zip(&self.model)
+            .map(|(a, b)| a - b)
+            .collect()
     }
 }
 
@@ -161,14 +172,30 @@ pub fn compare(m: &Measured, replay: &Replay, n_gear: f64, opts: &CompareOptions
     };
     let mut signals = Vec::new();
     if let (Some(th), true) = (&m.theta_l_rad, mode != ReplayMode::Speed) {
-        signals.push(SignalComparison::new(SignalKind::Position, th.clone(), replay.theta_l_rad.clone()));
+        signals.push(SignalComparison::new(
+            SignalKind::Position,
+            th.clone(),
+            replay.theta_l_rad.clone(),
+        ));
     }
-    signals.push(SignalComparison::new(SignalKind::Speed, m.omega_l_rad_s.clone(), model_speed));
+    signals.push(SignalComparison::new(
+        SignalKind::Speed,
+        m.omega_l_rad_s.clone(),
+        model_speed,
+    ));
     if let Some(i) = &m.i_a_a {
-        signals.push(SignalComparison::new(SignalKind::Current, i.clone(), replay.i_a_a.clone()));
+        signals.push(SignalComparison::new(
+            SignalKind::Current,
+            i.clone(),
+            replay.i_a_a.clone(),
+        ));
     }
     if mode == ReplayMode::ClosedLoop {
-        signals.push(SignalComparison::new(SignalKind::Voltage, m.u_v.clone(), replay.u_v.clone()));
+        signals.push(SignalComparison::new(
+            SignalKind::Voltage,
+            m.u_v.clone(),
+            replay.u_v.clone(),
+        ));
     }
     let headline = 0;
     let residual = signals[headline].residual();
@@ -185,15 +212,30 @@ pub fn compare(m: &Measured, replay: &Replay, n_gear: f64, opts: &CompareOptions
     if let Some(th) = &m.theta_l_rad {
         let ne = effective_samples(&residual);
         let th_m: Vec<f64> = th.iter().map(|v| v * n_gear).collect();
-        if let Some(f) = best_harmonic(&residual, &th_m, AngleSource::Motor, opts.max_motor_harmonic, ne) {
+        if let Some(f) = best_harmonic(
+            &residual,
+            &th_m,
+            AngleSource::Motor,
+            opts.max_motor_harmonic,
+            ne,
+        ) {
             periodic.push(f);
         }
-        if let Some(f) = best_harmonic(&residual, th, AngleSource::Load, opts.max_load_harmonic, ne) {
+        if let Some(f) = best_harmonic(&residual, th, AngleSource::Load, opts.max_load_harmonic, ne)
+        {
             periodic.push(f);
         }
     }
     let win = ((opts.window_s / m.dt_s) as usize).max(1);
-    let worst = worst_windows(&residual, &m.time_s, &m.omega_l_rad_s, &m.u_v, &classification, win, opts.worst_count);
+    let worst = worst_windows(
+        &residual,
+        &m.time_s,
+        &m.omega_l_rad_s,
+        &m.u_v,
+        &classification,
+        win,
+        opts.worst_count,
+    );
     let mut r = CompareReport {
         mode,
         time_s: m.time_s.clone(),
@@ -220,14 +262,26 @@ pub fn compare(m: &Measured, replay: &Replay, n_gear: f64, opts: &CompareOptions
 /// Where a regime is, in words.
 pub fn regime_phrase(r: Regime, c: &Classification, opts: &RegimeOptions) -> String {
     match r {
-        Regime::Reversal => format!("within {:.0} ms of a velocity reversal", 1e3 * opts.reversal_window_s),
-        Regime::Standstill => format!("at standstill (|omega_l| < {:.2} rad/s)", c.standstill_rad_s),
+        Regime::Reversal => format!(
+            "within {:.0} ms of a velocity reversal",
+            1e3 * opts.reversal_window_s
+        ),
+        Regime::Standstill => format!(
+            "at standstill (|omega_l| < {:.2} rad/s)",
+            c.standstill_rad_s
+        ),
         Regime::VoltageLimit => match c.u_limit_v {
-            Some(l) => format!("while the voltage is at its limit (|u| >= {:.2} V)", opts.limit_fraction * l),
+            Some(l) => format!(
+                "while the voltage is at its limit (|u| >= {:.2} V)",
+                opts.limit_fraction * l
+            ),
             None => String::from("while the voltage is at its limit"),
         },
         Regime::Acceleration => {
-            format!("while the motor accelerates or brakes (|alpha_l| > {:.0} rad/s^2)", c.acceleration_rad_s2)
+            format!(
+                "while the motor accelerates or brakes (|alpha_l| > {:.0} rad/s^2)",
+                c.acceleration_rad_s2
+            )
         }
         Regime::ConstantSpeed => String::from("at roughly constant speed"),
     }
@@ -287,8 +341,10 @@ fn findings(r: &CompareReport, opts: &CompareOptions) -> Vec<String> {
     ));
     let mut reg: Vec<&RegimeStats> = r.regimes.iter().filter(|s| s.samples > 0).collect();
     reg.sort_by(|a, b| b.error_share_pct.total_cmp(&a.error_share_pct));
-    let hot: Vec<&&RegimeStats> =
-        reg.iter().filter(|s| s.concentration >= 1.5 && s.error_share_pct >= 15.0).collect();
+    let hot: Vec<&&RegimeStats> = reg
+        .iter()
+        .filter(|s| s.concentration >= 1.5 && s.error_share_pct >= 15.0)
+        .collect();
     for s in &hot {
         let sign = if s.mean >= 0.0 { "above" } else { "below" };
         out.push(format!(

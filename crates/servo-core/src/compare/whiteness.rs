@@ -65,7 +65,12 @@ pub fn autocorrelation(e: &[f64], max_lag: usize) -> Vec<f64> {
             if k >= n || c0 <= 0.0 {
                 return if k == 0 { 1.0 } else { 0.0 };
             }
-            c[..n - k].iter().zip(&c[k..]).map(|(a, b)| a * b).sum::<f64>() / c0
+            c[..n - k]
+                .iter()
+                .zip(&c[k..])
+                .map(|(a, b)| a * b)
+                .sum::<f64>()
+                / c0
         })
         .collect()
 }
@@ -80,7 +85,10 @@ pub fn whiteness(e: &[f64], max_lag: usize) -> Whiteness {
     let nf = n as f64;
     let q = nf * (nf + 2.0) * (1..=m).map(|k| r[k] * r[k] / (nf - k as f64)).sum::<f64>();
     let p = chi2_sf(q, m as f64);
-    let correlation_lags = r.iter().position(|v| *v < 1.0 / core::f64::consts::E).unwrap_or(m + 1);
+    let correlation_lags = r
+        .iter()
+        .position(|v| *v < 1.0 / core::f64::consts::E)
+        .unwrap_or(m + 1);
     Whiteness {
         autocorr: r,
         bound99,
@@ -123,7 +131,14 @@ pub fn cross_correlation(e: &[f64], u: &[f64], max_lag: usize) -> CrossCorrelati
             peak_lag = i as i64 - m as i64;
         }
     }
-    CrossCorrelation { xcorr, max_lag: m, bound99, lags_outside, peak_lag, peak }
+    CrossCorrelation {
+        xcorr,
+        max_lag: m,
+        bound99,
+        lags_outside,
+        peak_lag,
+        peak,
+    }
 }
 
 #[cfg(test)]
@@ -164,7 +179,9 @@ mod tests {
         let mut rng = SplitMix64(3);
         let u: Vec<f64> = (0..4000).map(|_| rng.normal()).collect();
         // e(t) = u(t - 3) + noise: peak at lag +3.
-        let e: Vec<f64> = (0..4000).map(|t| if t >= 3 { u[t - 3] } else { 0.0 } + 0.5 * rng.normal()).collect();
+        let e: Vec<f64> = (0..4000)
+            .map(|t| if t >= 3 { u[t - 3] } else { 0.0 } + 0.5 * rng.normal())
+            .collect();
         let x = cross_correlation(&e, &u, 10);
         assert_eq!(x.peak_lag, 3);
         assert!(x.peak > 0.8 && x.lags_outside >= 1);

@@ -37,7 +37,12 @@ pub fn worst_windows(
     len: usize,
     count: usize,
 ) -> Vec<Window> {
-    let n = residual.len().min(time_s.len()).min(omega_l.len()).min(u.len()).min(c.regime.len());
+    let n = residual
+        .len()
+        .min(time_s.len())
+        .min(omega_l.len())
+        .min(u.len())
+        .min(c.regime.len());
     let len = len.clamp(1, n.max(1));
     if n == 0 {
         return Vec::new();
@@ -80,12 +85,18 @@ pub fn worst_windows(
         let mut per = [0.0f64; 5];
         let mut sum = 0.0;
         for k in s..=e {
-            per[Regime::ALL.iter().position(|r| *r == c.regime[k]).unwrap_or(4)] += residual[k] * residual[k];
+            per[Regime::ALL
+                .iter()
+                .position(|r| *r == c.regime[k])
+                .unwrap_or(4)] += residual[k] * residual[k];
             sum += residual[k];
         }
         let ri = (0..5).fold(0, |b, i| if per[i] > per[b] { i } else { b });
-        let (wmin, wmax) =
-            omega_l[s..=e].iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), w| (a.min(*w), b.max(*w)));
+        let (wmin, wmax) = omega_l[s..=e]
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), w| {
+                (a.min(*w), b.max(*w))
+            });
         out.push(Window {
             start: s,
             end: e,

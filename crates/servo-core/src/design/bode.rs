@@ -120,10 +120,18 @@ pub fn wrap_pi(x: f64) -> f64 {
 /// derivative (eqs. 44-52), then attaches the real derivative time constant `tl_s` (eq. 53).
 ///
 /// `p_gc` is the plant response P(j w_gc); `alpha` = T_I / T_D (PID only).
-pub fn synthesize(kind: ControllerKind, spec: &LoopSpec, alpha: f64, p_gc: Complex<f64>, tl_s: f64) -> Result<PidGains, DesignError> {
+pub fn synthesize(
+    kind: ControllerKind,
+    spec: &LoopSpec,
+    alpha: f64,
+    p_gc: Complex<f64>,
+    tl_s: f64,
+) -> Result<PidGains, DesignError> {
     spec.validate()?;
     if !(p_gc.re.is_finite() && p_gc.im.is_finite()) || c_abs(p_gc) == 0.0 {
-        return Err(DesignError::Invalid("the plant response at w_gc is zero or not finite"));
+        return Err(DesignError::Invalid(
+            "the plant response at w_gc is zero or not finite",
+        ));
     }
     let w = spec.omega_gc;
     let (delta_k, delta_phi) = required_compensation(spec, p_gc);
@@ -133,7 +141,7 @@ pub fn synthesize(kind: ControllerKind, spec: &LoopSpec, alpha: f64, p_gc: Compl
         ControllerKind::Pd => (0.0, math::PI / 2.0),
     };
     let strict_ok = delta_phi > lo && delta_phi < hi;
-    let edge_ok = (kind == ControllerKind::Pi && delta_phi == 0.0) || (kind == ControllerKind::Pd && delta_phi == 0.0);
+    let edge_ok = delta_phi == 0.0 && kind != ControllerKind::Pid;
     if !(strict_ok || edge_ok) {
         return Err(infeasible(kind, spec, p_gc, delta_phi, lo, hi));
     }
@@ -150,15 +158,37 @@ pub fn synthesize(kind: ControllerKind, spec: &LoopSpec, alpha: f64, p_gc: Compl
             let t = math::tan(delta_phi);
             let td = (t + math::sqrt(t * t + 4.0 / alpha)) / (2.0 * w);
             let ti = alpha * td;
-            PidGains { kp, ki: kp / ti, kd: kp * td, tl_s }
+            PidGains {
+                kp,
+                ki: kp / ti,
+                kd: kp * td,
+                tl_s,
+            }
         }
-        ControllerKind::Pd => PidGains { kp, ki: 0.0, kd: delta_k * math::sin(delta_phi) / w, tl_s },
-        ControllerKind::Pi => PidGains { kp, ki: -w * delta_k * math::sin(delta_phi), kd: 0.0, tl_s: 0.0 },
+        ControllerKind::Pd => PidGains {
+            kp,
+            ki: 0.0,
+            kd: delta_k * math::sin(delta_phi) / w,
+            tl_s,
+        },
+        ControllerKind::Pi => PidGains {
+            kp,
+            ki: -w * delta_k * math::sin(delta_phi),
+            kd: 0.0,
+            tl_s: 0.0,
+        },
     };
     Ok(g)
 }
 
-fn infeasible(kind: ControllerKind, spec: &LoopSpec, p_gc: Complex<f64>, delta_phi: f64, lo: f64, hi: f64) -> DesignError {
+fn infeasible(
+    kind: ControllerKind,
+    spec: &LoopSpec,
+    p_gc: Complex<f64>,
+    delta_phi: f64,
+    lo: f64,
+    hi: f64,
+) -> DesignError {
     // phi_m = delta_phi + pi + angle(P) (mod 2 pi): map the allowed delta_phi interval to phi_m.
     let base = wrap_pi(math::PI + c_arg(p_gc));
     let mut range = (f64::NAN, f64::NAN);
@@ -170,13 +200,18 @@ fn infeasible(kind: ControllerKind, spec: &LoopSpec, p_gc: Complex<f64>, delta_p
         }
     }
     let (why, other) = match kind {
-        ControllerKind::Pi if delta_phi > 0.0 && delta_phi < math::PI / 2.0 => {
-            ("a PI can only add phase lag, here lead is needed", Some("pid"))
-        }
-        ControllerKind::Pd if delta_phi < 0.0 && delta_phi > -math::PI / 2.0 => {
-            ("a PD can only add phase lead, here lag is needed", Some("pi"))
-        }
-        _ => ("more than 90 deg of lead or lag would need a negative K_P", None),
+        ControllerKind::Pi if delta_phi > 0.0 && delta_phi < math::PI / 2.0 => (
+            "a PI can only add phase lag, here lead is needed",
+            Some("pid"),
+        ),
+        ControllerKind::Pd if delta_phi < 0.0 && delta_phi > -math::PI / 2.0 => (
+            "a PD can only add phase lead, here lag is needed",
+            Some("pi"),
+        ),
+        _ => (
+            "more than 90 deg of lead or lag would need a negative K_P",
+            None,
+        ),
     };
     DesignError::Infeasible {
         controller: match kind {
@@ -189,7 +224,10 @@ fn infeasible(kind: ControllerKind, spec: &LoopSpec, p_gc: Complex<f64>, delta_p
         plant_phase_deg: deg(c_arg(p_gc)),
         needed_deg: deg(delta_phi),
         why,
-        fix: FixHint { pm_range_deg: range, other_controller: other },
+        fix: FixHint {
+            pm_range_deg: range,
+            other_controller: other,
+        },
     }
 }
 
@@ -200,13 +238,23 @@ mod tests {
     use crate::params::PlantParams;
 
     fn spec(w: f64, pm_deg: f64) -> LoopSpec {
-        LoopSpec { omega_gc: w, phase_margin: rad(pm_deg) }
+        LoopSpec {
+            omega_gc: w,
+            phase_margin: rad(pm_deg),
+        }
     }
 
     #[test]
     fn reference_point_table2() {
         let m = PlantModel::reduced(&PlantParams::TABLE2);
-        let g = synthesize(ControllerKind::Pid, &spec(30.0, 60.0), 4.0, m.response(30.0), 0.0).unwrap();
+        let g = synthesize(
+            ControllerKind::Pid,
+            &spec(30.0, 60.0),
+            4.0,
+            m.response(30.0),
+            0.0,
+        )
+        .unwrap();
         assert!((g.kp - 7.0476).abs() < 5e-4, "{g:?}");
         assert!((g.ki - 86.121).abs() < 5e-3);
         assert!((g.kd - 0.14418).abs() < 5e-5);
@@ -219,12 +267,21 @@ mod tests {
     fn loop_hits_spec_for_many_designs() {
         let p = PlantParams::TABLE2;
         for model in [PlantModel::reduced(&p), PlantModel::full(&p)] {
-            for (w, pm, alpha) in [(10.0, 45.0, 4.0), (30.0, 60.0, 4.0), (50.0, 70.0, 6.0), (80.0, 50.0, 10.0), (20.0, 30.0, 4.0)] {
+            for (w, pm, alpha) in [
+                (10.0, 45.0, 4.0),
+                (30.0, 60.0, 4.0),
+                (50.0, 70.0, 6.0),
+                (80.0, 50.0, 10.0),
+                (20.0, 30.0, 4.0),
+            ] {
                 let s = spec(w, pm);
                 let g = synthesize(ControllerKind::Pid, &s, alpha, model.response(w), 0.0).unwrap();
                 let l = g.response(w) * model.response(w);
                 assert!((c_abs(l) - 1.0).abs() < 1e-12, "|L| at w_gc");
-                assert!((deg(c_arg(l)) - (pm - 180.0)).abs() < 1e-9, "angle L at w_gc");
+                assert!(
+                    (deg(c_arg(l)) - (pm - 180.0)).abs() < 1e-9,
+                    "angle L at w_gc"
+                );
                 assert!((g.ti_s() / g.td_s() - alpha).abs() < 1e-9);
                 assert!(g.kp > 0.0 && g.ki > 0.0 && g.kd > 0.0);
             }
@@ -235,16 +292,37 @@ mod tests {
     fn pi_and_pd() {
         let m = PlantModel::reduced(&PlantParams::TABLE2);
         // plant phase at w = 10: -90 - atan(0.2966) = -106.5 deg -> PI feasible for pm < 73.5 deg
-        let g = synthesize(ControllerKind::Pi, &spec(10.0, 50.0), 4.0, m.response(10.0), 0.0).unwrap();
+        let g = synthesize(
+            ControllerKind::Pi,
+            &spec(10.0, 50.0),
+            4.0,
+            m.response(10.0),
+            0.0,
+        )
+        .unwrap();
         let l = g.response(10.0) * m.response(10.0);
         assert!((c_abs(l) - 1.0).abs() < 1e-12 && (deg(c_arg(l)) + 130.0).abs() < 1e-9);
         assert_eq!(g.kd, 0.0);
-        let g = synthesize(ControllerKind::Pd, &spec(40.0, 70.0), 4.0, m.response(40.0), 0.0).unwrap();
+        let g = synthesize(
+            ControllerKind::Pd,
+            &spec(40.0, 70.0),
+            4.0,
+            m.response(40.0),
+            0.0,
+        )
+        .unwrap();
         let l = g.response(40.0) * m.response(40.0);
         assert!((c_abs(l) - 1.0).abs() < 1e-12 && (deg(c_arg(l)) + 110.0).abs() < 1e-9);
         assert_eq!(g.ki, 0.0);
         // PI cannot add lead: at w = 30 the plant has -131.7 deg, pm 60 needs +11.7 deg
-        let e = synthesize(ControllerKind::Pi, &spec(30.0, 60.0), 4.0, m.response(30.0), 0.0).unwrap_err();
+        let e = synthesize(
+            ControllerKind::Pi,
+            &spec(30.0, 60.0),
+            4.0,
+            m.response(30.0),
+            0.0,
+        )
+        .unwrap_err();
         match e {
             DesignError::Infeasible { fix, .. } => {
                 assert!((fix.pm_range_deg.1 - 48.34).abs() < 0.05, "{fix:?}");

@@ -27,13 +27,20 @@ pub enum Stability {
     Unstable,
 }
 
-fn close(pa: &DMatrix<f64>, pb: &DVector<f64>, pc: &DVector<f64>, k: &ControllerRealisation, ts_s: Option<f64>) -> ClosedLoop {
+fn close(
+    pa: &DMatrix<f64>,
+    pb: &DVector<f64>,
+    pc: &DVector<f64>,
+    k: &ControllerRealisation,
+    ts_s: Option<f64>,
+) -> ClosedLoop {
     let n = pa.nrows();
     let m = k.order;
     let mut a = DMatrix::<f64>::zeros(n + m, n + m);
     let mut b = DVector::<f64>::zeros(n + m);
     // plant: x+ = pa x + pb (d e + Cc xc), e = r - pc x
-    a.view_mut((0, 0), (n, n)).copy_from(&(pa - pb * pc.transpose() * k.d));
+    a.view_mut((0, 0), (n, n))
+        .copy_from(&(pa - pb * pc.transpose() * k.d));
     for j in 0..m {
         for i in 0..n {
             a[(i, n + j)] = pb[i] * k.c[j];
@@ -63,7 +70,11 @@ impl ClosedLoop {
     }
 
     /// Discrete loop: ZOH plant and the discrete PID at the same T_s.
-    pub fn discrete(plant: &DiscreteStateSpace, gains: &PidGains, method: Discretization) -> ClosedLoop {
+    pub fn discrete(
+        plant: &DiscreteStateSpace,
+        gains: &PidGains,
+        method: Discretization,
+    ) -> ClosedLoop {
         let k = ControllerRealisation::discrete(gains, plant.ts_s, method);
         close(&plant.phi, &plant.gamma, &plant.c, &k, Some(plant.ts_s))
     }
@@ -84,7 +95,11 @@ pub fn classify(poles: &[Complex<f64>], discrete: bool) -> Stability {
     let mut verdict = Stability::Stable;
     for p in poles {
         let margin = if discrete { 1.0 - c_abs(*p) } else { -p.re };
-        let tol = if discrete { 1e-9 } else { 1e-9 * c_abs(*p).max(1e-6) };
+        let tol = if discrete {
+            1e-9
+        } else {
+            1e-9 * c_abs(*p).max(1e-6)
+        };
         if margin < -tol {
             return Stability::Unstable;
         }
@@ -106,8 +121,16 @@ mod tests {
     /// evaluating that polynomial at each pole.
     #[test]
     fn poles_are_roots_of_characteristic_polynomial() {
-        let g = PidGains { kp: 7.0476, ki: 86.121, kd: 0.14418, tl_s: 1.0 / 150.0 };
-        for model in [PlantModel::reduced(&PlantParams::TABLE2), PlantModel::full(&PlantParams::TABLE2)] {
+        let g = PidGains {
+            kp: 7.0476,
+            ki: 86.121,
+            kd: 0.14418,
+            tl_s: 1.0 / 150.0,
+        };
+        for model in [
+            PlantModel::reduced(&PlantParams::TABLE2),
+            PlantModel::full(&PlantParams::TABLE2),
+        ] {
             let cl = ClosedLoop::continuous(&model.state_space(), &g).unwrap();
             // C(s) = (kp s (tl s + 1) + ki (tl s + 1) + kd s^2) / (s (tl s + 1))
             let cnum = alloc::vec![g.ki, g.kp + g.ki * g.tl_s, g.kp * g.tl_s + g.kd];
@@ -119,8 +142,16 @@ mod tests {
             let scale: f64 = ch.iter().map(|c| c.abs()).fold(0.0, f64::max);
             for p in &poles {
                 let v = TransferFunction::poly_eval(&ch, *p);
-                let mag = ch.iter().enumerate().map(|(k, c)| c.abs() * c_abs(*p).powi(k as i32)).sum::<f64>();
-                assert!(c_abs(v) < 1e-8 * mag.max(scale), "{} pole {p}", model.name());
+                let mag = ch
+                    .iter()
+                    .enumerate()
+                    .map(|(k, c)| c.abs() * c_abs(*p).powi(k as i32))
+                    .sum::<f64>();
+                assert!(
+                    c_abs(v) < 1e-8 * mag.max(scale),
+                    "{} pole {p}",
+                    model.name()
+                );
             }
             assert_eq!(cl.stability(), Stability::Stable);
         }
@@ -129,10 +160,21 @@ mod tests {
     #[test]
     fn too_much_gain_is_unstable_in_discrete_time() {
         let model = PlantModel::full(&PlantParams::TABLE2);
-        let g = PidGains { kp: 2000.0, ki: 0.0, kd: 0.0, tl_s: 0.0 };
+        let g = PidGains {
+            kp: 2000.0,
+            ki: 0.0,
+            kd: 0.0,
+            tl_s: 0.0,
+        };
         let d = model.state_space().discretize_zoh(1e-3);
-        assert_eq!(ClosedLoop::discrete(&d, &g, Discretization::Tustin).stability(), Stability::Unstable);
+        assert_eq!(
+            ClosedLoop::discrete(&d, &g, Discretization::Tustin).stability(),
+            Stability::Unstable
+        );
         let g = PidGains { kp: 5.0, ..g };
-        assert_eq!(ClosedLoop::discrete(&d, &g, Discretization::Tustin).stability(), Stability::Stable);
+        assert_eq!(
+            ClosedLoop::discrete(&d, &g, Discretization::Tustin).stability(),
+            Stability::Stable
+        );
     }
 }

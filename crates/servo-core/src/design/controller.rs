@@ -51,7 +51,13 @@ impl ControllerRealisation {
     /// Continuous realisation of C(s) = K_P + K_I/s + K_D s/(T_L s + 1); requires T_L > 0 when
     /// K_D != 0 (an ideal derivative has no state space).
     pub fn continuous(g: &PidGains) -> Option<ControllerRealisation> {
-        let mut r = ControllerRealisation { order: 0, a: [0.0; 2], b: [0.0; 2], c: [0.0; 2], d: g.kp };
+        let mut r = ControllerRealisation {
+            order: 0,
+            a: [0.0; 2],
+            b: [0.0; 2],
+            c: [0.0; 2],
+            d: g.kp,
+        };
         if g.ki != 0.0 {
             r.push(0.0, 1.0, g.ki);
         }
@@ -68,7 +74,13 @@ impl ControllerRealisation {
 
     /// Discrete realisation of C(z) at T_s [s].
     pub fn discrete(g: &PidGains, ts_s: f64, method: Discretization) -> ControllerRealisation {
-        let mut r = ControllerRealisation { order: 0, a: [0.0; 2], b: [0.0; 2], c: [0.0; 2], d: g.kp };
+        let mut r = ControllerRealisation {
+            order: 0,
+            a: [0.0; 2],
+            b: [0.0; 2],
+            c: [0.0; 2],
+            d: g.kp,
+        };
         if g.ki != 0.0 {
             // s_next = s + T_s e; I = s + c_i T_s e, c_i = 1 (BE) or 1/2 (Tustin)
             let ci = match method {
@@ -82,7 +94,10 @@ impl ControllerRealisation {
             // H(z) = gain (z - 1)/(z - p) = gain (1 + (p - 1)/(z - p)); w_next = p w + e
             let (gain, p) = match method {
                 Discretization::BackwardEuler => (1.0 / (g.tl_s + ts_s), g.tl_s / (g.tl_s + ts_s)),
-                Discretization::Tustin => (2.0 / (2.0 * g.tl_s + ts_s), (2.0 * g.tl_s - ts_s) / (2.0 * g.tl_s + ts_s)),
+                Discretization::Tustin => (
+                    2.0 / (2.0 * g.tl_s + ts_s),
+                    (2.0 * g.tl_s - ts_s) / (2.0 * g.tl_s + ts_s),
+                ),
             };
             r.push(p, 1.0, g.kd * gain * (p - 1.0));
             r.d += g.kd * gain;
@@ -101,7 +116,12 @@ impl ControllerRealisation {
 }
 
 /// Discrete controller response C(e^{j w T_s}), w [rad/s].
-pub fn discrete_response(g: &PidGains, ts_s: f64, method: Discretization, omega: f64) -> Complex<f64> {
+pub fn discrete_response(
+    g: &PidGains,
+    ts_s: f64,
+    method: Discretization,
+    omega: f64,
+) -> Complex<f64> {
     ControllerRealisation::discrete(g, ts_s, method).eval(c_expj(omega * ts_s))
 }
 
@@ -110,7 +130,12 @@ mod tests {
     use super::*;
     use crate::design::c_abs;
 
-    const G: PidGains = PidGains { kp: 7.0, ki: 86.0, kd: 0.144, tl_s: 1.0 / 150.0 };
+    const G: PidGains = PidGains {
+        kp: 7.0,
+        ki: 86.0,
+        kd: 0.144,
+        tl_s: 1.0 / 150.0,
+    };
 
     #[test]
     fn continuous_realisation_matches_formula() {

@@ -34,22 +34,48 @@ pub fn solve(
     }
     let p = plant.response(w);
     let c = c_expj(-math::PI + spec.phase_margin) / p;
-    let unit = |ki: f64, kd: f64| discrete_response(&PidGains { kp: 0.0, ki, kd, tl_s }, ts, method, w);
+    let unit = |ki: f64, kd: f64| {
+        discrete_response(
+            &PidGains {
+                kp: 0.0,
+                ki,
+                kd,
+                tl_s,
+            },
+            ts,
+            method,
+            w,
+        )
+    };
     let (i, d) = (unit(1.0, 0.0), unit(0.0, 1.0));
     let g = match kind {
         ControllerKind::Pi => {
             let ki = c.im / i.im;
-            PidGains { kp: c.re - ki * i.re, ki, kd: 0.0, tl_s: 0.0 }
+            PidGains {
+                kp: c.re - ki * i.re,
+                ki,
+                kd: 0.0,
+                tl_s: 0.0,
+            }
         }
         ControllerKind::Pd => {
             let kd = c.im / d.im;
-            PidGains { kp: c.re - kd * d.re, ki: 0.0, kd, tl_s }
+            PidGains {
+                kp: c.re - kd * d.re,
+                ki: 0.0,
+                kd,
+                tl_s,
+            }
         }
         ControllerKind::Pid => {
             let shape = |td: f64| Complex::new(1.0, 0.0) + i / (alpha * td) + d * td;
             let f = |td: f64| wrap_pi(c_arg(shape(td)) - c_arg(c));
             // scan T_D on a log grid around the handout's value, keep the sign change nearest to it
-            let td0 = if guess.td_s().is_finite() && guess.td_s() > 0.0 { guess.td_s() } else { 1.0 / w };
+            let td0 = if guess.td_s().is_finite() && guess.td_s() > 0.0 {
+                guess.td_s()
+            } else {
+                1.0 / w
+            };
             let (lo, hi) = (math::ln(td0 * 1e-3), math::ln(td0 * 1e3));
             let n = 600;
             let mut best: Option<(f64, f64, f64)> = None;
@@ -60,7 +86,11 @@ pub fn solve(
                 // a genuine root, not a jump of the wrapped phase across +-pi
                 if (prev.1 > 0.0) != (fx > 0.0) && (prev.1 - fx).abs() < 1.0 {
                     let dist = (0.5 * (prev.0 + x) - math::ln(td0)).abs();
-                    if best.map_or(true, |b| dist < b.2) {
+                    let better = match best {
+                        None => true,
+                        Some(b) => dist < b.2,
+                    };
+                    if better {
                         best = Some((prev.0, x, dist));
                     }
                 }
@@ -81,10 +111,21 @@ pub fn solve(
             }
             let td = math::exp(0.5 * (a + b));
             let kp = c_abs(c) / c_abs(shape(td));
-            PidGains { kp, ki: kp / (alpha * td), kd: kp * td, tl_s }
+            PidGains {
+                kp,
+                ki: kp / (alpha * td),
+                kd: kp * td,
+                tl_s,
+            }
         }
     };
-    if !(g.kp > 0.0 && g.ki >= 0.0 && g.kd >= 0.0 && g.kp.is_finite() && g.ki.is_finite() && g.kd.is_finite()) {
+    if !(g.kp > 0.0
+        && g.ki >= 0.0
+        && g.kd >= 0.0
+        && g.kp.is_finite()
+        && g.ki.is_finite()
+        && g.kd.is_finite())
+    {
         return Err(DesignError::NoSolution(
             "--exact: matching the spec with the derivative filter and the ZOH delay would need a negative gain; \
              lower the phase margin or w_gc, shorten T_s, or raise --tl-factor",

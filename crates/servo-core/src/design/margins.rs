@@ -81,7 +81,11 @@ pub fn margins<F: Fn(f64) -> Complex<f64>>(l: F, sweep: &Sweep) -> Margins {
             }
         }
         // phase crossovers at -180 + 360 k
-        let (lo, hi) = if ph_prev < ph { (ph_prev, ph) } else { (ph, ph_prev) };
+        let (lo, hi) = if ph_prev < ph {
+            (ph_prev, ph)
+        } else {
+            (ph, ph_prev)
+        };
         let k_lo = math::floor((lo + 180.0) / 360.0) + 1.0;
         let k_hi = math::floor((hi + 180.0) / 360.0);
         let mut k = k_lo;
@@ -136,7 +140,15 @@ mod tests {
             let s = Complex::new(0.0, w);
             Complex::new(k, 0.0) / (s * (s + 1.0) * (s + 1.0))
         };
-        let m = margins(l, &Sweep { omega_lo: 1e-3, omega_hi: 1e3, points: 800, loop_type: 1 });
+        let m = margins(
+            l,
+            &Sweep {
+                omega_lo: 1e-3,
+                omega_hi: 1e3,
+                points: 800,
+                loop_type: 1,
+            },
+        );
         assert!((m.omega_pc - 1.0).abs() < 1e-9, "{m:?}");
         assert!((m.gain_margin_db - 20.0 * (2.0f64 / k).log10()).abs() < 1e-8);
         // w_gc solves w sqrt(1 + w^2)^2 = K -> w (1 + w^2) = 0.5
@@ -153,7 +165,15 @@ mod tests {
             let s = Complex::new(0.0, w);
             (s * 2.0 + 1.0) / (s * s * (s * 0.02 + 1.0))
         };
-        let m = margins(l, &Sweep { omega_lo: 1e-3, omega_hi: 1e4, points: 800, loop_type: 2 });
+        let m = margins(
+            l,
+            &Sweep {
+                omega_lo: 1e-3,
+                omega_hi: 1e4,
+                points: 800,
+                loop_type: 2,
+            },
+        );
         assert!(m.gain_margin_db.is_infinite());
         assert!(m.phase_margin_deg > 0.0 && m.gain_crossovers == 1);
     }

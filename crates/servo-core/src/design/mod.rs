@@ -87,9 +87,15 @@ impl core::fmt::Display for FixHint {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         let (lo, hi) = self.pm_range_deg;
         if lo.is_finite() && hi.is_finite() && hi > lo {
-            write!(f, "at this w_gc it can give phase margins between {lo:.2} and {hi:.2} deg")?;
+            write!(
+                f,
+                "at this w_gc it can give phase margins between {lo:.2} and {hi:.2} deg"
+            )?;
         } else {
-            write!(f, "no phase margin in (0, 90) deg is reachable at this w_gc")?;
+            write!(
+                f,
+                "no phase margin in (0, 90) deg is reachable at this w_gc"
+            )?;
         }
         if let Some(c) = self.other_controller {
             write!(f, "; or use --controller {c}")?;

@@ -44,14 +44,22 @@ pub enum PlantModel {
 impl PlantModel {
     /// Reduced model (eq. 29) of a parameter set.
     pub fn reduced(p: &PlantParams) -> PlantModel {
-        PlantModel::Reduced { k_m: p.k_m(), t_m: p.t_m(), n: p.n }
+        PlantModel::Reduced {
+            k_m: p.k_m(),
+            t_m: p.t_m(),
+            n: p.n,
+        }
     }
 
     /// Reduced model given directly by k_m [rad/(V s)], T_m [s] and N.
     pub fn reduced_from(k_m: f64, t_m: f64, n: f64) -> Result<PlantModel, DesignError> {
         for (name, v) in [("k_m [rad/(V s)]", k_m), ("T_m [s]", t_m), ("N [-]", n)] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(DesignError::OutOfRange { name, value: v, why: "a plant constant must be finite and > 0" });
+                return Err(DesignError::OutOfRange {
+                    name,
+                    value: v,
+                    why: "a plant constant must be finite and > 0",
+                });
             }
         }
         Ok(PlantModel::Reduced { k_m, t_m, n })
@@ -84,8 +92,20 @@ impl PlantModel {
     pub fn eval(&self, s: Complex<f64>) -> Complex<f64> {
         let one = Complex::new(1.0, 0.0);
         match *self {
-            PlantModel::Reduced { k_m, t_m, n } => Complex::new(k_m, 0.0) / ((s * t_m + one) * s * n),
-            PlantModel::Full { k_drv, t_drv, l_a, r_eq, k_t, k_e, j_eq, b_eq, n } => {
+            PlantModel::Reduced { k_m, t_m, n } => {
+                Complex::new(k_m, 0.0) / ((s * t_m + one) * s * n)
+            }
+            PlantModel::Full {
+                k_drv,
+                t_drv,
+                l_a,
+                r_eq,
+                k_t,
+                k_e,
+                j_eq,
+                b_eq,
+                n,
+            } => {
                 let elec_mech = (s * l_a + r_eq) * (s * j_eq + b_eq) + k_t * k_e;
                 Complex::new(k_drv * k_t, 0.0) / ((s * t_drv + one) * elec_mech * s * n)
             }
@@ -101,7 +121,9 @@ impl PlantModel {
     pub fn fastest_pole(&self) -> f64 {
         match *self {
             PlantModel::Reduced { t_m, .. } => 1.0 / t_m,
-            PlantModel::Full { t_drv, l_a, r_eq, .. } => (1.0 / t_drv).max(r_eq / l_a),
+            PlantModel::Full {
+                t_drv, l_a, r_eq, ..
+            } => (1.0 / t_drv).max(r_eq / l_a),
         }
     }
 }
@@ -117,10 +139,29 @@ mod realisations {
         /// Rational transfer function (coefficients in ascending powers of s).
         pub fn transfer_function(&self) -> TransferFunction {
             match *self {
-                PlantModel::Reduced { k_m, t_m, n } => TransferFunction::new(vec![k_m], vec![0.0, n, n * t_m]),
-                PlantModel::Full { k_drv, t_drv, l_a, r_eq, k_t, k_e, j_eq, b_eq, n } => {
+                PlantModel::Reduced { k_m, t_m, n } => {
+                    TransferFunction::new(vec![k_m], vec![0.0, n, n * t_m])
+                }
+                PlantModel::Full {
+                    k_drv,
+                    t_drv,
+                    l_a,
+                    r_eq,
+                    k_t,
+                    k_e,
+                    j_eq,
+                    b_eq,
+                    n,
+                } => {
                     // (L s + R)(J s + B) + k_t k_e = L J s^2 + (L B + R J) s + (R B + k_t k_e)
-                    let em = TransferFunction::poly_mul(&[r_eq * b_eq + k_t * k_e, l_a * b_eq + r_eq * j_eq, l_a * j_eq], &[1.0, t_drv]);
+                    let em = TransferFunction::poly_mul(
+                        &[
+                            r_eq * b_eq + k_t * k_e,
+                            l_a * b_eq + r_eq * j_eq,
+                            l_a * j_eq,
+                        ],
+                        &[1.0, t_drv],
+                    );
                     let den = TransferFunction::poly_mul(&em, &[0.0, n]);
                     TransferFunction::new(vec![k_drv * k_t], den)
                 }
@@ -138,13 +179,35 @@ mod realisations {
                     &[k_m / t_m, 0.0],
                     &[0.0, 1.0],
                 ),
-                PlantModel::Full { k_drv, t_drv, l_a, r_eq, k_t, k_e, j_eq, b_eq, n } => StateSpace::from_rows(
+                PlantModel::Full {
+                    k_drv,
+                    t_drv,
+                    l_a,
+                    r_eq,
+                    k_t,
+                    k_e,
+                    j_eq,
+                    b_eq,
+                    n,
+                } => StateSpace::from_rows(
                     4,
                     &[
-                        -1.0 / t_drv, 0.0, 0.0, 0.0, //
-                        1.0 / l_a, -r_eq / l_a, -k_e / l_a, 0.0, //
-                        0.0, k_t / j_eq, -b_eq / j_eq, 0.0, //
-                        0.0, 0.0, 1.0 / n, 0.0,
+                        -1.0 / t_drv,
+                        0.0,
+                        0.0,
+                        0.0, //
+                        1.0 / l_a,
+                        -r_eq / l_a,
+                        -k_e / l_a,
+                        0.0, //
+                        0.0,
+                        k_t / j_eq,
+                        -b_eq / j_eq,
+                        0.0, //
+                        0.0,
+                        0.0,
+                        1.0 / n,
+                        0.0,
                     ],
                     &[k_drv / t_drv, 0.0, 0.0, 0.0],
                     &[0.0, 0.0, 0.0, 1.0],
@@ -162,7 +225,10 @@ mod tests {
     #[test]
     fn reduced_response_by_hand() {
         let m = PlantModel::reduced(&PlantParams::TABLE2);
-        let (k_m, t_m): (f64, f64) = (78.125, 3.1 * 5.644_897_959_183_673e-7 / (7.682e-3 * 7.68e-3));
+        let (k_m, t_m): (f64, f64) = (
+            78.125,
+            3.1 * 5.644_897_959_183_673e-7 / (7.682e-3 * 7.68e-3),
+        );
         let p = m.response(30.0);
         // |P| = k_m / (N w sqrt(1 + (w T_m)^2)), angle = -90 - atan(w T_m)
         let mag = k_m / (14.0 * 30.0 * (1.0 + (30.0 * t_m) * (30.0 * t_m)).sqrt());
@@ -184,7 +250,10 @@ mod tests {
 
     #[test]
     fn transfer_function_and_state_space_agree_with_response() {
-        let p = PlantParams { b_l: 2e-4, ..PlantParams::TABLE2 };
+        let p = PlantParams {
+            b_l: 2e-4,
+            ..PlantParams::TABLE2
+        };
         for m in [PlantModel::reduced(&p), PlantModel::full(&p)] {
             let tf = m.transfer_function();
             let ss = m.state_space();

@@ -110,7 +110,9 @@ pub fn damping_from_phase_margin(phase_margin: f64) -> Result<f64, DesignError> 
     while phase_margin_from_damping(hi) < phase_margin {
         hi *= 2.0;
         if hi > 1e6 {
-            return Err(DesignError::NoSolution("phase margin too close to 90 deg to invert eq. 41"));
+            return Err(DesignError::NoSolution(
+                "phase margin too close to 90 deg to invert eq. 41",
+            ));
         }
     }
     for _ in 0..200 {
@@ -137,7 +139,11 @@ pub fn translate(damping: DampingSpec, speed: SpeedSpec) -> Result<Translation, 
         if v.is_finite() && v > 0.0 {
             Ok(v)
         } else {
-            Err(DesignError::OutOfRange { name, value: v, why: "a time spec must be a finite number of seconds > 0" })
+            Err(DesignError::OutOfRange {
+                name,
+                value: v,
+                why: "a time spec must be a finite number of seconds > 0",
+            })
         }
     };
     let omega_gc = match speed {
@@ -146,9 +152,16 @@ pub fn translate(damping: DampingSpec, speed: SpeedSpec) -> Result<Translation, 
         SpeedSpec::Settling5(t) => 3.0 / (delta * positive("5 % settling time [s]", t)?),
         SpeedSpec::Settling1(t) => 4.6 / (delta * positive("1 % settling time [s]", t)?),
     };
-    let spec = LoopSpec { omega_gc, phase_margin };
+    let spec = LoopSpec {
+        omega_gc,
+        phase_margin,
+    };
     spec.validate()?;
-    Ok(Translation { delta, spec, overshoot: overshoot_from_damping(delta) })
+    Ok(Translation {
+        delta,
+        spec,
+        overshoot: overshoot_from_damping(delta),
+    })
 }
 
 #[cfg(test)]
@@ -181,7 +194,11 @@ mod tests {
         assert!((d - 0.5).abs() < 0.05, "{d}");
         assert!((phase_margin_from_damping(d) - rad(50.0)).abs() < 1e-12);
         // rise time (eq. 39) and 1 % settling (eq. 40)
-        let t = translate(DampingSpec::PhaseMargin(rad(60.0)), SpeedSpec::RiseTime(0.06)).unwrap();
+        let t = translate(
+            DampingSpec::PhaseMargin(rad(60.0)),
+            SpeedSpec::RiseTime(0.06),
+        )
+        .unwrap();
         assert!((t.spec.omega_gc - 30.0).abs() < 1e-12);
         let t = translate(DampingSpec::Overshoot(0.1), SpeedSpec::Settling1(0.2)).unwrap();
         assert!((t.spec.omega_gc - 4.6 / (0.591_155 * 0.2)).abs() < 1e-3);
@@ -191,8 +208,16 @@ mod tests {
     fn rejects_meaningless() {
         assert!(damping_from_overshoot(0.0).is_err());
         assert!(damping_from_overshoot(1.5).is_err());
-        assert!(translate(DampingSpec::PhaseMargin(rad(95.0)), SpeedSpec::OmegaGc(30.0)).is_err());
-        assert!(translate(DampingSpec::PhaseMargin(rad(60.0)), SpeedSpec::OmegaGc(-1.0)).is_err());
+        assert!(translate(
+            DampingSpec::PhaseMargin(rad(95.0)),
+            SpeedSpec::OmegaGc(30.0)
+        )
+        .is_err());
+        assert!(translate(
+            DampingSpec::PhaseMargin(rad(60.0)),
+            SpeedSpec::OmegaGc(-1.0)
+        )
+        .is_err());
         assert!(translate(DampingSpec::Overshoot(0.1), SpeedSpec::Settling5(0.0)).is_err());
     }
 }

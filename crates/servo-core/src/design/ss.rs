@@ -76,7 +76,13 @@ impl DiscreteStateSpace {
 }
 
 /// C (sI - A)^-1 B + D by Gaussian elimination with partial pivoting on the complex system.
-fn resolvent_gain(a: &DMatrix<f64>, b: &DVector<f64>, c: &DVector<f64>, d: f64, s: Complex<f64>) -> Complex<f64> {
+fn resolvent_gain(
+    a: &DMatrix<f64>,
+    b: &DVector<f64>,
+    c: &DVector<f64>,
+    d: f64,
+    s: Complex<f64>,
+) -> Complex<f64> {
     let n = a.nrows();
     let mut m: Vec<Complex<f64>> = Vec::with_capacity(n * n);
     for i in 0..n {
@@ -123,7 +129,9 @@ fn resolvent_gain(a: &DMatrix<f64>, b: &DVector<f64>, c: &DVector<f64>, d: f64, 
         }
         x[col] = acc / m[col * n + col];
     }
-    x.iter().zip(c.iter()).fold(Complex::new(d, 0.0), |acc, (xi, &ci)| acc + xi * ci)
+    x.iter()
+        .zip(c.iter())
+        .fold(Complex::new(d, 0.0), |acc, (xi, &ci)| acc + xi * ci)
 }
 
 #[cfg(test)]

@@ -36,7 +36,13 @@ pub fn step_response(cl: &ClosedLoop, horizon_s: f64, steps: usize) -> StepRespo
         Some(ts) => (cl.a.clone(), cl.b.clone(), ts),
         None => {
             let dt = horizon_s / steps.max(1) as f64;
-            let d = StateSpace { a: cl.a.clone(), b: cl.b.clone(), c: cl.c.clone(), d: 0.0 }.discretize_zoh(dt);
+            let d = StateSpace {
+                a: cl.a.clone(),
+                b: cl.b.clone(),
+                c: cl.c.clone(),
+                d: 0.0,
+            }
+            .discretize_zoh(dt);
             (d.phi, d.gamma, dt)
         }
     };
@@ -80,7 +86,11 @@ pub fn metrics(r: &StepResponse) -> StepMetrics {
                 }
                 let target = if y[k] > 1.0 { 1.0 + band } else { 1.0 - band };
                 let (y0, y1) = (y[k], y[k + 1]);
-                let f = if y1 != y0 { ((target - y0) / (y1 - y0)).clamp(0.0, 1.0) } else { 0.0 };
+                let f = if y1 != y0 {
+                    ((target - y0) / (y1 - y0)).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
                 Some(t[k] + f * (t[k + 1] - t[k]))
             }
         }
@@ -112,20 +122,37 @@ mod tests {
         };
         let r = step_response(&cl, 3.0, 30_000);
         let m = metrics(&r);
-        assert!((m.overshoot_pct - 100.0 * overshoot_from_damping(d)).abs() < 1e-3, "{m:?}");
+        assert!(
+            (m.overshoot_pct - 100.0 * overshoot_from_damping(d)).abs() < 1e-3,
+            "{m:?}"
+        );
         let wd = wn * (1.0 - d * d).sqrt();
-        let y = |t: f64| 1.0 - (-d * wn * t).exp() * (wd * t + d.acos()).sin() / (1.0 - d * d).sqrt();
+        let y =
+            |t: f64| 1.0 - (-d * wn * t).exp() * (wd * t + d.acos()).sin() / (1.0 - d * d).sqrt();
         let first = |level: f64| {
             let (mut a, mut b) = (0.0, std::f64::consts::PI / wd);
             for _ in 0..100 {
                 let m = 0.5 * (a + b);
-                if y(m) < level { a = m } else { b = m }
+                if y(m) < level {
+                    a = m
+                } else {
+                    b = m
+                }
             }
             a
         };
-        assert!((m.rise_time_s.unwrap() - (first(0.9) - first(0.1))).abs() < 1e-6, "{m:?}");
+        assert!(
+            (m.rise_time_s.unwrap() - (first(0.9) - first(0.1))).abs() < 1e-6,
+            "{m:?}"
+        );
         // settling: last time |y - 1| = band, found on a dense analytic grid
-        let last_out = |band: f64| (0..3_000_000).rev().map(|k| k as f64 * 1e-6).find(|&t| (y(t) - 1.0).abs() > band).unwrap();
+        let last_out = |band: f64| {
+            (0..3_000_000)
+                .rev()
+                .map(|k| k as f64 * 1e-6)
+                .find(|&t| (y(t) - 1.0).abs() > band)
+                .unwrap()
+        };
         let ts5 = m.settling_time_5pct_s.unwrap();
         assert!((ts5 - last_out(0.05)).abs() < 2e-5, "{ts5}");
         let ts1 = m.settling_time_1pct_s.unwrap();

@@ -44,7 +44,9 @@ impl TransferFunction {
 
     /// Evaluates a polynomial at s (Horner).
     pub fn poly_eval(p: &[f64], s: Complex<f64>) -> Complex<f64> {
-        p.iter().rev().fold(Complex::new(0.0, 0.0), |acc, &c| acc * s + c)
+        p.iter()
+            .rev()
+            .fold(Complex::new(0.0, 0.0), |acc, &c| acc * s + c)
     }
 
     /// G(s).
@@ -54,7 +56,10 @@ impl TransferFunction {
 
     /// Series connection G1 G2.
     pub fn series(&self, other: &TransferFunction) -> TransferFunction {
-        TransferFunction::new(Self::poly_mul(&self.num, &other.num), Self::poly_mul(&self.den, &other.den))
+        TransferFunction::new(
+            Self::poly_mul(&self.num, &other.num),
+            Self::poly_mul(&self.den, &other.den),
+        )
     }
 
     /// Unity negative feedback T = G / (1 + G) and the characteristic polynomial D + N.
@@ -70,7 +75,10 @@ mod tests {
     #[test]
     fn algebra() {
         // (1 + s)(2 + s) = 2 + 3 s + s^2
-        assert_eq!(TransferFunction::poly_mul(&[1.0, 1.0], &[2.0, 1.0]), alloc::vec![2.0, 3.0, 1.0]);
+        assert_eq!(
+            TransferFunction::poly_mul(&[1.0, 1.0], &[2.0, 1.0]),
+            alloc::vec![2.0, 3.0, 1.0]
+        );
         let g = TransferFunction::new(alloc::vec![2.0], alloc::vec![0.0, 1.0]); // 2/s
         let t = g.feedback_unity(); // 2/(s + 2)
         assert_eq!(t.den, alloc::vec![2.0, 1.0]);

@@ -71,10 +71,17 @@ impl DesignReport {
         let g = &self.gains;
         match which {
             "reduced" => Some(g.response(omega) * self.request.reduced.response(omega)),
-            "full" => self.request.full.map(|m| g.response(omega) * m.response(omega)),
+            "full" => self
+                .request
+                .full
+                .map(|m| g.response(omega) * m.response(omega)),
             "discrete" => Some(
-                discrete_response(g, self.discrete_plant.ts_s, self.request.discretization, omega)
-                    * self.discrete_plant.response(omega),
+                discrete_response(
+                    g,
+                    self.discrete_plant.ts_s,
+                    self.request.discretization,
+                    omega,
+                ) * self.discrete_plant.response(omega),
             ),
             _ => None,
         }
@@ -87,14 +94,27 @@ pub fn sweep_for(omega_gc: f64, plant: &PlantModel, gains: &PidGains, ts_s: Opti
     let hi = match ts_s {
         Some(ts) => 0.9999 * math::PI / ts,
         None => {
-            let filt = if gains.tl_s > 0.0 { 10.0 / gains.tl_s } else { 0.0 };
+            let filt = if gains.tl_s > 0.0 {
+                10.0 / gains.tl_s
+            } else {
+                0.0
+            };
             (1e3 * omega_gc).max(100.0 * plant.fastest_pole()).max(filt)
         }
     };
-    Sweep { omega_lo: lo, omega_hi: hi.max(lo * 10.0), points: 2000, loop_type: 1 + i32::from(gains.ki != 0.0) }
+    Sweep {
+        omega_lo: lo,
+        omega_hi: hi.max(lo * 10.0),
+        points: 2000,
+        loop_type: 1 + i32::from(gains.ki != 0.0),
+    }
 }
 
-fn step_of(cl: &ClosedLoop, poles: &[Complex<f64>], omega_gc: f64) -> (Option<StepMetrics>, StepResponse) {
+fn step_of(
+    cl: &ClosedLoop,
+    poles: &[Complex<f64>],
+    omega_gc: f64,
+) -> (Option<StepMetrics>, StepResponse) {
     // horizon: 1.5 x the 1 % envelope of the slowest pole, within [10, 300] / w_gc
     let slowest = poles
         .iter()
@@ -109,8 +129,15 @@ fn step_of(cl: &ClosedLoop, poles: &[Complex<f64>], omega_gc: f64) -> (Option<St
 }
 
 /// Verifies `gains` on a continuous plant model.
-pub fn verify_continuous(gains: &PidGains, model: &PlantModel, omega_gc: f64) -> Result<Achieved, DesignError> {
-    let m = margins(|w| gains.response(w) * model.response(w), &sweep_for(omega_gc, model, gains, None));
+pub fn verify_continuous(
+    gains: &PidGains,
+    model: &PlantModel,
+    omega_gc: f64,
+) -> Result<Achieved, DesignError> {
+    let m = margins(
+        |w| gains.response(w) * model.response(w),
+        &sweep_for(omega_gc, model, gains, None),
+    );
     let cl = ClosedLoop::continuous(&model.state_space(), gains).ok_or(DesignError::Invalid(
         "the derivative needs T_L > 0 to be simulated (use --tl-factor or --tl > 0)",
     ))?;
@@ -130,25 +157,55 @@ pub fn verify_discrete(
         |w| discrete_response(gains, ts, method, w) * plant.response(w),
         &sweep_for(omega_gc, model, gains, Some(ts)),
     );
-    finish("discrete", model.name(), m, ClosedLoop::discrete(plant, gains, method), omega_gc)
+    finish(
+        "discrete",
+        model.name(),
+        m,
+        ClosedLoop::discrete(plant, gains, method),
+        omega_gc,
+    )
 }
 
-fn finish(name: &'static str, plant: &'static str, m: Margins, cl: ClosedLoop, omega_gc: f64) -> Result<Achieved, DesignError> {
+fn finish(
+    name: &'static str,
+    plant: &'static str,
+    m: Margins,
+    cl: ClosedLoop,
+    omega_gc: f64,
+) -> Result<Achieved, DesignError> {
     let poles = cl.poles();
     let stability = super::closed_loop::classify(&poles, cl.ts_s.is_some());
     let (step, response) = if stability == Stability::Stable {
         step_of(&cl, &poles, omega_gc)
     } else {
-        (None, StepResponse { time_s: Vec::new(), y_rad: Vec::new() })
+        (
+            None,
+            StepResponse {
+                time_s: Vec::new(),
+                y_rad: Vec::new(),
+            },
+        )
     };
-    Ok(Achieved { name, plant, margins: m, poles, stability, step, response })
+    Ok(Achieved {
+        name,
+        plant,
+        margins: m,
+        poles,
+        stability,
+        step,
+        response,
+    })
 }
 
 /// Designs and verifies.
 pub fn design(req: &DesignRequest) -> Result<DesignReport, DesignError> {
     req.spec.validate()?;
     if !(req.ts_s.is_finite() && req.ts_s > 0.0) {
-        return Err(DesignError::OutOfRange { name: "--ts [s]", value: req.ts_s, why: "the sample period must be > 0" });
+        return Err(DesignError::OutOfRange {
+            name: "--ts [s]",
+            value: req.ts_s,
+            why: "the sample period must be > 0",
+        });
     }
     if req.spec.omega_gc * req.ts_s >= 0.5 * math::PI {
         return Err(DesignError::OutOfRange {
@@ -160,16 +217,38 @@ pub fn design(req: &DesignRequest) -> Result<DesignReport, DesignError> {
     }
     let design_model = match (req.design_on_full, req.full) {
         (true, Some(f)) => f,
-        (true, None) => return Err(DesignError::Invalid("designing on the full model needs the plant parameters, not just k_m and T_m")),
+        (true, None) => {
+            return Err(DesignError::Invalid(
+                "designing on the full model needs the plant parameters, not just k_m and T_m",
+            ))
+        }
         (false, _) => req.reduced,
     };
     let w = req.spec.omega_gc;
-    let tl_s = if req.kind == ControllerKind::Pi { 0.0 } else { req.filter.tl_s(w)? };
-    let handout_gains = synthesize(req.kind, &req.spec, req.alpha, design_model.response(w), tl_s)?;
+    let tl_s = if req.kind == ControllerKind::Pi {
+        0.0
+    } else {
+        req.filter.tl_s(w)?
+    };
+    let handout_gains = synthesize(
+        req.kind,
+        &req.spec,
+        req.alpha,
+        design_model.response(w),
+        tl_s,
+    )?;
     let discrete_model = req.full.unwrap_or(req.reduced);
     let discrete_plant = discrete_model.state_space().discretize_zoh(req.ts_s);
     let gains = if req.exact {
-        super::exact::solve(req.kind, &req.spec, req.alpha, tl_s, &discrete_plant, req.discretization, &handout_gains)?
+        super::exact::solve(
+            req.kind,
+            &req.spec,
+            req.alpha,
+            tl_s,
+            &discrete_plant,
+            req.discretization,
+            &handout_gains,
+        )?
     } else {
         handout_gains
     };
@@ -178,10 +257,19 @@ pub fn design(req: &DesignRequest) -> Result<DesignReport, DesignError> {
         Some(f) => Some(verify_continuous(&gains, &f, w)?),
         None => None,
     };
-    let discrete = verify_discrete(&gains, &discrete_model, &discrete_plant, req.discretization, w)?;
+    let discrete = verify_discrete(
+        &gains,
+        &discrete_model,
+        &discrete_plant,
+        req.discretization,
+        w,
+    )?;
     if req.exact {
         let m = &discrete.margins;
-        let (dw, dpm) = ((m.omega_gc - w).abs() / w, (m.phase_margin_deg - super::deg(req.spec.phase_margin)).abs());
+        let (dw, dpm) = (
+            (m.omega_gc - w).abs() / w,
+            (m.phase_margin_deg - super::deg(req.spec.phase_margin)).abs(),
+        );
         if !(dw <= 0.005 && dpm <= 0.1) {
             return Err(DesignError::NoSolution(
                 "--exact: the gains put |L| = 1 at w_gc, but the loop has another gain crossover with a smaller phase \
@@ -189,7 +277,15 @@ pub fn design(req: &DesignRequest) -> Result<DesignReport, DesignError> {
             ));
         }
     }
-    Ok(DesignReport { request: *req, handout_gains, gains, reduced, full, discrete, discrete_plant })
+    Ok(DesignReport {
+        request: *req,
+        handout_gains,
+        gains,
+        reduced,
+        full,
+        discrete,
+        discrete_plant,
+    })
 }
 
 #[cfg(test)]
@@ -202,7 +298,10 @@ mod tests {
         let p = PlantParams::TABLE2;
         DesignRequest {
             kind: ControllerKind::Pid,
-            spec: LoopSpec { omega_gc: w, phase_margin: rad(pm) },
+            spec: LoopSpec {
+                omega_gc: w,
+                phase_margin: rad(pm),
+            },
             alpha: 4.0,
             filter: DerivativeFilter::Factor(5.0),
             ts_s: 1e-3,
@@ -237,7 +336,11 @@ mod tests {
         let r = design(&request(30.0, 60.0, false)).unwrap();
         assert_eq!(r.gains, r.handout_gains);
         // The real derivative and the ZOH delay eat phase: the achieved margin is below the spec.
-        assert!(r.discrete.margins.phase_margin_deg < 59.0, "{:?}", r.discrete.margins);
+        assert!(
+            r.discrete.margins.phase_margin_deg < 59.0,
+            "{:?}",
+            r.discrete.margins
+        );
         assert!(r.reduced.margins.phase_margin_deg < 60.0);
         assert_eq!(r.discrete.stability, Stability::Stable);
         let e = design(&request(30.0, 60.0, true)).unwrap();
@@ -248,7 +351,12 @@ mod tests {
 
     #[test]
     fn exact_for_several_specs_and_structures() {
-        for (w, pm, kind) in [(15.0, 45.0, ControllerKind::Pid), (50.0, 65.0, ControllerKind::Pid), (20.0, 70.0, ControllerKind::Pd), (8.0, 45.0, ControllerKind::Pi)] {
+        for (w, pm, kind) in [
+            (15.0, 45.0, ControllerKind::Pid),
+            (50.0, 65.0, ControllerKind::Pid),
+            (20.0, 70.0, ControllerKind::Pd),
+            (8.0, 45.0, ControllerKind::Pi),
+        ] {
             let mut q = request(w, pm, true);
             q.kind = kind;
             q.discretization = Discretization::BackwardEuler;

@@ -91,6 +91,7 @@ pub fn prediction_cost_on(ds: &Dataset, plant: &Plant, segs: &[(usize, usize)]) 
             theta_m_rad: th,
             omega_l_rad_s: w / p.n,
             theta_l_rad: th / p.n,
+            ..PlantState::default()
         });
         for j in 0..h {
             let s = sim.step(r.u_v[k0 + j]);

@@ -30,7 +30,11 @@ pub struct CombinedConfig {
 
 impl Default for CombinedConfig {
     fn default() -> Self {
-        CombinedConfig { cutoff_hz: 10.0, min_speed_frac: 0.05, edge_s: 0.05 }
+        CombinedConfig {
+            cutoff_hz: 10.0,
+            min_speed_frac: 0.05,
+            edge_s: 0.05,
+        }
     }
 }
 
@@ -50,9 +54,15 @@ pub struct CombinedFit {
 }
 
 /// J_eq, B_eq and tau_sf from one LS over `exps`; `n` is the gear ratio N.
-pub fn identify_combined(exps: &[Experiment], n: f64, cfg: &CombinedConfig) -> Result<CombinedFit, IdentError> {
+pub fn identify_combined(
+    exps: &[Experiment],
+    n: f64,
+    cfg: &CombinedConfig,
+) -> Result<CombinedFit, IdentError> {
     if !(cfg.min_speed_frac >= 0.0 && cfg.min_speed_frac < 1.0 && cfg.edge_s >= 0.0) {
-        return Err(IdentError::BadConfig(format!("combined-fit settings out of range: {cfg:?}")));
+        return Err(IdentError::BadConfig(format!(
+            "combined-fit settings out of range: {cfg:?}"
+        )));
     }
     let (mut ca, mut cw, mut cs, mut y) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for e in exps {
@@ -65,7 +75,10 @@ pub fn identify_combined(exps: &[Experiment], n: f64, cfg: &CombinedConfig) -> R
         let tf = lowpass_zero_phase(tau, dt, cfg.cutoff_hz)?;
         let a = derivative(&e.time_s, &wf);
         let wmax = wf.iter().fold(0.0_f64, |m, w| m.max(w.abs()));
-        let (t0, t1) = (e.time_s[0] + cfg.edge_s, e.time_s[e.time_s.len() - 1] - cfg.edge_s);
+        let (t0, t1) = (
+            e.time_s[0] + cfg.edge_s,
+            e.time_s[e.time_s.len() - 1] - cfg.edge_s,
+        );
         // Exclude whole neighbourhoods of zero crossings: the filtered sign is smeared there.
         let guard = (1.0 / (cfg.cutoff_hz * dt)) as usize;
         let mut near_zero = alloc::vec![false; wf.len()];
@@ -112,7 +125,13 @@ pub fn identify_combined(exps: &[Experiment], n: f64, cfg: &CombinedConfig) -> R
             ));
         }
     }
-    Ok(CombinedFit { j_eq, b_eq, tau_sf, rows, notes })
+    Ok(CombinedFit {
+        j_eq,
+        b_eq,
+        tau_sf,
+        rows,
+        notes,
+    })
 }
 
 /// Refuses records that cannot separate J_eq, B_eq and tau_sf, saying what is missing.
@@ -121,7 +140,8 @@ fn check_excitation(a: &[f64], w: &[f64], s: &[f64]) -> Result<(), IdentError> {
     let wabs: Vec<f64> = w.iter().map(|w| w.abs()).collect();
     let wmax = wabs.iter().cloned().fold(0.0, f64::max);
     let wmean = wabs.iter().sum::<f64>() / wabs.len() as f64;
-    let wsd = math::sqrt(wabs.iter().map(|v| (v - wmean) * (v - wmean)).sum::<f64>() / wabs.len() as f64);
+    let wsd =
+        math::sqrt(wabs.iter().map(|v| (v - wmean) * (v - wmean)).sum::<f64>() / wabs.len() as f64);
     if wsd < 0.03 * wmax {
         return Err(IdentError::NotIdentifiable(format!(
             "combined: the speed magnitude hardly varies (|w_m| = {wmean:.1} +- {wsd:.1} rad/s), so B_eq |w_m| and the \

@@ -85,9 +85,10 @@ pub fn identify_electrical(
     let k_drv = mk(k_drv, se_k);
     let r_eq = mk(r_eq, se_r);
     let mut warnings = Vec::new();
-    for (name, est, nom, unit) in
-        [("k_drv", &k_drv, params.k_drv, "V/V"), ("R_eq", &r_eq, params.r_eq(), "ohm")]
-    {
+    for (name, est, nom, unit) in [
+        ("k_drv", &k_drv, params.k_drv, "V/V"),
+        ("R_eq", &r_eq, params.r_eq(), "ohm"),
+    ] {
         let rel = (est.value - nom) / nom;
         if rel.abs() > FLAG_REL && !est.contains(nom) {
             warnings.push(format!(

@@ -32,7 +32,10 @@ impl Butter2 {
         let q = core::f64::consts::FRAC_1_SQRT_2;
         let norm = 1.0 / (1.0 + k / q + k * k);
         let b0 = k * k * norm;
-        Ok(Butter2 { b: [b0, 2.0 * b0, b0], a: [2.0 * (k * k - 1.0) * norm, (1.0 - k / q + k * k) * norm] })
+        Ok(Butter2 {
+            b: [b0, 2.0 * b0, b0],
+            a: [2.0 * (k * k - 1.0) * norm, (1.0 - k / q + k * k) * norm],
+        })
     }
 
     fn run(&self, x: &mut [f64]) {
@@ -111,7 +114,9 @@ mod tests {
     #[test]
     fn passes_dc_and_slow_sines_without_delay() {
         let dt = 1e-3;
-        let x: Vec<f64> = (0..5000).map(|k| 2.0 + math::sin(math::TAU * 1.0 * k as f64 * dt)).collect();
+        let x: Vec<f64> = (0..5000)
+            .map(|k| 2.0 + math::sin(math::TAU * 1.0 * k as f64 * dt))
+            .collect();
         let y = lowpass_zero_phase(&x, dt, 20.0).unwrap();
         // A 1 Hz sine through a 20 Hz zero-phase filter: same amplitude, no lag.
         for k in 500..4500 {
@@ -122,7 +127,9 @@ mod tests {
     #[test]
     fn attenuates_fast_sines() {
         let dt = 1e-3;
-        let x: Vec<f64> = (0..5000).map(|k| math::sin(math::TAU * 200.0 * k as f64 * dt)).collect();
+        let x: Vec<f64> = (0..5000)
+            .map(|k| math::sin(math::TAU * 200.0 * k as f64 * dt))
+            .collect();
         let y = lowpass_zero_phase(&x, dt, 10.0).unwrap();
         let rms = (y[500..4500].iter().map(|v| v * v).sum::<f64>() / 4000.0).sqrt();
         // |H|^2 at 20x the cut-off of a 2nd-order Butterworth is 1/(1+20^4) ~ 6e-6.
@@ -133,7 +140,9 @@ mod tests {
     fn cutoff_is_minus_6db_after_forward_backward() {
         let dt = 1e-3;
         let f = 10.0;
-        let x: Vec<f64> = (0..20000).map(|k| math::sin(math::TAU * f * k as f64 * dt)).collect();
+        let x: Vec<f64> = (0..20000)
+            .map(|k| math::sin(math::TAU * f * k as f64 * dt))
+            .collect();
         let y = lowpass_zero_phase(&x, dt, f).unwrap();
         let amp = (y[5000..15000].iter().map(|v| v * v).sum::<f64>() / 10000.0 * 2.0).sqrt();
         assert!((amp - 0.5).abs() < 0.01, "{amp}");

@@ -27,7 +27,11 @@ pub struct FrictionConfig {
 
 impl Default for FrictionConfig {
     fn default() -> Self {
-        FrictionConfig { plateau: PlateauConfig::default(), min_speed_frac: 0.02, samples: false }
+        FrictionConfig {
+            plateau: PlateauConfig::default(),
+            min_speed_frac: 0.02,
+            samples: false,
+        }
     }
 }
 
@@ -71,7 +75,10 @@ impl FrictionFit {
 }
 
 /// Finds the constant-speed segments of every experiment that has a torque signal.
-pub fn friction_points(exps: &[Experiment], cfg: &FrictionConfig) -> Result<Vec<FrictionPoint>, IdentError> {
+pub fn friction_points(
+    exps: &[Experiment],
+    cfg: &FrictionConfig,
+) -> Result<Vec<FrictionPoint>, IdentError> {
     let mut points = Vec::new();
     for (k, e) in exps.iter().enumerate() {
         let tau = e.torque("friction")?;
@@ -96,9 +103,15 @@ pub fn friction_points(exps: &[Experiment], cfg: &FrictionConfig) -> Result<Vec<
 }
 
 /// Estimates B_eq and tau_sf from the constant-speed segments of `exps`; `n` is the gear ratio N.
-pub fn identify_friction(exps: &[Experiment], n: f64, cfg: &FrictionConfig) -> Result<FrictionFit, IdentError> {
+pub fn identify_friction(
+    exps: &[Experiment],
+    n: f64,
+    cfg: &FrictionConfig,
+) -> Result<FrictionFit, IdentError> {
     if !(n > 0.0 && n.is_finite()) {
-        return Err(IdentError::BadConfig(format!("gear ratio N must be > 0, got {n}")));
+        return Err(IdentError::BadConfig(format!(
+            "gear ratio N must be > 0, got {n}"
+        )));
     }
     if exps.is_empty() {
         return Err(IdentError::TooFewData { needed: 1, got: 0 });
@@ -131,7 +144,10 @@ pub fn identify_friction(exps: &[Experiment], n: f64, cfg: &FrictionConfig) -> R
         ls::fit(&[&w, &s], &y, Covariance::Blocks(points.len()))?
     } else {
         let w: Vec<f64> = points.iter().map(|p| p.omega_m_rad_s).collect();
-        let s: Vec<f64> = points.iter().map(|p| math::sign(p.omega_m_rad_s) / n).collect();
+        let s: Vec<f64> = points
+            .iter()
+            .map(|p| math::sign(p.omega_m_rad_s) / n)
+            .collect();
         let y: Vec<f64> = points.iter().map(|p| p.tau_m_nm).collect();
         ls::fit(&[&w, &s], &y, Covariance::Iid)?
     };
@@ -150,7 +166,13 @@ pub fn identify_friction(exps: &[Experiment], n: f64, cfg: &FrictionConfig) -> R
             tau_sf.value
         ));
     }
-    Ok(FrictionFit { b_eq, tau_sf, n, points, notes })
+    Ok(FrictionFit {
+        b_eq,
+        tau_sf,
+        n,
+        points,
+        notes,
+    })
 }
 
 /// Refuses segment sets that cannot separate B_eq and tau_sf, saying which experiment is missing.

@@ -104,7 +104,11 @@ pub fn identify_inertia(
     while k + 1 < phases.len() {
         let (a, b) = (&phases[k], &phases[k + 1]);
         if a.experiment == b.experiment && a.accel_rad_s2 * b.accel_rad_s2 < 0.0 {
-            let (p, m) = if a.accel_rad_s2 > 0.0 { (k, k + 1) } else { (k + 1, k) };
+            let (p, m) = if a.accel_rad_s2 > 0.0 {
+                (k, k + 1)
+            } else {
+                (k + 1, k)
+            };
             let (pp, pm) = (&phases[p], &phases[m]);
             let j = (pp.tau_i_nm - pm.tau_i_nm) / (pp.accel_rad_s2 - pm.accel_rad_s2);
             pairs.push((p, m, j));
@@ -138,7 +142,9 @@ pub fn identify_inertia(
             let e = &exps[ph.experiment];
             let tau = e.torque("inertia")?;
             for i in ph.start..ph.end {
-                let r = tau[i] - friction_torque(friction, e.omega_m_rad_s[i]) - j_mean * ph.accel_rad_s2;
+                let r = tau[i]
+                    - friction_torque(friction, e.omega_m_rad_s[i])
+                    - j_mean * ph.accel_rad_s2;
                 ss += r * r;
                 cnt += 1;
             }
@@ -160,7 +166,12 @@ pub fn identify_inertia(
         dof: m - 1,
         n: m,
     };
-    Ok(InertiaFit { j_eq, phases, pairs, notes })
+    Ok(InertiaFit {
+        j_eq,
+        phases,
+        pairs,
+        notes,
+    })
 }
 
 /// J_eq by LS of tau_i = J_eq dw_m/dt over the samples with |dw_m/dt| above the phase threshold.
@@ -195,7 +206,14 @@ pub fn identify_inertia_ls(
     let fit = ls::fit(&[&a_rows], &y, Covariance::Blocks(blocks))?;
     let mut notes = Vec::new();
     if friction.is_none() {
-        notes.push(String::from("no friction estimate given: the LS attributes all torque to inertia"));
+        notes.push(String::from(
+            "no friction estimate given: the LS attributes all torque to inertia",
+        ));
     }
-    Ok(InertiaFit { j_eq: Estimate::from_fit(&fit, 0), phases: Vec::new(), pairs: Vec::new(), notes })
+    Ok(InertiaFit {
+        j_eq: Estimate::from_fit(&fit, 0),
+        phases: Vec::new(),
+        pairs: Vec::new(),
+        notes,
+    })
 }

@@ -55,14 +55,21 @@ pub fn fit(columns: &[&[f64]], y: &[f64], cov: Covariance) -> Result<LsFit, Iden
     let p = columns.len();
     let n = y.len();
     if p == 0 || columns.iter().any(|c| c.len() != n) {
-        return Err(IdentError::Internal("regressor columns and observations differ in length"));
+        return Err(IdentError::Internal(
+            "regressor columns and observations differ in length",
+        ));
     }
     if n <= p {
-        return Err(IdentError::TooFewData { needed: p + 1, got: n });
+        return Err(IdentError::TooFewData {
+            needed: p + 1,
+            got: n,
+        });
     }
     if let Covariance::Blocks(b) = cov {
         if b < 2 || n < 2 * b {
-            return Err(IdentError::Internal("block covariance needs >= 2 blocks of >= 2 rows"));
+            return Err(IdentError::Internal(
+                "block covariance needs >= 2 blocks of >= 2 rows",
+            ));
         }
     }
     // Column scaling.
@@ -71,7 +78,9 @@ pub fn fit(columns: &[&[f64]], y: &[f64], cov: Covariance) -> Result<LsFit, Iden
     for c in columns {
         let norm = crate::math::sqrt(c.iter().map(|v| v * v).sum::<f64>());
         if !(norm > 0.0) || !norm.is_finite() {
-            return Err(IdentError::RankDeficient { cond: f64::INFINITY });
+            return Err(IdentError::RankDeficient {
+                cond: f64::INFINITY,
+            });
         }
         scale.push(norm);
         data.extend(c.iter().map(|v| v / norm));
@@ -80,8 +89,14 @@ pub fn fit(columns: &[&[f64]], y: &[f64], cov: Covariance) -> Result<LsFit, Iden
     let qr = phi.clone().qr();
     let r = qr.r();
     let sv = r.clone().singular_values();
-    let (smax, smin) = sv.iter().fold((0.0_f64, f64::INFINITY), |(a, b), &s| (a.max(s), b.min(s)));
-    let cond = if smin > 0.0 { smax / smin } else { f64::INFINITY };
+    let (smax, smin) = sv
+        .iter()
+        .fold((0.0_f64, f64::INFINITY), |(a, b), &s| (a.max(s), b.min(s)));
+    let cond = if smin > 0.0 {
+        smax / smin
+    } else {
+        f64::INFINITY
+    };
     if !(cond < MAX_COND) {
         return Err(IdentError::RankDeficient { cond });
     }
@@ -96,7 +111,7 @@ pub fn fit(columns: &[&[f64]], y: &[f64], cov: Covariance) -> Result<LsFit, Iden
         .try_inverse()
         .ok_or(IdentError::RankDeficient { cond })?;
     let bread = &r_inv * r_inv.transpose(); // (R^T R)^-1 in scaled coordinates
-    // Residuals.
+                                            // Residuals.
     let fitted = &phi * &theta_s;
     let resid: Vec<f64> = y.iter().zip(fitted.iter()).map(|(a, b)| a - b).collect();
     let rss: f64 = resid.iter().map(|e| e * e).sum();
@@ -139,7 +154,16 @@ pub fn fit(columns: &[&[f64]], y: &[f64], cov: Covariance) -> Result<LsFit, Iden
         std_err.push(se);
         ci95.push((v - t * se, v + t * se));
     }
-    Ok(LsFit { theta, std_err, ci95, dof, n, residual_rms, cond, cov: cov_out })
+    Ok(LsFit {
+        theta,
+        std_err,
+        ci95,
+        dof,
+        n,
+        residual_rms,
+        cond,
+        cov: cov_out,
+    })
 }
 
 #[cfg(test)]
@@ -164,13 +188,24 @@ mod tests {
         let mut rng = SplitMix64(7);
         let x: Vec<f64> = (0..50).map(|i| i as f64 * 0.1).collect();
         let one = alloc::vec![1.0; 50];
-        let y: Vec<f64> = x.iter().map(|x| 1.0 + 0.5 * x + 0.1 * rng.normal()).collect();
+        let y: Vec<f64> = x
+            .iter()
+            .map(|x| 1.0 + 0.5 * x + 0.1 * rng.normal())
+            .collect();
         let f = fit(&[&x, &one], &y, Covariance::Iid).unwrap();
         let xbar = x.iter().sum::<f64>() / 50.0;
         let sxx: f64 = x.iter().map(|v| (v - xbar) * (v - xbar)).sum();
-        let rss: f64 = x.iter().zip(&y).map(|(x, y)| (y - f.theta[1] - f.theta[0] * x).powi(2)).sum();
+        let rss: f64 = x
+            .iter()
+            .zip(&y)
+            .map(|(x, y)| (y - f.theta[1] - f.theta[0] * x).powi(2))
+            .sum();
         let se_b = (rss / 48.0).sqrt() / sxx.sqrt();
-        assert!((f.std_err[0] - se_b).abs() < 1e-12 * se_b.max(1.0), "{} vs {se_b}", f.std_err[0]);
+        assert!(
+            (f.std_err[0] - se_b).abs() < 1e-12 * se_b.max(1.0),
+            "{} vs {se_b}",
+            f.std_err[0]
+        );
         let t = t95(48.0);
         assert!((f.ci95[0].1 - f.theta[0] - t * se_b).abs() < 1e-12);
         assert!(f.cond > 1.0 && f.cond < 10.0);
@@ -208,7 +243,12 @@ mod tests {
             .collect();
         let iid = fit(&[&x], &y, Covariance::Iid).unwrap();
         let blk = fit(&[&x], &y, Covariance::Blocks(20)).unwrap();
-        assert!(blk.std_err[0] > 3.0 * iid.std_err[0], "{} vs {}", blk.std_err[0], iid.std_err[0]);
+        assert!(
+            blk.std_err[0] > 3.0 * iid.std_err[0],
+            "{} vs {}",
+            blk.std_err[0],
+            iid.std_err[0]
+        );
         assert_eq!(blk.dof, 19);
     }
 
@@ -217,8 +257,17 @@ mod tests {
         let x: Vec<f64> = (0..10).map(|i| i as f64).collect();
         let x2: Vec<f64> = x.iter().map(|v| 2.0 * v).collect();
         let y = x.clone();
-        assert!(matches!(fit(&[&x, &x2], &y, Covariance::Iid), Err(IdentError::RankDeficient { .. })));
-        assert!(matches!(fit(&[&x], &y[..1], Covariance::Iid), Err(IdentError::Internal(_))));
-        assert!(matches!(fit(&[&x[..1]], &y[..1], Covariance::Iid), Err(IdentError::TooFewData { .. })));
+        assert!(matches!(
+            fit(&[&x, &x2], &y, Covariance::Iid),
+            Err(IdentError::RankDeficient { .. })
+        ));
+        assert!(matches!(
+            fit(&[&x], &y[..1], Covariance::Iid),
+            Err(IdentError::Internal(_))
+        ));
+        assert!(matches!(
+            fit(&[&x[..1]], &y[..1], Covariance::Iid),
+            Err(IdentError::TooFewData { .. })
+        ));
     }
 }

@@ -36,10 +36,19 @@ use crate::record::Record;
 pub enum IdentError {
     /// A signal the method needs is not in the log.
     #[error("{log}: no {signal} signal: {why}")]
-    MissingSignal { log: String, signal: &'static str, why: &'static str },
+    MissingSignal {
+        log: String,
+        signal: &'static str,
+        why: &'static str,
+    },
     /// A signal holds NaN or infinity.
     #[error("{log}: signal {signal} is not finite at row {row} (t = {time_s} s)")]
-    NotFinite { log: String, signal: &'static str, row: usize, time_s: f64 },
+    NotFinite {
+        log: String,
+        signal: &'static str,
+        row: usize,
+        time_s: f64,
+    },
     /// Time is not strictly increasing.
     #[error("{log}: time is not strictly increasing at row {row}")]
     BadTime { log: String, row: usize },
@@ -123,15 +132,25 @@ impl Experiment {
     /// Prepares a record: checks finiteness and time, derives the motor speed from whatever the
     /// log has (omega_m, omega_l, theta_m or theta_l, in that order) and the torque k_t i_a.
     pub fn from_record(rec: &Record, params: &PlantParams) -> Result<Experiment, IdentError> {
-        let source = if rec.source.is_empty() { String::from("record") } else { rec.source.clone() };
+        let source = if rec.source.is_empty() {
+            String::from("record")
+        } else {
+            rec.source.clone()
+        };
         let t = &rec.time_s;
         if t.len() < 3 {
-            return Err(IdentError::TooFewData { needed: 3, got: t.len() });
+            return Err(IdentError::TooFewData {
+                needed: 3,
+                got: t.len(),
+            });
         }
         check_finite(&source, "time", t, t)?;
         for k in 1..t.len() {
             if !(t[k] > t[k - 1]) {
-                return Err(IdentError::BadTime { log: source, row: k });
+                return Err(IdentError::BadTime {
+                    log: source,
+                    row: k,
+                });
             }
         }
         let n = params.n;
@@ -168,8 +187,17 @@ impl Experiment {
             }
             None => None,
         };
-        let tau_m_nm = i_a_a.as_ref().map(|i| i.iter().map(|i| params.k_t * i).collect());
-        Ok(Experiment { source, time_s: t.clone(), omega_m_rad_s, tau_m_nm, i_a_a, u_v })
+        let tau_m_nm = i_a_a
+            .as_ref()
+            .map(|i| i.iter().map(|i| params.k_t * i).collect());
+        Ok(Experiment {
+            source,
+            time_s: t.clone(),
+            omega_m_rad_s,
+            tau_m_nm,
+            i_a_a,
+            u_v,
+        })
     }
 
     /// The motor torque, or the explanation why the method needs the current.
@@ -188,7 +216,12 @@ impl Experiment {
     }
 }
 
-fn check_finite(source: &str, signal: &'static str, x: &[f64], t: &[f64]) -> Result<(), IdentError> {
+fn check_finite(
+    source: &str,
+    signal: &'static str,
+    x: &[f64],
+    t: &[f64],
+) -> Result<(), IdentError> {
     match x.iter().position(|v| !v.is_finite()) {
         None => Ok(()),
         Some(row) => Err(IdentError::NotFinite {

@@ -29,7 +29,13 @@ pub struct PhaseConfig {
 
 impl Default for PhaseConfig {
     fn default() -> Self {
-        PhaseConfig { cutoff_hz: 10.0, min_accel_frac: 0.3, min_accel_rad_s2: None, min_duration_s: 0.2, trim_frac: 0.1 }
+        PhaseConfig {
+            cutoff_hz: 10.0,
+            min_accel_frac: 0.3,
+            min_accel_rad_s2: None,
+            min_duration_s: 0.2,
+            trim_frac: 0.1,
+        }
     }
 }
 
@@ -64,9 +70,18 @@ pub fn accel_threshold(accel: &[f64], cfg: &PhaseConfig) -> f64 {
 }
 
 /// Finds the constant acceleration/deceleration phases of `omega` sampled at `t`.
-pub fn find_phases(t: &[f64], omega: &[f64], cfg: &PhaseConfig) -> Result<Vec<AccelPhase>, IdentError> {
-    if !(cfg.min_duration_s > 0.0 && (0.0..0.5).contains(&cfg.trim_frac) && cfg.min_accel_frac > 0.0) {
-        return Err(IdentError::BadConfig(format!("phase settings out of range: {cfg:?}")));
+pub fn find_phases(
+    t: &[f64],
+    omega: &[f64],
+    cfg: &PhaseConfig,
+) -> Result<Vec<AccelPhase>, IdentError> {
+    if !(cfg.min_duration_s > 0.0
+        && (0.0..0.5).contains(&cfg.trim_frac)
+        && cfg.min_accel_frac > 0.0)
+    {
+        return Err(IdentError::BadConfig(format!(
+            "phase settings out of range: {cfg:?}"
+        )));
     }
     if t.len() != omega.len() {
         return Err(IdentError::Internal("time and speed lengths differ"));
@@ -79,7 +94,15 @@ pub fn find_phases(t: &[f64], omega: &[f64], cfg: &PhaseConfig) -> Result<Vec<Ac
     if !(thr > 0.0) {
         return Ok(Vec::new());
     }
-    let sgn = |x: f64| if x > thr { 1 } else if x < -thr { -1 } else { 0 };
+    let sgn = |x: f64| {
+        if x > thr {
+            1
+        } else if x < -thr {
+            -1
+        } else {
+            0
+        }
+    };
     let mut out = Vec::new();
     let mut i = 0;
     let n = a.len();
@@ -95,7 +118,11 @@ pub fn find_phases(t: &[f64], omega: &[f64], cfg: &PhaseConfig) -> Result<Vec<Ac
             let (ps, pe) = (i + cut, j - cut);
             if pe > ps + 2 {
                 let slope = line_slope(&t[ps..pe], &omega[ps..pe]);
-                out.push(AccelPhase { start: ps, end: pe, accel_rad_s2: slope });
+                out.push(AccelPhase {
+                    start: ps,
+                    end: pe,
+                    accel_rad_s2: slope,
+                });
             }
         }
         i = j;
@@ -144,6 +171,8 @@ mod tests {
     fn constant_speed_has_no_phases() {
         let t: Vec<f64> = (0..3000).map(|k| k as f64 * 1e-3).collect();
         let w = alloc::vec![100.0; 3000];
-        assert!(find_phases(&t, &w, &PhaseConfig::default()).unwrap().is_empty());
+        assert!(find_phases(&t, &w, &PhaseConfig::default())
+            .unwrap()
+            .is_empty());
     }
 }

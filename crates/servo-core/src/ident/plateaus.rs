@@ -54,7 +54,11 @@ pub struct Plateau {
 }
 
 /// Finds the constant-speed plateaus of `omega` sampled at times `t`.
-pub fn find_plateaus(t: &[f64], omega: &[f64], cfg: &PlateauConfig) -> Result<Vec<Plateau>, IdentError> {
+pub fn find_plateaus(
+    t: &[f64],
+    omega: &[f64],
+    cfg: &PlateauConfig,
+) -> Result<Vec<Plateau>, IdentError> {
     let n = omega.len();
     if t.len() != n {
         return Err(IdentError::Internal("time and speed lengths differ"));
@@ -66,7 +70,9 @@ pub fn find_plateaus(t: &[f64], omega: &[f64], cfg: &PlateauConfig) -> Result<Ve
         && (0.0..0.5).contains(&cfg.trim_start_frac)
         && (0.0..0.5).contains(&cfg.trim_end_frac))
     {
-        return Err(IdentError::BadConfig(alloc::format!("plateau settings out of range: {cfg:?}")));
+        return Err(IdentError::BadConfig(alloc::format!(
+            "plateau settings out of range: {cfg:?}"
+        )));
     }
     if n < 3 {
         return Ok(Vec::new());
@@ -99,7 +105,11 @@ pub fn find_plateaus(t: &[f64], omega: &[f64], cfg: &PlateauConfig) -> Result<Ve
             let e = j - (cfg.trim_end_frac * len as f64) as usize;
             if e > s + 1 {
                 let omega_mean = super::mean(&omega[s..e]);
-                out.push(Plateau { start: s, end: e, omega_mean });
+                out.push(Plateau {
+                    start: s,
+                    end: e,
+                    omega_mean,
+                });
             }
         }
         i = j.max(i + 1);
@@ -142,6 +152,8 @@ mod tests {
     fn a_ramp_has_no_plateaus() {
         let t: Vec<f64> = (0..2000).map(|k| k as f64 * 1e-3).collect();
         let w: Vec<f64> = t.iter().map(|t| 600.0 * t).collect();
-        assert!(find_plateaus(&t, &w, &PlateauConfig::default()).unwrap().is_empty());
+        assert!(find_plateaus(&t, &w, &PlateauConfig::default())
+            .unwrap()
+            .is_empty());
     }
 }
