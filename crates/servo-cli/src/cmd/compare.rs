@@ -10,8 +10,9 @@ use servo_core::compare::quantum::encoder_quantum;
 use servo_core::compare::regimes::{detect_u_limit, Regime};
 use servo_core::compare::report::{describe_window, regime_phrase, with_unit};
 use servo_core::compare::{
-    compare, replay, ClosedLoop, CompareOptions, CompareReport, Controller, Figures, Measured, ReplayMode, SignalKind,
+    compare, replay, ClosedLoop, CompareOptions, CompareReport, Figures, Measured, ReplayMode, SignalKind,
 };
+use servo_core::control::pid::{AntiWindup, Pid, PidConfig, PidGains};
 use servo_core::fit::{fit_model, EffectToFit, FitOptions};
 use servo_core::record::Record;
 use servo_core::Plant;
@@ -86,46 +87,18 @@ pub struct ModeChoice {
     pub reason: String,
 }
 
-/// The PID of a gains file, as it runs on the board each sample: parallel form, integral by
-/// forward Euler, derivative on the error through the real derivative s/(T_L s + 1) discretised
-/// by backward Euler (ideal backward difference when T_L = 0), optional back-calculation
-/// anti-windup against the output limit.
-#[derive(Debug, Clone)]
-pub struct ReplayPid {
-    pid: PidSection,
-    dt_s: f64,
-    limit_v: Option<f64>,
-    integral: f64,
-    deriv: f64,
-    e_prev: Option<f64>,
-}
-
-impl ReplayPid {
-    pub fn new(pid: PidSection, dt_s: f64, limit_v: Option<f64>) -> ReplayPid {
-        ReplayPid { pid, dt_s, limit_v, integral: 0.0, deriv: 0.0, e_prev: None }
+/// servo's discrete PID ([`servo_core::control::Pid`], backward Euler, derivative on the error)
+/// configured from a gains file for a replay at sample period `dt_s` [s], with the board's output
+/// limit and the file's back-calculation anti-windup, if any.
+pub fn replay_pid(pid: &PidSection, dt_s: f64, limit_v: Option<f64>) -> anyhow::Result<Pid> {
+    let mut cfg = PidConfig::new(PidGains { kp: pid.kp, ki: pid.ki, kd: pid.kd, tl_s: pid.tl_s }, dt_s);
+    if let Some(l) = limit_v {
+        cfg = cfg.with_symmetric_limit(l);
     }
-}
-
-impl Controller for ReplayPid {
-    fn update(&mut self, reference_rad: f64, measured_rad: f64) -> f64 {
-        let p = &self.pid;
-        let e = reference_rad - measured_rad;
-        let de = match self.e_prev {
-            Some(ep) => e - ep,
-            None => 0.0,
-        };
-        self.e_prev = Some(e);
-        // D(z) = kd (1 - z^-1) / (T_L + dt - T_L z^-1): backward Euler of kd s / (T_L s + 1).
-        self.deriv = (p.tl_s * self.deriv + p.kd * de) / (p.tl_s + self.dt_s);
-        let v = p.kp * e + self.integral + self.deriv;
-        let sat = match self.limit_v {
-            Some(l) => v.clamp(-l, l),
-            None => v,
-        };
-        let aw = p.kw.map_or(0.0, |kw| kw * (sat - v));
-        self.integral += (p.ki * e + aw) * self.dt_s;
-        v
+    if let Some(kw) = pid.kw {
+        cfg.anti_windup = AntiWindup::BackCalculation { kw };
     }
+    Pid::new(cfg).map_err(|e| anyhow!("gains: {e}"))
 }
 
 fn parse_mode(s: &str, k: usize, seg: usize) -> ReplayMode {
@@ -191,7 +164,7 @@ impl Compare {
             let rp = if mc.mode == ReplayMode::ClosedLoop {
                 let g = gains.ok_or_else(|| anyhow!("closed-loop replay without gains"))?;
                 let limit = self.u_limit_v.or(g.pid.u_limit_v).or_else(|| detect_u_limit(&m.u_v));
-                let mut pid = ReplayPid::new(g.pid, m.dt_s, limit);
+                let mut pid = replay_pid(&g.pid, m.dt_s, limit)?;
                 let q = m.theta_l_rad.as_deref().and_then(encoder_quantum);
                 replay(
                     plant,
@@ -690,12 +663,15 @@ mod tests {
 
     #[test]
     fn replay_pid_matches_hand_values() {
+        use servo_core::compare::Controller;
         let pid = PidSection { kp: 2.0, ki: 10.0, kd: 0.1, tl_s: 0.0, ts_s: 1e-3, kw: None, u_limit_v: None };
-        let mut c = ReplayPid::new(pid, 1e-3, None);
-        // e = 1: u = 2 + 0 + 0 (no previous error), then integral = 0.01
-        assert!((c.update(1.0, 0.0) - 2.0).abs() < 1e-12);
-        // e = 0.5: u = 1 + 0.01 + 0.1 * (-0.5) / 1e-3 = 1.01 - 50
-        assert!((c.update(0.5, 0.0) - (1.01 - 50.0)).abs() < 1e-9);
+        let mut c = replay_pid(&pid, 1e-3, Some(100.0)).unwrap();
+        // Backward Euler: I_0 = 10 * 1e-3 * 1 = 0.01; no derivative kick at the first sample.
+        assert!((Controller::update(&mut c, 1.0, 0.0) - 2.01).abs() < 1e-12);
+        // e = 0.5: P = 1, I = 0.015, D = 0.1 * (-0.5) / 1e-3 = -50
+        assert!((Controller::update(&mut c, 0.5, 0.0) - (1.015 - 50.0)).abs() < 1e-9);
+        // The limit holds.
+        assert_eq!(Controller::update(&mut c, 1e3, 0.0), 100.0);
     }
 
     #[test]
