@@ -26,7 +26,7 @@ fn plant(tau_sf: Option<f64>) -> Plant {
 /// A closed-loop run of `truth` with the PID, steps of several sizes, a 4096-count encoder and a
 /// +/-10 V output limit, written as servo CSV (time_s,u_V,theta_l_rad,ref_rad).
 fn simulate_steps(truth: &Plant, path: &Path) {
-    let steps_deg = [0.0, 30.0, 0.0, 90.0, -45.0, 0.0, 180.0, 20.0, -10.0, 0.0];
+    let steps_deg: [f64; 10] = [0.0, 30.0, 0.0, 90.0, -45.0, 0.0, 180.0, 20.0, -10.0, 0.0];
     let q = std::f64::consts::TAU / 4096.0;
     let mut sim = PlantSim::new(truth, DT).unwrap();
     let mut pid = Pid::new(PidConfig::new(PidGains { kp: KP, ki: KI, kd: KD, tl_s: TL }, DT).with_symmetric_limit(10.0)).unwrap();
