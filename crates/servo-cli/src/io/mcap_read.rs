@@ -125,20 +125,48 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
     Ok(run)
 }
 
-/// The [`Record`] of a sequence of loop messages (`ref` only when present).
+/// The [`Record`] of a sequence of loop messages (a signal only when some sample has it).
 pub fn record_of(msgs: &[LoopMsg], source: &str) -> Record {
-    let col = |f: fn(&LoopMsg) -> f64| msgs.iter().map(f).collect::<Vec<f64>>();
-    let has_ref = msgs.iter().any(|m| m.ref_rad.is_finite());
+    let col = |f: fn(&LoopMsg) -> f64| {
+        let v: Vec<f64> = msgs.iter().map(f).collect();
+        v.iter().any(|x| x.is_finite()).then_some(v)
+    };
     Record {
         source: source.to_string(),
-        time_s: col(|m| m.time_s),
-        u_v: Some(col(|m| m.u_v)),
-        theta_l_rad: Some(col(|m| m.theta_l_rad)),
-        omega_l_rad_s: Some(col(|m| m.omega_l_rad_s)),
-        i_a_a: Some(col(|m| m.i_a_a)),
-        ref_rad: has_ref.then(|| col(|m| m.ref_rad)),
+        time_s: msgs.iter().map(|m| m.time_s).collect(),
+        u_v: col(|m| m.u_v),
+        theta_l_rad: col(|m| m.theta_l_rad),
+        omega_l_rad_s: col(|m| m.omega_l_rad_s),
+        i_a_a: col(|m| m.i_a_a),
+        ref_rad: col(|m| m.ref_rad),
         ..Record::default()
     }
+}
+
+/// Loop messages for a [`Record`] (e.g. a CSV converted to MCAP): signals the record lacks are
+/// null; controller terms are null (unknown).
+pub fn loop_msgs_of(rec: &Record) -> Vec<LoopMsg> {
+    let get = |v: &Option<Vec<f64>>, k: usize| v.as_ref().map_or(f64::NAN, |v| v[k]);
+    (0..rec.len())
+        .map(|k| {
+            let r = get(&rec.ref_rad, k);
+            let y = get(&rec.theta_l_rad, k);
+            LoopMsg {
+                time_s: rec.time_s[k],
+                ref_rad: r,
+                theta_l_rad: y,
+                omega_l_rad_s: get(&rec.omega_l_rad_s, k),
+                err_rad: r - y,
+                u_v: get(&rec.u_v, k),
+                ff_v: f64::NAN,
+                p_v: f64::NAN,
+                i_v: f64::NAN,
+                d_v: f64::NAN,
+                i_a_a: get(&rec.i_a_a, k),
+                saturated: false,
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]
