@@ -104,7 +104,7 @@ pub struct Run {
     pub derivative_on: DerivativeOnArg,
 
     /// Discretisation of the integral and derivative.
-    #[arg(long, value_enum, default_value = "backward-euler")]
+    #[arg(long, value_enum, default_value = "auto")]
     pub discretization: DiscretizationArg,
 
     /// Bandwidth of the speed estimate [Hz] (tracking-loop estimator on the encoder angle).
@@ -200,7 +200,7 @@ impl Run {
         };
         let pid = gains
             .as_ref()
-            .map(|g| pid_config(&g.pid, &opts, ts_s, u_limit_v))
+            .map(|g| pid_config(g, &opts, ts_s, u_limit_v))
             .transpose()?;
         let model = match &self.model {
             Some(p) => Some(ModelFile::load(p).context("--model")?),

@@ -14,6 +14,8 @@ use std::path::{Path, PathBuf};
 pub const RUN_METADATA: &str = "servo.run";
 /// Name of the metadata record written at the end of a run with its summary figures.
 pub const SUMMARY_METADATA: &str = "servo.summary";
+/// Metadata key of the Unix time [ns] of run time 0 (`log_time = start + time_s`).
+pub const START_TIME_KEY: &str = "start_time_unix_ns";
 /// Profile string in the MCAP header.
 pub const PROFILE: &str = "";
 
@@ -107,11 +109,10 @@ impl McapLog {
         let loop_channel = writer
             .add_channel(schema, LOOP_TOPIC, "json", &BTreeMap::new())
             .map_err(mcap_err(path, "adding the channel"))?;
+        let mut metadata = metadata.clone();
+        metadata.insert(START_TIME_KEY.to_string(), opts.start_unix_ns.to_string());
         writer
-            .write_metadata(&mcap::records::Metadata {
-                name: RUN_METADATA.to_string(),
-                metadata: metadata.clone(),
-            })
+            .write_metadata(&mcap::records::Metadata { name: RUN_METADATA.to_string(), metadata })
             .map_err(mcap_err(path, "writing the metadata"))?;
         writer.flush().map_err(mcap_err(path, "flushing"))?;
         Ok(McapLog {

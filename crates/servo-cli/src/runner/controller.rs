@@ -1,7 +1,7 @@
 //! The controller of a run from the gains file and the command-line options: PID options and
 //! the feedforward selection (`--ff inertia,friction`).
 
-use crate::gains_file::PidSection;
+use crate::gains_file::GainsFile;
 use anyhow::{anyhow, bail};
 use servo_core::control::{
     AntiWindup, DerivativeOn, Discretization, FeedforwardConfig, PidConfig, PidGains,
@@ -29,6 +29,9 @@ pub enum DerivativeOnArg {
 /// Discretisation on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum DiscretizationArg {
+    /// As the gains were designed (`[design] discretization` of the gains file), else
+    /// backward Euler.
+    Auto,
     BackwardEuler,
     Tustin,
 }
@@ -49,19 +52,20 @@ impl Default for PidOptions {
             anti_windup: AntiWindupArg::Auto,
             kw: None,
             derivative_on: DerivativeOnArg::Error,
-            discretization: DiscretizationArg::BackwardEuler,
+            discretization: DiscretizationArg::Auto,
         }
     }
 }
 
-/// The PID configuration of a gains file's `[pid]` section with `opts`, at period `ts_s` [s],
-/// limited to +-`u_limit_v` [V].
+/// The PID configuration of a gains file with `opts`, at period `ts_s` [s], limited to
+/// +-`u_limit_v` [V].
 pub fn pid_config(
-    p: &PidSection,
+    g: &GainsFile,
     opts: &PidOptions,
     ts_s: f64,
     u_limit_v: f64,
 ) -> anyhow::Result<PidConfig> {
+    let p = &g.pid;
     let kw = opts.kw.or(p.kw);
     let anti_windup = match opts.anti_windup {
         AntiWindupArg::Auto => kw.map_or(AntiWindup::None, |kw| AntiWindup::BackCalculation { kw }),
@@ -89,6 +93,11 @@ pub fn pid_config(
         DerivativeOnArg::Measurement => DerivativeOn::Measurement,
     };
     c.discretization = match opts.discretization {
+        DiscretizationArg::Auto => match g.design.as_ref().and_then(|d| d.get("discretization")).and_then(|v| v.as_str()) {
+            Some("tustin") => Discretization::Tustin,
+            Some("backward-euler") | Some("backward_euler") | None => Discretization::BackwardEuler,
+            Some(other) => bail!("gains file: [design] discretization = `{other}`; expected `tustin` or `backward-euler`"),
+        },
         DiscretizationArg::BackwardEuler => Discretization::BackwardEuler,
         DiscretizationArg::Tustin => Discretization::Tustin,
     };
@@ -148,6 +157,7 @@ mod tests {
 
     #[test]
     fn pid_options_and_ff() {
+        use crate::gains_file::PidSection;
         let p = PidSection {
             kp: 7.0,
             ki: 86.0,
@@ -157,12 +167,14 @@ mod tests {
             kw: Some(30.0),
             u_limit_v: None,
         };
-        let c = pid_config(&p, &PidOptions::default(), 1e-3, 10.0).unwrap();
+        let g = |p: PidSection| GainsFile { pid: p, design: None };
+        let c = pid_config(&g(p), &PidOptions::default(), 1e-3, 10.0).unwrap();
+        assert_eq!(c.discretization, Discretization::BackwardEuler);
         assert_eq!(c.anti_windup, AntiWindup::BackCalculation { kw: 30.0 });
         assert_eq!((c.u_min_v, c.u_max_v), (-10.0, 10.0));
         let p2 = PidSection { kw: None, ..p };
         assert_eq!(
-            pid_config(&p2, &PidOptions::default(), 1e-3, 10.0)
+            pid_config(&g(p2), &PidOptions::default(), 1e-3, 10.0)
                 .unwrap()
                 .anti_windup,
             AntiWindup::None
@@ -171,7 +183,11 @@ mod tests {
             anti_windup: AntiWindupArg::BackCalc,
             ..PidOptions::default()
         };
-        assert!(format!("{:#}", pid_config(&p2, &o, 1e-3, 10.0).unwrap_err()).contains("--kw"));
+        assert!(format!("{:#}", pid_config(&g(p2), &o, 1e-3, 10.0).unwrap_err()).contains("--kw"));
+        let mut d = toml::Table::new();
+        d.insert("discretization".into(), "tustin".into());
+        let gt = GainsFile { pid: p, design: Some(d) };
+        assert_eq!(pid_config(&gt, &PidOptions::default(), 1e-3, 10.0).unwrap().discretization, Discretization::Tustin);
         let ff = parse_ff("inertia,friction").unwrap();
         assert!(ff.inertia && ff.viscous && ff.coulomb && ff.back_emf);
         assert_eq!(ff_name(&parse_ff("friction").unwrap()), "viscous,coulomb");
