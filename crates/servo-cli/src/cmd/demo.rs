@@ -64,7 +64,8 @@ pub fn stages() -> Vec<Stage> {
     vec![
         Stage {
             name: "design",
-            what: "Bode PID for w_gc = 30 rad/s, phase margin 60 deg on the nominal model (Table 2)",
+            what:
+                "Bode PID for w_gc = 30 rad/s, phase margin 60 deg on the nominal model (Table 2)",
             run: stage_design,
         },
         Stage {
@@ -91,7 +92,8 @@ pub fn demo_program() -> anyhow::Result<Program> {
     let mut placed: Vec<PlacedSegment> = Vec::new();
     for deg in [10.0f64, 30.0, 90.0, -45.0] {
         let seg = Segment::position(Reference::step(deg.to_radians(), 0.0), 1.5);
-        placed.push(PlacedSegment::after(&placed, seg).map_err(|e| anyhow!("demo reference: {e}"))?);
+        placed
+            .push(PlacedSegment::after(&placed, seg).map_err(|e| anyhow!("demo reference: {e}"))?);
     }
     Ok(Program::Segments(placed))
 }
@@ -104,7 +106,10 @@ fn stage_design(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)>
     let params = PlantParams::TABLE2;
     let req = DesignRequest {
         kind: ControllerKind::Pid,
-        spec: LoopSpec { omega_gc: 30.0, phase_margin: 60f64.to_radians() },
+        spec: LoopSpec {
+            omega_gc: 30.0,
+            phase_margin: 60f64.to_radians(),
+        },
         alpha: 4.0,
         filter: DerivativeFilter::Factor(5.0),
         ts_s: 1e-3,
@@ -117,13 +122,24 @@ fn stage_design(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)>
     let r = design(&req).map_err(|e| anyhow!("design: {e}"))?;
     let g = r.gains;
     let mut d = toml::Table::new();
-    d.insert("method".into(), "Bode (handout eqs. 44-53), servo demo".into());
+    d.insert(
+        "method".into(),
+        "Bode (handout eqs. 44-53), servo demo".into(),
+    );
     d.insert("wgc_rad_s".into(), 30.0.into());
     d.insert("pm_deg".into(), 60.0.into());
     d.insert("alpha".into(), 4.0.into());
     d.insert("discretization".into(), "tustin".into());
     let gains = GainsFile {
-        pid: PidSection { kp: g.kp, ki: g.ki, kd: g.kd, tl_s: g.tl_s, ts_s: 1e-3, kw: None, u_limit_v: None },
+        pid: PidSection {
+            kp: g.kp,
+            ki: g.ki,
+            kd: g.kd,
+            tl_s: g.tl_s,
+            ts_s: 1e-3,
+            kw: None,
+            u_limit_v: None,
+        },
         design: Some(d),
     };
     let path = ctx.out.join("gains.toml");
@@ -142,7 +158,15 @@ fn stage_design(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)>
 /// The handout's reference-point gains, used when the design stage is skipped or fails.
 pub fn handout_gains() -> GainsFile {
     GainsFile {
-        pid: PidSection { kp: 7.0476, ki: 86.121, kd: 0.14418, tl_s: 1.0 / 150.0, ts_s: 1e-3, kw: None, u_limit_v: None },
+        pid: PidSection {
+            kp: 7.0476,
+            ki: 86.121,
+            kd: 0.14418,
+            tl_s: 1.0 / 150.0,
+            ts_s: 1e-3,
+            kw: None,
+            u_limit_v: None,
+        },
         design: None,
     }
 }
@@ -158,16 +182,27 @@ fn stage_run(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
     mf.sensors = Some(ctx.sensors);
     mf.save(&truth_path)?;
     let mut meta = BTreeMap::new();
-    meta.insert(meta_keys::SERVO_VERSION.into(), env!("CARGO_PKG_VERSION").into());
+    meta.insert(
+        meta_keys::SERVO_VERSION.into(),
+        env!("CARGO_PKG_VERSION").into(),
+    );
     meta.insert(meta_keys::BACKEND.into(), "sim".into());
     meta.insert(meta_keys::SAMPLE_PERIOD_S.into(), "0.001".into());
     meta.insert(meta_keys::DURATION_S.into(), duration_s.to_string());
-    meta.insert(meta_keys::REFERENCE.into(), "steps 10, 30, 90, -45 deg, 1.5 s each".into());
+    meta.insert(
+        meta_keys::REFERENCE.into(),
+        "steps 10, 30, 90, -45 deg, 1.5 s each".into(),
+    );
     meta.insert(meta_keys::GAINS_TOML.into(), gains.to_toml_commented());
     meta.insert(meta_keys::PLANT_TOML.into(), mf.to_toml()?);
     meta.insert(
         meta_keys::PLANT_EFFECTS.into(),
-        ctx.truth.effects.iter().map(|e| e.to_string()).collect::<Vec<_>>().join(" "),
+        ctx.truth
+            .effects
+            .iter()
+            .map(|e| e.to_string())
+            .collect::<Vec<_>>()
+            .join(" "),
     );
     meta.insert(meta_keys::SEED.into(), ctx.sensors.seed.to_string());
     meta.insert(meta_keys::FEEDFORWARD.into(), "none".into());
@@ -194,13 +229,20 @@ fn stage_run(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
     ctx.run = Some(out);
     ctx.run_log = Some(log_path.clone());
     ctx.run_csv = Some(csv_path.clone());
-    Ok((headline, vec![truth_path, log_path, csv_path, plot_path, u_plot]))
+    Ok((
+        headline,
+        vec![truth_path, log_path, csv_path, plot_path, u_plot],
+    ))
 }
 
 impl Demo {
     pub fn run(self) -> anyhow::Result<()> {
-        std::fs::create_dir_all(&self.out).with_context(|| format!("creating --out folder {}", self.out.display()))?;
-        let sensors = SensorConfig { seed: self.seed, ..SensorConfig::default() };
+        std::fs::create_dir_all(&self.out)
+            .with_context(|| format!("creating --out folder {}", self.out.display()))?;
+        let sensors = SensorConfig {
+            seed: self.seed,
+            ..SensorConfig::default()
+        };
         let mut ctx = DemoContext {
             out: self.out.clone(),
             truth: demo_truth()?,
@@ -215,7 +257,8 @@ impl Demo {
         let mut files = Vec::new();
         for (i, st) in all.iter().enumerate() {
             println!("== [{}/{}] {}: {}", i + 1, all.len(), st.name, st.what);
-            let (headline, written) = (st.run)(&mut ctx).with_context(|| format!("demo stage `{}`", st.name))?;
+            let (headline, written) =
+                (st.run)(&mut ctx).with_context(|| format!("demo stage `{}`", st.name))?;
             println!("   -> {headline}");
             for f in &written {
                 println!("      wrote {}", f.display());
@@ -233,5 +276,8 @@ impl Demo {
 }
 
 fn display_dir(p: &Path) -> String {
-    std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf()).display().to_string()
+    std::fs::canonicalize(p)
+        .unwrap_or_else(|_| p.to_path_buf())
+        .display()
+        .to_string()
 }

@@ -37,7 +37,10 @@ impl Export {
             }),
         };
         if output == self.input {
-            bail!("the output {} is the input; give another name with -o", output.display());
+            bail!(
+                "the output {} is the input; give another name with -o",
+                output.display()
+            );
         }
         let out_fmt = LogFormat::of(&output)?;
         let (rec, meta) = read_log_with_meta(&self.input, self.columns.as_deref())?;
@@ -48,12 +51,17 @@ impl Export {
             LogFormat::Csv => write_csv(&output, &rec)?,
             LogFormat::Mcap => {
                 let mut entries = meta.entries.clone();
-                entries.entry(meta_keys::SERVO_VERSION.into()).or_insert_with(|| env!("CARGO_PKG_VERSION").into());
+                entries
+                    .entry(meta_keys::SERVO_VERSION.into())
+                    .or_insert_with(|| env!("CARGO_PKG_VERSION").into());
                 entries.insert("converted_from".into(), self.input.display().to_string());
                 if let Some(c) = &meta.columns {
                     entries.insert("columns".into(), c.clone());
                 }
-                let opts = McapLogOptions { start_unix_ns: 0, ..McapLogOptions::default() };
+                let opts = McapLogOptions {
+                    start_unix_ns: 0,
+                    ..McapLogOptions::default()
+                };
                 let mut log = McapLog::create(&output, &entries, opts)?;
                 for m in loop_msgs_of(&rec) {
                     log.write_loop(&m)?;

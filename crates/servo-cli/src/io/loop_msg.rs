@@ -52,7 +52,7 @@ pub struct LoopMsg {
 /// JSON schema of [`LoopMsg`] (draft 2020-12, as Foxglove reads it).
 pub fn loop_schema() -> String {
     let num = |d: &str| serde_json::json!({ "type": ["number", "null"], "description": d });
-    
+
     serde_json::json!({
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": LOOP_SCHEMA_NAME,

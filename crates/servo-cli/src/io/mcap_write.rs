@@ -112,7 +112,10 @@ impl McapLog {
         let mut metadata = metadata.clone();
         metadata.insert(START_TIME_KEY.to_string(), opts.start_unix_ns.to_string());
         writer
-            .write_metadata(&mcap::records::Metadata { name: RUN_METADATA.to_string(), metadata })
+            .write_metadata(&mcap::records::Metadata {
+                name: RUN_METADATA.to_string(),
+                metadata,
+            })
             .map_err(mcap_err(path, "writing the metadata"))?;
         writer.flush().map_err(mcap_err(path, "flushing"))?;
         Ok(McapLog {

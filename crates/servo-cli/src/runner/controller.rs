@@ -167,7 +167,10 @@ mod tests {
             kw: Some(30.0),
             u_limit_v: None,
         };
-        let g = |p: PidSection| GainsFile { pid: p, design: None };
+        let g = |p: PidSection| GainsFile {
+            pid: p,
+            design: None,
+        };
         let c = pid_config(&g(p), &PidOptions::default(), 1e-3, 10.0).unwrap();
         assert_eq!(c.discretization, Discretization::BackwardEuler);
         assert_eq!(c.anti_windup, AntiWindup::BackCalculation { kw: 30.0 });
@@ -186,8 +189,16 @@ mod tests {
         assert!(format!("{:#}", pid_config(&g(p2), &o, 1e-3, 10.0).unwrap_err()).contains("--kw"));
         let mut d = toml::Table::new();
         d.insert("discretization".into(), "tustin".into());
-        let gt = GainsFile { pid: p, design: Some(d) };
-        assert_eq!(pid_config(&gt, &PidOptions::default(), 1e-3, 10.0).unwrap().discretization, Discretization::Tustin);
+        let gt = GainsFile {
+            pid: p,
+            design: Some(d),
+        };
+        assert_eq!(
+            pid_config(&gt, &PidOptions::default(), 1e-3, 10.0)
+                .unwrap()
+                .discretization,
+            Discretization::Tustin
+        );
         let ff = parse_ff("inertia,friction").unwrap();
         assert!(ff.inertia && ff.viscous && ff.coulomb && ff.back_emf);
         assert_eq!(ff_name(&parse_ff("friction").unwrap()), "viscous,coulomb");
