@@ -5,12 +5,14 @@
 //! servo run --gains gains.toml --ref step:1.5 --duration 5 --log run.mcap
 //! servo run --gains gains.toml --ref step:90deg --plant-effect backlash:gap=0.04 --csv run.csv
 //! servo run --voltage step:3 --duration 2 --log open_loop.mcap        (open loop, no gains)
+//! servo run --experiment experiments/steps.toml --gains gains.toml --log steps.mcap
 //! ```
 
 use crate::gains_file::GainsFile;
 use crate::io::{meta_keys, write_csv, McapLog, McapLogOptions};
 use crate::model_file::ModelFile;
 use crate::plant_args::PlantArgs;
+use crate::reference_file::load_experiment;
 use crate::runner::controller::{
     ff_name, parse_ff, pid_config, AntiWindupArg, DerivativeOnArg, DiscretizationArg, PidOptions,
 };
@@ -46,15 +48,20 @@ pub struct Run {
 
     /// Position reference at the load, e.g. `step:1.5`, `step:90deg@0.5`, `sine:amp=0.5,freq=1`,
     /// `trap:distance=3,vmax=10,amax=100`, `square:amp=1,period=2`, `prbs:amp=0.5,bit=0.05`.
-    #[arg(long = "ref", value_name = "REF", conflicts_with = "voltage")]
+    #[arg(long = "ref", value_name = "REF", conflicts_with_all = ["voltage", "experiment"])]
     pub reference: Option<String>,
+
+    /// Experiment file (TOML, see `experiments/`): a sequence of closed-loop reference and
+    /// open-loop voltage segments. The run lasts the experiment's duration unless --duration.
+    #[arg(long, value_name = "FILE", conflicts_with = "voltage")]
+    pub experiment: Option<PathBuf>,
 
     /// Open loop: driver input u [V] from a generator read in volts, e.g. `step:3`,
     /// `sine:amp=2,freq=1`, `prbs:amp=3,bit=0.02`.
     #[arg(long, value_name = "REF")]
     pub voltage: Option<String>,
 
-    /// Run length [s] (default 5 s).
+    /// Run length [s] (default: the experiment's duration, else 5 s).
     #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,
 
@@ -129,19 +136,28 @@ impl Run {
         Ok(())
     }
 
-    fn program(&self, duration_s: f64) -> anyhow::Result<Program> {
-        match (&self.reference, &self.voltage) {
-            (Some(r), None) => {
-                Ok(Program::Position(Reference::parse(r).map_err(|e| anyhow!("--ref `{r}`: {e}"))?))
-            }
-            (None, Some(v)) => {
+    /// The program and the text describing it (for the log's metadata).
+    fn program(&self, duration_s: Option<f64>) -> anyhow::Result<(Program, String)> {
+        let d = duration_s.unwrap_or(5.0);
+        match (&self.reference, &self.voltage, &self.experiment) {
+            (Some(r), None, None) => Ok((
+                Program::Position(Reference::parse(r).map_err(|e| anyhow!("--ref `{r}`: {e}"))?),
+                r.clone(),
+            )),
+            (None, Some(v), None) => {
                 let r = Reference::parse(v).map_err(|e| anyhow!("--voltage `{v}`: {e}"))?;
-                Program::open_loop(r, duration_s)
+                Ok((Program::open_loop(r, d)?, format!("voltage {v}")))
             }
-            (None, None) => bail!(
-                "give a position reference (--ref step:1.5) or an open-loop voltage (--voltage step:3)"
+            (None, None, Some(path)) => {
+                let exp = load_experiment(path)?;
+                let text = std::fs::read_to_string(path).unwrap_or_default();
+                Ok((Program::Segments(exp.segments), text))
+            }
+            (None, None, None) => bail!(
+                "give a position reference (--ref step:1.5), an open-loop voltage (--voltage step:3) \
+                 or an experiment file (--experiment experiments/steps.toml)"
             ),
-            (Some(_), Some(_)) => bail!("--ref and --voltage exclude each other"),
+            _ => bail!("--ref, --voltage and --experiment exclude each other"),
         }
     }
 
@@ -166,11 +182,13 @@ impl Run {
                 );
             }
         }
-        let duration_s = self.duration.unwrap_or(5.0);
-        if !(duration_s.is_finite() && duration_s > 0.0) {
-            bail!("--duration must be > 0 s, got {duration_s}");
+        if let Some(d) = self.duration {
+            if !(d.is_finite() && d > 0.0) {
+                bail!("--duration must be > 0 s, got {d}");
+            }
         }
-        let program = self.program(duration_s)?;
+        let (program, program_text) = self.program(self.duration)?;
+        let duration_s = self.duration.or(program.duration_s()).unwrap_or(5.0);
         let gains = match &self.gains {
             Some(p) => Some(GainsFile::load(p)?),
             None if program.needs_controller() => {
@@ -266,14 +284,7 @@ impl Run {
             meta_keys::U_LIMIT_V.into(),
             u_limit_v.min(info.voltage_limit_v).to_string(),
         );
-        meta.insert(
-            meta_keys::REFERENCE.into(),
-            match (&self.reference, &self.voltage) {
-                (Some(r), _) => r.clone(),
-                (_, Some(v)) => format!("voltage {v}"),
-                _ => String::new(),
-            },
-        );
+        meta.insert(meta_keys::REFERENCE.into(), program_text);
         if let Some(g) = &gains {
             meta.insert(meta_keys::GAINS_TOML.into(), g.to_toml_commented());
         }
