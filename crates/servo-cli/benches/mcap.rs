@@ -28,7 +28,10 @@ fn msg(k: usize) -> LoopMsg {
 }
 
 fn write(path: &std::path::Path, compress: bool) {
-    let opts = McapLogOptions { compress, ..McapLogOptions::default() };
+    let opts = McapLogOptions {
+        compress,
+        ..McapLogOptions::default()
+    };
     let mut log = McapLog::create(path, &BTreeMap::new(), opts).unwrap();
     for k in 0..N {
         log.write_loop(&msg(k)).unwrap();
@@ -42,10 +45,16 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("mcap");
     g.throughput(Throughput::Elements(N as u64));
     g.sample_size(10);
-    g.bench_function("write_loop_zstd_20k_msgs", |b| b.iter(|| write(&path, true)));
-    g.bench_function("write_loop_uncompressed_20k_msgs", |b| b.iter(|| write(&path, false)));
+    g.bench_function("write_loop_zstd_20k_msgs", |b| {
+        b.iter(|| write(&path, true))
+    });
+    g.bench_function("write_loop_uncompressed_20k_msgs", |b| {
+        b.iter(|| write(&path, false))
+    });
     write(&path, true);
-    g.bench_function("read_back_20k_msgs", |b| b.iter(|| read_mcap(&path).unwrap().loop_msgs.len()));
+    g.bench_function("read_back_20k_msgs", |b| {
+        b.iter(|| read_mcap(&path).unwrap().loop_msgs.len())
+    });
     g.finish();
 }
 

@@ -316,3 +316,151 @@ fn push(v: &mut Option<Vec<f64>>, x: f64) {
         v.push(x);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use servo_hw::{BoardInfo, HwError, Sample};
+
+    /// A board whose angle is the integral of u (theta' = u), recording what it was told.
+    struct Integrator {
+        theta: f64,
+        k: u64,
+        applied: Vec<f64>,
+        stopped: u32,
+        fail_at: Option<u64>,
+    }
+
+    impl Backend for Integrator {
+        fn info(&self) -> BoardInfo {
+            BoardInfo {
+                firmware: "test",
+                counts_per_rev: 0,
+                voltage_limit_v: 5.0,
+                sample_period_s: 1e-3,
+            }
+        }
+        fn sample(&mut self) -> Result<Sample, HwError> {
+            if Some(self.k) == self.fail_at {
+                return Err(HwError::Timeout { timeout_ms: 10 });
+            }
+            Ok(Sample {
+                time_s: self.k as f64 * 1e-3,
+                theta_l_rad: self.theta,
+                ..Sample::default()
+            })
+        }
+        fn apply(&mut self, u_v: f64) -> Result<(), HwError> {
+            self.applied.push(u_v);
+            self.theta += u_v * 1e-3;
+            self.k += 1;
+            Ok(())
+        }
+        fn stop(&mut self) -> Result<(), HwError> {
+            self.stopped += 1;
+            Ok(())
+        }
+    }
+
+    fn board() -> Integrator {
+        Integrator {
+            theta: 0.0,
+            k: 0,
+            applied: Vec::new(),
+            stopped: 0,
+            fail_at: None,
+        }
+    }
+
+    #[test]
+    fn row_convention_limits_and_p_control() {
+        let mut b = board();
+        let pid = PidConfig::new(
+            servo_core::control::PidGains {
+                kp: 20.0,
+                ki: 0.0,
+                kd: 0.0,
+                tl_s: 0.0,
+            },
+            1e-3,
+        );
+        let cfg = RunConfig {
+            handle_ctrlc: false,
+            ..RunConfig::closed_loop(
+                Program::Position(servo_core::control::Reference::step(1.0, 0.0)),
+                pid,
+                0.5,
+            )
+        };
+        let mut msgs: Vec<LoopMsg> = Vec::new();
+        let out = run_loop(&mut b, &cfg, Some(&mut msgs)).unwrap();
+        assert_eq!(out.record.len(), 500);
+        assert_eq!(msgs.len(), 500);
+        assert_eq!(b.stopped, 1);
+        // Board limit 5 V < RunConfig's 10 V: the tighter one wins.
+        assert_eq!(out.u_limit_v, 5.0);
+        let u = out.record.u_v.as_ref().unwrap();
+        let th = out.record.theta_l_rad.as_ref().unwrap();
+        assert_eq!(u[0], 5.0);
+        assert!(out.saturated[0] && !out.saturated[499]);
+        // Row k: u_k applied after theta_k was measured; theta_{k+1} = theta_k + u_k T_s.
+        for k in 0..499 {
+            assert_eq!(u[k], b.applied[k]);
+            assert!((th[k + 1] - th[k] - u[k] * 1e-3).abs() < 1e-15);
+            assert_eq!(msgs[k].u_v, u[k]);
+            assert_eq!(msgs[k].p_v, 20.0 * (1.0 - th[k]));
+        }
+        // Unsaturated P loop on an integrator: first-order, tau = 1/20 s.
+        assert!((th[499] - 1.0).abs() < 1e-3, "{}", th[499]);
+        // The speed estimate follows the true speed (u) with the tracking loop's lag of about
+        // 2/w_b = 6.4 ms.
+        let w = out.record.omega_l_rad_s.as_ref().unwrap();
+        assert!(
+            (w[300] - u[294]).abs() < 0.03 * u[294],
+            "{} vs {}",
+            w[300],
+            u[294]
+        );
+    }
+
+    #[test]
+    fn open_loop_needs_no_controller_and_error_stops_the_board() {
+        let mut b = board();
+        let p = Program::open_loop(servo_core::control::Reference::step(7.0, 0.0), 0.1).unwrap();
+        let cfg = RunConfig {
+            handle_ctrlc: false,
+            ..RunConfig::open_loop(p.clone(), 0.2)
+        };
+        let out = run_loop(&mut b, &cfg, None).unwrap();
+        let u = out.record.u_v.as_ref().unwrap();
+        assert_eq!(u[10], 5.0); // clipped at the board's 5 V
+        assert!(out.saturated[10]);
+        assert_eq!(u[150], 0.0); // after the program: 0 V
+        assert!(out.record.ref_rad.is_none());
+        // A closed-loop program without a controller is refused before anything moves.
+        let cfg2 = RunConfig {
+            pid: None,
+            ..RunConfig::closed_loop(
+                Program::Position(servo_core::control::Reference::step(1.0, 0.0)),
+                PidConfig::new(Default::default(), 1e-3),
+                1.0,
+            )
+        };
+        let mut b2 = board();
+        assert!(format!("{:#}", run_loop(&mut b2, &cfg2, None).unwrap_err()).contains("--gains"));
+        assert!(b2.applied.is_empty());
+        // A board error mid-run: the board is stopped, the error says where.
+        let mut b3 = Integrator {
+            fail_at: Some(42),
+            ..board()
+        };
+        let mut msgs: Vec<LoopMsg> = Vec::new();
+        let e = format!(
+            "{:#}",
+            run_loop(&mut b3, &cfg, Some(&mut msgs)).unwrap_err()
+        );
+        assert!(e.contains("sample 42") && e.contains("10 ms"), "{e}");
+        assert_eq!(b3.stopped, 1);
+        assert_eq!(msgs.len(), 42);
+    }
+}
