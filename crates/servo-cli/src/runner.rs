@@ -290,7 +290,7 @@ pub fn run_loop(
     })();
     // Always: 0 V, then make the log durable.
     let stopped = backend.stop().context("stopping the board (0 V)");
-    let flushed = sink.as_deref_mut().map_or(Ok(()), |s| s.flush());
+    let flushed = sink.map_or(Ok(()), |s| s.flush());
     result?;
     stopped?;
     flushed?;

@@ -49,6 +49,9 @@ pub struct DemoContext {
     pub run_csv: Option<PathBuf>,
 }
 
+/// A stage's body: returns its headline and the files it wrote.
+pub type StageFn = fn(&mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)>;
+
 /// One step of the story.
 pub struct Stage {
     /// Short name (`design`, `run`, ...).
@@ -56,7 +59,7 @@ pub struct Stage {
     /// What the stage does, one line.
     pub what: &'static str,
     /// Runs the stage; returns its headline and the files it wrote.
-    pub run: fn(&mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)>,
+    pub run: StageFn,
 }
 
 /// The stages, in story order.

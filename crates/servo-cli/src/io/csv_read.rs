@@ -65,7 +65,7 @@ pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Res
             Some(m) => m,
             None => {
                 let (m, ignored) =
-                    ColumnMap::guess(&header_refs).with_context(|| format!("{source}"))?;
+                    ColumnMap::guess(&header_refs).with_context(|| source.to_string())?;
                 let mut note = format!("{source}: guessed the column map --columns {m}");
                 if !ignored.is_empty() {
                     note.push_str(&format!(" (ignored: {})", ignored.join(", ")));

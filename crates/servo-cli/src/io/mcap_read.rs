@@ -188,7 +188,7 @@ mod tests {
             i_v: -0.25,
             d_v: 1e-9 * k as f64,
             i_a_a: 0.01 * k as f64,
-            saturated: k % 7 == 0,
+            saturated: k.is_multiple_of(7),
         }
     }
 

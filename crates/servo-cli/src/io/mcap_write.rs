@@ -166,7 +166,8 @@ impl McapLog {
             .map_err(mcap_err(&path, "writing a message"))?;
         self.sequence = self.sequence.wrapping_add(1);
         self.messages += 1;
-        if !(msg.time_s - self.last_flush_s < self.opts.flush_period_s - 1e-9) {
+        if msg.time_s - self.last_flush_s >= self.opts.flush_period_s - 1e-9 || msg.time_s.is_nan()
+        {
             w.flush().map_err(mcap_err(&path, "flushing"))?;
             self.last_flush_s = msg.time_s;
         }
