@@ -15,7 +15,9 @@
 //! `load_inertia_fraction`, imbalance acts on it), joined through the play `gap` at the load by a
 //! spring-damper contact (`stiffness`, `damping`, load side). Viscous friction B_eq is split
 //! between the bodies in the same ratio as the inertia, so that a rigid contact gives back eq. 20.
-//! Dry friction (Coulomb, Stribeck, asymmetry) acts on the motor-side body.
+//! Dry friction (Coulomb, Stribeck, asymmetry) acts at the load as in eq. 8 (on the load body
+//! with backlash): after a reversal the load stays where friction stopped it while the motor
+//! crosses the gap.
 //!
 //! # Integration
 //!
@@ -28,9 +30,10 @@
 //! the predicted end). A linear plant (no dry friction, cogging, imbalance or backlash) takes a
 //! single exact step per period, so the linear case equals the exact ZOH solution.
 //!
-//! Stick-slip uses a stuck/slipping state machine on the motor-side body: when the speed crosses
-//! zero the shaft sticks (omega_m = 0 exactly, the current keeps evolving); it breaks away when
-//! the net driving torque (motor torque minus cogging, imbalance or contact torque) exceeds the
+//! Stick-slip uses a stuck/slipping state machine on the body that carries the dry friction (the
+//! whole rigid drivetrain, or the load body with backlash): when its speed crosses zero it sticks
+//! (speed = 0 exactly, the current keeps evolving); it breaks away when the net driving torque on
+//! it (motor torque minus cogging and imbalance, or the contact torque with backlash) exceeds the
 //! breakaway torque of [`Friction::breakaway_l`] (tau_s with Stribeck, else the Coulomb level of
 //! that direction). Below breakaway the shaft does not creep and there is no chattering around
 //! zero speed. Events (sticking, breakaway, contact) are resolved at sub-step resolution.
@@ -107,7 +110,8 @@ pub struct PlantState {
     pub omega_l_rad_s: f64,
     /// Load angle theta_l [rad] (theta_m / N without backlash).
     pub theta_l_rad: f64,
-    /// True while dry friction holds the motor-side shaft (omega_m = 0 exactly).
+    /// True while dry friction holds the shaft (omega_l = 0 exactly; with backlash the load body,
+    /// without it the whole drivetrain).
     pub stuck: bool,
 }
 
@@ -403,11 +407,16 @@ impl PlantSim {
             state.omega_l_rad_s,
             state.theta_l_rad,
         ];
-        self.stuck = self.dry && (state.stuck || state.omega_m_rad_s == 0.0);
-        if self.stuck {
-            self.x[2] = 0.0;
+        if self.backlash.is_none() {
+            self.x[4] = self.x[2] / self.n;
+            self.x[5] = self.x[3] / self.n;
         }
-        self.dir = math::sign(self.x[2]);
+        let w = self.fb_w();
+        self.stuck = self.dry && (state.stuck || self.x[w] == 0.0);
+        if self.stuck {
+            self.x[w] = 0.0;
+        }
+        self.dir = math::sign(self.x[w]);
         let t = if state.time_s.is_finite() {
             state.time_s
         } else {
@@ -472,9 +481,9 @@ impl PlantSim {
         let friction = if !self.dry {
             0.0
         } else if self.stuck {
-            self.drive_torque_m(x) * self.n
+            self.drive_torque_l(x)
         } else {
-            self.friction.torque_l(x[2] / self.n, self.dir)
+            self.friction.torque_l(self.fb_speed_l(x), self.dir)
         };
         let viscous = match self.backlash {
             Some(_) => {
@@ -540,22 +549,44 @@ impl PlantSim {
         }
     }
 
-    /// Net torque driving the motor-side body at rest [N m], motor side: motor torque minus
-    /// cogging and the load's reaction (imbalance, or the contact torque with backlash).
-    fn drive_torque_m(&self, x: &[f64; NS]) -> f64 {
-        let mut t = self.k_t * x[1];
-        if let Some((a, h, ph)) = self.cogging {
-            t -= torque::cogging_torque_m(a, h, ph, x[3]);
+    /// Index of the speed of the body that carries the dry friction (omega_m rigid, omega_l with
+    /// backlash); its angle is the next index.
+    #[inline]
+    fn fb_w(&self) -> usize {
+        if self.backlash.is_some() {
+            4
+        } else {
+            2
         }
+    }
+
+    /// Load-side speed of the friction body [rad/s].
+    #[inline]
+    fn fb_speed_l(&self, x: &[f64; NS]) -> f64 {
+        if self.backlash.is_some() {
+            x[4]
+        } else {
+            x[2] / self.n
+        }
+    }
+
+    /// Net torque driving the friction body at rest [N m], load side: without backlash N (k_t
+    /// i_a - cogging) - imbalance; with backlash contact torque - imbalance.
+    fn drive_torque_l(&self, x: &[f64; NS]) -> f64 {
+        let imbalance = match self.imbalance {
+            Some((a, ph)) => torque::imbalance_torque_l(a, ph, self.theta_l(x)),
+            None => 0.0,
+        };
         match self.backlash {
-            Some(_) => t -= self.contact_torque_l(x) / self.n,
+            Some(_) => self.contact_torque_l(x) - imbalance,
             None => {
-                if let Some((a, ph)) = self.imbalance {
-                    t -= torque::imbalance_torque_l(a, ph, x[3] / self.n) / self.n;
+                let mut t = self.k_t * x[1];
+                if let Some((a, h, ph)) = self.cogging {
+                    t -= torque::cogging_torque_m(a, h, ph, x[3]);
                 }
+                t * self.n - imbalance
             }
         }
-        t
     }
 
     /// Nonlinear input torques (tau_m motor side, tau_l load side) at state `x`.
@@ -565,16 +596,22 @@ impl PlantSim {
         if let Some((a, h, ph)) = self.cogging {
             tau_m += torque::cogging_torque_m(a, h, ph, x[3]);
         }
-        if self.dry && !self.stuck {
-            // Friction of the current slip direction; a predicted reversal is held at zero speed
-            // (the reversal itself is an event).
-            let w = if x[2] * self.dir < 0.0 { 0.0 } else { x[2] };
-            tau_m += self.friction.torque_l(w / self.n, self.dir) / self.n;
-        }
-        let tau_l = match self.imbalance {
+        let mut tau_l = match self.imbalance {
             Some((a, ph)) => torque::imbalance_torque_l(a, ph, self.theta_l(x)),
             None => 0.0,
         };
+        if self.dry && !self.stuck {
+            // Friction of the current slip direction; a predicted reversal is held at zero speed
+            // (the reversal itself is an event).
+            let w = self.fb_speed_l(x);
+            let w = if w * self.dir < 0.0 { 0.0 } else { w };
+            let f = self.friction.torque_l(w, self.dir);
+            if self.backlash.is_some() {
+                tau_l += f;
+            } else {
+                tau_m += f / self.n;
+            }
+        }
         (tau_m, tau_l)
     }
 
@@ -584,9 +621,9 @@ impl PlantSim {
         let mut carry = carry;
         // Breakaway.
         if self.stuck {
-            let drive = self.drive_torque_m(&self.x);
+            let drive = self.drive_torque_l(&self.x);
             let dir = math::sign(drive);
-            if dir != 0.0 && dir * drive * self.n > self.friction.breakaway_l(dir) {
+            if dir != 0.0 && dir * drive > self.friction.breakaway_l(dir) {
                 self.stuck = false;
                 self.dir = dir;
                 carry = None;
@@ -635,14 +672,15 @@ impl PlantSim {
         }
         self.x = xp;
         let mut next = Some((tm1, tl1));
+        let w = self.fb_w();
         if mode & STUCK != 0 {
-            self.x[2] = 0.0;
-            self.x[3] = x0[3];
+            self.x[w] = 0.0;
+            self.x[w + 1] = x0[w + 1];
         } else if self.dry {
-            let w0 = x0[2];
-            let w1 = self.x[2];
+            let w0 = x0[w];
+            let w1 = self.x[w];
             if w1 * self.dir <= 0.0 {
-                // The motor-side shaft stops within this sub-step: it sticks at the zero crossing
+                // The friction body stops within this sub-step: it sticks at the zero crossing
                 // (the part of the sub-step after it is taken as stuck); breakaway is checked at
                 // the start of the next sub-step.
                 let h = self.sub_len[li];
@@ -651,8 +689,8 @@ impl PlantSim {
                 } else {
                     0.0
                 };
-                self.x[3] -= 0.5 * w1 * (h - tc);
-                self.x[2] = 0.0;
+                self.x[w + 1] -= 0.5 * w1 * (h - tc);
+                self.x[w] = 0.0;
                 self.stuck = true;
                 next = None;
             } else {
@@ -661,12 +699,13 @@ impl PlantSim {
         }
         if let Some(b) = &self.backlash {
             if mode & CONTACT == 0 {
-                // Entering contact during a free sub-step: put the load on the flank (no
-                // spurious spring energy), keep the speeds; contact starts next sub-step.
+                // Entering contact during a free sub-step: put the motor side back on the flank
+                // (no spurious spring energy; the load, which the encoder sees and friction may
+                // hold, is not moved), keep the speeds; contact starts next sub-step.
                 let delta = self.x[3] / self.n - self.x[5];
                 let p = torque::backlash_penetration_l(b.gap, delta);
                 if p != 0.0 {
-                    self.x[5] += p;
+                    self.x[3] -= p * self.n;
                     next = None;
                 }
             }
@@ -720,8 +759,10 @@ fn discretise(plant: &Plant, frac: f64, backlash: Option<&Backlash>, mode: usize
         }
     }
     if mode & STUCK != 0 {
-        a[2] = [0.0; NS];
-        b[2] = [0.0; NI];
+        // Dry friction holds the friction body: its speed row is zero.
+        let w = if backlash.is_some() { 4 } else { 2 };
+        a[w] = [0.0; NS];
+        b[w] = [0.0; NI];
     }
     // Augmented matrix (Van Loan): exp([[A h, B h, 0], [0, 0, E], [0, 0, 0]]) with E feeding the
     // ramp generators of the torque inputs.
