@@ -193,6 +193,8 @@ pub struct PlantSim {
     disc: [[Disc; 4]; 3],
     /// Lengths [s] of the three sub-step kinds.
     sub_len: [f64; 3],
+    /// Stuck-mode discretisation over a whole period (rigid drivetrain with dry friction only).
+    coarse_stuck: Option<Disc>,
     // State.
     x: [f64; NS],
     stuck: bool,
@@ -202,6 +204,9 @@ pub struct PlantSim {
     history: [f64; DELAY_CAPACITY],
     head: usize,
     state: PlantState,
+    /// Last (angle, torque) of cogging and imbalance, reused while the angle is unchanged.
+    cache_cog: (f64, f64),
+    cache_imb: (f64, f64),
 }
 
 impl PlantSim {
@@ -344,6 +349,8 @@ impl PlantSim {
                 disc[li][mode] = discretise(plant, frac, backlash.as_ref(), mode, len);
             }
         }
+        let coarse_stuck = (dry && backlash.is_none() && substeps > 1)
+            .then(|| discretise(plant, frac, None, STUCK, dt_s));
         let state = PlantState {
             stuck: dry,
             ..PlantState::default()
@@ -365,6 +372,7 @@ impl PlantSim {
             switch_at,
             disc,
             sub_len: lengths,
+            coarse_stuck,
             x: [0.0; NS],
             stuck: dry,
             dir: 0.0,
@@ -373,6 +381,8 @@ impl PlantSim {
             history: [0.0; DELAY_CAPACITY],
             head: 0,
             state,
+            cache_cog: (f64::NAN, 0.0),
+            cache_imb: (f64::NAN, 0.0),
         })
     }
 
@@ -443,7 +453,10 @@ impl PlantSim {
         let new = self.history[(self.head + DELAY_CAPACITY - self.delay_k) % DELAY_CAPACITY];
         let old = self.history[(self.head + DELAY_CAPACITY - self.delay_k - 1) % DELAY_CAPACITY];
         let mut carry = None;
-        match self.switch_at {
+        let switch_at = self.switch_at;
+        let held = switch_at.is_none() && self.stuck && self.stays_stuck_over_period(new);
+        match switch_at {
+            None if held => {}
             None => {
                 for _ in 0..self.substeps {
                     carry = self.substep(0, new, carry);
@@ -464,6 +477,33 @@ impl PlantSim {
         self.steps += 1;
         self.publish(self.steps as f64 * self.dt_s);
         &self.state
+    }
+
+    /// Shortcut for a rigid drivetrain held by dry friction: one exact step over the whole period
+    /// in the stuck mode, accepted when the driving torque stays below breakaway at both ends.
+    /// While stuck the angles are fixed and the current follows two first-order lags in series
+    /// (no overshoot), so the driving torque is monotone over the period and never exceeds
+    /// breakaway in between. Returns false (state untouched) otherwise.
+    fn stays_stuck_over_period(&mut self, u: f64) -> bool {
+        let Some(coarse) = &self.coarse_stuck else {
+            return false;
+        };
+        let x0 = self.x;
+        let x1 = advance::<4>(coarse, &x0, &[u, 0.0, 0.0, 0.0]);
+        let cogging = self.cogging_cached(x0[3]);
+        let imbalance = self.imbalance_cached(self.theta_l(&x0));
+        let holds = |sim: &Self, x: &[f64; NS]| {
+            let d = sim.drive_torque_l_with(x, cogging, imbalance);
+            d.abs() <= sim.friction.breakaway_l(math::sign(d))
+        };
+        if holds(self, &x0) && holds(self, &x1) {
+            self.x = x1;
+            self.x[2] = 0.0;
+            self.x[3] = x0[3];
+            true
+        } else {
+            false
+        }
     }
 
     /// The torque of every effect at the current state.
@@ -577,29 +617,57 @@ impl PlantSim {
             Some((a, ph)) => torque::imbalance_torque_l(a, ph, self.theta_l(x)),
             None => 0.0,
         };
+        let cogging = match self.cogging {
+            Some((a, h, ph)) => torque::cogging_torque_m(a, h, ph, x[3]),
+            None => 0.0,
+        };
+        self.drive_torque_l_with(x, cogging, imbalance)
+    }
+
+    /// [`Self::drive_torque_l`] with the cogging [N m, motor side] and imbalance [N m, load side]
+    /// torques given.
+    #[inline]
+    fn drive_torque_l_with(&self, x: &[f64; NS], cogging: f64, imbalance: f64) -> f64 {
         match self.backlash {
             Some(_) => self.contact_torque_l(x) - imbalance,
-            None => {
-                let mut t = self.k_t * x[1];
-                if let Some((a, h, ph)) = self.cogging {
-                    t -= torque::cogging_torque_m(a, h, ph, x[3]);
+            None => (self.k_t * x[1] - cogging) * self.n - imbalance,
+        }
+    }
+
+    /// Cogging torque at `theta_m` [N m], motor side; the last value is reused while the angle
+    /// does not change (stuck shaft).
+    #[inline]
+    fn cogging_cached(&mut self, theta_m: f64) -> f64 {
+        match self.cogging {
+            Some((a, h, ph)) => {
+                if theta_m != self.cache_cog.0 {
+                    self.cache_cog = (theta_m, torque::cogging_torque_m(a, h, ph, theta_m));
                 }
-                t * self.n - imbalance
+                self.cache_cog.1
             }
+            None => 0.0,
+        }
+    }
+
+    /// Imbalance torque at `theta_l` [N m], load side, cached like [`Self::cogging_cached`].
+    #[inline]
+    fn imbalance_cached(&mut self, theta_l: f64) -> f64 {
+        match self.imbalance {
+            Some((a, ph)) => {
+                if theta_l != self.cache_imb.0 {
+                    self.cache_imb = (theta_l, torque::imbalance_torque_l(a, ph, theta_l));
+                }
+                self.cache_imb.1
+            }
+            None => 0.0,
         }
     }
 
     /// Nonlinear input torques (tau_m motor side, tau_l load side) at state `x`.
     #[inline]
-    fn nonlinear_torques(&self, x: &[f64; NS]) -> (f64, f64) {
-        let mut tau_m = 0.0;
-        if let Some((a, h, ph)) = self.cogging {
-            tau_m += torque::cogging_torque_m(a, h, ph, x[3]);
-        }
-        let mut tau_l = match self.imbalance {
-            Some((a, ph)) => torque::imbalance_torque_l(a, ph, self.theta_l(x)),
-            None => 0.0,
-        };
+    fn nonlinear_torques(&mut self, x: &[f64; NS]) -> (f64, f64) {
+        let mut tau_m = self.cogging_cached(x[3]);
+        let mut tau_l = self.imbalance_cached(self.theta_l(x));
         if self.dry && !self.stuck {
             // Friction of the current slip direction; a predicted reversal is held at zero speed
             // (the reversal itself is an event).
@@ -621,7 +689,10 @@ impl PlantSim {
         let mut carry = carry;
         // Breakaway.
         if self.stuck {
-            let drive = self.drive_torque_l(&self.x);
+            let x = self.x;
+            let cogging = self.cogging_cached(x[3]);
+            let imbalance = self.imbalance_cached(self.theta_l(&x));
+            let drive = self.drive_torque_l_with(&x, cogging, imbalance);
             let dir = math::sign(drive);
             if dir != 0.0 && dir * drive > self.friction.breakaway_l(dir) {
                 self.stuck = false;
@@ -648,26 +719,23 @@ impl PlantSim {
         }
         let (tm0, tl0) = match carry {
             Some(t) => t,
-            None => self.nonlinear_torques(&self.x),
+            None => {
+                let x = self.x;
+                self.nonlinear_torques(&x)
+            }
         };
         let d = &self.disc[li][mode];
-        let ns = self.ns;
         let x0 = self.x;
         let inp = [u, tm0, tl0, tau_offset];
-        let mut xp = [0.0; NS];
-        for i in 0..ns {
-            let mut acc = 0.0;
-            for j in 0..ns {
-                acc += d.phi[i][j] * x0[j];
-            }
-            for j in 0..NI {
-                acc += d.g0[i][j] * inp[j];
-            }
-            xp[i] = acc;
-        }
+        let mut xp = if self.ns == 4 {
+            advance::<4>(d, &x0, &inp)
+        } else {
+            advance::<6>(d, &x0, &inp)
+        };
         let (tm1, tl1) = self.nonlinear_torques(&xp);
         let (dm, dl) = (tm1 - tm0, tl1 - tl0);
-        for i in 0..ns {
+        let d = &self.disc[li][mode];
+        for i in 0..self.ns {
             xp[i] += d.g1[i][0] * dm + d.g1[i][1] * dl;
         }
         self.x = xp;
@@ -712,6 +780,23 @@ impl PlantSim {
         }
         next
     }
+}
+
+/// x+ = Phi x + G0 inp over the first `N` states (4 rigid, 6 with backlash).
+#[inline(always)]
+fn advance<const N: usize>(d: &Disc, x0: &[f64; NS], inp: &[f64; NI]) -> [f64; NS] {
+    let mut xp = [0.0; NS];
+    for i in 0..N {
+        let mut acc = 0.0;
+        for j in 0..N {
+            acc += d.phi[i][j] * x0[j];
+        }
+        for j in 0..NI {
+            acc += d.g0[i][j] * inp[j];
+        }
+        xp[i] = acc;
+    }
+    xp
 }
 
 /// Exact discretisation of mode `mode` over a sub-step `h` [s] (zero-order hold of u_in and of
