@@ -258,7 +258,7 @@ fn load_angle(r: &Reference, x: &[f64; 6]) -> f64 {
 /// Input used by the accuracy tests: a slow sine with steps (reversals, stops and fast parts).
 fn test_input(k: usize) -> f64 {
     let t = k as f64 * DT;
-    3.0 * (2.0 * std::f64::consts::PI * 1.5 * t).sin() + if (k / 150) % 2 == 0 { 0.8 } else { -0.8 }
+    3.0 * (2.0 * std::f64::consts::PI * 1.5 * t).sin() + if (k / 150) & 1 == 0 { 0.8 } else { -0.8 }
 }
 
 fn compare_with_reference(specs: &[&str], steps: usize) -> (f64, f64) {
@@ -661,7 +661,7 @@ fn any_combination_is_finite_and_deterministic() {
             let mut sim = PlantSim::new(&p, DT).unwrap();
             run(
                 &mut sim,
-                |k| if (k / 97) % 2 == 0 { 10.0 } else { -10.0 } * ((k % 13) as f64 / 13.0),
+                |k| if (k / 97) & 1 == 0 { 10.0 } else { -10.0 } * ((k % 13) as f64 / 13.0),
                 800,
             )
         };

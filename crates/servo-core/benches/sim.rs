@@ -3,7 +3,7 @@
 //!
 //! `cargo bench -p servo-core --bench sim -- --warm-up-time 1 --measurement-time 3`
 
-use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use servo_core::effects::Effect;
 use servo_core::sim::PlantSim;
 use servo_core::Plant;
@@ -37,7 +37,7 @@ fn closed_loop_second(sim: &mut PlantSim, t0: u64) -> f64 {
     let (mut integ, mut dstate, mut prev) = (0.0, 0.0, sim.state().theta_l_rad);
     let mut acc = 0.0;
     for k in 0..1000u64 {
-        let r = if ((t0 + k) / 1000) % 2 == 0 {
+        let r = if ((t0 + k) / 1000) & 1 == 0 {
             1.0
         } else {
             -1.0
@@ -63,7 +63,7 @@ fn bench(c: &mut Criterion) {
             b.iter(|| {
                 let r = closed_loop_second(&mut sim, t);
                 t += 1000;
-                black_box(r)
+                std::hint::black_box(r)
             })
         });
     }

@@ -46,6 +46,9 @@
 //! Row k of a log holds the measurements taken at `time_s[k]` and the voltage u applied from then
 //! until row k+1: `state()` at time t_k is measured, then `step(u_k)` advances to t_k + dt_s.
 
+// Small dense matrix code reads best with explicit indices.
+#![allow(clippy::needless_range_loop)]
+
 pub mod expm;
 pub mod sensors;
 
