@@ -6,7 +6,11 @@
 //! * The serial board backend and the virtual board live beside it.
 
 pub mod backend;
+pub mod board;
+pub mod serial;
 pub mod sim;
 
 pub use backend::{Backend, BoardInfo, HwError, Sample};
+pub use board::{BoardConfig, BoardReport, VirtualBoard};
+pub use serial::{LinkStats, SerialBackend, SerialConfig};
 pub use sim::SimBackend;
