@@ -288,7 +288,7 @@ impl PlantSim {
         };
         let nonlinear = dry || cogging.is_some() || imbalance.is_some() || backlash.is_some();
         let substeps = if nonlinear {
-            math::floor(dt_s / max_substep_s - 1e-9) as usize + 1
+            (math::floor(dt_s / max_substep_s - 1e-9) as usize).saturating_add(1)
         } else {
             1
         };
@@ -311,9 +311,9 @@ impl PlantSim {
         }
         if f > 1.0 - 1e-9 {
             f = 0.0;
-            delay_k += 1;
+            delay_k = delay_k.saturating_add(1);
         }
-        if delay_k + 2 > DELAY_CAPACITY {
+        if delay_k.saturating_add(2) > DELAY_CAPACITY {
             return Err(SimError::DelayTooLong {
                 delay_s,
                 max_s: (DELAY_CAPACITY - 2) as f64 * dt_s,
@@ -942,6 +942,29 @@ mod tests {
             out
         };
         assert_eq!(run(), run());
+    }
+
+    #[test]
+    fn extreme_contact_stiffness_stays_bounded() {
+        for spec in [
+            "backlash:gap=0.02,stiffness=1e12,damping=0",
+            "backlash:gap=0,stiffness=1e9,damping=10",
+        ] {
+            let p = plant_with(&[spec, "coulomb:tau_sf=0.003"]);
+            let mut sim = PlantSim::new(&p, 1e-3).unwrap();
+            for k in 0..3000 {
+                let u = if (k / 200) & 1 == 0 { 10.0 } else { -10.0 };
+                let s = sim.step(u);
+                assert!(
+                    s.theta_l_rad.is_finite() && s.omega_l_rad_s.abs() < 200.0,
+                    "{spec}: {s:?}"
+                );
+                assert!(
+                    (s.theta_m_rad / 14.0 - s.theta_l_rad).abs() < 0.011 + 1e-3,
+                    "{spec}: {s:?}"
+                );
+            }
+        }
     }
 
     #[test]
