@@ -61,7 +61,9 @@ pub enum DerivativeOn {
     /// The error e = r - y (the linear controller C(s) of the design; kicks on reference steps).
     #[default]
     Error,
-    /// Minus the measurement, -y (no derivative kick on reference steps; same loop gain).
+    /// Minus the measurement, -y (no derivative kick on reference steps; same loop gain). When
+    /// tracking a moving reference with feedforward, prefer [`DerivativeOn::Error`]: on the
+    /// measurement the D term brakes the motion by K_D omega_ref and undoes part of the feedforward.
     Measurement,
 }
 
