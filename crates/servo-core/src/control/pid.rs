@@ -333,6 +333,32 @@ impl Pid {
         }
     }
 
+    /// Restarts the controller so that it takes over from an output `u_v` [V] that was being
+    /// applied (open loop, another controller) without a bump: the history is primed with the
+    /// current error (no derivative kick) and the integral set to `u_v - K_P e - FF`. The next
+    /// [`update`](Self::update) with the same inputs then returns `u_v` plus one integral
+    /// increment (K_I T_s e).
+    pub fn bumpless_start(
+        &mut self,
+        u_v: f64,
+        reference_rad: f64,
+        measurement_rad: f64,
+        feedforward_v: f64,
+    ) {
+        self.reset();
+        let e = reference_rad - measurement_rad;
+        if !(e.is_finite() && u_v.is_finite() && feedforward_v.is_finite()) {
+            return;
+        }
+        self.x_prev = match self.cfg.derivative_on {
+            DerivativeOn::Error => e,
+            DerivativeOn::Measurement => -measurement_rad,
+        };
+        self.e_prev = e;
+        self.primed = true;
+        self.i_v = u_v - self.cfg.kp * e - feedforward_v;
+    }
+
     /// Changes the gains without a bump in the output: the integral absorbs the change of
     /// P + D at the last sample's error and derivative state.
     pub fn set_gains(&mut self, gains: PidGains) -> Result<(), ControlError> {
@@ -713,6 +739,26 @@ mod tests {
         let raw_bump = (new.kp - 2.0) * e_k + (new.kd - 0.2) * f_k;
         assert!(raw_bump.abs() > 4.0, "{raw_bump}");
         assert!(pid.set_gains(PidGains { kp: -1.0, ..new }).is_err());
+    }
+
+    #[test]
+    fn bumpless_start_from_an_open_loop_voltage() {
+        // K_P = 2, K_I = 10, T_s = 0.01, e = 0.3: I = 1.5 - 0.6 - 0.1 = 0.8, then the update adds
+        // K_I T_s e = 0.03 (both rules, since e_{k-1} = e_k): u = 0.6 + 0.83 + 0 + 0.1 = 1.53.
+        for disc in [Discretization::BackwardEuler, Discretization::Tustin] {
+            let mut pid = Pid::new(PidConfig {
+                discretization: disc,
+                ..cfg(2.0, 10.0, 0.5, 0.01, 0.01)
+            })
+            .unwrap();
+            pid.update(5.0, 0.0, 0.0); // some unrelated history
+            pid.bumpless_start(1.5, 1.0, 0.7, 0.1);
+            let o = pid.update(1.0, 0.7, 0.1);
+            assert!(
+                (o.u_v - 1.53).abs() < 1e-12 && o.d_v == 0.0,
+                "{disc:?}: {o:?}"
+            );
+        }
     }
 
     #[test]
