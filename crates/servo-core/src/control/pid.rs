@@ -238,6 +238,8 @@ pub struct Pid {
     i_w1: f64,
     /// T_s K_w of back-calculation (0 otherwise).
     kw_ts: f64,
+    /// 1 / (1 + T_s K_w).
+    kw_den_inv: f64,
     // State.
     /// Integral term [V].
     i_v: f64,
@@ -263,6 +265,7 @@ impl Pid {
             i_w0: 0.0,
             i_w1: 0.0,
             kw_ts: 0.0,
+            kw_den_inv: 1.0,
             i_v: 0.0,
             f_rad_s: 0.0,
             e_prev: 0.0,
@@ -303,6 +306,7 @@ impl Pid {
             AntiWindup::BackCalculation { kw } => kw * ts,
             _ => 0.0,
         };
+        self.kw_den_inv = 1.0 / (1.0 + self.kw_ts);
     }
 
     /// The configuration in use.
@@ -436,9 +440,9 @@ impl Pid {
             }
             AntiWindup::BackCalculation { .. } => {
                 if v_free > c.u_max_v {
-                    i = (i + self.kw_ts * (c.u_max_v - pdf)) / (1.0 + self.kw_ts);
+                    i = (i + self.kw_ts * (c.u_max_v - pdf)) * self.kw_den_inv;
                 } else if v_free < c.u_min_v {
-                    i = (i + self.kw_ts * (c.u_min_v - pdf)) / (1.0 + self.kw_ts);
+                    i = (i + self.kw_ts * (c.u_min_v - pdf)) * self.kw_den_inv;
                 }
             }
         }
