@@ -174,3 +174,35 @@ fn feedforward_predicts_the_measured_steady_voltage_of_the_real_motor() {
     }
     assert_eq!(checked, 9);
 }
+
+/// `experiments/steps.toml` reproduces the reference of the real Padova step run sample by sample
+/// (the logged reference switches one 1 ms sample after the nominal instant).
+#[test]
+fn steps_recipe_matches_the_real_run_reference() {
+    let Some(dir) = servo_e2e::realdata_dir() else {
+        return;
+    };
+    let path = dir.join("padova2021-jacopisky/csv/pid_bode_steps.csv");
+    let text = std::fs::read_to_string(&path).expect("read pid_bode_steps.csv");
+    let recipe = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("experiments/steps.toml");
+    let e = servo_cli::reference_file::load_experiment(&recipe).expect("steps.toml");
+    let mut rows = 0;
+    for line in text.lines().skip(1) {
+        let f: Vec<f64> = line
+            .split(',')
+            .take(3)
+            .map(|x| x.trim().parse().unwrap_or(f64::NAN))
+            .collect();
+        let (t, ref_deg) = (f[0], f[2]);
+        let ours = match e.at(t - 1e-3) {
+            servo_core::control::Setpoint::Position(r) => r.pos_rad.to_degrees(),
+            other => panic!("{other:?}"),
+        };
+        assert!(
+            (ours - ref_deg).abs() < 1e-9,
+            "t = {t} s: recipe {ours} deg, real run {ref_deg} deg"
+        );
+        rows += 1;
+    }
+    assert!(rows > 25_000, "{rows} rows");
+}

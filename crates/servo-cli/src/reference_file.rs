@@ -117,7 +117,7 @@ impl Experiment {
     /// Index of the segment active at `t_s` (the last one after the end).
     pub fn segment_index_at(&self, t_s: f64) -> usize {
         self.segments
-            .partition_point(|p| p.start_s <= t_s)
+            .partition_point(|p| p.start_s <= t_s + servo_core::control::reference::TIME_EPS_S)
             .saturating_sub(1)
     }
 
