@@ -447,13 +447,8 @@ impl Pid {
             }
         }
         let v = pdf + i;
-        let u = if v > c.u_max_v {
-            c.u_max_v
-        } else if v < c.u_min_v {
-            c.u_min_v
-        } else {
-            v
-        };
+        // Branch-free clamp (limits validated ordered and not NaN; v is finite).
+        let u = v.max(c.u_min_v).min(c.u_max_v);
         self.i_v = i;
         self.f_rad_s = f;
         self.e_prev = e;
