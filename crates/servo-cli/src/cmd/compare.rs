@@ -6,12 +6,14 @@ use crate::model_file::ModelFile;
 use crate::plot::{line_chart_svg, Chart, Series};
 use anyhow::{anyhow, bail, Context};
 use serde_json::{json, Value};
+use servo_core::compare::controller_check::{check_controller, ControllerCheck};
 use servo_core::compare::quantum::encoder_quantum;
 use servo_core::compare::regimes::{detect_u_limit, Regime};
 use servo_core::compare::report::{describe_window, regime_phrase, with_unit};
 use servo_core::compare::{
-    compare, replay, ClosedLoop, CompareOptions, CompareReport, Controller, Figures, Measured, ReplayMode, SignalKind,
+    compare, replay, ClosedLoop, CompareOptions, CompareReport, Figures, Measured, ReplayMode, SignalKind,
 };
+use servo_core::control::pid::{AntiWindup, Pid, PidConfig, PidGains};
 use servo_core::fit::{fit_model, EffectToFit, FitOptions};
 use servo_core::record::Record;
 use servo_core::Plant;
@@ -36,6 +38,10 @@ pub struct Compare {
     /// Controller that ran during the log (gains file of `servo design`): enables closed-loop replay.
     #[arg(long, value_name = "gains.toml")]
     pub gains: Option<PathBuf>,
+    /// Closed-loop replay with the PID gains that best reproduce the logged u (least squares on
+    /// the logged reference, position and u), instead of --gains or the log's metadata.
+    #[arg(long)]
+    pub gains_from_log: bool,
     /// Replay mode: closed-loop, speed, k-step or segments (default: closed-loop when gains and
     /// reference are known, else speed).
     #[arg(long, value_parser = ["closed-loop", "speed", "k-step", "segments"])]
@@ -70,6 +76,11 @@ pub struct LogData {
     pub path: PathBuf,
     pub record: Record,
     pub measured: Measured,
+    /// The controller of the log (--gains, the log's metadata or --gains-from-log) and where it
+    /// came from.
+    pub gains: Option<(PidSection, String)>,
+    /// How well that controller reproduces the logged u.
+    pub check: Option<ControllerCheck>,
 }
 
 /// The comparison of one model with every log.
@@ -86,46 +97,18 @@ pub struct ModeChoice {
     pub reason: String,
 }
 
-/// The PID of a gains file, as it runs on the board each sample: parallel form, integral by
-/// forward Euler, derivative on the error through the real derivative s/(T_L s + 1) discretised
-/// by backward Euler (ideal backward difference when T_L = 0), optional back-calculation
-/// anti-windup against the output limit.
-#[derive(Debug, Clone)]
-pub struct ReplayPid {
-    pid: PidSection,
-    dt_s: f64,
-    limit_v: Option<f64>,
-    integral: f64,
-    deriv: f64,
-    e_prev: Option<f64>,
-}
-
-impl ReplayPid {
-    pub fn new(pid: PidSection, dt_s: f64, limit_v: Option<f64>) -> ReplayPid {
-        ReplayPid { pid, dt_s, limit_v, integral: 0.0, deriv: 0.0, e_prev: None }
+/// servo's discrete PID ([`servo_core::control::Pid`], backward Euler, derivative on the error)
+/// configured from a gains file for a replay at sample period `dt_s` [s], with the board's output
+/// limit and the file's back-calculation anti-windup, if any.
+pub fn replay_pid(pid: &PidSection, dt_s: f64, limit_v: Option<f64>) -> anyhow::Result<Pid> {
+    let mut cfg = PidConfig::new(PidGains { kp: pid.kp, ki: pid.ki, kd: pid.kd, tl_s: pid.tl_s }, dt_s);
+    if let Some(l) = limit_v {
+        cfg = cfg.with_symmetric_limit(l);
     }
-}
-
-impl Controller for ReplayPid {
-    fn update(&mut self, reference_rad: f64, measured_rad: f64) -> f64 {
-        let p = &self.pid;
-        let e = reference_rad - measured_rad;
-        let de = match self.e_prev {
-            Some(ep) => e - ep,
-            None => 0.0,
-        };
-        self.e_prev = Some(e);
-        // D(z) = kd (1 - z^-1) / (T_L + dt - T_L z^-1): backward Euler of kd s / (T_L s + 1).
-        self.deriv = (p.tl_s * self.deriv + p.kd * de) / (p.tl_s + self.dt_s);
-        let v = p.kp * e + self.integral + self.deriv;
-        let sat = match self.limit_v {
-            Some(l) => v.clamp(-l, l),
-            None => v,
-        };
-        let aw = p.kw.map_or(0.0, |kw| kw * (sat - v));
-        self.integral += (p.ki * e + aw) * self.dt_s;
-        v
+    if let Some(kw) = pid.kw {
+        cfg.anti_windup = AntiWindup::BackCalculation { kw };
     }
+    Pid::new(cfg).map_err(|e| anyhow!("gains: {e}"))
 }
 
 fn parse_mode(s: &str, k: usize, seg: usize) -> ReplayMode {
@@ -138,7 +121,8 @@ fn parse_mode(s: &str, k: usize, seg: usize) -> ReplayMode {
 }
 
 impl Compare {
-    fn mode_for(&self, log: &LogData, gains: Option<&GainsFile>) -> anyhow::Result<ModeChoice> {
+    fn mode_for(&self, log: &LogData) -> anyhow::Result<ModeChoice> {
+        let gains = log.gains.as_ref();
         let m = &log.measured;
         let seg = ((self.segment_s / m.dt_s).round() as usize).max(1);
         let has_ref = m.ref_rad.is_some();
@@ -147,7 +131,7 @@ impl Compare {
             let mode = parse_mode(s, self.k_steps.max(1), seg);
             if mode == ReplayMode::ClosedLoop {
                 if gains.is_none() {
-                    bail!("--mode closed-loop needs the controller: give --gains gains.toml");
+                    bail!("--mode closed-loop needs the controller of {}: give --gains gains.toml or --gains-from-log", log.path.display());
                 }
                 if !has_ref || !has_pos {
                     bail!(
@@ -164,7 +148,10 @@ impl Compare {
         Ok(match (gains.is_some(), has_ref && has_pos) {
             (true, true) => ModeChoice {
                 mode: ReplayMode::ClosedLoop,
-                reason: String::from("controller gains and reference are known: the model runs in the logged loop, as the motor did"),
+                reason: format!(
+                    "controller ({}) and reference are known: the model runs in the logged loop, as the motor did",
+                    gains.map(|g| g.1.as_str()).unwrap_or_default()
+                ),
             },
             (true, false) => ModeChoice {
                 mode: ReplayMode::Speed,
@@ -182,16 +169,15 @@ impl Compare {
         plant: &Plant,
         logs: &[LogData],
         modes: &[ModeChoice],
-        gains: Option<&GainsFile>,
         opts: &CompareOptions,
     ) -> anyhow::Result<ModelComparison> {
         let mut reports = Vec::new();
         for (log, mc) in logs.iter().zip(modes) {
             let m = &log.measured;
             let rp = if mc.mode == ReplayMode::ClosedLoop {
-                let g = gains.ok_or_else(|| anyhow!("closed-loop replay without gains"))?;
-                let limit = self.u_limit_v.or(g.pid.u_limit_v).or_else(|| detect_u_limit(&m.u_v));
-                let mut pid = ReplayPid::new(g.pid, m.dt_s, limit);
+                let (g, _) = log.gains.as_ref().ok_or_else(|| anyhow!("closed-loop replay without gains"))?;
+                let limit = self.u_limit(g, m);
+                let mut pid = replay_pid(g, m.dt_s, limit)?;
                 let q = m.theta_l_rad.as_deref().and_then(encoder_quantum);
                 replay(
                     plant,
@@ -206,6 +192,53 @@ impl Compare {
             reports.push(compare(m, &rp, plant.params.n, opts));
         }
         Ok(ModelComparison { plant: *plant, reports })
+    }
+
+    /// The board's output limit for a replay: --u-limit-v, the gains file's limit, or the plateau
+    /// of the logged u.
+    fn u_limit(&self, g: &PidSection, m: &Measured) -> Option<f64> {
+        self.u_limit_v.or(g.u_limit_v).or_else(|| detect_u_limit(&m.u_v))
+    }
+
+    /// Checks the log's controller against the logged u; with --gains-from-log replaces it by the
+    /// least-squares PID.
+    fn check_gains(&self, log: &mut LogData) -> anyhow::Result<()> {
+        let m = &log.measured;
+        let (Some(r), Some(th)) = (&m.ref_rad, &m.theta_l_rad) else {
+            if self.gains_from_log {
+                bail!("--gains-from-log needs the reference and the position in {}", log.path.display());
+            }
+            return Ok(());
+        };
+        let probe = PidSection { kp: 1.0, ki: 0.0, kd: 0.0, tl_s: 0.0, ts_s: m.dt_s, kw: None, u_limit_v: None };
+        let limit = self.u_limit(log.gains.as_ref().map_or(&probe, |g| &g.0), m);
+        let given = log.gains.as_ref().map(|g| g.0).unwrap_or(probe);
+        let mut pid = replay_pid(&given, m.dt_s, None)?;
+        let check = check_controller(&mut pid, r, th, &m.u_v, limit, m.dt_s);
+        if self.gains_from_log {
+            let [kp, ki, kd] = check.ls_gains.ok_or_else(|| {
+                anyhow!("--gains-from-log: the logged u of {} does not determine PID gains (singular least squares)", log.path.display())
+            })?;
+            if !(kp >= 0.0 && ki >= 0.0 && kd >= 0.0) {
+                bail!(
+                    "--gains-from-log: the least-squares PID of {} has a negative gain (kp = {kp:.4}, ki = {ki:.4}, kd = {kd:.4}); the logged u is not a PID on the logged error",
+                    log.path.display()
+                );
+            }
+            let pid = PidSection { kp, ki, kd, tl_s: 0.0, ts_s: m.dt_s, kw: None, u_limit_v: limit };
+            log.gains = Some((
+                pid,
+                format!(
+                    "PID fitted to the logged u: kp = {kp:.4} V/rad, ki = {ki:.4} V/(rad s), kd = {kd:.4} V s/rad, fit {:.1} %",
+                    check.ls_fit_percent
+                ),
+            ));
+            let mut fitted = replay_pid(&pid, m.dt_s, None)?;
+            log.check = Some(check_controller(&mut fitted, r, th, &m.u_v, limit, m.dt_s));
+        } else if log.gains.is_some() {
+            log.check = Some(check);
+        }
+        Ok(())
     }
 
     pub fn run(self) -> anyhow::Result<()> {
@@ -231,16 +264,28 @@ impl Compare {
         let opts = CompareOptions::default();
         let mut logs = Vec::new();
         for path in &self.logs {
-            let record = crate::io::read_log(path, self.columns.as_deref())
+            let (record, meta) = crate::io::read_log_with_meta(path, self.columns.as_deref())
                 .with_context(|| format!("reading log {}", path.display()))?;
+            if !self.json {
+                for n in &meta.notes {
+                    eprintln!("note: {n}");
+                }
+            }
             let measured = Measured::from_record(&record, plant.params.n, opts.speed_filter_hz)
                 .map_err(|e| anyhow!("log {}: {e}", path.display()))?;
-            logs.push(LogData { path: path.clone(), record, measured });
+            let mut log = LogData { path: path.clone(), record, measured, gains: None, check: None };
+            log.gains = match (&gains, meta.gains()?) {
+                (Some(g), _) => Some((g.pid, format!("gains from {}", self.gains.as_deref().map(|p| p.display().to_string()).unwrap_or_default()))),
+                (None, Some(g)) => Some((g.pid, String::from("gains from the log's metadata"))),
+                (None, None) => None,
+            };
+            self.check_gains(&mut log)?;
+            logs.push(log);
         }
-        let modes: Vec<ModeChoice> = logs.iter().map(|l| self.mode_for(l, gains.as_ref())).collect::<anyhow::Result<_>>()?;
+        let modes: Vec<ModeChoice> = logs.iter().map(|l| self.mode_for(l)).collect::<anyhow::Result<_>>()?;
 
         let mut ladder = Vec::new();
-        let first = self.compare_all(&plant, &logs, &modes, gains.as_ref(), &opts)?;
+        let first = self.compare_all(&plant, &logs, &modes, &opts)?;
         ladder.push(LadderStep { label: String::from("model as given"), effect: None, cmp_fit: pooled(&first), fitted: Vec::new() });
         let mut current = first;
         let records: Vec<Record> = logs.iter().map(|l| l.record.clone()).collect();
@@ -248,7 +293,7 @@ impl Compare {
             let fit = fit_model(&records, &plant, std::slice::from_ref(eff), &FitOptions::default())
                 .map_err(|e| anyhow!("--add {spec}: fitting the effect to the logs failed: {e}"))?;
             plant = fit.plant;
-            let cmp = self.compare_all(&plant, &logs, &modes, gains.as_ref(), &opts)?;
+            let cmp = self.compare_all(&plant, &logs, &modes, &opts)?;
             let fitted = fit
                 .params
                 .iter()
@@ -440,7 +485,6 @@ fn to_json(logs: &[LogData], modes: &[ModeChoice], c: &ModelComparison, ladder: 
     }
     windows.sort_by(|a, b| b.0.total_cmp(&a.0));
     let r0 = &c.reports[0];
-    let wh = &r0.whiteness;
     let x = &r0.input_xcorr;
     let per_log: Vec<Value> = logs
         .iter()
@@ -451,6 +495,7 @@ fn to_json(logs: &[LogData], modes: &[ModeChoice], c: &ModelComparison, ladder: 
                 "mode": r.mode.name(), "mode_reason": mc.reason,
                 "samples": r.time_s.len(), "dt_s": r.dt_s,
                 "speed_derived_from_position": l.measured.speed_derived,
+                "controller": controller_json(l),
                 "signal": r.headline_signal().kind.name(),
                 "signals": r.signals.iter().map(|s| figures_json(s.kind, &s.figures)).collect::<Vec<_>>(),
                 "whiteness": whiteness_json(r),
@@ -465,6 +510,7 @@ fn to_json(logs: &[LogData], modes: &[ModeChoice], c: &ModelComparison, ladder: 
     json!({
         "mode": r0.mode.name(),
         "mode_reason": modes[0].reason,
+        "controller": controller_json(&logs[0]),
         "signal": hk.name(),
         "unit": hk.unit(),
         "fit_percent": finite(hf.fit_percent),
@@ -483,6 +529,36 @@ fn to_json(logs: &[LogData], modes: &[ModeChoice], c: &ModelComparison, ladder: 
         }),
         "findings": r0.findings,
         "logs": per_log,
+    })
+}
+
+/// The controller check in words (None without a controller).
+pub fn controller_words(log: &LogData) -> Option<String> {
+    let c = log.check.as_ref()?;
+    let mut s = format!(
+        "controller check: the controller reproduces the logged u with fit {:.1} % (RMS {:.3} V over {} samples inside the output limit)",
+        c.fit_percent, c.rms_v, c.samples
+    );
+    if c.fit_percent < 90.0 {
+        if let Some([kp, ki, kd]) = c.ls_gains {
+            s.push_str(&format!(
+                "\nWARNING: these gains do not reproduce the logged u, so the replay will differ for reasons unrelated to the plant. The PID that best reproduces it is kp = {kp:.4} V/rad, ki = {ki:.4} V/(rad s), kd = {kd:.4} V s/rad (fit {:.1} %): try --gains-from-log.",
+                c.ls_fit_percent
+            ));
+        }
+    }
+    Some(s)
+}
+
+fn controller_json(log: &LogData) -> Value {
+    let Some((g, source)) = &log.gains else { return Value::Null };
+    let c = log.check.as_ref();
+    json!({
+        "source": source, "kp": g.kp, "ki": g.ki, "kd": g.kd, "tl_s": g.tl_s,
+        "check_fit_percent": c.map(|c| finite(c.fit_percent)),
+        "check_rms_v": c.map(|c| finite(c.rms_v)),
+        "ls_gains": c.and_then(|c| c.ls_gains).map(|[kp, ki, kd]| json!({"kp": kp, "ki": ki, "kd": kd})),
+        "ls_fit_percent": c.map(|c| finite(c.ls_fit_percent)),
     })
 }
 
@@ -508,6 +584,9 @@ fn print_text(
     for ((log, r), mc) in logs.iter().zip(&c.reports).zip(modes) {
         println!("== {} ({} samples, {:.3} s, dt = {:.4} s)", log.path.display(), r.time_s.len(), r.time_s.len() as f64 * r.dt_s, r.dt_s);
         println!("mode: {} -- {}", r.mode.name(), mc.reason);
+        if let Some(line) = controller_words(log) {
+            println!("{line}");
+        }
         if log.measured.speed_derived {
             println!("speed: derived from position (zero-phase {:.0} Hz low-pass + central differences), model speed filtered the same way", opts.speed_filter_hz);
         }
@@ -690,12 +769,15 @@ mod tests {
 
     #[test]
     fn replay_pid_matches_hand_values() {
+        use servo_core::compare::Controller;
         let pid = PidSection { kp: 2.0, ki: 10.0, kd: 0.1, tl_s: 0.0, ts_s: 1e-3, kw: None, u_limit_v: None };
-        let mut c = ReplayPid::new(pid, 1e-3, None);
-        // e = 1: u = 2 + 0 + 0 (no previous error), then integral = 0.01
-        assert!((c.update(1.0, 0.0) - 2.0).abs() < 1e-12);
-        // e = 0.5: u = 1 + 0.01 + 0.1 * (-0.5) / 1e-3 = 1.01 - 50
-        assert!((c.update(0.5, 0.0) - (1.01 - 50.0)).abs() < 1e-9);
+        let mut c = replay_pid(&pid, 1e-3, Some(100.0)).unwrap();
+        // Backward Euler: I_0 = 10 * 1e-3 * 1 = 0.01; no derivative kick at the first sample.
+        assert!((Controller::update(&mut c, 1.0, 0.0) - 2.01).abs() < 1e-12);
+        // e = 0.5: P = 1, I = 0.015, D = 0.1 * (-0.5) / 1e-3 = -50
+        assert!((Controller::update(&mut c, 0.5, 0.0) - (1.015 - 50.0)).abs() < 1e-9);
+        // The limit holds.
+        assert_eq!(Controller::update(&mut c, 1e3, 0.0), 100.0);
     }
 
     #[test]
