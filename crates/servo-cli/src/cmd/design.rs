@@ -26,10 +26,10 @@ pub enum Structure {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Method {
+    /// s <- (z - 1)/(T_s z) (the default of `control::pid`)
+    BackwardEuler,
     /// s <- 2/T_s (z - 1)/(z + 1)
     Tustin,
-    /// s <- (z - 1)/(T_s z)
-    BackwardEuler,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -91,8 +91,8 @@ pub struct Design {
     /// Sample period T_s [s] of the discrete controller (ZOH).
     #[arg(long, value_name = "S", default_value_t = 1e-3)]
     pub ts: f64,
-    /// Discretisation of the integral and the filtered derivative.
-    #[arg(long, value_enum, default_value = "tustin")]
+    /// Discretisation of the integral and the filtered derivative (as the running PID does it).
+    #[arg(long, value_enum, default_value = "backward-euler")]
     pub discretization: Method,
     /// Model the gains are synthesised on.
     #[arg(long, value_enum, default_value = "reduced")]

@@ -26,19 +26,9 @@ impl ControllerKind {
     }
 }
 
-/// Gains of C(s) = K_P + K_I/s + K_D s/(T_L s + 1) acting on the load-angle error [rad], output
-/// the driver input u [V].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PidGains {
-    /// Proportional gain K_P [V/rad].
-    pub kp: f64,
-    /// Integral gain K_I [V/(rad s)].
-    pub ki: f64,
-    /// Derivative gain K_D [V s/rad].
-    pub kd: f64,
-    /// Real-derivative time constant T_L [s] (eq. 53); 0 = ideal derivative.
-    pub tl_s: f64,
-}
+/// The gains of C(s) = K_P + K_I/s + K_D s/(T_L s + 1) [V/rad, V/(rad s), V s/rad, s]: the same
+/// type the discrete controller (`control::pid`) runs.
+pub use crate::control::pid::PidGains;
 
 impl PidGains {
     /// Integral time T_I = K_P / K_I [s] (infinite without integral action).

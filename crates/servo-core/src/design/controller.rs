@@ -4,18 +4,14 @@
 //! Discrete PID (derivative on the error, as in the loop analysis):
 //! u[k] = K_P e[k] + K_I I[k] + K_D D[k], where the integral and the filtered derivative
 //! s/(T_L s + 1) are discretised with backward Euler (s <- (z - 1)/(T_s z)) or Tustin
-//! (s <- 2/T_s (z - 1)/(z + 1)). The output is applied at once and held (ZOH) for one period.
+//! (s <- 2/T_s (z - 1)/(z + 1)), exactly as `control::pid::Pid` does. The output is applied at
+//! once and held (ZOH) for one period.
 
 use super::{c_expj, Complex, PidGains};
 
-/// Discretisation of the integral and the filtered derivative.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Discretization {
-    /// s <- (z - 1)/(T_s z).
-    BackwardEuler,
-    /// s <- (2/T_s)(z - 1)/(z + 1).
-    Tustin,
-}
+/// Discretisation of the integral and the filtered derivative: the rule the discrete controller
+/// (`control::pid`) implements, so the verification analyses the controller that will run.
+pub use crate::control::pid::Discretization;
 
 impl Discretization {
     /// "backward-euler" or "tustin".

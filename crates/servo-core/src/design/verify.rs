@@ -367,6 +367,35 @@ mod tests {
         }
     }
 
+    /// The discrete loop analysed here is the loop `servo run` closes: the real `control::Pid`
+    /// driving the ZOH plant gives the same step response (reference stepped at k = 1, because the
+    /// Pid primes its derivative history on its first sample).
+    #[test]
+    fn discrete_loop_matches_the_running_pid() {
+        use crate::control::pid::{Pid, PidConfig};
+        for method in [Discretization::BackwardEuler, Discretization::Tustin] {
+            let mut q = request(30.0, 60.0, false);
+            q.discretization = method;
+            let r = design(&q).unwrap();
+            let plant = &r.discrete_plant;
+            let mut cfg = PidConfig::new(r.gains, plant.ts_s);
+            cfg.discretization = method;
+            let mut pid = Pid::new(cfg).unwrap();
+            let mut x = nalgebra::DVector::<f64>::zeros(plant.phi.nrows());
+            let y_ref = &r.discrete.response.y_rad;
+            let mut worst = 0.0f64;
+            for k in 0..400 {
+                let y = plant.c.dot(&x);
+                if k >= 1 {
+                    worst = worst.max((y - y_ref[k - 1]).abs());
+                }
+                let u = pid.update(if k >= 1 { 1.0 } else { 0.0 }, y, 0.0).u_v;
+                x = &plant.phi * &x + &plant.gamma * u;
+            }
+            assert!(worst < 1e-9, "{method:?}: max deviation {worst}");
+        }
+    }
+
     #[test]
     fn step_metrics_plausible() {
         let r = design(&request(30.0, 60.0, false)).unwrap();
