@@ -20,17 +20,40 @@ fn csv_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
 
 #[test]
 fn every_realdata_csv_imports() {
-    let Some(dir) = servo_e2e::realdata_dir() else { return };
+    let Some(dir) = servo_e2e::realdata_dir() else {
+        return;
+    };
     let mut files = Vec::new();
     csv_files(&dir, &mut files);
     files.sort();
-    assert!(files.len() >= 12, "expected the 12 lab CSVs, found {}", files.len());
+    assert!(
+        files.len() >= 12,
+        "expected the 12 lab CSVs, found {}",
+        files.len()
+    );
     for f in &files {
-        let (rec, meta) = read_log_with_meta(f, None).unwrap_or_else(|e| panic!("{}: {e:#}", f.display()));
+        let (rec, meta) =
+            read_log_with_meta(f, None).unwrap_or_else(|e| panic!("{}: {e:#}", f.display()));
         assert!(rec.len() > 1000, "{}: {} rows", f.display(), rec.len());
-        assert!((rec.sample_period_s() - 1e-3).abs() < 1e-9, "{}: Ts = {}", f.display(), rec.sample_period_s());
-        assert!(rec.signals().len() >= 2, "{}: only {:?}", f.display(), rec.signals());
-        println!("{}: {} rows, {:?}, {:?}", f.display(), rec.len(), rec.signals(), meta.notes);
+        assert!(
+            (rec.sample_period_s() - 1e-3).abs() < 1e-9,
+            "{}: Ts = {}",
+            f.display(),
+            rec.sample_period_s()
+        );
+        assert!(
+            rec.signals().len() >= 2,
+            "{}: only {:?}",
+            f.display(),
+            rec.signals()
+        );
+        println!(
+            "{}: {} rows, {:?}, {:?}",
+            f.display(),
+            rec.len(),
+            rec.signals(),
+            meta.notes
+        );
     }
 }
 
@@ -40,12 +63,16 @@ fn raw_column(path: &Path, column: &str) -> Vec<f64> {
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let i = header.iter().position(|h| *h == column).unwrap();
-    lines.map(|l| l.split(',').nth(i).unwrap().parse::<f64>().unwrap()).collect()
+    lines
+        .map(|l| l.split(',').nth(i).unwrap().parse::<f64>().unwrap())
+        .collect()
 }
 
 #[test]
 fn realdata_units_are_converted() {
-    let Some(dir) = servo_e2e::realdata_dir() else { return };
+    let Some(dir) = servo_e2e::realdata_dir() else {
+        return;
+    };
     // jacopisky: thl in deg -> rad, wm in deg/s (motor side) -> rad/s, u in V, ia in A.
     let f = dir.join("padova2021-jacopisky/csv/friction_pos.csv");
     let rec = read_log(&f, None).unwrap();
@@ -61,14 +88,25 @@ fn realdata_units_are_converted() {
     let wm_deg = raw_column(&f, "wm_deg_per_s");
     let k = wm.len() - 2000; // last speed step: ~660 rad/s at the motor
     assert!((wm[k] - wm_deg[k] * PI / 180.0).abs() < 1e-9 * wm_deg[k].abs());
-    assert!((600.0..700.0).contains(&wm[k]), "motor speed {} rad/s", wm[k]);
+    assert!(
+        (600.0..700.0).contains(&wm[k]),
+        "motor speed {} rad/s",
+        wm[k]
+    );
     assert_eq!(rec.u_v.as_ref().unwrap()[1], 2.93215);
     assert!(rec.ref_rad.is_some() && rec.i_a_a.is_some());
 
     // An explicit map gives the same as the guess; units apply (mA here on purpose).
-    let rec2 = read_log(&f, Some("time=t_s:s,theta_l=thl_meas_deg:deg,u=u_V:V,i_a=ia_A:mA")).unwrap();
+    let rec2 = read_log(
+        &f,
+        Some("time=t_s:s,theta_l=thl_meas_deg:deg,u=u_V:V,i_a=ia_A:mA"),
+    )
+    .unwrap();
     assert_eq!(rec2.theta_l_rad, rec.theta_l_rad);
-    assert!((rec2.i_a_a.as_ref().unwrap()[30000] - rec.i_a_a.as_ref().unwrap()[30000] * 1e-3).abs() < 1e-15);
+    assert!(
+        (rec2.i_a_a.as_ref().unwrap()[30000] - rec.i_a_a.as_ref().unwrap()[30000] * 1e-3).abs()
+            < 1e-15
+    );
 
     // mustacchi: wm in rpm -> rad/s; last step 6300 rpm = 659.7 rad/s.
     let rec = read_log(&dir.join("padova2022-mustacchi/csv/friction_pos.csv"), None).unwrap();
@@ -81,21 +119,59 @@ fn realdata_units_are_converted() {
     let mean: f64 = wl[42000..44000].iter().sum::<f64>() / 2000.0;
     assert!((mean - 450.0 * 2.0 * PI / 60.0).abs() < 2.0, "{mean}");
     // mustacchi step: 360 deg reference = 2 pi rad.
-    let rec = read_log(&dir.join("padova2022-mustacchi/csv/pid_aw_step360.csv"), None).unwrap();
+    let rec = read_log(
+        &dir.join("padova2022-mustacchi/csv/pid_aw_step360.csv"),
+        None,
+    )
+    .unwrap();
     let r = rec.ref_rad.as_ref().unwrap();
-    assert!((r[r.len() - 1] - 2.0 * PI).abs() < 1e-9, "{}", r[r.len() - 1]);
+    assert!(
+        (r[r.len() - 1] - 2.0 * PI).abs() < 1e-9,
+        "{}",
+        r[r.len() - 1]
+    );
 }
 
 #[test]
 fn bad_csv_inputs_name_file_line_column() {
     let dir = tempfile::tempdir().unwrap();
     let cases: [(&str, &str, Option<&str>, &[&str]); 6] = [
-        ("num.csv", "time_s,u_V,theta_l_rad\n0,1,0\n0.001,1,x\n", None, &["num.csv", "line 3", "column 3", "theta_l_rad", "`x`"]),
-        ("time.csv", "time_s,u_V\n0,1\n0.002,1\n0.001,1\n", None, &["time.csv", "line 4", "increase"]),
-        ("fields.csv", "time_s,u_V\n0,1\n0.001\n", None, &["fields.csv", "line 3", "expected 2 fields"]),
-        ("hdr.csv", "foo,bar\n0,1\n", None, &["hdr.csv", "`foo,bar`", "--columns time="]),
-        ("map.csv", "t,x\n0,1\n", Some("time=t,theta_l=y:deg"), &["map.csv", "no column `y`", "`t,x`"]),
-        ("unit.csv", "t,x\n0,1\n", Some("time=t,theta_l=x:rpm"), &["--columns", "rpm", "angle"]),
+        (
+            "num.csv",
+            "time_s,u_V,theta_l_rad\n0,1,0\n0.001,1,x\n",
+            None,
+            &["num.csv", "line 3", "column 3", "theta_l_rad", "`x`"],
+        ),
+        (
+            "time.csv",
+            "time_s,u_V\n0,1\n0.002,1\n0.001,1\n",
+            None,
+            &["time.csv", "line 4", "increase"],
+        ),
+        (
+            "fields.csv",
+            "time_s,u_V\n0,1\n0.001\n",
+            None,
+            &["fields.csv", "line 3", "expected 2 fields"],
+        ),
+        (
+            "hdr.csv",
+            "foo,bar\n0,1\n",
+            None,
+            &["hdr.csv", "`foo,bar`", "--columns time="],
+        ),
+        (
+            "map.csv",
+            "t,x\n0,1\n",
+            Some("time=t,theta_l=y:deg"),
+            &["map.csv", "no column `y`", "`t,x`"],
+        ),
+        (
+            "unit.csv",
+            "t,x\n0,1\n",
+            Some("time=t,theta_l=x:rpm"),
+            &["--columns", "rpm", "angle"],
+        ),
     ];
     for (name, text, cols, needles) in cases {
         let p = dir.path().join(name);
@@ -105,7 +181,10 @@ fn bad_csv_inputs_name_file_line_column() {
             assert!(e.contains(n), "{name}: `{n}` not in: {e}");
         }
     }
-    let e = format!("{:#}", read_log(Path::new("/nonexistent/x.csv"), None).unwrap_err());
+    let e = format!(
+        "{:#}",
+        read_log(Path::new("/nonexistent/x.csv"), None).unwrap_err()
+    );
     assert!(e.contains("/nonexistent/x.csv"), "{e}");
     let e = format!("{:#}", read_log(Path::new("x.dat"), None).unwrap_err());
     assert!(e.contains(".mcap or .csv"), "{e}");

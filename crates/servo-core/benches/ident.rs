@@ -41,12 +41,21 @@ fn record() -> Record {
         w.push(wk + 2.0 * rng.normal());
         ia.push(tau / kt + 2e-3 * rng.normal());
     }
-    Record { source: "bench".into(), time_s: t, omega_m_rad_s: Some(w), i_a_a: Some(ia), ..Record::default() }
+    Record {
+        source: "bench".into(),
+        time_s: t,
+        omega_m_rad_s: Some(w),
+        i_a_a: Some(ia),
+        ..Record::default()
+    }
 }
 
 fn bench(c: &mut Criterion) {
     let rec = record();
-    let p = PlantParams { k_t: 7.68e-3, ..PlantParams::TABLE2 };
+    let p = PlantParams {
+        k_t: 7.68e-3,
+        ..PlantParams::TABLE2
+    };
     let mut g = c.benchmark_group("ident");
     g.sample_size(10);
     g.bench_function("10min_1kHz_friction+inertia+combined", |bch| {

@@ -107,10 +107,18 @@ mod tests {
         assert!(s.contains("\"ref_rad\":null"), "{s}");
         let b: LoopMsg = serde_json::from_str(&s).unwrap();
         assert!(b.ref_rad.is_nan() && b.err_rad.is_nan());
-        assert_eq!((b.time_s, b.theta_l_rad, b.u_v, b.p_v), (m.time_s, m.theta_l_rad, m.u_v, m.p_v));
+        assert_eq!(
+            (b.time_s, b.theta_l_rad, b.u_v, b.p_v),
+            (m.time_s, m.theta_l_rad, m.u_v, m.p_v)
+        );
         let schema: serde_json::Value = serde_json::from_str(&loop_schema()).unwrap();
         let props = schema["properties"].as_object().unwrap();
-        for k in serde_json::from_str::<serde_json::Value>(&s).unwrap().as_object().unwrap().keys() {
+        for k in serde_json::from_str::<serde_json::Value>(&s)
+            .unwrap()
+            .as_object()
+            .unwrap()
+            .keys()
+        {
             assert!(props.contains_key(k), "schema lacks {k}");
         }
     }

@@ -30,7 +30,8 @@ pub struct McapRun {
 
 /// Reads the MCAP file `path`.
 pub fn read_mcap(path: &Path) -> anyhow::Result<McapRun> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading MCAP log {}", path.display()))?;
+    let bytes =
+        std::fs::read(path).with_context(|| format!("reading MCAP log {}", path.display()))?;
     parse_mcap(&bytes, &path.display().to_string())
 }
 
@@ -39,8 +40,11 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
     if bytes.len() < mcap::MAGIC.len() || &bytes[..mcap::MAGIC.len()] != mcap::MAGIC {
         bail!("{source}: not an MCAP file (bad magic bytes at the start)");
     }
-    let reader = ChunkFlattener::new_with_options(bytes, Options::IgnoreEndMagic | Options::ValidateChunkCrcs)
-        .map_err(|e| anyhow!("{source}: {e}"))?;
+    let reader = ChunkFlattener::new_with_options(
+        bytes,
+        Options::IgnoreEndMagic | Options::ValidateChunkCrcs,
+    )
+    .map_err(|e| anyhow!("{source}: {e}"))?;
     let mut topics: HashMap<u16, String> = HashMap::new();
     let mut run = McapRun::default();
     let mut data_end = false;
@@ -50,7 +54,11 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
             Ok(r) => r,
             Err(e) => {
                 if !data_end {
-                    let upto = run.loop_msgs.last().map(|m| format!("{} s", m.time_s)).unwrap_or_else(|| "the start".into());
+                    let upto = run
+                        .loop_msgs
+                        .last()
+                        .map(|m| format!("{} s", m.time_s))
+                        .unwrap_or_else(|| "the start".into());
                     run.notes.push(format!(
                         "{source}: the log is truncated or damaged ({e}); read {} samples up to {upto}, \
                          the rest (the unflushed chunk, at most 100 ms of a killed run) is lost",
@@ -65,10 +73,16 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
                 topics.insert(c.id, c.topic);
             }
             McapRecord::Message { header, data } if !data_end => {
-                let topic = topics.get(&header.channel_id).map(String::as_str).unwrap_or("");
+                let topic = topics
+                    .get(&header.channel_id)
+                    .map(String::as_str)
+                    .unwrap_or("");
                 if topic == LOOP_TOPIC {
                     let m: LoopMsg = serde_json::from_slice(&data).map_err(|e| {
-                        anyhow!("{source}: message {} on {LOOP_TOPIC} is not a servo loop message: {e}", header.sequence)
+                        anyhow!(
+                            "{source}: message {} on {LOOP_TOPIC} is not a servo loop message: {e}",
+                            header.sequence
+                        )
                     })?;
                     run.loop_msgs.push(m);
                 } else {
@@ -90,11 +104,21 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
         ));
     }
     if run.loop_msgs.is_empty() {
-        let others: Vec<String> = other_topics.iter().map(|(t, n)| format!("{t} ({n})")).collect();
+        let others: Vec<String> = other_topics
+            .iter()
+            .map(|(t, n)| format!("{t} ({n})"))
+            .collect();
         bail!(
             "{source}: no {LOOP_TOPIC} messages{}{}",
-            if others.is_empty() { String::new() } else { format!("; topics found: {}", others.join(", ")) },
-            run.notes.first().map(|n| format!("; {n}")).unwrap_or_default()
+            if others.is_empty() {
+                String::new()
+            } else {
+                format!("; topics found: {}", others.join(", "))
+            },
+            run.notes
+                .first()
+                .map(|n| format!("; {n}"))
+                .unwrap_or_default()
         );
     }
     run.record = record_of(&run.loop_msgs, source);
@@ -143,7 +167,15 @@ mod tests {
     fn write(path: &Path, n: usize, finish: bool) {
         let mut meta = BTreeMap::new();
         meta.insert("gains_toml".to_string(), "[pid]\nkp = 1.0\n".to_string());
-        let mut log = McapLog::create(path, &meta, McapLogOptions { start_unix_ns: 5, ..McapLogOptions::default() }).unwrap();
+        let mut log = McapLog::create(
+            path,
+            &meta,
+            McapLogOptions {
+                start_unix_ns: 5,
+                ..McapLogOptions::default()
+            },
+        )
+        .unwrap();
         for k in 0..n {
             log.write_loop(&msg(k)).unwrap();
         }
@@ -212,7 +244,10 @@ mod tests {
                         assert!(same(m, &msg(k)));
                     }
                 }
-                Err(e) => assert!(format!("{e:#}").contains("no /servo/loop messages"), "{e:#}"),
+                Err(e) => assert!(
+                    format!("{e:#}").contains("no /servo/loop messages"),
+                    "{e:#}"
+                ),
             }
         }
         assert!(last > 800, "{last}");
