@@ -647,3 +647,67 @@ fn cli_identify_refuses_bad_input_clearly() {
     ]);
     assert!(!ok && err.contains("nothing could be identified"), "{err}");
 }
+
+#[test]
+fn cli_identify_ramp_runs_the_experiments_on_the_simulator() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let mut truth = servo_cli::model_file::ModelFile::default();
+    truth.params = truth_params_for_cli();
+    let plant = d.join("truth.toml");
+    truth.save(&plant).unwrap();
+    let fr = d.join("fr.toml");
+    std::fs::write(&fr, "speeds_rad_s = [100.0, 250.0, 400.0, 550.0]\nstep_duration_s = 1.5\nboth_directions = true\nrest_s = 0.5\n").unwrap();
+    let ir = d.join("ir.toml");
+    std::fs::write(
+        &ir,
+        "accel_rad_s2 = 660.0\npeak_speed_rad_s = 600.0\nbase_speed_rad_s = 30.0\ncycles = 4\n",
+    )
+    .unwrap();
+    let out = d.join("ident.toml");
+    let logs = d.join("logs");
+    let (ok, stdout, stderr) = servo_e2e::servo(&[
+        "identify",
+        "--ramp",
+        "--plant",
+        plant.to_str().unwrap(),
+        "--friction-recipe",
+        fr.to_str().unwrap(),
+        "--inertia-recipe",
+        ir.to_str().unwrap(),
+        "--log-dir",
+        logs.to_str().unwrap(),
+        "--json",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(
+        logs.join("identify_friction.mcap").exists() && logs.join("identify_inertia.mcap").exists()
+    );
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let b = v["B_eq"]["value"].as_f64().unwrap();
+    let t = v["tau_sf"]["value"].as_f64().unwrap();
+    let j = v["J_eq"]["value"].as_f64().unwrap();
+    assert!((b / 1.1e-6 - 1.0).abs() < 0.01, "{v}");
+    assert!((t / 8e-3 - 1.0).abs() < 0.01, "{v}");
+    assert!((j / 7e-7 - 1.0).abs() < 0.015, "{v}"); // see sim_j_ok
+    let m = servo_cli::model_file::ModelFile::load(&out).unwrap();
+    assert_eq!(m.params.b_eq, Some(b));
+    // The logs alone give the same answer (`servo identify LOG...` on servo's MCAP).
+    let (ok, stdout2, stderr) = servo_e2e::servo(&[
+        "identify",
+        logs.join("identify_friction.mcap").to_str().unwrap(),
+        logs.join("identify_inertia.mcap").to_str().unwrap(),
+        "--plant",
+        plant.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    let v2: serde_json::Value = serde_json::from_str(&stdout2).unwrap();
+    assert_eq!(v2["B_eq"]["value"], v["B_eq"]["value"]);
+}
+
+fn truth_params_for_cli() -> PlantParams {
+    truth()
+}
