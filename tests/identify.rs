@@ -8,7 +8,7 @@ use servo_cli::cmd::identify_ramp::{run_speed_loop, FrictionRecipe, InertiaRecip
 use servo_core::ident::combined::{identify_combined, CombinedConfig};
 use servo_core::ident::electrical::identify_electrical;
 use servo_core::ident::friction::{identify_friction, FrictionConfig};
-use servo_core::ident::inertia::identify_inertia;
+use servo_core::ident::inertia::{identify_inertia, identify_inertia_ls};
 use servo_core::ident::phases::PhaseConfig;
 use servo_core::ident::Experiment;
 use servo_core::record::Record;
@@ -196,6 +196,29 @@ fn real_data_library_reproduces_published_estimates() {
         } else {
             within("J_eq", j.j_eq.value, g.j_eq, 0.03);
         }
+        // SOURCE.txt's own alternative: LS on |a_m| above 300 (400 for mustacchi) rad/s^2, friction removed.
+        let (thr, want_ls) = match g.dir {
+            d if d.contains("jacopisky") => (300.0, 7.35e-7),
+            d if d.contains("savian") => (300.0, 7.21e-7),
+            _ => (400.0, 5.55e-7),
+        };
+        let pc = PhaseConfig {
+            min_accel_rad_s2: Some(thr),
+            ..PhaseConfig::default()
+        };
+        let jl = identify_inertia_ls(std::slice::from_ref(&inertia), Some(&f), &pc).unwrap();
+        within("J_eq (LS on |a| > thr)", jl.j_eq.value, want_ls, 0.03);
+        let fs = identify_friction(
+            &exps,
+            p.n,
+            &FrictionConfig {
+                samples: true,
+                ..FrictionConfig::default()
+            },
+        )
+        .unwrap();
+        within("B_eq (samples)", fs.b_eq.value, g.b_eq, 0.03);
+        within("tau_sf (samples)", fs.tau_sf.value, g.tau_sf, 0.03);
         let mut all = exps.clone();
         all.push(inertia.clone());
         match identify_combined(&all, p.n, &CombinedConfig::default()) {
