@@ -68,6 +68,36 @@ fn bench(c: &mut Criterion) {
             (f.b_eq.value, j.j_eq.value, c.j_eq.value)
         })
     });
+    let e = Experiment::from_record(&rec, &p).unwrap();
+    let exps = std::slice::from_ref(&e);
+    let f = identify_friction(exps, p.n, &FrictionConfig::default()).unwrap();
+    g.bench_function("part_prepare", |bch| {
+        bch.iter(|| Experiment::from_record(&rec, &p).unwrap().time_s.len())
+    });
+    g.bench_function("part_friction", |bch| {
+        bch.iter(|| {
+            identify_friction(exps, p.n, &FrictionConfig::default())
+                .unwrap()
+                .b_eq
+                .value
+        })
+    });
+    g.bench_function("part_inertia", |bch| {
+        bch.iter(|| {
+            identify_inertia(exps, Some(&f), &PhaseConfig::default())
+                .unwrap()
+                .j_eq
+                .value
+        })
+    });
+    g.bench_function("part_combined", |bch| {
+        bch.iter(|| {
+            identify_combined(exps, p.n, &CombinedConfig::default())
+                .unwrap()
+                .j_eq
+                .value
+        })
+    });
     g.finish();
 }
 
