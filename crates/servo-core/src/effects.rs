@@ -17,6 +17,8 @@
 //! | `deadzone` | `width` V: dead band (half width) on the driver input u |
 //! | `delay` | `delay` s: input transport delay beyond the one-sample zero-order hold |
 
+pub mod torque;
+
 use core::fmt;
 
 /// One parameter of a catalogue effect.

@@ -5,6 +5,7 @@
 //! * [`effects`]: the effect catalogue, the one definition of every physical mechanism that the
 //!   simulator, the model fit and the diagnosis use.
 //! * [`plant`]: a parameter set together with its active effects: the model of one gearmotor.
+//! * [`control`]: discrete PID, feedforward compensation, reference generators and sequences.
 //! * [`sim`]: integration of the plant with its effects (truth for the simulator, model for
 //!   `compare`).
 //!
@@ -16,16 +17,27 @@
 #[cfg(feature = "alloc")]
 extern crate alloc;
 
+#[cfg(feature = "alloc")]
+pub mod compare;
+pub mod control;
+pub mod design;
+#[cfg(feature = "alloc")]
+pub mod diagnose;
 pub mod effects;
+#[cfg(feature = "alloc")]
+pub mod fit;
+#[cfg(feature = "alloc")]
+pub mod ident;
 pub mod math;
 pub mod params;
 pub mod plant;
 pub mod protocol;
-pub mod safety;
 #[cfg(feature = "alloc")]
 pub mod record;
+pub mod safety;
 pub mod sim;
 
+pub use design::DesignError;
 pub use effects::{Effect, EffectKind, Effects};
 pub use params::{ParamError, PlantParams};
 pub use plant::Plant;

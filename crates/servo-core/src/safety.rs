@@ -50,8 +50,14 @@ pub enum LimitsError {
 pub enum Trip {
     #[error("over-current: |i_a| = {i_a_a:.3} A > trip level {i_trip_a:.3} A")]
     OverCurrent { i_a_a: f64, i_trip_a: f64 },
-    #[error("position limit: theta_l = {theta_l_rad:.3} rad outside [{min_rad:.3}, {max_rad:.3}] rad")]
-    PositionLimit { theta_l_rad: f64, min_rad: f64, max_rad: f64 },
+    #[error(
+        "position limit: theta_l = {theta_l_rad:.3} rad outside [{min_rad:.3}, {max_rad:.3}] rad"
+    )]
+    PositionLimit {
+        theta_l_rad: f64,
+        min_rad: f64,
+        max_rad: f64,
+    },
     #[error("non-finite measurement")]
     NonFinite,
 }
@@ -63,7 +69,10 @@ impl SafetyLimits {
             return Err(LimitsError::VoltageLimit(self.voltage_limit_v));
         }
         if !(self.theta_min_rad < self.theta_max_rad) {
-            return Err(LimitsError::PositionLimits(self.theta_min_rad, self.theta_max_rad));
+            return Err(LimitsError::PositionLimits(
+                self.theta_min_rad,
+                self.theta_max_rad,
+            ));
         }
         if !(self.i_trip_a > 0.0) {
             return Err(LimitsError::CurrentTrip(self.i_trip_a));
@@ -87,10 +96,17 @@ impl SafetyLimits {
             return Err(Trip::NonFinite);
         }
         if i_a_a > self.i_trip_a || i_a_a < -self.i_trip_a {
-            return Err(Trip::OverCurrent { i_a_a, i_trip_a: self.i_trip_a });
+            return Err(Trip::OverCurrent {
+                i_a_a,
+                i_trip_a: self.i_trip_a,
+            });
         }
         if theta_l_rad < self.theta_min_rad || theta_l_rad > self.theta_max_rad {
-            return Err(Trip::PositionLimit { theta_l_rad, min_rad: self.theta_min_rad, max_rad: self.theta_max_rad });
+            return Err(Trip::PositionLimit {
+                theta_l_rad,
+                min_rad: self.theta_min_rad,
+                max_rad: self.theta_max_rad,
+            });
         }
         Ok(())
     }
@@ -109,9 +125,16 @@ mod tests {
         assert_eq!(l.clamp_voltage(f64::NAN), (0.0, true));
         assert!(l.check(1.0, 1.9).is_ok());
         assert!(matches!(l.check(1.0, -2.6), Err(Trip::OverCurrent { .. })));
-        assert!(matches!(l.check(13.0, 0.0), Err(Trip::PositionLimit { .. })));
+        assert!(matches!(
+            l.check(13.0, 0.0),
+            Err(Trip::PositionLimit { .. })
+        ));
         assert_eq!(l.check(f64::NAN, 0.0), Err(Trip::NonFinite));
-        let bad = SafetyLimits { theta_min_rad: 1.0, theta_max_rad: 0.0, ..l };
+        let bad = SafetyLimits {
+            theta_min_rad: 1.0,
+            theta_max_rad: 0.0,
+            ..l
+        };
         assert!(bad.validate().is_err());
     }
 }

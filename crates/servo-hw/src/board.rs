@@ -91,7 +91,9 @@ impl BoardConfig {
                 self.physics_substeps
             )));
         }
-        self.limits.validate().map_err(|e| HwError::Safety(e.to_string()))
+        self.limits
+            .validate()
+            .map_err(|e| HwError::Safety(e.to_string()))
     }
 }
 
@@ -129,11 +131,21 @@ struct OnboardPid {
 
 impl OnboardPid {
     fn new(g: LoopGains) -> Self {
-        OnboardPid { g, integral_v: 0.0, d_v: 0.0, e_prev: None }
+        OnboardPid {
+            g,
+            integral_v: 0.0,
+            d_v: 0.0,
+            e_prev: None,
+        }
     }
     /// u [V] for error `e_rad`, period `t_s`, clipped to `limit_v` with integrator clamping.
     fn update(&mut self, e_rad: f64, t_s: f64, limit_v: f64) -> f64 {
-        let (kp, ki, kd, tau) = (self.g.kp as f64, self.g.ki as f64, self.g.kd as f64, self.g.tau_f_s as f64);
+        let (kp, ki, kd, tau) = (
+            self.g.kp as f64,
+            self.g.ki as f64,
+            self.g.kd as f64,
+            self.g.tau_f_s as f64,
+        );
         let de = self.e_prev.map_or(0.0, |p| e_rad - p);
         self.e_prev = Some(e_rad);
         self.d_v = (tau * self.d_v + kd * de) / (tau + t_s);
@@ -182,7 +194,11 @@ enum Link {
 
 impl VirtualBoard {
     /// A board for `plant` with its sensors and firmware constants.
-    pub fn new(plant: &Plant, sensors: SensorConfig, cfg: BoardConfig) -> Result<VirtualBoard, HwError> {
+    pub fn new(
+        plant: &Plant,
+        sensors: SensorConfig,
+        cfg: BoardConfig,
+    ) -> Result<VirtualBoard, HwError> {
         cfg.validate()?;
         let h = cfg.sample_period_s / cfg.physics_substeps as f64;
         Ok(VirtualBoard {
@@ -226,14 +242,19 @@ impl VirtualBoard {
 
     /// Serves the protocol on `port` until `stop` is set or the host side closes (POLLHUP).
     /// I/O errors other than a closed peer are returned.
-    pub fn serve(&mut self, port: &mut dyn SerialPort, stop: &AtomicBool) -> Result<BoardReport, HwError> {
+    pub fn serve(
+        &mut self,
+        port: &mut dyn SerialPort,
+        stop: &AtomicBool,
+    ) -> Result<BoardReport, HwError> {
         let mut run: Option<Run> = None;
         let mut msgs = Vec::new();
         self.idle_since = Instant::now();
         while !stop.load(Ordering::Relaxed) {
             match run.take() {
                 None => {
-                    let link = self.receive(port, Instant::now() + Duration::from_millis(50), &mut msgs)?;
+                    let link =
+                        self.receive(port, Instant::now() + Duration::from_millis(50), &mut msgs)?;
                     self.coast_idle();
                     for (at, m) in msgs.drain(..) {
                         if run.is_none() {
@@ -295,7 +316,11 @@ impl VirtualBoard {
             }
             if r.last_cmd_at.elapsed() > watchdog {
                 r.u_v = 0.0;
-                let what = if r.onboard.is_some() { "reference" } else { "voltage command" };
+                let what = if r.onboard.is_some() {
+                    "reference"
+                } else {
+                    "voltage command"
+                };
                 let text = format!("watchdog: no {what} for {} ms", watchdog.as_millis());
                 self.fault(port, FaultCode::Watchdog, &text)?;
                 return Ok((false, Link::Open));
@@ -314,15 +339,26 @@ impl VirtualBoard {
             self.report.missed_deadlines += 1;
         }
         let rtt_us = match r.cmd_for_k {
-            Some(at) => at.saturating_duration_since(r.sample_sent_at).as_micros().min(0xFFFE) as u16,
+            Some(at) => at
+                .saturating_duration_since(r.sample_sent_at)
+                .as_micros()
+                .min(0xFFFE) as u16,
             None => 0xFFFF,
         };
         r.k = r.k.wrapping_add(1);
         let u_applied = r.u_v;
         let was_clipped = r.clipped;
         let flags = if missed { flags::MISSED_DEADLINE } else { 0 }
-            | if r.onboard.is_some() { flags::ONBOARD_LOOP } else { 0 }
-            | if was_clipped { flags::VOLTAGE_CLIPPED } else { 0 };
+            | if r.onboard.is_some() {
+                flags::ONBOARD_LOOP
+            } else {
+                0
+            }
+            | if was_clipped {
+                flags::VOLTAGE_CLIPPED
+            } else {
+                0
+            };
         let keep = self.send_sample(port, r, u_applied, rtt_us, flags)?;
         Ok((keep, Link::Open))
     }
@@ -339,21 +375,30 @@ impl VirtualBoard {
         let m = self.sensors.measure(self.sim.state());
         let count = m.encoder_count - r.count0;
         let cpr = self.sensors.config().counts_per_rev;
-        let theta = if cpr > 0 { count as f64 * math::TAU / cpr as f64 } else { m.theta_l_rad };
+        let theta = if cpr > 0 {
+            count as f64 * math::TAU / cpr as f64
+        } else {
+            m.theta_l_rad
+        };
         if let Err(trip) = self.cfg.limits.check(self.sim.state().theta_l_rad, m.i_a_a) {
             r.u_v = 0.0;
             self.fault(port, trip.into(), &trip.to_string())?;
             return Ok(false);
         }
         if let Some((pid, ref_rad)) = r.onboard.as_mut() {
-            let u = pid.update(*ref_rad - theta, self.cfg.sample_period_s, self.cfg.limits.voltage_limit_v);
+            let u = pid.update(
+                *ref_rad - theta,
+                self.cfg.sample_period_s,
+                self.cfg.limits.voltage_limit_v,
+            );
             r.u_v = u;
         }
         let sample = Sample {
             seq: r.k,
             time_us: (r.k as u64 * math::round(self.cfg.sample_period_s * 1e6) as u64) as u32,
             encoder_count: count.clamp(i32::MIN as i64, i32::MAX as i64) as i32,
-            current_raw: math::round(m.i_a_a / self.cfg.current_scale_a_per_lsb).clamp(-32768.0, 32767.0) as i16,
+            current_raw: math::round(m.i_a_a / self.cfg.current_scale_a_per_lsb)
+                .clamp(-32768.0, 32767.0) as i16,
             u_applied_v: u_applied_v as f32,
             rtt_us,
             flags,
@@ -365,7 +410,12 @@ impl VirtualBoard {
         Ok(true)
     }
 
-    fn start_run(&mut self, port: &mut dyn SerialPort, at: Instant, onboard: Option<(OnboardPid, f64)>) -> Result<Option<Run>, HwError> {
+    fn start_run(
+        &mut self,
+        port: &mut dyn SerialPort,
+        at: Instant,
+        onboard: Option<(OnboardPid, f64)>,
+    ) -> Result<Option<Run>, HwError> {
         self.coast_idle();
         self.report.runs += 1;
         self.bad_cmd_reported = false;
@@ -388,7 +438,12 @@ impl VirtualBoard {
         Ok(keep.then_some(r))
     }
 
-    fn handle_idle(&mut self, port: &mut dyn SerialPort, m: Message, at: Instant) -> Result<Option<Run>, HwError> {
+    fn handle_idle(
+        &mut self,
+        port: &mut dyn SerialPort,
+        m: Message,
+        at: Instant,
+    ) -> Result<Option<Run>, HwError> {
         match m {
             Message::Hello { protocol_version } => self.hello(port, protocol_version)?,
             Message::Start => return self.start_run(port, at, None),
@@ -408,10 +463,18 @@ impl VirtualBoard {
     }
 
     /// Handles a message during a run; returns whether the run goes on.
-    fn handle_running(&mut self, port: &mut dyn SerialPort, r: &mut Run, m: Message, at: Instant) -> Result<bool, HwError> {
+    fn handle_running(
+        &mut self,
+        port: &mut dyn SerialPort,
+        r: &mut Run,
+        m: Message,
+        at: Instant,
+    ) -> Result<bool, HwError> {
         match m {
             Message::SetVoltage { seq, u_v } => {
-                let newer = r.last_seq_applied.map_or(true, |l| (seq.wrapping_sub(l) as i32) > 0);
+                let newer = r
+                    .last_seq_applied
+                    .map_or(true, |l| (seq.wrapping_sub(l) as i32) > 0);
                 if !newer {
                     return Ok(true);
                 }
@@ -492,7 +555,12 @@ impl VirtualBoard {
         self.fault(port, FaultCode::BadCommand, text)
     }
 
-    fn fault(&mut self, port: &mut dyn SerialPort, code: FaultCode, text: &str) -> Result<(), HwError> {
+    fn fault(
+        &mut self,
+        port: &mut dyn SerialPort,
+        code: FaultCode,
+        text: &str,
+    ) -> Result<(), HwError> {
         self.report.faults.push((code, text.to_string()));
         self.bad_cmd_reported = true;
         self.send(port, &Message::Fault(Fault::new(code, text)))
@@ -530,7 +598,10 @@ impl VirtualBoard {
         let mut buf = [0u8; 256];
         loop {
             let now = Instant::now();
-            let Some(wait) = deadline.checked_duration_since(now).filter(|d| !d.is_zero()) else {
+            let Some(wait) = deadline
+                .checked_duration_since(now)
+                .filter(|d| !d.is_zero())
+            else {
                 return Ok(Link::Open);
             };
             port.set_timeout(wait)?;
@@ -550,7 +621,9 @@ impl VirtualBoard {
                 }
                 Err(e) if e.kind() == ErrorKind::TimedOut => return Ok(Link::Open),
                 Err(e) if e.kind() == ErrorKind::Interrupted => {}
-                Err(e) if matches!(e.kind(), ErrorKind::BrokenPipe) || e.raw_os_error() == Some(5) => {
+                Err(e)
+                    if matches!(e.kind(), ErrorKind::BrokenPipe) || e.raw_os_error() == Some(5) =>
+                {
                     return Ok(Link::Closed)
                 }
                 Err(e) => {

@@ -11,6 +11,6 @@ pub mod serial;
 pub mod sim;
 
 pub use backend::{Backend, BoardInfo, HwError, Sample};
-pub use sim::SimBackend;
 pub use board::{BoardConfig, BoardReport, VirtualBoard};
 pub use serial::{LinkStats, SerialBackend, SerialConfig};
+pub use sim::SimBackend;

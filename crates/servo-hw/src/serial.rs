@@ -78,7 +78,12 @@ pub struct LinkStats {
 impl std::fmt::Display for LinkStats {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let us = |s: f64| s * 1e6;
-        writeln!(f, "serial link: {} samples at {:.0} us period", self.samples, us(self.period_s))?;
+        writeln!(
+            f,
+            "serial link: {} samples at {:.0} us period",
+            self.samples,
+            us(self.period_s)
+        )?;
         writeln!(
             f,
             "  period jitter [us]: p50 {:.0}  p99 {:.0}  max {:.0}",
@@ -134,7 +139,10 @@ pub struct SerialBackend {
 
 impl std::fmt::Debug for SerialBackend {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SerialBackend").field("port", &self.cfg.port).field("info", &self.info).finish()
+        f.debug_struct("SerialBackend")
+            .field("port", &self.cfg.port)
+            .field("info", &self.info)
+            .finish()
     }
 }
 
@@ -149,8 +157,13 @@ impl SerialBackend {
     }
 
     /// Performs the handshake on an already open port (e.g. one end of a pty pair).
-    pub fn from_port(port: Box<dyn SerialPort>, cfg: SerialConfig) -> Result<SerialBackend, HwError> {
-        cfg.limits.validate().map_err(|e| HwError::Safety(e.to_string()))?;
+    pub fn from_port(
+        port: Box<dyn SerialPort>,
+        cfg: SerialConfig,
+    ) -> Result<SerialBackend, HwError> {
+        cfg.limits
+            .validate()
+            .map_err(|e| HwError::Safety(e.to_string()))?;
         if !(cfg.timeout_s > 0.0 && cfg.handshake_timeout_s > 0.0) {
             return Err(HwError::Protocol("serial timeouts must be > 0 s".into()));
         }
@@ -169,7 +182,12 @@ impl SerialBackend {
                 sample_period_us: 0,
                 watchdog_ms: 0,
             },
-            info: BoardInfo { firmware: "", counts_per_rev: 0, voltage_limit_v: 0.0, sample_period_s: 0.0 },
+            info: BoardInfo {
+                firmware: "",
+                counts_per_rev: 0,
+                voltage_limit_v: 0.0,
+                sample_period_s: 0.0,
+            },
             limits: cfg.limits,
             inbox: VecDeque::new(),
             started: false,
@@ -192,13 +210,18 @@ impl SerialBackend {
         self.write_raw(&[0])?;
         let wait = Duration::from_secs_f64(self.cfg.handshake_timeout_s);
         for _attempt in 0..3 {
-            self.send(&Message::Hello { protocol_version: PROTOCOL_VERSION })?;
+            self.send(&Message::Hello {
+                protocol_version: PROTOCOL_VERSION,
+            })?;
             let deadline = Instant::now() + wait;
             while let Some(m) = self.next_message(deadline)? {
                 match m {
                     Message::HelloAck(h) => return self.accept_hello(h),
                     Message::Fault(f) => {
-                        return Err(HwError::Fault { code: f.code.to_u16(), text: f.text_str().to_string() })
+                        return Err(HwError::Fault {
+                            code: f.code.to_u16(),
+                            text: f.text_str().to_string(),
+                        })
                     }
                     _ => {} // leftovers of a previous session
                 }
@@ -220,8 +243,13 @@ impl SerialBackend {
             )));
         }
         let v = h.voltage_limit_v as f64;
-        if !(v > 0.0 && v.is_finite()) || h.sample_period_us == 0 || !(h.current_scale_a_per_lsb > 0.0) {
-            return Err(HwError::Protocol(format!("board reported an invalid description: {h:?}")));
+        if !(v > 0.0 && v.is_finite())
+            || h.sample_period_us == 0
+            || !(h.current_scale_a_per_lsb > 0.0)
+        {
+            return Err(HwError::Protocol(format!(
+                "board reported an invalid description: {h:?}"
+            )));
         }
         self.limits.voltage_limit_v = self.limits.voltage_limit_v.min(v);
         // BoardInfo holds a &'static str: one small leak per connection.
@@ -260,7 +288,9 @@ impl SerialBackend {
     }
 
     fn write_raw(&mut self, bytes: &[u8]) -> Result<(), HwError> {
-        self.port.write_all(bytes).map_err(|e| port_error(&self.cfg.port, e))
+        self.port
+            .write_all(bytes)
+            .map_err(|e| port_error(&self.cfg.port, e))
     }
 
     fn send(&mut self, m: &Message) -> Result<(), HwError> {
@@ -275,12 +305,20 @@ impl SerialBackend {
             if let Some(m) = self.inbox.pop_front() {
                 return Ok(Some(m));
             }
-            let Some(wait) = deadline.checked_duration_since(Instant::now()).filter(|d| !d.is_zero()) else {
+            let Some(wait) = deadline
+                .checked_duration_since(Instant::now())
+                .filter(|d| !d.is_zero())
+            else {
                 return Ok(None);
             };
             self.port.set_timeout(wait).map_err(HwError::Serial)?;
             match self.port.read(&mut buf) {
-                Ok(0) => return Err(HwError::Protocol(format!("serial port {} closed", self.cfg.port))),
+                Ok(0) => {
+                    return Err(HwError::Protocol(format!(
+                        "serial port {} closed",
+                        self.cfg.port
+                    )))
+                }
                 Ok(n) => {
                     let inbox = &mut self.inbox;
                     self.dec.feed(&buf[..n], |r| {
@@ -297,7 +335,11 @@ impl SerialBackend {
     }
 
     /// Converts and accounts a wire sample.
-    fn accept_sample(&mut self, s: servo_core::protocol::Sample, at: Instant) -> Result<Option<Sample>, HwError> {
+    fn accept_sample(
+        &mut self,
+        s: servo_core::protocol::Sample,
+        at: Instant,
+    ) -> Result<Option<Sample>, HwError> {
         if let Some(last) = self.last_seq {
             let d = s.seq.wrapping_sub(last) as i32;
             if d <= 0 {
@@ -328,8 +370,11 @@ impl SerialBackend {
             }
         }
         let cpr = self.hello.counts_per_rev;
-        let theta_l_rad =
-            if cpr > 0 { s.encoder_count as f64 * math::TAU / cpr as f64 } else { 0.0 };
+        let theta_l_rad = if cpr > 0 {
+            s.encoder_count as f64 * math::TAU / cpr as f64
+        } else {
+            0.0
+        };
         let i_a_a = s.current_raw as f64 * self.hello.current_scale_a_per_lsb as f64;
         if let Err(trip) = self.limits.check(theta_l_rad, i_a_a) {
             return Err(HwError::Safety(format!("host-side {trip}")));
@@ -345,7 +390,9 @@ impl SerialBackend {
 }
 
 fn port_error(port: &str, e: std::io::Error) -> HwError {
-    HwError::Protocol(format!("serial port {port} failed (vanished or closed?): {e}"))
+    HwError::Protocol(format!(
+        "serial port {port} failed (vanished or closed?): {e}"
+    ))
 }
 
 impl Backend for SerialBackend {
@@ -361,11 +408,14 @@ impl Backend for SerialBackend {
             self.started = true;
             self.send(&Message::Start)?;
         }
-        let timeout = Duration::from_secs_f64(self.cfg.timeout_s.max(2.0 * self.info.sample_period_s));
+        let timeout =
+            Duration::from_secs_f64(self.cfg.timeout_s.max(2.0 * self.info.sample_period_s));
         let mut deadline = Instant::now() + timeout;
         loop {
             let Some(m) = self.next_message(deadline)? else {
-                return Err(HwError::Timeout { timeout_ms: timeout.as_millis() as u64 });
+                return Err(HwError::Timeout {
+                    timeout_ms: timeout.as_millis() as u64,
+                });
             };
             match m {
                 Message::Sample(s) => {
@@ -376,7 +426,10 @@ impl Backend for SerialBackend {
                 }
                 Message::Fault(f) => {
                     self.stopped = true;
-                    return Err(HwError::Fault { code: f.code.to_u16(), text: f.text_str().to_string() });
+                    return Err(HwError::Fault {
+                        code: f.code.to_u16(),
+                        text: f.text_str().to_string(),
+                    });
                 }
                 Message::Stopped => {
                     self.stopped = true;
@@ -392,7 +445,9 @@ impl Backend for SerialBackend {
             return Err(HwError::Safety(format!("non-finite voltage command {u_v}")));
         }
         let Some(seq) = self.last_seq else {
-            return Err(HwError::Protocol("apply() before the first sample()".into()));
+            return Err(HwError::Protocol(
+                "apply() before the first sample()".into(),
+            ));
         };
         let (u, _clipped) = self.limits.clamp_voltage(u_v);
         self.send(&Message::SetVoltage { seq, u_v: u as f32 })
@@ -404,7 +459,10 @@ impl Backend for SerialBackend {
         }
         self.stopped = true;
         self.started = false;
-        self.send(&Message::SetVoltage { seq: self.last_seq.unwrap_or(0).wrapping_add(1), u_v: 0.0 })?;
+        self.send(&Message::SetVoltage {
+            seq: self.last_seq.unwrap_or(0).wrapping_add(1),
+            u_v: 0.0,
+        })?;
         self.send(&Message::Stop)?;
         let deadline = Instant::now() + Duration::from_millis(200);
         while let Some(m) = self.next_message(deadline)? {
@@ -438,7 +496,13 @@ mod tests {
     use std::sync::atomic::AtomicBool;
     use std::sync::Arc;
 
-    fn board_thread(cfg: BoardConfig) -> (serialport::TTYPort, std::thread::JoinHandle<crate::board::BoardReport>, Arc<AtomicBool>) {
+    fn board_thread(
+        cfg: BoardConfig,
+    ) -> (
+        serialport::TTYPort,
+        std::thread::JoinHandle<crate::board::BoardReport>,
+        Arc<AtomicBool>,
+    ) {
         let (mut master, slave) = serialport::TTYPort::pair().unwrap();
         let stop = Arc::new(AtomicBool::new(false));
         let s2 = stop.clone();

@@ -18,7 +18,7 @@ pub enum Command {
     /// Print the default plant parameter file (Table 2) with units.
     Params(params::Params),
     /// Design a PID/PI/PD position controller by Bode's method and verify it.
-    Design(design::Design),
+    Design(Box<design::Design>),
     /// Run the position loop on the simulator or a board, logging to MCAP.
     Run(run::Run),
     /// Tell the whole story on the simulator: design, run, identify, compare, diagnose.

@@ -28,7 +28,10 @@ impl core::fmt::Display for FrameError {
             FrameError::Cobs => write!(f, "invalid COBS encoding"),
             FrameError::TooShort => write!(f, "frame too short"),
             FrameError::Crc { expected, got } => {
-                write!(f, "CRC mismatch: computed 0x{expected:04X}, frame says 0x{got:04X}")
+                write!(
+                    f,
+                    "CRC mismatch: computed 0x{expected:04X}, frame says 0x{got:04X}"
+                )
             }
             FrameError::Parse(e) => write!(f, "{e}"),
         }
@@ -69,7 +72,12 @@ impl Decoder {
             buf: [0; MAX_ENCODED],
             len: 0,
             overflow: false,
-            stats: DecoderStats { frames_ok: 0, crc_errors: 0, framing_errors: 0, bytes: 0 },
+            stats: DecoderStats {
+                frames_ok: 0,
+                crc_errors: 0,
+                framing_errors: 0,
+                bytes: 0,
+            },
         }
     }
 
@@ -102,7 +110,11 @@ impl Decoder {
         if len == 0 && !overflow {
             return None;
         }
-        let r = if overflow { Err(FrameError::TooLong) } else { Self::decode_block(&self.buf[..len]) };
+        let r = if overflow {
+            Err(FrameError::TooLong)
+        } else {
+            Self::decode_block(&self.buf[..len])
+        };
         match r {
             Ok(_) => self.stats.frames_ok += 1,
             Err(FrameError::Crc { .. }) => self.stats.crc_errors += 1,
@@ -113,7 +125,11 @@ impl Decoder {
 
     /// Feeds `bytes`, calling `on_frame` for every completed frame; returns the bytes consumed
     /// (always all of them).
-    pub fn feed(&mut self, bytes: &[u8], mut on_frame: impl FnMut(Result<Message, FrameError>)) -> usize {
+    pub fn feed(
+        &mut self,
+        bytes: &[u8],
+        mut on_frame: impl FnMut(Result<Message, FrameError>),
+    ) -> usize {
         for &b in bytes {
             if let Some(r) = self.push(b) {
                 on_frame(r);

@@ -130,7 +130,10 @@ pub struct Fault {
 impl Fault {
     /// A fault with `text` truncated to [`FAULT_TEXT_LEN`] bytes (at a char boundary).
     pub fn new(code: FaultCode, text: &str) -> Fault {
-        Fault { code, text: fixed_text(text) }
+        Fault {
+            code,
+            text: fixed_text(text),
+        }
     }
     /// The text up to the first NUL (or invalid UTF-8 byte).
     pub fn text_str(&self) -> &str {
@@ -188,7 +191,11 @@ pub enum ParseError {
     /// Unknown type byte.
     UnknownType(u8),
     /// Payload length differs from the one of this type.
-    BadLength { kind: u8, expected: usize, got: usize },
+    BadLength {
+        kind: u8,
+        expected: usize,
+        got: usize,
+    },
 }
 
 impl core::fmt::Display for ParseError {
@@ -196,8 +203,15 @@ impl core::fmt::Display for ParseError {
         match self {
             ParseError::Empty => write!(f, "empty message"),
             ParseError::UnknownType(t) => write!(f, "unknown message type 0x{t:02X}"),
-            ParseError::BadLength { kind, expected, got } => {
-                write!(f, "message 0x{kind:02X}: payload of {got} bytes, expected {expected}")
+            ParseError::BadLength {
+                kind,
+                expected,
+                got,
+            } => {
+                write!(
+                    f,
+                    "message 0x{kind:02X}: payload of {got} bytes, expected {expected}"
+                )
             }
         }
     }
@@ -336,25 +350,47 @@ impl Message {
         let (&k, payload) = body.split_first().ok_or(ParseError::Empty)?;
         let expected = payload_len(k).ok_or(ParseError::UnknownType(k))?;
         if payload.len() != expected {
-            return Err(ParseError::BadLength { kind: k, expected, got: payload.len() });
+            return Err(ParseError::BadLength {
+                kind: k,
+                expected,
+                got: payload.len(),
+            });
         }
-        let bad = ParseError::BadLength { kind: k, expected, got: payload.len() };
+        let bad = ParseError::BadLength {
+            kind: k,
+            expected,
+            got: payload.len(),
+        };
         Self::parse_payload(k, payload).ok_or(bad)
     }
 
     fn parse_payload(k: u8, payload: &[u8]) -> Option<Message> {
-        let mut r = R { buf: payload, at: 0 };
+        let mut r = R {
+            buf: payload,
+            at: 0,
+        };
         Some(match k {
-            kind::HELLO => Message::Hello { protocol_version: r.u16()? },
+            kind::HELLO => Message::Hello {
+                protocol_version: r.u16()?,
+            },
             kind::START => Message::Start,
             kind::STOP => Message::Stop,
             kind::STOPPED => Message::Stopped,
             kind::GAINS_ACK => Message::GainsAck,
-            kind::SET_VOLTAGE => Message::SetVoltage { seq: r.u32()?, u_v: r.f32()? },
-            kind::LOOP_GAINS => {
-                Message::LoopGains(LoopGains { kp: r.f32()?, ki: r.f32()?, kd: r.f32()?, tau_f_s: r.f32()? })
-            }
-            kind::LOOP_REFERENCE => Message::LoopReference { seq: r.u32()?, ref_rad: r.f32()? },
+            kind::SET_VOLTAGE => Message::SetVoltage {
+                seq: r.u32()?,
+                u_v: r.f32()?,
+            },
+            kind::LOOP_GAINS => Message::LoopGains(LoopGains {
+                kp: r.f32()?,
+                ki: r.f32()?,
+                kd: r.f32()?,
+                tau_f_s: r.f32()?,
+            }),
+            kind::LOOP_REFERENCE => Message::LoopReference {
+                seq: r.u32()?,
+                ref_rad: r.f32()?,
+            },
             kind::HELLO_ACK => Message::HelloAck(HelloAck {
                 protocol_version: r.u16()?,
                 firmware: r.take()?,
@@ -373,7 +409,10 @@ impl Message {
                 rtt_us: r.u16()?,
                 flags: r.u8()?,
             }),
-            kind::FAULT => Message::Fault(Fault { code: FaultCode::from_u16(r.u16()?), text: r.take()? }),
+            kind::FAULT => Message::Fault(Fault {
+                code: FaultCode::from_u16(r.u16()?),
+                text: r.take()?,
+            }),
             _ => return None,
         })
     }

@@ -7,12 +7,25 @@ use crate::sim::sensors::SplitMix64;
 
 fn all_messages() -> [Message; 11] {
     [
-        Message::Hello { protocol_version: PROTOCOL_VERSION },
+        Message::Hello {
+            protocol_version: PROTOCOL_VERSION,
+        },
         Message::Start,
-        Message::SetVoltage { seq: 0xDEAD_BEEF, u_v: -3.25 },
+        Message::SetVoltage {
+            seq: 0xDEAD_BEEF,
+            u_v: -3.25,
+        },
         Message::Stop,
-        Message::LoopGains(LoopGains { kp: 12.5, ki: 40.0, kd: 0.25, tau_f_s: 0.002 }),
-        Message::LoopReference { seq: 7, ref_rad: 1.5 },
+        Message::LoopGains(LoopGains {
+            kp: 12.5,
+            ki: 40.0,
+            kd: 0.25,
+            tau_f_s: 0.002,
+        }),
+        Message::LoopReference {
+            seq: 7,
+            ref_rad: 1.5,
+        },
         Message::HelloAck(HelloAck {
             protocol_version: PROTOCOL_VERSION,
             firmware: fixed_text("servo-vboard 0.1.0"),
@@ -31,7 +44,10 @@ fn all_messages() -> [Message; 11] {
             rtt_us: 0xFFFF,
             flags: 0x07,
         }),
-        Message::Fault(Fault::new(FaultCode::Watchdog, "no voltage command for 50 ms, going to 0 V")),
+        Message::Fault(Fault::new(
+            FaultCode::Watchdog,
+            "no voltage command for 50 ms, going to 0 V",
+        )),
         Message::Stopped,
         Message::GainsAck,
     ]
@@ -52,12 +68,19 @@ fn every_message_round_trips() {
     for m in all_messages() {
         let f = Frame::new(&m);
         assert!(!f.as_bytes().is_empty() && f.as_bytes().len() <= MAX_FRAME);
-        assert_eq!(f.as_bytes().iter().filter(|&&b| b == 0).count(), 1, "one delimiter in {m:?}");
+        assert_eq!(
+            f.as_bytes().iter().filter(|&&b| b == 0).count(),
+            1,
+            "one delimiter in {m:?}"
+        );
         assert_eq!(*f.as_bytes().last().unwrap(), 0);
         let (ok, err) = decode_all(f.as_bytes());
         assert_eq!(ok, vec![m]);
         assert!(err.is_empty());
-        assert_eq!(message::payload_len(m.kind()), Some(m.write_body(&mut [0; 64]).unwrap() - 1));
+        assert_eq!(
+            message::payload_len(m.kind()),
+            Some(m.write_body(&mut [0; 64]).unwrap() - 1)
+        );
     }
 }
 
@@ -76,14 +99,21 @@ fn wrong_lengths_and_types_are_rejected() {
     assert_eq!(Message::parse(&[0x7F]), Err(ParseError::UnknownType(0x7F)));
     assert_eq!(
         Message::parse(&[kind::SET_VOLTAGE, 1, 2, 3]),
-        Err(ParseError::BadLength { kind: kind::SET_VOLTAGE, expected: 8, got: 3 })
+        Err(ParseError::BadLength {
+            kind: kind::SET_VOLTAGE,
+            expected: 8,
+            got: 3
+        })
     );
     // A valid CRC around an invalid message is a parse error, not a crash.
     let body = [kind::START, 0xAA];
     let crc = crc::crc16(&body).to_le_bytes();
     let mut enc = [0u8; 16];
     let n = cobs::encode(&[body[0], body[1], crc[0], crc[1]], &mut enc).unwrap();
-    assert!(matches!(Decoder::decode_block(&enc[..n]), Err(FrameError::Parse(_))));
+    assert!(matches!(
+        Decoder::decode_block(&enc[..n]),
+        Err(FrameError::Parse(_))
+    ));
 }
 
 #[test]
@@ -108,7 +138,11 @@ fn fuzz_arbitrary_bytes_never_panic() {
         let zero_every = [2u64, 17, 255][case % 3];
         for b in buf.iter_mut().take(n) {
             let r = rng.next_u64();
-            *b = if r % zero_every == 0 { 0 } else { (r >> 8) as u8 };
+            *b = if r % zero_every == 0 {
+                0
+            } else {
+                (r >> 8) as u8
+            };
         }
         d.feed(&buf[..n], |_| {});
         let _ = Message::parse(&buf[..n]);
@@ -142,7 +176,10 @@ fn fuzz_corrupted_frames_are_rejected() {
             };
             f[i] ^= x;
             let (ok, err) = decode_all(&f);
-            assert!(ok.is_empty(), "single-byte corruption accepted: {m:?} -> {ok:?}");
+            assert!(
+                ok.is_empty(),
+                "single-byte corruption accepted: {m:?} -> {ok:?}"
+            );
             assert!(!err.is_empty());
             single += 1;
         }
@@ -172,9 +209,15 @@ fn fuzz_corrupted_frames_are_rejected() {
         }
     }
     assert!(single > 40_000 && multi > 200_000);
-    assert!(crc_rejects > multi / 4, "many corruptions are caught by the CRC: {crc_rejects}/{multi} (accepted {accepted})");
+    assert!(
+        crc_rejects > multi / 4,
+        "many corruptions are caught by the CRC: {crc_rejects}/{multi} (accepted {accepted})"
+    );
     // Expected false accepts ~ multi * 2^-16 ~ 3.4; allow a generous margin, not a vacuous one.
-    assert!(accepted <= 20, "{accepted} corrupted frames accepted out of {multi}");
+    assert!(
+        accepted <= 20,
+        "{accepted} corrupted frames accepted out of {multi}"
+    );
 }
 
 /// A stream of frames with garbage, dropped and duplicated bytes in between: the decoder

@@ -1,0 +1,304 @@
+//! Plain-language evidence for candidates, the verdict, and the experiments that resolve
+//! undecided effects.
+
+use super::regimes::{self, Regime};
+use super::Candidate;
+use crate::effects::EffectKind;
+use crate::fit::dataset::{Dataset, RecData};
+use crate::fit::model::{EqSolution, Equation};
+use crate::fit::{shapes, ParamEstimate};
+use crate::math;
+use alloc::string::String;
+use alloc::vec::Vec;
+use core::fmt::Write;
+
+/// The experiment that best exposes `kind`.
+pub fn experiment(kind: EffectKind) -> &'static str {
+    match kind {
+        EffectKind::Viscous | EffectKind::Coulomb => {
+            "run a friction staircase (constant speeds in both directions) and log the current"
+        }
+        EffectKind::Stribeck => "run slow speed ramps through zero (below 1 rad/s at the load) and log the current",
+        EffectKind::Asymmetry => "run the same constant-speed staircase in both directions and log the current",
+        EffectKind::Backlash => {
+            "run small position reversals (a 1-2 Hz sine of a few degrees) and log both motor and load angles"
+        }
+        EffectKind::Cogging => "turn the motor slowly at constant speed over several revolutions and log the current",
+        EffectKind::Imbalance => "turn the load slowly over full revolutions in both directions and log the current",
+        EffectKind::Saturation => "apply steps large enough to drive the command to its limit",
+        EffectKind::Deadzone => "apply slow voltage ramps through zero and log the current",
+        EffectKind::Delay => "apply a fast voltage excitation (PRBS or chirp up to 100 Hz) and log the current",
+    }
+}
+
+/// The signal whose correlation with the residual an effect removes: (name, values at rows).
+fn signature(
+    ds: &Dataset,
+    kind: EffectKind,
+    eq: Equation,
+    params: &[ParamEstimate],
+) -> Option<(String, Vec<Vec<f64>>)> {
+    let rows = if eq == Equation::Electrical {
+        &ds.elec_rows
+    } else {
+        &ds.mech_rows
+    };
+    let get = |k: &str| {
+        params
+            .iter()
+            .find(|p| p.key == k)
+            .map(|p| p.value)
+            .unwrap_or(f64::NAN)
+    };
+    let n = ds.gear_ratio;
+    let col = |f: &dyn Fn(&RecData, usize) -> f64| {
+        ds.column(rows, |r: &RecData| {
+            (0..r.u_v.len()).map(|k| f(r, k)).collect()
+        })
+    };
+    Some(match kind {
+        EffectKind::Coulomb | EffectKind::Backlash => (
+            String::from("sign(omega)"),
+            alloc::vec![col(&|r, k| shapes::coulomb_dir(r.omega_raw[k]))],
+        ),
+        EffectKind::Stribeck => {
+            let ws = get("omega_s");
+            (
+                String::from("the low-speed friction excess sign(omega) exp(-(omega_l/omega_s)^2)"),
+                alloc::vec![col(&|r, k| shapes::coulomb_dir(r.omega_raw[k])
+                    * shapes::stribeck_decay(r.omega_raw[k] / n, ws))],
+            )
+        }
+        EffectKind::Asymmetry => (
+            String::from("the direction of motion (omega > 0)"),
+            alloc::vec![col(&|r, k| if r.omega_raw[k] > 0.0 { 1.0 } else { 0.0 })],
+        ),
+        EffectKind::Cogging => {
+            let h = get("harmonic");
+            (
+                alloc::format!("sin/cos of {h:.0} x motor angle"),
+                alloc::vec![
+                    col(&|r, k| shapes::cogging_pair(r.theta_m_rad[k], h).0),
+                    col(&|r, k| shapes::cogging_pair(r.theta_m_rad[k], h).1)
+                ],
+            )
+        }
+        EffectKind::Imbalance => (
+            String::from("sin/cos of the load angle"),
+            alloc::vec![
+                col(&|r, k| shapes::imbalance_pair(r.theta_m_rad[k] / n).0),
+                col(&|r, k| shapes::imbalance_pair(r.theta_m_rad[k] / n).1)
+            ],
+        ),
+        EffectKind::Saturation => {
+            let l = get("limit");
+            (
+                String::from("the command beyond the limit"),
+                alloc::vec![col(&|r, k| {
+                    let u = r.u_v[k];
+                    u - shapes::saturation(u, l)
+                })],
+            )
+        }
+        EffectKind::Deadzone => {
+            let w = get("width");
+            (
+                String::from("the command inside the dead band"),
+                alloc::vec![col(&|r, k| {
+                    let u = r.u_v[k];
+                    u - shapes::deadzone(u, w)
+                })],
+            )
+        }
+        EffectKind::Delay => (
+            String::from("the rate of change of the command"),
+            alloc::vec![col(&|r, k| if k > 0 {
+                r.u_v[k] - r.u_v[k - 1]
+            } else {
+                0.0
+            })],
+        ),
+        EffectKind::Viscous => return None,
+    })
+}
+
+fn corr(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len()).max(1) as f64;
+    let ma = a.iter().sum::<f64>() / n;
+    let mb = b.iter().sum::<f64>() / n;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma) * (x - ma);
+        sbb += (y - mb) * (y - mb);
+    }
+    if saa > 0.0 && sbb > 0.0 {
+        sab / math::sqrt(saa * sbb)
+    } else {
+        0.0
+    }
+}
+
+/// Magnitude of the correlation of `r` with a signature (root-sum-square over its components).
+fn corr_mag(r: &[f64], sig: &[Vec<f64>]) -> f64 {
+    math::sqrt(sig.iter().map(|s| corr(r, s).powi(2)).sum::<f64>())
+}
+
+fn fmt_params(params: &[ParamEstimate]) -> String {
+    let mut s = String::new();
+    for (i, p) in params.iter().filter(|p| p.fitted).enumerate() {
+        if i > 0 {
+            s.push_str(", ");
+        }
+        let _ = write!(s, "{} = {:.4} {}", p.key, p.value, p.unit);
+        if let Some(e) = p.std_err {
+            let _ = write!(s, " (+/- {e:.2e})");
+        }
+    }
+    s
+}
+
+/// Evidence text of one candidate.
+#[allow(clippy::too_many_arguments)]
+pub fn describe(
+    ds: &Dataset,
+    kind: EffectKind,
+    eq: Equation,
+    b: &EqSolution,
+    c: &EqSolution,
+    params: &[ParamEstimate],
+    explained: f64,
+    floor: Option<f64>,
+    eq_drop: f64,
+    oe_drop: Option<f64>,
+    bic_gain: f64,
+    significant: bool,
+) -> String {
+    let mut s = String::new();
+    let _ = write!(s, "{}: fitted {}. ", kind.description(), fmt_params(params));
+    let rms_pct = 100.0 * (1.0 - math::sqrt((1.0 - eq_drop).max(0.0)));
+    if kind == EffectKind::Backlash {
+        let _ = write!(
+            s,
+            "It lowers the held-out simulation error by {:.1} %",
+            100.0 * oe_drop.unwrap_or(0.0)
+        );
+    } else {
+        let _ = write!(
+            s,
+            "It removes {:.1} % of the held-out {} residual (RMS)",
+            rms_pct,
+            eq.name()
+        );
+        if let Some(d) = oe_drop {
+            let _ = write!(
+                s,
+                " and changes the held-out simulation error by {:+.1} %",
+                -100.0 * d
+            );
+        }
+    }
+    // Where it helps.
+    let rows = if eq == Equation::Electrical {
+        &ds.elec_rows
+    } else {
+        &ds.mech_rows
+    };
+    let reg = regimes::label(ds, rows);
+    let gain: Vec<f64> = b
+        .resid
+        .iter()
+        .zip(&c.resid)
+        .map(|(x, y)| x * x - y * y)
+        .collect();
+    let sh = regimes::shares(&reg, &gain);
+    let occ = regimes::occupancy(&reg);
+    let best = (0..5)
+        .filter(|&i| occ[i] > 0.0)
+        .max_by(|&i, &j| (sh[i] / occ[i]).total_cmp(&(sh[j] / occ[j])))
+        .map(|i| Regime::ALL[i]);
+    if let Some(r) = best {
+        let i = Regime::ALL.iter().position(|&q| q == r).unwrap_or(0);
+        if sh[i] > 0.05 {
+            let _ = write!(
+                s,
+                "; {:.0} % of that gain sits {} ({:.0} % of the samples)",
+                100.0 * sh[i].min(1.0),
+                r.phrase(),
+                100.0 * occ[i]
+            );
+        }
+    }
+    s.push('.');
+    if let Some((name, sig)) = signature(ds, kind, eq, params) {
+        let (c0, c1) = (corr_mag(&b.resid, &sig), corr_mag(&c.resid, &sig));
+        let _ = write!(
+            s,
+            " The residual's correlation with {name} goes from {c0:.2} to {c1:.2}."
+        );
+    }
+    if !significant {
+        if let Some(f) = floor.filter(|f| explained < *f) {
+            let unit = eq.unit();
+            let _ = write!(
+                s,
+                " Not resolvable with this data: what it explains ({explained:.2e} {unit} RMS) is below the sensor-noise level ({f:.2e} {unit}); to resolve it, {}.",
+                experiment(kind)
+            );
+        } else {
+            let _ = write!(
+                s,
+                " Not significant (BIC gain {bic_gain:.1}, held-out residual drop {:.1} %",
+                100.0 * eq_drop
+            );
+            if let Some(d) = oe_drop {
+                let _ = write!(s, ", held-out simulation drop {:.1} %", 100.0 * d);
+            }
+            s.push_str(").");
+        }
+    }
+    s
+}
+
+/// The verdict paragraph.
+pub fn verdict(ranking: &[Candidate]) -> String {
+    let sig: Vec<&Candidate> = ranking.iter().filter(|c| c.significant).collect();
+    match sig.first() {
+        Some(w) => {
+            let mut s = alloc::format!(
+                "The model is missing {} ({}): adding it removes {:.1} % of the held-out {} residual.",
+                w.effect,
+                w.effect.description(),
+                w.error_reduction_pct,
+                w.equation.name()
+            );
+            if sig.len() > 1 {
+                let others: Vec<&str> = sig[1..].iter().map(|c| c.effect.name()).collect();
+                let _ = write!(
+                    s,
+                    " Also significant now: {} — add the first one, refit and diagnose again before believing them (one effect can masquerade as another).",
+                    others.join(", ")
+                );
+            }
+            s
+        }
+        None => {
+            let mut s = String::from(
+                "No missing effect is significant: the model explains these logs as well as any catalogue effect added to it, judged on held-out data.",
+            );
+            let unres: Vec<&str> = ranking
+                .iter()
+                .filter(|c| !c.resolvable)
+                .map(|c| c.effect.name())
+                .collect();
+            if !unres.is_empty() {
+                let _ = write!(
+                    s,
+                    " Below the noise floor and not resolvable with this data: {}.",
+                    unres.join(", ")
+                );
+            }
+            s
+        }
+    }
+}

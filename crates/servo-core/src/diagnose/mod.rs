@@ -1,0 +1,514 @@
+//! Which physical effect is the model missing?
+//!
+//! Every catalogue effect the model lacks is fitted to the data (nonlinear parameters by search,
+//! base parameters refitted with it, see [`crate::fit`]) on the fit blocks of the logs, and judged
+//! on three guards against overfitting, all of which must pass for `significant`:
+//!
+//! 1. information criterion: the BIC gain of its own equation, computed with the effective number
+//!    of independent rows (lag-1 autocorrelation of the residual) and charged for the parameters
+//!    added plus the search over each nonlinear parameter;
+//! 2. a minimum relative drop of its own equation's residual on the held-out blocks;
+//! 3. a minimum drop of the output-error (simulation) cost on the held-out blocks.
+//!
+//! Candidates are ranked significant first, then by error reduction. One effect is accepted at a
+//! time ([`diagnose_loop`]): accepting several at once produces false effects. A candidate whose
+//! fitted torque is below the current-noise torque is reported as not resolvable with this data,
+//! with the experiment that would resolve it.
+
+pub mod evidence;
+pub mod regimes;
+
+use crate::effects::EffectKind;
+use crate::fit::model::Equation;
+use crate::fit::oe::{self, Part};
+use crate::fit::{self, Dataset, EffectToFit, FitError, FitOptions, ParamEstimate, Solved};
+use crate::math;
+use crate::plant::Plant;
+use crate::record::Record;
+use alloc::string::String;
+use alloc::vec::Vec;
+
+/// Options of the diagnosis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DiagnoseOptions {
+    /// Fit options (the held-out split is set here: every `holdout_every`-th block).
+    pub fit: FitOptions,
+    /// Minimum BIC gain of the effect's own equation.
+    pub min_bic_gain: f64,
+    /// Minimum relative drop of the effect's own equation residual sum of squares on held-out
+    /// data (0.02 = 2 %).
+    pub min_eq_drop: f64,
+    /// Minimum relative drop of the held-out output-error cost (0.01 = 1 %).
+    pub min_oe_drop: f64,
+    /// Kinds to try; empty: every kind the model lacks.
+    pub candidates: Vec<EffectKind>,
+    /// Run candidates on two threads (std builds).
+    pub parallel: bool,
+}
+
+impl Default for DiagnoseOptions {
+    fn default() -> Self {
+        DiagnoseOptions {
+            fit: FitOptions {
+                holdout_every: 3,
+                ..FitOptions::default()
+            },
+            min_bic_gain: 10.0,
+            min_eq_drop: 0.02,
+            min_oe_drop: 0.01,
+            candidates: Vec::new(),
+            parallel: true,
+        }
+    }
+}
+
+/// One candidate effect, fitted and judged.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Candidate {
+    pub effect: EffectKind,
+    /// Passed every guard (information criterion, held-out equation drop, held-out output error).
+    pub significant: bool,
+    /// Whether its fitted torque (or voltage) is above the sensor-noise floor.
+    pub resolvable: bool,
+    /// RMS reduction of its own equation's residual on held-out data [%].
+    pub error_reduction_pct: f64,
+    /// Reduction of the held-out output-error (simulation) cost [%], when computable.
+    pub oe_reduction_pct: Option<f64>,
+    /// BIC gain of its equation (search-corrected, effective sample size).
+    pub bic_gain: f64,
+    /// The equation it was judged in.
+    pub equation: Equation,
+    /// Its fitted parameters (catalogue keys and units).
+    pub params: Vec<ParamEstimate>,
+    /// The model with the effect added and the base refitted (on the fit blocks).
+    pub plant: Plant,
+    /// Plain-language evidence.
+    pub evidence: String,
+    /// For non-significant candidates: the experiment that would resolve it.
+    pub experiment: Option<String>,
+}
+
+/// Residual summary of the model being diagnosed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BaseSummary {
+    /// The model with its base parameters refitted (fit blocks).
+    pub plant: Plant,
+    /// Per equation: (equation, rms of the residual [unit], share of squared residual per regime).
+    pub equations: Vec<(Equation, f64, [f64; 5], [f64; 5])>,
+    /// Held-out output-error cost (RMS motor-angle prediction error [rad]).
+    pub oe_cost_rad: Option<f64>,
+    /// Current-noise floor [A] estimated from the logs (current logged).
+    pub current_noise_a: Option<f64>,
+}
+
+/// The outcome of a diagnosis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Diagnosis {
+    /// Candidates, best first.
+    pub ranking: Vec<Candidate>,
+    /// One paragraph for the user.
+    pub verdict: String,
+    pub base: BaseSummary,
+}
+
+impl Diagnosis {
+    /// The best significant candidate.
+    pub fn winner(&self) -> Option<&Candidate> {
+        self.ranking.first().filter(|c| c.significant)
+    }
+}
+
+/// Diagnoses `model` against `records`.
+pub fn diagnose(
+    records: &[Record],
+    model: &Plant,
+    opts: &DiagnoseOptions,
+) -> Result<Diagnosis, FitError> {
+    let ds = Dataset::new(records, &model.params, &opts.fit)?;
+    diagnose_dataset(&ds, model, opts)
+}
+
+/// Kinds worth trying on `model`.
+pub fn candidate_kinds(model: &Plant, opts: &DiagnoseOptions) -> Vec<EffectKind> {
+    let has = |k| model.effects.contains(k);
+    EffectKind::ALL
+        .into_iter()
+        .filter(|&k| k != EffectKind::Viscous && !has(k))
+        .filter(|&k| opts.candidates.is_empty() || opts.candidates.contains(&k))
+        // Stribeck decays to the Coulomb level: it needs Coulomb friction in the model; asymmetry
+        // replaces Coulomb, which must be found first.
+        .filter(|&k| {
+            !matches!(k, EffectKind::Stribeck | EffectKind::Asymmetry) || has(EffectKind::Coulomb)
+        })
+        .collect()
+}
+
+/// Diagnoses on a prepared dataset (reuse it across the loop).
+pub fn diagnose_dataset(
+    ds: &Dataset,
+    model: &Plant,
+    opts: &DiagnoseOptions,
+) -> Result<Diagnosis, FitError> {
+    let base = ds.fit_config(model, &[])?;
+    let base_oe = oe::prediction_cost(ds, &base.plant, Part::Holdout);
+    let noise = current_noise(ds);
+    let kinds = candidate_kinds(model, opts);
+    let results = run_candidates(ds, model, &kinds, opts.parallel);
+    let mut ranking = Vec::new();
+    for (kind, res) in kinds.iter().zip(results) {
+        match res {
+            Ok(solved) => ranking.push(judge(ds, &base, base_oe, noise, *kind, &solved, opts)),
+            Err(e) => ranking.push(failed(&base, *kind, &e)),
+        }
+    }
+    ranking.sort_by(|a, b| {
+        b.significant
+            .cmp(&a.significant)
+            .then(b.error_reduction_pct.total_cmp(&a.error_reduction_pct))
+    });
+    let mut equations = Vec::new();
+    for sol in core::iter::once(&base.mech).chain(base.elec.as_ref()) {
+        let rows = if sol.equation == Equation::Electrical {
+            &ds.elec_rows
+        } else {
+            &ds.mech_rows
+        };
+        let reg = regimes::label(ds, rows);
+        let sq: Vec<f64> = sol.resid.iter().map(|r| r * r).collect();
+        equations.push((
+            sol.equation,
+            sol.rms(),
+            regimes::shares(&reg, &sq),
+            regimes::occupancy(&reg),
+        ));
+    }
+    let summary = BaseSummary {
+        plant: base.plant,
+        equations,
+        oe_cost_rad: base_oe,
+        current_noise_a: noise,
+    };
+    let verdict = evidence::verdict(&ranking);
+    Ok(Diagnosis {
+        ranking,
+        verdict,
+        base: summary,
+    })
+}
+
+fn run_candidates(
+    ds: &Dataset,
+    model: &Plant,
+    kinds: &[EffectKind],
+    parallel: bool,
+) -> Vec<Result<Solved, FitError>> {
+    let one = |k: EffectKind| ds.fit_config(model, &[EffectToFit::all(k)]);
+    #[cfg(feature = "std")]
+    if parallel && kinds.len() > 1 {
+        let threads = std::thread::available_parallelism()
+            .map_or(2, |n| n.get())
+            .clamp(1, 4);
+        let mut out: Vec<Option<Result<Solved, FitError>>> = kinds.iter().map(|_| None).collect();
+        std::thread::scope(|s| {
+            let handles: Vec<_> = (0..threads)
+                .map(|t| {
+                    let one = &one;
+                    s.spawn(move || {
+                        kinds
+                            .iter()
+                            .enumerate()
+                            .filter(|(i, _)| i % threads == t)
+                            .map(|(i, &k)| (i, one(k)))
+                            .collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            for h in handles {
+                if let Ok(v) = h.join() {
+                    for (i, r) in v {
+                        out[i] = Some(r);
+                    }
+                }
+            }
+        });
+        return out
+            .into_iter()
+            .map(|r| {
+                r.unwrap_or_else(|| {
+                    Err(FitError::BadModel(String::from("candidate thread failed")))
+                })
+            })
+            .collect();
+    }
+    let _ = parallel;
+    kinds.iter().map(|&k| one(k)).collect()
+}
+
+/// Robust estimate of the white current-sensor noise [A]: MAD of first differences / sqrt(2).
+fn current_noise(ds: &Dataset) -> Option<f64> {
+    let mut d: Vec<f64> = Vec::new();
+    for r in &ds.recs {
+        let i = r.i_raw.as_ref()?;
+        d.extend(i.windows(2).map(|w| (w[1] - w[0]).abs()));
+    }
+    if d.is_empty() {
+        return None;
+    }
+    d.sort_by(|a, b| a.total_cmp(b));
+    Some(d[d.len() / 2] / 0.6745 / core::f64::consts::SQRT_2)
+}
+
+/// Lag-1 autocorrelation of a residual (rows in order).
+fn lag1(r: &[f64]) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for w in r.windows(2) {
+        num += w[0] * w[1];
+    }
+    for v in r {
+        den += v * v;
+    }
+    if den > 0.0 {
+        (num / den).clamp(0.0, 0.99)
+    } else {
+        0.0
+    }
+}
+
+fn nonlinear_searched(kind: EffectKind) -> usize {
+    kind.params()
+        .iter()
+        .filter(|p| {
+            p.nonlinear
+                && p.key != "stiffness"
+                && p.key != "damping"
+                && p.key != "load_inertia_fraction"
+        })
+        .count()
+}
+
+fn judge(
+    ds: &Dataset,
+    base: &Solved,
+    base_oe: Option<f64>,
+    noise_a: Option<f64>,
+    kind: EffectKind,
+    cand: &Solved,
+    opts: &DiagnoseOptions,
+) -> Candidate {
+    let eq = fit::model::Config::equation_of(kind, ds.has_current);
+    let params: Vec<ParamEstimate> = ds
+        .estimates(cand)
+        .into_iter()
+        .filter(|p| p.effect == Some(kind) || (kind == EffectKind::Coulomb && p.key == "tau_sf"))
+        .collect();
+    let cand_oe = oe::prediction_cost(ds, &cand.plant, Part::Holdout);
+    let oe_drop = match (base_oe, cand_oe) {
+        (Some(b), Some(c)) if b > 0.0 => Some(1.0 - c / b),
+        _ => None,
+    };
+    let (b, c) = match (base.equation(eq), cand.equation(eq)) {
+        (Some(b), Some(c)) => (b, c),
+        _ => {
+            return failed(
+                base,
+                kind,
+                &FitError::BadModel(String::from("equation missing")),
+            )
+        }
+    };
+    let backlash = kind == EffectKind::Backlash;
+    // Information criterion on the fit rows.
+    let rho = lag1(&b.resid);
+    let n_eff = (b.n_fit as f64 * (1.0 - rho) / (1.0 + rho)).max(1.0);
+    let q_lin = c.p.saturating_sub(b.p) as f64;
+    let q_nl = nonlinear_searched(kind) as f64;
+    let bic_gain = if backlash {
+        // Backlash lives outside the equation-error regressors: judged on the simulation cost.
+        let fit_b = oe::prediction_cost(ds, &base.plant, Part::Fit);
+        let fit_c = oe::prediction_cost(ds, &cand.plant, Part::Fit);
+        match (fit_b, fit_c) {
+            (Some(x), Some(y)) if y > 0.0 => {
+                n_eff * math::ln(x * x / (y * y)) - 3.0 * q_nl * math::ln(n_eff)
+            }
+            _ => f64::NEG_INFINITY,
+        }
+    } else {
+        n_eff * math::ln(b.rss_fit / c.rss_fit.max(1e-300)) - (q_lin + 3.0 * q_nl) * math::ln(n_eff)
+    };
+    let (rss0, rss1) = if b.n_hold > 0 {
+        (b.rss_hold, c.rss_hold)
+    } else {
+        (b.rss_fit, c.rss_fit)
+    };
+    let eq_drop = if backlash {
+        oe_drop.unwrap_or(0.0)
+    } else {
+        1.0 - rss1 / rss0.max(1e-300)
+    };
+    let error_reduction_pct = 100.0 * (1.0 - math::sqrt((1.0 - eq_drop).max(0.0)));
+    let oe_ok = oe_drop.is_some_and(|d| d >= opts.min_oe_drop);
+    let significant = bic_gain > opts.min_bic_gain && eq_drop >= opts.min_eq_drop && oe_ok;
+    // Detection floor: RMS of what the effect explains versus the sensor-noise torque/voltage.
+    let explained: f64 = {
+        let s: f64 = b
+            .resid
+            .iter()
+            .zip(&c.resid)
+            .map(|(x, y)| (x - y) * (x - y))
+            .sum();
+        math::sqrt(s / b.resid.len().max(1) as f64)
+    };
+    let floor = noise_a.map(|s| match eq {
+        Equation::Electrical => s * base.plant.params.r_eq() / base.plant.params.k_drv,
+        _ => s * base.plant.params.k_t,
+    });
+    let resolvable = floor.is_none_or(|f| explained >= f);
+    let ev = evidence::describe(
+        ds,
+        kind,
+        eq,
+        b,
+        c,
+        &params,
+        explained,
+        floor,
+        eq_drop,
+        oe_drop,
+        bic_gain,
+        significant,
+    );
+    Candidate {
+        effect: kind,
+        significant,
+        resolvable,
+        error_reduction_pct,
+        oe_reduction_pct: oe_drop.map(|d| 100.0 * d),
+        bic_gain,
+        equation: eq,
+        params,
+        plant: cand.plant,
+        evidence: ev,
+        experiment: if significant {
+            None
+        } else {
+            Some(String::from(evidence::experiment(kind)))
+        },
+    }
+}
+
+fn failed(base: &Solved, kind: EffectKind, e: &FitError) -> Candidate {
+    Candidate {
+        effect: kind,
+        significant: false,
+        resolvable: false,
+        error_reduction_pct: 0.0,
+        oe_reduction_pct: None,
+        bic_gain: f64::NEG_INFINITY,
+        equation: Equation::Torque,
+        params: Vec::new(),
+        plant: base.plant,
+        evidence: alloc::format!("could not be fitted to these logs ({e})"),
+        experiment: Some(String::from(evidence::experiment(kind))),
+    }
+}
+
+/// One rung of the error ladder.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rung {
+    /// The effect added at this rung (`None` for the starting model).
+    pub added: Option<EffectKind>,
+    /// The model after this rung (refitted on all the data).
+    pub plant: Plant,
+    /// RMS residual per equation.
+    pub equations: Vec<(Equation, f64)>,
+    /// Held-out output-error cost [rad].
+    pub oe_cost_rad: Option<f64>,
+}
+
+/// The loop: diagnose, add the winner (refitted with the base on all the data), diagnose again,
+/// until nothing is significant or `max_steps` effects were added.
+pub fn diagnose_loop(
+    records: &[Record],
+    model: &Plant,
+    opts: &DiagnoseOptions,
+    max_steps: usize,
+) -> Result<(Vec<Rung>, Vec<Diagnosis>), FitError> {
+    let ds = Dataset::new(records, &model.params, &opts.fit)?;
+    let mut plant = *model;
+    let mut ladder = Vec::new();
+    let mut diags = Vec::new();
+    let mut added: Option<EffectKind> = None;
+    for step in 0..=max_steps {
+        let d = diagnose_dataset(&ds, &plant, opts)?;
+        ladder.push(Rung {
+            added,
+            plant: d.base.plant,
+            equations: d.base.equations.iter().map(|e| (e.0, e.1)).collect(),
+            oe_cost_rad: d.base.oe_cost_rad,
+        });
+        let next = d.winner().map(|w| (w.effect, w.plant));
+        diags.push(d);
+        match next {
+            Some((kind, cand_plant)) if step < max_steps => {
+                // Keep the candidate's nonlinear parameters; refit everything linear on all data.
+                plant = cand_plant;
+                let _ = kind;
+                added = Some(kind);
+            }
+            _ => break,
+        }
+    }
+    Ok((ladder, diags))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::tests::{open_loop_log, truth};
+    use crate::params::PlantParams;
+
+    #[test]
+    fn names_missing_coulomb_and_nothing_on_a_complete_model() {
+        let truth = truth();
+        let logs = [open_loop_log(&truth, 12.0, 5, true)];
+        // Model without Coulomb friction.
+        let lacking = Plant::from_params(PlantParams {
+            j_eq: Some(7.0e-7),
+            b_eq: Some(1.0e-6),
+            ..PlantParams::TABLE2
+        })
+        .unwrap();
+        let d = diagnose(&logs, &lacking, &DiagnoseOptions::default()).unwrap();
+        for c in &d.ranking {
+            std::eprintln!(
+                "{} sig={} red={:.1}% oe={:?} bic={:.1}\n   {}",
+                c.effect,
+                c.significant,
+                c.error_reduction_pct,
+                c.oe_reduction_pct,
+                c.bic_gain,
+                c.evidence
+            );
+        }
+        std::eprintln!("{}", d.verdict);
+        let w = d.winner().expect("a significant candidate");
+        assert_eq!(w.effect, EffectKind::Coulomb);
+        let tau = w.params.iter().find(|p| p.key == "tau_sf").unwrap().value;
+        assert!((tau / 0.01 - 1.0).abs() < 0.15, "tau_sf {tau}");
+        // The complete model.
+        let d = diagnose(&logs, &truth, &DiagnoseOptions::default()).unwrap();
+        for c in &d.ranking {
+            std::eprintln!(
+                "{} sig={} red={:.1}% oe={:?} bic={:.1}\n   {}",
+                c.effect,
+                c.significant,
+                c.error_reduction_pct,
+                c.oe_reduction_pct,
+                c.bic_gain,
+                c.evidence
+            );
+        }
+        std::eprintln!("{}", d.verdict);
+        assert!(d.winner().is_none(), "false positive: {}", d.verdict);
+    }
+}

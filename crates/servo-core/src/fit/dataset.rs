@@ -1,0 +1,362 @@
+//! Preparation of records for equation-error fitting: one zero-phase filter, derivatives, the rows
+//! of each equation (moving samples with a margin around stuck phases for the torque balance, every
+//! sample for the electrical balance), decimation and the fit / held-out split.
+
+use super::filter::{derivative, ZeroPhase};
+use super::{FitError, FitOptions};
+use crate::math;
+use crate::params::PlantParams;
+use crate::record::Record;
+use alloc::string::String;
+use alloc::vec::Vec;
+
+/// One record, prepared.
+#[derive(Debug, Clone)]
+pub struct RecData {
+    /// Where it came from.
+    pub source: String,
+    /// Sample period [s].
+    pub dt_s: f64,
+    /// Time of each row [s].
+    pub time_s: Vec<f64>,
+    /// Logged driver input u [V], raw (row k applied from k to k+1).
+    pub u_v: Vec<f64>,
+    /// Motor angle [rad], raw (measured, or N times the load angle).
+    pub theta_m_rad: Vec<f64>,
+    /// Motor speed [rad/s] from a lightly filtered position (for nonlinear regressors).
+    pub omega_raw: Vec<f64>,
+    /// Motor speed [rad/s], zero-phase filtered.
+    pub omega_f: Vec<f64>,
+    /// Motor acceleration [rad/s^2], zero-phase filtered.
+    pub accel_f: Vec<f64>,
+    /// Armature current [A], raw and filtered, and its filtered derivative [A/s].
+    pub i_raw: Option<Vec<f64>>,
+    pub i_f: Option<Vec<f64>>,
+    pub di_f: Option<Vec<f64>>,
+    /// The filter every regressor of this record goes through.
+    pub filter: ZeroPhase,
+}
+
+impl RecData {
+    /// Applies the record's filter to a raw full-length signal.
+    pub fn filt(&self, raw: &[f64]) -> Vec<f64> {
+        self.filter.apply(raw)
+    }
+
+    /// The logged input with a transformation per sample (input nonlinearity), then seen through
+    /// the zero-order hold shifted by `shift_s` [s] and averaged over one sample centred on each
+    /// row: row k gets the mean of the held input over [t_k - dt/2 - shift, t_k + dt/2 - shift].
+    /// With `shift_s` = 0 this is (u[k-1] + u[k]) / 2, the log convention.
+    pub fn input_seen(&self, transform: impl Fn(f64) -> f64, shift_s: f64) -> Vec<f64> {
+        let u_in: Vec<f64> = self.u_v.iter().map(|&u| transform(u)).collect();
+        shift_hold(&u_in, shift_s / self.dt_s)
+    }
+
+    /// The input as a point sample at each row: what drives the current measured at t_k. The
+    /// transformed input, delayed by `delay_s`, held, then passed through the first-order lag
+    /// `lag_s` (driver and armature) exactly for a zero-order-hold input: with no delay and a lag
+    /// much shorter than the sample period, row k sees u[k-1].
+    pub fn input_point(
+        &self,
+        transform: impl Fn(f64) -> f64,
+        delay_s: f64,
+        lag_s: f64,
+    ) -> Vec<f64> {
+        let u_in: Vec<f64> = self.u_v.iter().map(|&u| transform(u)).collect();
+        let held = shift_hold(&u_in, 0.5 + delay_s / self.dt_s);
+        let a = if lag_s > 0.0 {
+            math::exp(-self.dt_s / lag_s)
+        } else {
+            0.0
+        };
+        let mut y = held.first().copied().unwrap_or(0.0);
+        held.iter()
+            .map(|&x| {
+                y = a * y + (1.0 - a) * x;
+                y
+            })
+            .collect()
+    }
+}
+
+/// Box-averaged zero-order hold of `u` shifted by `m` samples, evaluated at every row.
+pub fn shift_hold(u: &[f64], m: f64) -> Vec<f64> {
+    let n = u.len();
+    let mut out = Vec::with_capacity(n);
+    for k in 0..n {
+        let x = k as f64 - 0.5 - m;
+        let j0 = math::floor(x);
+        let f = x - j0;
+        let at = |j: f64| -> f64 {
+            let j = if j < 0.0 { 0 } else { (j as usize).min(n - 1) };
+            u[j]
+        };
+        out.push((1.0 - f) * at(j0) + f * at(j0 + 1.0));
+    }
+    out
+}
+
+/// Selected rows of an equation: (record, sample) pairs and whether each is used for fitting
+/// (true) or held out (false).
+#[derive(Debug, Clone, Default)]
+pub struct Rows {
+    pub rec: Vec<usize>,
+    pub k: Vec<usize>,
+    pub fit: Vec<bool>,
+}
+
+impl Rows {
+    pub fn len(&self) -> usize {
+        self.k.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.k.is_empty()
+    }
+}
+
+/// Records prepared for fitting.
+#[derive(Debug, Clone)]
+pub struct Dataset {
+    pub recs: Vec<RecData>,
+    /// Every record logs the armature current (torque and electrical balances are used); else the
+    /// u-driven combined equation is used.
+    pub has_current: bool,
+    /// Rows of the torque (or combined) equation: moving samples with a margin.
+    pub mech_rows: Rows,
+    /// Rows of the electrical equation: every sample away from the ends.
+    pub elec_rows: Rows,
+    /// Largest |u| in the logs [V].
+    pub u_max_v: f64,
+    /// Gear ratio N used to convert load and motor sides.
+    pub gear_ratio: f64,
+    pub opts: FitOptions,
+}
+
+impl Dataset {
+    /// Prepares `records` (gear ratio from `params`).
+    pub fn new(
+        records: &[Record],
+        params: &PlantParams,
+        opts: &FitOptions,
+    ) -> Result<Dataset, FitError> {
+        if records.is_empty() {
+            return Err(FitError::NoData(String::from("no records given")));
+        }
+        let mut recs = Vec::new();
+        for r in records {
+            recs.push(prepare(r, params, opts)?);
+        }
+        let has_current = recs.iter().all(|r| r.i_raw.is_some());
+        let u_max_v = recs
+            .iter()
+            .flat_map(|r| r.u_v.iter())
+            .fold(0.0f64, |m, u| m.max(u.abs()));
+        let mut mech_rows = Rows::default();
+        let mut elec_rows = Rows::default();
+        for (ri, r) in recs.iter().enumerate() {
+            select_rows(ri, r, opts, &mut mech_rows, &mut elec_rows);
+        }
+        let need = 20;
+        if mech_rows.len() < need {
+            return Err(FitError::NoData(alloc::format!(
+                "only {} usable moving samples (speed above {} rad/s at the motor, away from stuck phases); the logs need the motor to move",
+                mech_rows.len(),
+                opts.min_speed_rad_s
+            )));
+        }
+        Ok(Dataset {
+            recs,
+            has_current,
+            mech_rows,
+            elec_rows,
+            u_max_v,
+            gear_ratio: params.n,
+            opts: opts.clone(),
+        })
+    }
+
+    /// Samples a filtered full-rate signal of each record at `rows`.
+    pub fn sample(&self, rows: &Rows, sig: impl Fn(&RecData) -> &[f64]) -> Vec<f64> {
+        let mut out = Vec::with_capacity(rows.len());
+        let mut cur: Option<(usize, &[f64])> = None;
+        for (&ri, &k) in rows.rec.iter().zip(&rows.k) {
+            let s = match cur {
+                Some((c, s)) if c == ri => s,
+                _ => {
+                    let s = sig(&self.recs[ri]);
+                    cur = Some((ri, s));
+                    s
+                }
+            };
+            out.push(s[k]);
+        }
+        out
+    }
+
+    /// Builds a raw full-rate signal per record with `raw`, filters it with the record's filter
+    /// and samples it at `rows`.
+    pub fn column(&self, rows: &Rows, raw: impl Fn(&RecData) -> Vec<f64>) -> Vec<f64> {
+        let mut out = Vec::with_capacity(rows.len());
+        let mut cur: Option<(usize, Vec<f64>)> = None;
+        for (&ri, &k) in rows.rec.iter().zip(&rows.k) {
+            if cur.as_ref().map(|(c, _)| *c) != Some(ri) {
+                let r = &self.recs[ri];
+                cur = Some((ri, r.filt(&raw(r))));
+            }
+            if let Some((_, s)) = &cur {
+                out.push(s[k]);
+            }
+        }
+        out
+    }
+}
+
+fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecData, FitError> {
+    let n = r.len();
+    let src = r.source.clone();
+    if n < 50 {
+        return Err(FitError::NoData(alloc::format!("{src}: only {n} samples")));
+    }
+    let dt = r.sample_period_s();
+    if !(dt > 0.0 && dt.is_finite()) {
+        return Err(FitError::BadRecord(alloc::format!(
+            "{src}: time_s is not increasing"
+        )));
+    }
+    let u = r.u_v.clone().ok_or_else(|| {
+        FitError::BadRecord(alloc::format!("{src}: the input voltage u is not logged"))
+    })?;
+    let theta_m: Vec<f64> = if let Some(t) = &r.theta_m_rad {
+        t.clone()
+    } else if let Some(t) = &r.theta_l_rad {
+        t.iter().map(|v| v * params.n).collect()
+    } else if let Some(w) = r.omega_m_rad_s.as_ref().or(r.omega_l_rad_s.as_ref()) {
+        let scale = if r.omega_m_rad_s.is_some() {
+            1.0
+        } else {
+            params.n
+        };
+        let mut acc = 0.0;
+        w.iter()
+            .map(|v| {
+                let x = acc;
+                acc += v * scale * dt;
+                x
+            })
+            .collect()
+    } else {
+        return Err(FitError::BadRecord(alloc::format!(
+            "{src}: neither a position nor a speed is logged"
+        )));
+    };
+    for (name, sig) in [("u", &u), ("theta", &theta_m)] {
+        if let Some(k) = sig.iter().position(|v| !v.is_finite()) {
+            return Err(FitError::BadRecord(alloc::format!(
+                "{src}: {name} is not finite at row {k}"
+            )));
+        }
+    }
+    let fs = 1.0 / dt;
+    let filter = ZeroPhase::new(opts.filter_hz, fs);
+    let light = ZeroPhase::new(opts.filter_hz * 3.0, fs);
+    let th_f = filter.apply(&theta_m);
+    let omega_f = derivative(&th_f, dt);
+    let accel_f = derivative(&omega_f, dt);
+    let omega_raw = derivative(&light.apply(&theta_m), dt);
+    let (i_raw, i_f, di_f) = match &r.i_a_a {
+        Some(i) => {
+            if let Some(k) = i.iter().position(|v| !v.is_finite()) {
+                return Err(FitError::BadRecord(alloc::format!(
+                    "{src}: i_a is not finite at row {k}"
+                )));
+            }
+            let f = filter.apply(i);
+            let d = derivative(&f, dt);
+            (Some(i.clone()), Some(f), Some(d))
+        }
+        None => (None, None, None),
+    };
+    Ok(RecData {
+        source: src,
+        dt_s: dt,
+        time_s: r.time_s.clone(),
+        u_v: u,
+        theta_m_rad: theta_m,
+        omega_raw,
+        omega_f,
+        accel_f,
+        i_raw,
+        i_f,
+        di_f,
+        filter,
+    })
+}
+
+fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec: &mut Rows) {
+    let n = r.omega_f.len();
+    let fs = 1.0 / r.dt_s;
+    let edge = ((2.0 / opts.filter_hz) * fs).ceil() as usize + 2;
+    let dec = ((fs / (4.0 * opts.filter_hz)).floor() as usize).max(1);
+    let margin = (opts.margin_s * fs).ceil() as usize;
+    // Stuck samples, dilated by the margin.
+    let mut near_stuck = alloc::vec![false; n];
+    let mut last_stuck: Option<usize> = None;
+    for k in 0..n {
+        if r.omega_f[k].abs() < opts.min_speed_rad_s
+            || r.omega_raw[k].abs() < 0.5 * opts.min_speed_rad_s
+        {
+            last_stuck = Some(k);
+        }
+        if let Some(s) = last_stuck {
+            if k - s <= margin {
+                near_stuck[k] = true;
+            }
+        }
+    }
+    let mut next_stuck: Option<usize> = None;
+    for k in (0..n).rev() {
+        if r.omega_f[k].abs() < opts.min_speed_rad_s
+            || r.omega_raw[k].abs() < 0.5 * opts.min_speed_rad_s
+        {
+            next_stuck = Some(k);
+        }
+        if let Some(s) = next_stuck {
+            if s - k <= margin {
+                near_stuck[k] = true;
+            }
+        }
+    }
+    // Fit / held-out blocks: the record is cut in blocks of `holdout_block_s`; every
+    // `holdout_every`-th block is held out.
+    let block = ((opts.holdout_block_s * fs) as usize).max(1);
+    let mut k = edge;
+    while k + edge < n {
+        let b = k / block;
+        let fit = opts.holdout_every == 0 || b % opts.holdout_every != opts.holdout_every - 1;
+        if !near_stuck[k] {
+            mech.rec.push(ri);
+            mech.k.push(k);
+            mech.fit.push(fit);
+        }
+        elec.rec.push(ri);
+        elec.k.push(k);
+        elec.fit.push(fit);
+        k += dec;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shift_hold_follows_the_log_convention() {
+        let u = [0.0, 1.0, 2.0, 3.0, 4.0];
+        let s = shift_hold(&u, 0.0);
+        assert!((s[2] - 1.5).abs() < 1e-12);
+        let s = shift_hold(&u, 1.0);
+        assert!((s[3] - 1.5).abs() < 1e-12);
+        let s = shift_hold(&u, 0.25);
+        assert!((s[2] - 1.25).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,777 @@
+//! Fitting a model (base parameters + catalogue effects) to records.
+//!
+//! Each effect is fitted in the equation where it lives (see [`Equation`]): the torque balance
+//! for mechanical effects and the electrical balance for input-side effects when the current is
+//! logged, otherwise the u-driven combined equation. Position is filtered once with a zero-phase
+//! filter before being differentiated twice, and every regressor goes through the same filter.
+//! Linear parameters are estimated by least squares (QR) with their physical signs, nonlinear ones
+//! (Stribeck speed, cogging harmonic, dead-zone width, saturation limit, delay) by a grid search
+//! plus golden-section refinement, always refitting the base parameters (J_eq, B_eq, tau_sf, and
+//! R_eq, k_drv where the electrical balance is used) together with the effect. The backlash gap is
+//! fitted on the output error of a short simulation ([`oe`]), which sizes it where regressors
+//! cannot.
+//!
+//! Entry point: [`fit_model`]. For repeated fits on the same data (diagnosis), prepare a
+//! [`Dataset`] once and call [`Dataset::fit`].
+
+pub mod dataset;
+pub mod filter;
+pub mod lsq;
+pub mod model;
+pub mod oe;
+pub mod search;
+pub mod shapes;
+
+pub use dataset::Dataset;
+pub use model::Equation;
+
+use crate::effects::{Effect, EffectError, EffectKind, MAX_PARAMS};
+use crate::math;
+use crate::plant::Plant;
+use crate::record::Record;
+use alloc::string::String;
+use alloc::vec::Vec;
+use model::{Coef, Config, EqSolution, Slot};
+
+/// Options of the fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitOptions {
+    /// Cut-off of the zero-phase low-pass filter applied to every signal [Hz].
+    pub filter_hz: f64,
+    /// Motor speed below which a sample counts as stuck [rad/s].
+    pub min_speed_rad_s: f64,
+    /// Margin excluded around stuck phases in the torque balance [s].
+    pub margin_s: f64,
+    /// Refit J_eq, B_eq, tau_sf (and R_eq, k_drv) together with the effects.
+    pub refit_base: bool,
+    /// Largest input delay searched [s].
+    pub max_delay_s: f64,
+    /// Largest cogging harmonic searched [cycles per motor revolution].
+    pub max_cogging_harmonic: u32,
+    /// Length of the blocks of the fit / held-out split [s].
+    pub holdout_block_s: f64,
+    /// Every `holdout_every`-th block is held out (0: none; fit on everything).
+    pub holdout_every: usize,
+    /// Horizon of each output-error prediction segment [s].
+    pub oe_horizon_s: f64,
+    /// Most output-error segments simulated (bounds the cost on long logs).
+    pub oe_max_segments: usize,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            filter_hz: 25.0,
+            min_speed_rad_s: 2.0,
+            margin_s: 0.02,
+            refit_base: true,
+            max_delay_s: 0.02,
+            max_cogging_harmonic: 40,
+            holdout_block_s: 1.0,
+            holdout_every: 0,
+            oe_horizon_s: 0.25,
+            oe_max_segments: 60,
+        }
+    }
+}
+
+/// Why a fit failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FitError {
+    #[error("not enough data: {0}")]
+    NoData(String),
+    #[error("unusable record: {0}")]
+    BadRecord(String),
+    #[error("the least-squares problem is singular: {0}")]
+    Singular(String),
+    #[error("model: {0}")]
+    BadModel(String),
+}
+
+/// An effect to add to the model, with the parameters to fit marked.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EffectToFit {
+    /// The effect; values of parameters to fit are ignored (may be NaN).
+    pub effect: Effect,
+    /// Which parameters (in [`EffectKind::params`] order) are fitted.
+    pub fit: [bool; MAX_PARAMS],
+}
+
+/// Parameters that the fit never estimates unless asked explicitly (they keep their default):
+/// the contact stiffness, damping and inertia split of backlash.
+fn fittable(kind: EffectKind, key: &str) -> bool {
+    !(kind == EffectKind::Backlash && key != "gap")
+}
+
+impl EffectToFit {
+    /// Every fittable parameter of `kind` is fitted (the others keep their defaults).
+    pub fn all(kind: EffectKind) -> EffectToFit {
+        let mut fit = [false; MAX_PARAMS];
+        for (f, p) in fit.iter_mut().zip(kind.params()) {
+            *f = fittable(kind, p.key);
+        }
+        EffectToFit {
+            effect: Effect::unset(kind),
+            fit,
+        }
+    }
+
+    /// Parses the `--add` syntax `name[:key=value,...]`: given keys are kept as given, every
+    /// other fittable key is fitted.
+    pub fn parse(spec: &str) -> Result<EffectToFit, EffectError> {
+        let effect = Effect::parse(spec)?;
+        let given: Vec<&str> = match spec.split_once(':') {
+            Some((_, rest)) => rest
+                .split(',')
+                .filter_map(|kv| kv.split_once('=').map(|(k, _)| k.trim()))
+                .collect(),
+            None => Vec::new(),
+        };
+        let mut t = EffectToFit::all(effect.kind);
+        t.effect = effect;
+        for (i, p) in effect.kind.params().iter().enumerate() {
+            if given.contains(&p.key) {
+                t.fit[i] = false;
+            }
+        }
+        Ok(t)
+    }
+}
+
+impl From<Effect> for EffectToFit {
+    /// Parameters that are NaN (unset) are fitted, the others kept.
+    fn from(effect: Effect) -> EffectToFit {
+        let mut fit = [false; MAX_PARAMS];
+        for (f, v) in fit.iter_mut().zip(effect.values()) {
+            *f = v.is_nan();
+        }
+        EffectToFit { effect, fit }
+    }
+}
+
+/// One estimated (or kept) parameter.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParamEstimate {
+    /// The effect it belongs to; `None` for base parameters (`j_eq`, `r_eq`, `k_drv`).
+    pub effect: Option<EffectKind>,
+    /// Catalogue key (or base parameter name).
+    pub key: &'static str,
+    pub unit: &'static str,
+    pub value: f64,
+    /// Standard error from the least-squares covariance (linear parameters only).
+    pub std_err: Option<f64>,
+    /// Was it estimated (true) or kept as given (false)?
+    pub fitted: bool,
+}
+
+/// Residual of one equation before (base model as given) and after the fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EquationFit {
+    pub equation: Equation,
+    /// Unit of the residual (N m or V).
+    pub unit: &'static str,
+    pub rms_before: f64,
+    pub rms_after: f64,
+    /// Rows used (decimated samples).
+    pub n: usize,
+}
+
+/// The fitted model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitResult {
+    /// The fitted plant (base parameters refitted, effects added with their values).
+    pub plant: Plant,
+    /// Base parameters and effect parameters with standard errors.
+    pub params: Vec<ParamEstimate>,
+    /// Equation residuals before and after.
+    pub equations: Vec<EquationFit>,
+}
+
+/// Fits `base` extended with `effects` to `records`.
+///
+/// Effects already in `base` keep their nonlinear parameters and have their linear ones refitted
+/// (with the base parameters, unless `opts.refit_base` is false); `effects` are added (or replace
+/// the base's effect of the same kind) with the parameters marked in [`EffectToFit::fit`]
+/// estimated.
+pub fn fit_model(
+    records: &[Record],
+    base: &Plant,
+    effects: &[EffectToFit],
+    opts: &FitOptions,
+) -> Result<FitResult, FitError> {
+    let ds = Dataset::new(records, &base.params, opts)?;
+    ds.fit(base, effects)
+}
+
+/// Internal outcome of fitting one configuration.
+#[derive(Debug, Clone)]
+pub struct Solved {
+    pub cfg: Config,
+    pub mech: EqSolution,
+    pub elec: Option<EqSolution>,
+    pub plant: Plant,
+}
+
+impl Solved {
+    /// The solution of `eq`.
+    pub fn equation(&self, eq: Equation) -> Option<&EqSolution> {
+        if self.mech.equation == eq {
+            Some(&self.mech)
+        } else {
+            self.elec.as_ref().filter(|e| e.equation == eq)
+        }
+    }
+}
+
+impl Dataset {
+    /// Fits `base` extended with `effects` (see [`fit_model`]).
+    pub fn fit(&self, base: &Plant, effects: &[EffectToFit]) -> Result<FitResult, FitError> {
+        let before = self.solve_config(&self.config(base, &[], false))?;
+        let solved = self.fit_config(base, effects)?;
+        let mut equations = Vec::new();
+        for (b, a) in [
+            (Some(&before.mech), Some(&solved.mech)),
+            (before.elec.as_ref(), solved.elec.as_ref()),
+        ] {
+            if let (Some(b), Some(a)) = (b, a) {
+                equations.push(EquationFit {
+                    equation: a.equation,
+                    unit: a.equation.unit(),
+                    rms_before: b.rms(),
+                    rms_after: a.rms(),
+                    n: a.n_fit + a.n_hold,
+                });
+            }
+        }
+        Ok(FitResult {
+            plant: solved.plant,
+            params: self.estimates(&solved),
+            equations,
+        })
+    }
+
+    /// Builds the configuration: base effects beyond viscous/Coulomb become slots with their
+    /// linear parameters refitted (when `refit_base`), `effects` are added.
+    pub fn config(&self, base: &Plant, effects: &[EffectToFit], refit_base: bool) -> Config {
+        let mut slots: Vec<Slot> = Vec::new();
+        for e in base.effects.iter() {
+            if matches!(e.kind, EffectKind::Viscous | EffectKind::Coulomb) {
+                continue;
+            }
+            let mut fit = [false; MAX_PARAMS];
+            for (i, p) in e.kind.params().iter().enumerate() {
+                fit[i] = refit_base && !p.nonlinear;
+            }
+            let mut values = [f64::NAN; MAX_PARAMS];
+            values[..e.values().len()].copy_from_slice(e.values());
+            slots.push(Slot {
+                kind: e.kind,
+                values,
+                fit,
+            });
+        }
+        for t in effects {
+            if matches!(t.effect.kind, EffectKind::Viscous)
+                || (t.effect.kind == EffectKind::Coulomb
+                    && base.effects.contains(EffectKind::Coulomb))
+            {
+                continue;
+            }
+            slots.retain(|s| s.kind != t.effect.kind);
+            let mut values = [f64::NAN; MAX_PARAMS];
+            values[..t.effect.values().len()].copy_from_slice(t.effect.values());
+            slots.push(Slot {
+                kind: t.effect.kind,
+                values,
+                fit: t.fit,
+            });
+        }
+        Config {
+            base: *base,
+            slots,
+            refit_base,
+        }
+    }
+
+    /// Solves a configuration whose nonlinear parameters are all set.
+    pub fn solve_config(&self, cfg: &Config) -> Result<Solved, FitError> {
+        let mech = model::solve_mech(self, cfg).ok_or_else(|| {
+            FitError::Singular(String::from(
+                "the torque-balance regressors are collinear or too few",
+            ))
+        })?;
+        let elec = if self.has_current {
+            Some(model::solve_elec(self, cfg).ok_or_else(|| {
+                FitError::Singular(String::from(
+                    "the electrical-balance regressors are collinear",
+                ))
+            })?)
+        } else {
+            None
+        };
+        let plant = to_plant(cfg, &mech, elec.as_ref())?;
+        Ok(Solved {
+            cfg: cfg.clone(),
+            mech,
+            elec,
+            plant,
+        })
+    }
+
+    /// Residual sum of squares (fit rows) of the equation where `kind` lives, per row.
+    fn cost(&self, cfg: &Config, kind: EffectKind) -> f64 {
+        let eq = Config::equation_of(kind, self.has_current);
+        let sol = if eq == Equation::Electrical {
+            model::solve_elec(self, cfg)
+        } else {
+            model::solve_mech(self, cfg)
+        };
+        sol.map_or(f64::INFINITY, |s| s.rss_fit / s.n_fit.max(1) as f64)
+    }
+
+    /// Fits a configuration: nonlinear parameters by search (coordinate-wise when several), the
+    /// linear ones by least squares.
+    pub fn fit_config(&self, base: &Plant, effects: &[EffectToFit]) -> Result<Solved, FitError> {
+        let mut cfg = self.config(base, effects, self.opts.refit_base);
+        let searched: Vec<(usize, &'static str)> = cfg
+            .slots
+            .iter()
+            .enumerate()
+            .flat_map(|(i, s)| {
+                s.kind
+                    .params()
+                    .iter()
+                    .enumerate()
+                    .filter(move |(j, p)| p.nonlinear && s.fit[*j])
+                    .map(move |(_, p)| (i, p.key))
+            })
+            .collect();
+        // Start every searched parameter at a sensible value.
+        for &(i, key) in &searched {
+            let v = self.initial(&cfg.slots[i], key);
+            cfg.slots[i].set(key, v);
+        }
+        let passes = if searched.len() > 1 { 2 } else { 1 };
+        let mut backlash_gap: Option<usize> = None;
+        for _ in 0..passes {
+            for &(i, key) in &searched {
+                if cfg.slots[i].kind == EffectKind::Backlash {
+                    backlash_gap = Some(i);
+                    continue;
+                }
+                let kind = cfg.slots[i].kind;
+                let grid = self.grid(&cfg.slots[i], key);
+                let integer = kind == EffectKind::Cogging;
+                let log_scale = kind == EffectKind::Stribeck;
+                let mut trial = cfg.clone();
+                let mut f = |x: f64| {
+                    let x = if log_scale { math::exp(x) } else { x };
+                    trial.slots[i].set(key, x);
+                    self.cost(&trial, kind)
+                };
+                let g: Vec<f64> = if log_scale {
+                    grid.iter().map(|v| math::ln(*v)).collect()
+                } else {
+                    grid.clone()
+                };
+                let (x, fx) = search::grid_then_golden(&g, &mut f, if integer { 0 } else { 30 })
+                    .ok_or_else(|| {
+                        FitError::Singular(alloc::format!(
+                            "{kind}: no finite cost over the search grid"
+                        ))
+                    })?;
+                let mut x = if log_scale { math::exp(x) } else { x };
+                // Ties go to the "no effect" end (a saturation limit above every logged input, a
+                // zero dead band or delay): data that do not reach an effect cannot size it.
+                let none = match kind {
+                    EffectKind::Saturation => grid.last().copied(),
+                    EffectKind::Deadzone | EffectKind::Delay => grid.first().copied(),
+                    _ => None,
+                };
+                if let Some(none) = none {
+                    if f(none) <= fx * (1.0 + 1e-4) {
+                        x = none;
+                    }
+                }
+                cfg.slots[i].set(key, x);
+            }
+        }
+        let mut solved = self.solve_config(&cfg)?;
+        if let Some(i) = backlash_gap {
+            let lo = 0.0;
+            let hi = self
+                .grid(&cfg.slots[i], "gap")
+                .last()
+                .copied()
+                .unwrap_or(0.1);
+            let grid = search::linspace(lo, hi, 16);
+            let mut f = |gap: f64| {
+                let mut c = solved.cfg.clone();
+                c.slots[i].set("gap", gap);
+                match to_plant(&c, &solved.mech, solved.elec.as_ref()) {
+                    Ok(p) => oe::prediction_cost(self, &p, oe::Part::Fit).unwrap_or(f64::INFINITY),
+                    Err(_) => f64::INFINITY,
+                }
+            };
+            let (gap, _) = search::grid_then_golden(&grid, &mut f, 12).ok_or_else(|| {
+                FitError::Singular(String::from(
+                    "backlash: the simulation failed for every gap",
+                ))
+            })?;
+            solved.cfg.slots[i].set("gap", gap);
+            solved.plant = to_plant(&solved.cfg, &solved.mech, solved.elec.as_ref())?;
+        }
+        Ok(solved)
+    }
+
+    /// Largest load-side speed in the torque-balance rows [rad/s].
+    fn omega_l_max(&self) -> f64 {
+        let w = self.sample(&self.mech_rows, |r| &r.omega_f);
+        w.iter().fold(0.0f64, |m, v| m.max(v.abs())) / self.gear_ratio
+    }
+
+    fn grid(&self, s: &Slot, key: &str) -> Vec<f64> {
+        let umax = self.u_max_v.max(1e-6);
+        let dt = self
+            .recs
+            .iter()
+            .map(|r| r.dt_s)
+            .fold(f64::INFINITY, f64::min);
+        match (s.kind, key) {
+            (EffectKind::Stribeck, _) => {
+                let wl = self.omega_l_max().max(1e-3);
+                search::logspace(wl * 2e-3, wl * 0.5, 24)
+            }
+            (EffectKind::Cogging, _) => (1..=self.opts.max_cogging_harmonic.max(1))
+                .map(f64::from)
+                .collect(),
+            (EffectKind::Saturation, _) => search::linspace(0.2 * umax, umax * 1.001, 33),
+            (EffectKind::Deadzone, _) => search::linspace(0.0, (0.4 * umax).min(3.0), 31),
+            (EffectKind::Delay, _) => {
+                let n = ((self.opts.max_delay_s / (0.5 * dt)).ceil() as usize).clamp(2, 200);
+                search::linspace(0.0, self.opts.max_delay_s, n + 1)
+            }
+            (EffectKind::Backlash, _) => search::linspace(0.0, 0.2, 16),
+            _ => alloc::vec![s.get(key)],
+        }
+    }
+
+    fn initial(&self, s: &Slot, key: &str) -> f64 {
+        let g = self.grid(s, key);
+        g[g.len() / 2]
+    }
+
+    /// Estimates of every parameter of a solved configuration.
+    pub fn estimates(&self, solved: &Solved) -> Vec<ParamEstimate> {
+        let mut out = Vec::new();
+        let p = &solved.plant.params;
+        let refit = solved.cfg.refit_base;
+        let se = |eq: &EqSolution, c: Coef| eq.coef(c).map(|(_, s)| s).filter(|s| *s > 0.0);
+        out.push(ParamEstimate {
+            effect: None,
+            key: "j_eq",
+            unit: "kg m^2",
+            value: p.j_eq(),
+            std_err: se(&solved.mech, Coef::JEq),
+            fitted: refit,
+        });
+        out.push(ParamEstimate {
+            effect: Some(EffectKind::Viscous),
+            key: "b_eq",
+            unit: "N m s/rad",
+            value: solved.plant.b_eq(),
+            std_err: se(&solved.mech, Coef::BEq),
+            fitted: refit,
+        });
+        if solved.plant.effects.contains(EffectKind::Coulomb) {
+            out.push(ParamEstimate {
+                effect: Some(EffectKind::Coulomb),
+                key: "tau_sf",
+                unit: "N m",
+                value: solved.plant.tau_sf(),
+                std_err: se(&solved.mech, Coef::TauSf),
+                fitted: refit || solved.cfg.slot(EffectKind::Coulomb).is_some(),
+            });
+        }
+        if let Some(el) = &solved.elec {
+            let (ci, si) = el.coef(Coef::ROverK).unwrap_or((f64::NAN, 0.0));
+            let (cw, sw) = el.coef(Coef::KeOverK).unwrap_or((f64::NAN, 0.0));
+            let k_drv = p.k_drv;
+            let se_k = k_drv * sw / cw;
+            let se_r = p.r_eq() * math::sqrt((si / ci).powi(2) + (sw / cw).powi(2));
+            out.push(ParamEstimate {
+                effect: None,
+                key: "k_drv",
+                unit: "V/V",
+                value: k_drv,
+                std_err: Some(se_k).filter(|v| *v > 0.0),
+                fitted: refit,
+            });
+            out.push(ParamEstimate {
+                effect: None,
+                key: "r_eq",
+                unit: "ohm",
+                value: p.r_eq(),
+                std_err: Some(se_r).filter(|v| *v > 0.0),
+                fitted: refit,
+            });
+        }
+        for s in &solved.cfg.slots {
+            if s.kind == EffectKind::Coulomb {
+                continue;
+            }
+            for (j, spec) in s.kind.params().iter().enumerate() {
+                let value = solved
+                    .plant
+                    .effects
+                    .value(s.kind, spec.key)
+                    .unwrap_or(f64::NAN);
+                let std_err = match (s.kind, spec.key) {
+                    (EffectKind::Stribeck, "tau_s") => solved
+                        .mech
+                        .coef(Coef::StribeckExcess(slot_index(solved, s.kind)))
+                        .map(|c| c.1),
+                    (EffectKind::Asymmetry, "tau_sf_pos") => solved
+                        .mech
+                        .coef(Coef::AsymPos(slot_index(solved, s.kind)))
+                        .map(|c| c.1),
+                    (EffectKind::Asymmetry, "tau_sf_neg") => solved
+                        .mech
+                        .coef(Coef::AsymNeg(slot_index(solved, s.kind)))
+                        .map(|c| c.1),
+                    (EffectKind::Cogging | EffectKind::Imbalance, "amplitude") => {
+                        let i = slot_index(solved, s.kind);
+                        let a = solved
+                            .mech
+                            .coef(Coef::PairSin(i))
+                            .map(|c| c.1)
+                            .unwrap_or(0.0);
+                        let b = solved
+                            .mech
+                            .coef(Coef::PairCos(i))
+                            .map(|c| c.1)
+                            .unwrap_or(0.0);
+                        Some(math::sqrt(0.5 * (a * a + b * b)))
+                    }
+                    _ => None,
+                }
+                .filter(|v| *v > 0.0);
+                out.push(ParamEstimate {
+                    effect: Some(s.kind),
+                    key: spec.key,
+                    unit: spec.unit,
+                    value,
+                    std_err,
+                    fitted: s.fit[j],
+                });
+            }
+        }
+        out
+    }
+}
+
+fn slot_index(solved: &Solved, kind: EffectKind) -> usize {
+    solved
+        .cfg
+        .slots
+        .iter()
+        .position(|s| s.kind == kind)
+        .unwrap_or(usize::MAX)
+}
+
+/// Turns a solved configuration into a plant.
+pub(crate) fn to_plant(
+    cfg: &Config,
+    mech: &EqSolution,
+    elec: Option<&EqSolution>,
+) -> Result<Plant, FitError> {
+    let mut plant = cfg.base;
+    let mut params = plant.params;
+    let c = |q: Coef| mech.coef(q).map(|v| v.0);
+    if let Some(j) = c(Coef::JEq) {
+        if j <= 0.0 {
+            return Err(FitError::BadModel(String::from(
+                "the fitted inertia J_eq is not positive; the logs need accelerations",
+            )));
+        }
+        params.j_eq = Some(j);
+    }
+    let b = c(Coef::BEq).unwrap_or(plant.b_eq()).max(0.0);
+    params.b_eq = Some(b);
+    set(&mut plant, EffectKind::Viscous, &[b])?;
+    let asym = cfg
+        .slots
+        .iter()
+        .position(|s| s.kind == EffectKind::Asymmetry);
+    let mut tau_sf = c(Coef::TauSf);
+    if let Some(ai) = asym {
+        let pos = c(Coef::AsymPos(ai)).unwrap_or(0.0).max(0.0);
+        let neg = c(Coef::AsymNeg(ai)).unwrap_or(0.0).max(0.0);
+        set(&mut plant, EffectKind::Asymmetry, &[pos, neg])?;
+        tau_sf = Some(0.5 * (pos + neg));
+    }
+    if let Some(t) = tau_sf {
+        params.tau_sf = Some(t.max(0.0));
+        set(&mut plant, EffectKind::Coulomb, &[t.max(0.0)])?;
+    }
+    if let Some(el) = elec {
+        let ci = el.coef(Coef::ROverK).map(|v| v.0).unwrap_or(f64::NAN);
+        let cw = el.coef(Coef::KeOverK).map(|v| v.0).unwrap_or(f64::NAN);
+        if ci > 0.0 && cw > 0.0 {
+            let k_drv = params.k_e / cw;
+            let r_eq = ci * k_drv;
+            if r_eq > params.r_s {
+                params.k_drv = k_drv;
+                params.r_a = r_eq - params.r_s;
+            }
+        }
+    }
+    for (si, s) in cfg.slots.iter().enumerate() {
+        let mut v: Vec<f64> = s.values[..s.kind.params().len()].to_vec();
+        match s.kind {
+            EffectKind::Coulomb | EffectKind::Asymmetry => continue,
+            EffectKind::Stribeck => {
+                let ex = c(Coef::StribeckExcess(si)).unwrap_or(0.0).max(0.0);
+                v[0] = params.tau_sf.unwrap_or(0.0) + ex;
+            }
+            EffectKind::Cogging | EffectKind::Imbalance => {
+                let a = c(Coef::PairSin(si)).unwrap_or(0.0);
+                let b = c(Coef::PairCos(si)).unwrap_or(0.0);
+                let amp_i = 0;
+                let ph_i = if s.kind == EffectKind::Cogging { 2 } else { 1 };
+                v[amp_i] = math::hypot(a, b);
+                v[ph_i] = math::atan2(b, a);
+            }
+            _ => {}
+        }
+        for x in v.iter_mut() {
+            if x.is_nan() {
+                *x = 0.0;
+            }
+        }
+        set(&mut plant, s.kind, &v)?;
+    }
+    plant.params = params;
+    params
+        .validate()
+        .map_err(|e| FitError::BadModel(alloc::format!("fitted parameters: {e}")))?;
+    Ok(plant)
+}
+
+fn set(plant: &mut Plant, kind: EffectKind, values: &[f64]) -> Result<(), FitError> {
+    let e = Effect::new(kind, values)
+        .map_err(|e| FitError::BadModel(alloc::format!("fitted {kind}: {e}")))?;
+    plant.effects.insert(e);
+    Ok(())
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::params::PlantParams;
+    use crate::sim::sensors::SplitMix64;
+    use crate::sim::{PlantSim, SensorConfig, Sensors};
+
+    /// An open-loop identification-like log: random voltage steps of both signs.
+    pub(crate) fn open_loop_log(
+        plant: &Plant,
+        seconds: f64,
+        seed: u64,
+        with_current: bool,
+    ) -> Record {
+        let dt = 1e-3;
+        let mut sim = PlantSim::new(plant, dt).unwrap();
+        let mut sensors = Sensors::new(SensorConfig {
+            seed,
+            ..SensorConfig::default()
+        });
+        let mut rng = SplitMix64(seed ^ 0xABCD);
+        let n = (seconds / dt) as usize;
+        let mut rec = Record {
+            source: "sim".into(),
+            ..Record::default()
+        };
+        let (mut t, mut th, mut ia, mut uv) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut u = 0.0;
+        for k in 0..n {
+            if k % 300 == 0 {
+                let mag = 0.5 + 5.0 * rng.uniform();
+                u = if rng.uniform() < 0.5 { -mag } else { mag };
+            }
+            let m = sensors.measure(sim.state());
+            t.push(k as f64 * dt);
+            th.push(m.theta_l_rad);
+            ia.push(m.i_a_a);
+            uv.push(u);
+            sim.step(u);
+        }
+        rec.time_s = t;
+        rec.theta_l_rad = Some(th);
+        rec.u_v = Some(uv);
+        if with_current {
+            rec.i_a_a = Some(ia);
+        }
+        rec
+    }
+
+    pub(crate) fn truth() -> Plant {
+        let params = PlantParams {
+            j_eq: Some(7.0e-7),
+            b_eq: Some(1.0e-6),
+            tau_sf: Some(0.01),
+            ..PlantParams::TABLE2
+        };
+        Plant::from_params(params).unwrap()
+    }
+
+    #[test]
+    fn refits_the_base_parameters_with_and_without_current() {
+        let truth = truth();
+        let log = open_loop_log(&truth, 10.0, 3, true);
+        // Start from the nominal datasheet values with a rough friction guess.
+        let start = Plant::from_params(PlantParams {
+            tau_sf: Some(0.002),
+            ..PlantParams::TABLE2
+        })
+        .unwrap();
+        let r = fit_model(&[log.clone()], &start, &[], &FitOptions::default()).unwrap();
+        let p = &r.plant;
+        assert!(
+            (p.params.j_eq() / 7.0e-7 - 1.0).abs() < 0.05,
+            "J_eq {}",
+            p.params.j_eq()
+        );
+        assert!(
+            (p.tau_sf() / 0.01 - 1.0).abs() < 0.1,
+            "tau_sf {}",
+            p.tau_sf()
+        );
+        assert!((p.b_eq() / 1.0e-6 - 1.0).abs() < 0.25, "B_eq {}", p.b_eq());
+        assert!(
+            (p.params.k_drv / 0.6 - 1.0).abs() < 0.03,
+            "k_drv {}",
+            p.params.k_drv
+        );
+        assert!(
+            (p.params.r_eq() / 3.1 - 1.0).abs() < 0.05,
+            "R_eq {}",
+            p.params.r_eq()
+        );
+        assert!(r.equations.iter().all(|e| e.rms_after <= e.rms_before));
+        let mut no_i = log;
+        no_i.i_a_a = None;
+        let r = fit_model(&[no_i], &start, &[], &FitOptions::default()).unwrap();
+        assert_eq!(r.equations[0].equation, Equation::Combined);
+        let p = &r.plant;
+        assert!(
+            (p.params.j_eq() / 7.0e-7 - 1.0).abs() < 0.05,
+            "J_eq {}",
+            p.params.j_eq()
+        );
+        assert!(
+            (p.tau_sf() / 0.01 - 1.0).abs() < 0.1,
+            "tau_sf {}",
+            p.tau_sf()
+        );
+    }
+}

@@ -1,0 +1,456 @@
+//! Assembly and solution of the equations of one model configuration (every nonlinear parameter
+//! fixed): torque balance (current logged), electrical balance (current logged) or the u-driven
+//! combined equation (no current). Linear parameters by constrained least squares.
+
+use super::dataset::{Dataset, RecData, Rows};
+use super::lsq::{self, Sign};
+use super::shapes;
+use crate::effects::{EffectKind, MAX_PARAMS};
+use crate::math;
+use crate::plant::Plant;
+use alloc::vec::Vec;
+
+/// The equations servo fits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Equation {
+    /// k_t i_a = J_eq dw_m/dt + B_eq w_m + friction/N + cogging + imbalance/N (current logged) [N m].
+    Torque,
+    /// k_drv u_in = R_eq i_a + k_e w_m with u_in seen through the driver and armature lags,
+    /// written per unit k_drv (current logged) [V].
+    Electrical,
+    /// k_drv k_t u_in / R_eq = J_eq dw_m/dt + (B_eq + k_t k_e / R_eq) w_m + friction/N + ... (no
+    /// current logged) [N m].
+    Combined,
+}
+
+impl Equation {
+    pub const fn name(self) -> &'static str {
+        match self {
+            Equation::Torque => "torque balance",
+            Equation::Electrical => "electrical balance",
+            Equation::Combined => "u-driven torque balance",
+        }
+    }
+    pub const fn unit(self) -> &'static str {
+        match self {
+            Equation::Electrical => "V",
+            _ => "N m",
+        }
+    }
+}
+
+/// An effect of the configuration with the parameters to fit marked.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Slot {
+    pub kind: EffectKind,
+    pub values: [f64; MAX_PARAMS],
+    pub fit: [bool; MAX_PARAMS],
+}
+
+impl Slot {
+    pub fn get(&self, key: &str) -> f64 {
+        self.kind
+            .params()
+            .iter()
+            .position(|p| p.key == key)
+            .map_or(f64::NAN, |i| self.values[i])
+    }
+    pub fn set(&mut self, key: &str, v: f64) {
+        if let Some(i) = self.kind.params().iter().position(|p| p.key == key) {
+            self.values[i] = v;
+        }
+    }
+    pub fn fits(&self, key: &str) -> bool {
+        self.kind
+            .params()
+            .iter()
+            .position(|p| p.key == key)
+            .is_some_and(|i| self.fit[i])
+    }
+}
+
+/// What a column's coefficient means.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Coef {
+    JEq,
+    BEq,
+    TauSf,
+    /// Stribeck excess tau_s - tau_sf of slot i.
+    StribeckExcess(usize),
+    AsymPos(usize),
+    AsymNeg(usize),
+    /// amplitude * cos(phase) and amplitude * sin(phase) of a periodic effect (slot i).
+    PairSin(usize),
+    PairCos(usize),
+    /// R_eq / k_drv.
+    ROverK,
+    /// k_e / k_drv.
+    KeOverK,
+}
+
+/// The fit of one equation.
+#[derive(Debug, Clone)]
+pub struct EqSolution {
+    pub equation: Equation,
+    pub coefs: Vec<Coef>,
+    pub theta: Vec<f64>,
+    pub std_err: Vec<f64>,
+    /// Residual at every row of the equation (fit and held out).
+    pub resid: Vec<f64>,
+    /// Residual sum of squares on fit rows / held-out rows, and their counts.
+    pub rss_fit: f64,
+    pub rss_hold: f64,
+    pub n_fit: usize,
+    pub n_hold: usize,
+    /// Free coefficients estimated.
+    pub p: usize,
+}
+
+impl EqSolution {
+    pub fn coef(&self, c: Coef) -> Option<(f64, f64)> {
+        self.coefs
+            .iter()
+            .position(|&q| q == c)
+            .map(|i| (self.theta[i], self.std_err[i]))
+    }
+    /// RMS of the residual on every row.
+    pub fn rms(&self) -> f64 {
+        let n = (self.n_fit + self.n_hold).max(1);
+        math::sqrt((self.rss_fit + self.rss_hold) / n as f64)
+    }
+}
+
+struct Term {
+    col: Vec<f64>,
+    coef: Coef,
+    sign: Sign,
+    /// Value when the coefficient is not fitted.
+    fixed: Option<f64>,
+}
+
+/// A model configuration: the base plant, its effects as slots, whether to refit the base.
+#[derive(Debug, Clone)]
+pub struct Config {
+    pub base: Plant,
+    pub slots: Vec<Slot>,
+    pub refit_base: bool,
+}
+
+impl Config {
+    pub fn slot(&self, kind: EffectKind) -> Option<&Slot> {
+        self.slots.iter().find(|s| s.kind == kind)
+    }
+    pub fn has(&self, kind: EffectKind) -> bool {
+        self.slot(kind).is_some()
+    }
+    /// Input transformation (saturation, then dead zone) of the configuration.
+    fn input_transform(&self) -> impl Fn(f64) -> f64 {
+        let lim = self
+            .slot(EffectKind::Saturation)
+            .map(|s| s.get("limit"))
+            .filter(|v| v.is_finite());
+        let dz = self
+            .slot(EffectKind::Deadzone)
+            .map(|s| s.get("width"))
+            .filter(|v| v.is_finite());
+        move |u| {
+            let u = lim.map_or(u, |l| shapes::saturation(u, l));
+            dz.map_or(u, |w| shapes::deadzone(u, w))
+        }
+    }
+    fn delay_s(&self) -> f64 {
+        self.slot(EffectKind::Delay)
+            .map(|s| s.get("delay"))
+            .filter(|v| v.is_finite())
+            .unwrap_or(0.0)
+    }
+    /// Equation of an effect kind.
+    pub fn equation_of(kind: EffectKind, has_current: bool) -> Equation {
+        match (kind.is_mechanical(), has_current) {
+            (_, false) => Equation::Combined,
+            (true, true) => Equation::Torque,
+            (false, true) => Equation::Electrical,
+        }
+    }
+}
+
+/// Solves the mechanical (torque or combined) equation of `cfg`.
+pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
+    let rows = &ds.mech_rows;
+    let p = &cfg.base.params;
+    let n = p.n;
+    let mut terms: Vec<Term> = Vec::new();
+    let base_fixed = |v: f64| if cfg.refit_base { None } else { Some(v) };
+    terms.push(Term {
+        col: ds.sample(rows, |r| &r.accel_f),
+        coef: Coef::JEq,
+        sign: Sign::NonNegative,
+        fixed: base_fixed(p.j_eq()),
+    });
+    terms.push(Term {
+        col: ds.sample(rows, |r| &r.omega_f),
+        coef: Coef::BEq,
+        sign: Sign::NonNegative,
+        fixed: base_fixed(cfg.base.b_eq()),
+    });
+    let asym = cfg
+        .slots
+        .iter()
+        .position(|s| s.kind == EffectKind::Asymmetry);
+    let coulomb_col = || {
+        ds.column(rows, |r: &RecData| {
+            r.omega_raw
+                .iter()
+                .map(|&w| shapes::coulomb_dir(w) / n)
+                .collect()
+        })
+    };
+    if asym.is_none() && cfg.base.effects.contains(EffectKind::Coulomb) {
+        terms.push(Term {
+            col: coulomb_col(),
+            coef: Coef::TauSf,
+            sign: Sign::NonNegative,
+            fixed: base_fixed(cfg.base.tau_sf()),
+        });
+    }
+    for (si, s) in cfg.slots.iter().enumerate() {
+        match s.kind {
+            EffectKind::Coulomb => {
+                if asym.is_none() {
+                    let fixed = if s.fit[0] { None } else { Some(s.values[0]) };
+                    terms.push(Term {
+                        col: coulomb_col(),
+                        coef: Coef::TauSf,
+                        sign: Sign::NonNegative,
+                        fixed,
+                    });
+                }
+            }
+            EffectKind::Stribeck => {
+                let ws = s.get("omega_s");
+                if !ws.is_finite() {
+                    continue;
+                }
+                let col = ds.column(rows, |r: &RecData| {
+                    r.omega_raw
+                        .iter()
+                        .map(|&w| shapes::coulomb_dir(w) * shapes::stribeck_decay(w / n, ws) / n)
+                        .collect()
+                });
+                let fixed = if s.fits("tau_s") {
+                    None
+                } else {
+                    Some(s.get("tau_s") - cfg_tau_sf(cfg))
+                };
+                terms.push(Term {
+                    col,
+                    coef: Coef::StribeckExcess(si),
+                    sign: Sign::NonNegative,
+                    fixed,
+                });
+            }
+            EffectKind::Asymmetry => {
+                let pos = ds.column(rows, |r: &RecData| {
+                    r.omega_raw
+                        .iter()
+                        .map(|&w| if w > 0.0 { 1.0 / n } else { 0.0 })
+                        .collect()
+                });
+                let neg = ds.column(rows, |r: &RecData| {
+                    r.omega_raw
+                        .iter()
+                        .map(|&w| if w < 0.0 { -1.0 / n } else { 0.0 })
+                        .collect()
+                });
+                terms.push(Term {
+                    col: pos,
+                    coef: Coef::AsymPos(si),
+                    sign: Sign::NonNegative,
+                    fixed: if s.fit[0] { None } else { Some(s.values[0]) },
+                });
+                terms.push(Term {
+                    col: neg,
+                    coef: Coef::AsymNeg(si),
+                    sign: Sign::NonNegative,
+                    fixed: if s.fit[1] { None } else { Some(s.values[1]) },
+                });
+            }
+            EffectKind::Cogging | EffectKind::Imbalance => {
+                let cog = s.kind == EffectKind::Cogging;
+                let h = if cog { s.get("harmonic") } else { 1.0 };
+                if !h.is_finite() {
+                    continue;
+                }
+                let scale = if cog { 1.0 } else { 1.0 / n };
+                let angle = move |r: &RecData, k: usize| {
+                    if cog {
+                        r.theta_m_rad[k]
+                    } else {
+                        r.theta_m_rad[k] / n
+                    }
+                };
+                let sin_col = ds.column(rows, |r: &RecData| {
+                    (0..r.theta_m_rad.len())
+                        .map(|k| shapes::cogging_pair(angle(r, k), h).0 * scale)
+                        .collect()
+                });
+                let cos_col = ds.column(rows, |r: &RecData| {
+                    (0..r.theta_m_rad.len())
+                        .map(|k| shapes::cogging_pair(angle(r, k), h).1 * scale)
+                        .collect()
+                });
+                let fit_amp = s.fits("amplitude") || s.fits("phase");
+                let (a, ph) = (s.get("amplitude"), s.get("phase"));
+                terms.push(Term {
+                    col: sin_col,
+                    coef: Coef::PairSin(si),
+                    sign: Sign::Free,
+                    fixed: if fit_amp {
+                        None
+                    } else {
+                        Some(a * math::cos(ph))
+                    },
+                });
+                terms.push(Term {
+                    col: cos_col,
+                    coef: Coef::PairCos(si),
+                    sign: Sign::Free,
+                    fixed: if fit_amp {
+                        None
+                    } else {
+                        Some(a * math::sin(ph))
+                    },
+                });
+            }
+            _ => {}
+        }
+    }
+    let (equation, y) = if ds.has_current {
+        (
+            Equation::Torque,
+            ds.sample(rows, |r| r.i_f.as_deref().unwrap_or(&[]))
+                .into_iter()
+                .map(|i| p.k_t * i)
+                .collect(),
+        )
+    } else {
+        let r_eq = p.r_eq();
+        let g = p.k_drv * p.k_t / r_eq;
+        let shift = cfg.delay_s() + p.t_drv() + p.l_a / r_eq;
+        let tr = cfg.input_transform();
+        let useen = ds.column(rows, |r: &RecData| r.input_seen(&tr, shift));
+        let w = ds.sample(rows, |r| &r.omega_f);
+        let y: Vec<f64> = useen
+            .iter()
+            .zip(&w)
+            .map(|(u, w)| g * u - p.k_t * p.k_e / r_eq * w)
+            .collect();
+        (Equation::Combined, y)
+    };
+    solve_terms(equation, rows, y, terms)
+}
+
+fn cfg_tau_sf(cfg: &Config) -> f64 {
+    cfg.slot(EffectKind::Coulomb)
+        .map(|s| s.values[0])
+        .filter(|v| v.is_finite())
+        .unwrap_or(cfg.base.tau_sf())
+}
+
+/// Solves the electrical equation of `cfg` (current logged).
+pub fn solve_elec(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
+    if !ds.has_current {
+        return None;
+    }
+    let rows = &ds.elec_rows;
+    let p = &cfg.base.params;
+    let (delay, lag) = (cfg.delay_s(), p.t_drv() + p.l_a / p.r_eq());
+    let tr = cfg.input_transform();
+    let y = ds.column(rows, |r: &RecData| r.input_point(&tr, delay, lag));
+    let fixed = |v: f64| if cfg.refit_base { None } else { Some(v) };
+    let terms = alloc::vec![
+        Term {
+            col: ds.sample(rows, |r| r.i_f.as_deref().unwrap_or(&[])),
+            coef: Coef::ROverK,
+            sign: Sign::NonNegative,
+            fixed: fixed(p.r_eq() / p.k_drv),
+        },
+        Term {
+            col: ds.sample(rows, |r| &r.omega_f),
+            coef: Coef::KeOverK,
+            sign: Sign::NonNegative,
+            fixed: fixed(p.k_e / p.k_drv),
+        },
+    ];
+    solve_terms(Equation::Electrical, rows, y, terms)
+}
+
+fn solve_terms(
+    equation: Equation,
+    rows: &Rows,
+    mut y: Vec<f64>,
+    terms: Vec<Term>,
+) -> Option<EqSolution> {
+    for t in &terms {
+        if let Some(v) = t.fixed {
+            for (yi, c) in y.iter_mut().zip(&t.col) {
+                *yi -= v * c;
+            }
+        }
+    }
+    let free: Vec<&Term> = terms.iter().filter(|t| t.fixed.is_none()).collect();
+    let fit_idx: Vec<usize> = (0..rows.len()).filter(|&i| rows.fit[i]).collect();
+    let cols: Vec<Vec<f64>> = free
+        .iter()
+        .map(|t| fit_idx.iter().map(|&i| t.col[i]).collect())
+        .collect();
+    let yfit: Vec<f64> = fit_idx.iter().map(|&i| y[i]).collect();
+    let signs: Vec<Sign> = free.iter().map(|t| t.sign).collect();
+    let sol = lsq::solve(&cols, &yfit, &signs)?;
+    let mut resid = y;
+    for (t, th) in free.iter().zip(&sol.theta) {
+        for (r, c) in resid.iter_mut().zip(&t.col) {
+            *r -= th * c;
+        }
+    }
+    let (mut rss_fit, mut rss_hold, mut n_fit, mut n_hold) = (0.0, 0.0, 0, 0);
+    for (r, &f) in resid.iter().zip(&rows.fit) {
+        if f {
+            rss_fit += r * r;
+            n_fit += 1;
+        } else {
+            rss_hold += r * r;
+            n_hold += 1;
+        }
+    }
+    let mut coefs = Vec::new();
+    let mut theta = Vec::new();
+    let mut std_err = Vec::new();
+    let mut fi = 0;
+    for t in &terms {
+        coefs.push(t.coef);
+        match t.fixed {
+            Some(v) => {
+                theta.push(v);
+                std_err.push(0.0);
+            }
+            None => {
+                theta.push(sol.theta[fi]);
+                std_err.push(sol.std_err[fi]);
+                fi += 1;
+            }
+        }
+    }
+    Some(EqSolution {
+        equation,
+        coefs,
+        theta,
+        std_err,
+        resid,
+        rss_fit,
+        rss_hold,
+        n_fit,
+        n_hold,
+        p: sol.p,
+    })
+}

@@ -1,0 +1,264 @@
+//! Identification of the gearmotor's mechanical and electrical constants (handout section 4).
+//!
+//! * [`friction`] (4.1): constant-speed segments found automatically ([`plateaus`]), then LS on
+//!   k_t i_a = B_eq w_m + (tau_sf / N) sign(w_m) (eqs. 57-66).
+//! * [`inertia`] (4.2): constant acceleration/deceleration phases ([`phases`]), eqs. 67-70
+//!   averaged over phase pairs; or LS on the samples with |dw_m/dt| above a threshold.
+//! * [`combined`] (4.3): one LS over the whole record (eqs. 71-76) with zero-phase filtered
+//!   differentiation ([`filter`]), the same filter on every regressor.
+//! * [`electrical`]: u = (R_eq / k_drv) i_a + (k_e / k_drv) w_m at steady state gives k_drv, R_eq.
+//!
+//! All fits go through [`ls::fit`] (QR, standard errors, 95 % intervals with the Student t
+//! quantile of [`student_t`], residual RMS, condition number). Data that cannot identify a
+//! parameter is refused with [`IdentError::NotIdentifiable`], whose message says what experiment
+//! is missing.
+//!
+//! Units: SI. B_eq [N m s/rad] and J_eq [kg m^2] at motor side, tau_sf [N m] at load side.
+
+pub mod combined;
+pub mod electrical;
+pub mod filter;
+pub mod friction;
+pub mod inertia;
+pub mod ls;
+pub mod phases;
+pub mod plateaus;
+pub mod student_t;
+
+use alloc::string::String;
+use alloc::vec::Vec;
+
+use crate::params::PlantParams;
+use crate::record::Record;
+
+/// Why an identification was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum IdentError {
+    /// A signal the method needs is not in the log.
+    #[error("{log}: no {signal} signal: {why}")]
+    MissingSignal {
+        log: String,
+        signal: &'static str,
+        why: &'static str,
+    },
+    /// A signal holds NaN or infinity.
+    #[error("{log}: signal {signal} is not finite at row {row} (t = {time_s} s)")]
+    NotFinite {
+        log: String,
+        signal: &'static str,
+        row: usize,
+        time_s: f64,
+    },
+    /// Time is not strictly increasing.
+    #[error("{log}: time is not strictly increasing at row {row}")]
+    BadTime { log: String, row: usize },
+    /// The data cannot separate the parameters; the message says which experiment is missing.
+    #[error("{0}")]
+    NotIdentifiable(String),
+    /// Too few observations for the fit and its uncertainty.
+    #[error("too few data: need at least {needed} observations, got {got}")]
+    TooFewData { needed: usize, got: usize },
+    /// The regressors are (nearly) collinear.
+    #[error("the regressors are collinear (condition number {cond:.3e}): the parameters cannot be separated")]
+    RankDeficient { cond: f64 },
+    /// A bad configuration value.
+    #[error("invalid setting: {0}")]
+    BadConfig(String),
+    /// An internal inconsistency (a bug).
+    #[error("internal error: {0}")]
+    Internal(&'static str),
+}
+
+/// One identified parameter with its uncertainty and the quality of the fit it came from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimate {
+    /// Estimated value (SI).
+    pub value: f64,
+    /// Standard error.
+    pub std_err: f64,
+    /// 95 % confidence interval (lo, hi).
+    pub ci95: (f64, f64),
+    /// Residual RMS of the fit (units of its left-hand side, usually N m).
+    pub residual_rms: f64,
+    /// Condition number of the column-scaled regression.
+    pub cond: f64,
+    /// Degrees of freedom of the t quantile.
+    pub dof: usize,
+    /// Number of observations of the fit.
+    pub n: usize,
+}
+
+impl Estimate {
+    /// The `j`-th parameter of a least-squares fit.
+    pub fn from_fit(fit: &ls::LsFit, j: usize) -> Estimate {
+        Estimate {
+            value: fit.theta[j],
+            std_err: fit.std_err[j],
+            ci95: fit.ci95[j],
+            residual_rms: fit.residual_rms,
+            cond: fit.cond,
+            dof: fit.dof,
+            n: fit.n,
+        }
+    }
+    /// True when `x` lies in the 95 % interval.
+    pub fn contains(&self, x: f64) -> bool {
+        self.ci95.0 <= x && x <= self.ci95.1
+    }
+    /// Relative standard error |se / value|.
+    pub fn rel_err(&self) -> f64 {
+        (self.std_err / self.value).abs()
+    }
+}
+
+/// The signals of one experiment, in the form the estimators use: motor side, SI.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Experiment {
+    /// Where the data came from (for messages and provenance).
+    pub source: String,
+    /// Sample times [s].
+    pub time_s: Vec<f64>,
+    /// Motor speed omega_m [rad/s] (from omega_m, N omega_l, or differentiated angles).
+    pub omega_m_rad_s: Vec<f64>,
+    /// Motor torque tau_m = k_t i_a [N m], if the current was logged.
+    pub tau_m_nm: Option<Vec<f64>>,
+    /// Armature current i_a [A], if logged.
+    pub i_a_a: Option<Vec<f64>>,
+    /// Driver input voltage u [V], if logged.
+    pub u_v: Option<Vec<f64>>,
+}
+
+impl Experiment {
+    /// Prepares a record: checks finiteness and time, derives the motor speed from whatever the
+    /// log has (omega_m, omega_l, theta_m or theta_l, in that order) and the torque k_t i_a.
+    pub fn from_record(rec: &Record, params: &PlantParams) -> Result<Experiment, IdentError> {
+        let source = if rec.source.is_empty() {
+            String::from("record")
+        } else {
+            rec.source.clone()
+        };
+        let t = &rec.time_s;
+        if t.len() < 3 {
+            return Err(IdentError::TooFewData {
+                needed: 3,
+                got: t.len(),
+            });
+        }
+        check_finite(&source, "time", t, t)?;
+        for k in 1..t.len() {
+            if !(t[k] > t[k - 1]) {
+                return Err(IdentError::BadTime {
+                    log: source,
+                    row: k,
+                });
+            }
+        }
+        let n = params.n;
+        let omega_m_rad_s = if let Some(w) = &rec.omega_m_rad_s {
+            check_finite(&source, "omega_m", w, t)?;
+            w.clone()
+        } else if let Some(w) = &rec.omega_l_rad_s {
+            check_finite(&source, "omega_l", w, t)?;
+            w.iter().map(|w| w * n).collect()
+        } else if let Some(th) = &rec.theta_m_rad {
+            check_finite(&source, "theta_m", th, t)?;
+            derivative(t, th)
+        } else if let Some(th) = &rec.theta_l_rad {
+            check_finite(&source, "theta_l", th, t)?;
+            derivative(t, th).into_iter().map(|w| w * n).collect()
+        } else {
+            return Err(IdentError::MissingSignal {
+                log: source,
+                signal: "speed or angle",
+                why: "every method needs the motor speed; log omega_m, omega_l, theta_m or theta_l",
+            });
+        };
+        let i_a_a = match &rec.i_a_a {
+            Some(i) => {
+                check_finite(&source, "i_a", i, t)?;
+                Some(i.clone())
+            }
+            None => None,
+        };
+        let u_v = match &rec.u_v {
+            Some(u) => {
+                check_finite(&source, "u", u, t)?;
+                Some(u.clone())
+            }
+            None => None,
+        };
+        let tau_m_nm = i_a_a
+            .as_ref()
+            .map(|i| i.iter().map(|i| params.k_t * i).collect());
+        Ok(Experiment {
+            source,
+            time_s: t.clone(),
+            omega_m_rad_s,
+            tau_m_nm,
+            i_a_a,
+            u_v,
+        })
+    }
+
+    /// The motor torque, or the explanation why the method needs the current.
+    pub fn torque(&self, method: &'static str) -> Result<&[f64], IdentError> {
+        let _ = method;
+        self.tau_m_nm.as_deref().ok_or_else(|| IdentError::MissingSignal {
+            log: self.source.clone(),
+            signal: "armature current i_a",
+            why: "the motor torque tau_m = k_t i_a is the left-hand side of eqs. 57, 67 and 71; log the current (shunt voltage / R_s)",
+        })
+    }
+
+    /// Median sample period [s].
+    pub fn sample_period_s(&self) -> f64 {
+        median_dt(&self.time_s)
+    }
+}
+
+fn check_finite(
+    source: &str,
+    signal: &'static str,
+    x: &[f64],
+    t: &[f64],
+) -> Result<(), IdentError> {
+    match x.iter().position(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(row) => Err(IdentError::NotFinite {
+            log: String::from(source),
+            signal,
+            row,
+            time_s: t.get(row).copied().unwrap_or(f64::NAN),
+        }),
+    }
+}
+
+/// Median of the sample periods [s].
+pub(crate) fn median_dt(t: &[f64]) -> f64 {
+    if t.len() < 2 {
+        return f64::NAN;
+    }
+    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    d.sort_by(|a, b| a.total_cmp(b));
+    d[d.len() / 2]
+}
+
+/// Central-difference derivative (one-sided at the ends) on a possibly non-uniform time base.
+pub fn derivative(t: &[f64], x: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    let mut d = alloc::vec![0.0; n];
+    if n < 2 {
+        return d;
+    }
+    d[0] = (x[1] - x[0]) / (t[1] - t[0]);
+    d[n - 1] = (x[n - 1] - x[n - 2]) / (t[n - 1] - t[n - 2]);
+    for k in 1..n - 1 {
+        d[k] = (x[k + 1] - x[k - 1]) / (t[k + 1] - t[k - 1]);
+    }
+    d
+}
+
+/// Mean of a slice (NaN when empty).
+pub(crate) fn mean(x: &[f64]) -> f64 {
+    x.iter().sum::<f64>() / x.len() as f64
+}
