@@ -45,7 +45,11 @@ pub struct Board {
     #[arg(long = "i-trip-a", default_value_t = SafetyLimits::default().i_trip_a, value_name = "A")]
     pub i_trip_a: f64,
     /// Current-sense scale reported to the host [A/LSB].
-    #[arg(long = "current-scale-a", default_value_t = 1e-3, value_name = "A_PER_LSB")]
+    #[arg(
+        long = "current-scale-a",
+        default_value_t = 1e-3,
+        value_name = "A_PER_LSB"
+    )]
     pub current_scale_a: f64,
     #[command(flatten)]
     pub plant: PlantArgs,
@@ -86,12 +90,12 @@ impl Board {
                 .context("installing the Ctrl-C handler")?;
         }
         let report = if self.pty {
-            let (mut master, slave) = serialport::TTYPort::pair().context("creating a pseudo-terminal")?;
-            let path = slave
-                .name()
-                .context("the pseudo-terminal has no path")?;
+            let (mut master, slave) =
+                serialport::TTYPort::pair().context("creating a pseudo-terminal")?;
+            let path = slave.name().context("the pseudo-terminal has no path")?;
             if let Some(f) = &self.path_file {
-                std::fs::write(f, format!("{path}\n")).with_context(|| format!("--path-file {}", f.display()))?;
+                std::fs::write(f, format!("{path}\n"))
+                    .with_context(|| format!("--path-file {}", f.display()))?;
             }
             println!("board ready on {path}");
             println!(
@@ -106,17 +110,23 @@ impl Board {
             );
             let _ = std::io::stdout().flush();
             // The slave stays open here so that hosts can come and go without hanging up the pty.
-            let r = board.serve(&mut master, &stop).context("serving on the pseudo-terminal")?;
+            let r = board
+                .serve(&mut master, &stop)
+                .context("serving on the pseudo-terminal")?;
             drop(slave);
             r
         } else {
-            let Some(port) = &self.port else { bail!("give --pty or --port PATH") };
+            let Some(port) = &self.port else {
+                bail!("give --pty or --port PATH")
+            };
             let mut p = serialport::new(port, self.baud)
                 .open()
                 .with_context(|| format!("opening --port {port}"))?;
             println!("board ready on {port}");
             let _ = std::io::stdout().flush();
-            board.serve(&mut *p, &stop).with_context(|| format!("serving on {port}"))?
+            board
+                .serve(&mut *p, &stop)
+                .with_context(|| format!("serving on {port}"))?
         };
         print_report(&report);
         Ok(())

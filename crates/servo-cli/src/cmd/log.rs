@@ -83,7 +83,10 @@ impl RecoveryReport {
 impl Recover {
     pub fn run(self) -> anyhow::Result<()> {
         if self.input == self.output {
-            bail!("--output must differ from the input file {}", self.input.display());
+            bail!(
+                "--output must differ from the input file {}",
+                self.input.display()
+            );
         }
         let r = recover(&self.input, &self.output)?;
         let first = r.first_log_time_ns.map_or(0.0, |t| t as f64 * 1e-9);
@@ -125,22 +128,34 @@ impl<W: std::io::Write + std::io::Seek> Sink<W> {
     fn record(&mut self, rec: Record<'_>, depth: u32) -> anyhow::Result<bool> {
         match rec {
             Record::Schema { header, data } => {
-                self.w.add_schema_with_id(header.id, &header.name, &header.encoding, &data)?;
+                self.w
+                    .add_schema_with_id(header.id, &header.name, &header.encoding, &data)?;
             }
             Record::Channel(c) => {
-                self.w.add_channel_with_id(c.id, c.schema_id, &c.topic, &c.message_encoding, &c.metadata)?;
+                self.w.add_channel_with_id(
+                    c.id,
+                    c.schema_id,
+                    &c.topic,
+                    &c.message_encoding,
+                    &c.metadata,
+                )?;
                 self.channel_topics.insert(c.id, c.topic.clone());
             }
             Record::Message { header, data } => {
                 let Some(topic) = self.channel_topics.get(&header.channel_id) else {
-                    bail!("message on channel {} that was never declared", header.channel_id);
+                    bail!(
+                        "message on channel {} that was never declared",
+                        header.channel_id
+                    );
                 };
                 self.report.topics.insert(topic.clone());
                 self.w.write_to_known_channel(&header, &data)?;
                 self.report.messages += 1;
                 let t = header.log_time;
-                self.report.first_log_time_ns = Some(self.report.first_log_time_ns.map_or(t, |f| f.min(t)));
-                self.report.last_log_time_ns = Some(self.report.last_log_time_ns.map_or(t, |l| l.max(t)));
+                self.report.first_log_time_ns =
+                    Some(self.report.first_log_time_ns.map_or(t, |f| f.min(t)));
+                self.report.last_log_time_ns =
+                    Some(self.report.last_log_time_ns.map_or(t, |l| l.max(t)));
             }
             Record::Chunk { header, data } => {
                 if depth > 0 {
@@ -182,7 +197,14 @@ fn walk<W: std::io::Write + std::io::Seek>(
     let mut pos = 0usize;
     while pos < buf.len() {
         if buf.len() - pos < 9 {
-            return (pos, Some(format!("record header cut short ({} bytes left)", buf.len() - pos)), false);
+            return (
+                pos,
+                Some(format!(
+                    "record header cut short ({} bytes left)",
+                    buf.len() - pos
+                )),
+                false,
+            );
         }
         let op = buf[pos];
         let mut len_b = [0u8; 8];
@@ -196,12 +218,24 @@ fn walk<W: std::io::Write + std::io::Seek>(
                 let why = why.unwrap_or_else(|| format!("chunk of {len} bytes cut short"));
                 return (body_start + n, Some(why), false);
             }
-            return (pos, Some(format!("record 0x{op:02X} of {len} bytes cut short after {avail} bytes")), false);
+            return (
+                pos,
+                Some(format!(
+                    "record 0x{op:02X} of {len} bytes cut short after {avail} bytes"
+                )),
+                false,
+            );
         }
         let body = &buf[body_start..body_start + len as usize];
         let rec = match mcap::parse_record(op, body) {
             Ok(r) => r,
-            Err(e) => return (pos, Some(format!("unreadable record 0x{op:02X}: {e}")), false),
+            Err(e) => {
+                return (
+                    pos,
+                    Some(format!("unreadable record 0x{op:02X}: {e}")),
+                    false,
+                )
+            }
         };
         match sink.record(rec, depth) {
             Ok(true) => {}
@@ -215,7 +249,10 @@ fn walk<W: std::io::Write + std::io::Seek>(
 
 /// Salvages the records of an uncompressed chunk that was cut short; returns (bytes of the
 /// chunk body consumed, reason).
-fn partial_chunk<W: std::io::Write + std::io::Seek>(body: &[u8], sink: &mut Sink<W>) -> (usize, Option<String>) {
+fn partial_chunk<W: std::io::Write + std::io::Seek>(
+    body: &[u8],
+    sink: &mut Sink<W>,
+) -> (usize, Option<String>) {
     // message_start_time u64, message_end_time u64, uncompressed_size u64, uncompressed_crc u32,
     // compression string (u32 length + bytes), records length u64, records.
     let fixed = 8 + 8 + 8 + 4;
@@ -241,27 +278,40 @@ fn partial_chunk<W: std::io::Write + std::io::Seek>(body: &[u8], sink: &mut Sink
     }
     let (n, why, _) = walk(&body[recs_at..], sink, 1);
     let why = why.map(|w| format!("inside the last (uncompressed, cut short) chunk: {w}"));
-    (recs_at + n, why.or_else(|| Some("last chunk cut short after a whole record".into())))
+    (
+        recs_at + n,
+        why.or_else(|| Some("last chunk cut short after a whole record".into())),
+    )
 }
 
 /// Recovers `input` into `output`.
 pub fn recover(input: &Path, output: &Path) -> anyhow::Result<RecoveryReport> {
     let buf = std::fs::read(input).with_context(|| format!("reading {}", input.display()))?;
     if buf.len() < MAGIC.len() || &buf[..MAGIC.len()] != MAGIC {
-        bail!("{} is not an MCAP file (no MCAP magic at its start)", input.display());
+        bail!(
+            "{} is not an MCAP file (no MCAP magic at its start)",
+            input.display()
+        );
     }
-    let file = std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
+    let file =
+        std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
     let w = mcap::WriteOptions::new()
         .library(concat!("servo log recover ", env!("CARGO_PKG_VERSION")))
         .create(BufWriter::new(file))
         .with_context(|| format!("writing {}", output.display()))?;
-    let mut sink = Sink { w, report: RecoveryReport::default(), channel_topics: Default::default() };
+    let mut sink = Sink {
+        w,
+        report: RecoveryReport::default(),
+        channel_topics: Default::default(),
+    };
     let (n, why, data_end) = walk(&buf[MAGIC.len()..], &mut sink, 0);
     sink.report.total_bytes = buf.len() as u64;
     sink.report.good_bytes = (MAGIC.len() + n) as u64;
     sink.report.was_complete = data_end && buf.ends_with(MAGIC) && buf.len() > 2 * MAGIC.len();
     sink.report.stopped_because = why;
-    sink.w.finish().with_context(|| format!("finishing {}", output.display()))?;
+    sink.w
+        .finish()
+        .with_context(|| format!("finishing {}", output.display()))?;
     Ok(sink.report)
 }
 
@@ -274,10 +324,17 @@ mod tests {
         let f = std::fs::File::create(path).unwrap();
         let mut w = opts.create(BufWriter::new(f)).unwrap();
         let schema = w.add_schema("servo.Sample", "jsonschema", b"{}").unwrap();
-        let ch = w.add_channel(schema, "/sample", "json", &BTreeMap::new()).unwrap();
+        let ch = w
+            .add_channel(schema, "/sample", "json", &BTreeMap::new())
+            .unwrap();
         for i in 0..n {
             let data = format!("{{\"k\":{i}}}");
-            let h = records::MessageHeader { channel_id: ch, sequence: i as u32, log_time: i * 1_000_000, publish_time: i * 1_000_000 };
+            let h = records::MessageHeader {
+                channel_id: ch,
+                sequence: i as u32,
+                log_time: i * 1_000_000,
+                publish_time: i * 1_000_000,
+            };
             w.write_to_known_channel(&h, data.as_bytes()).unwrap();
         }
         w.finish().unwrap();
@@ -287,7 +344,10 @@ mod tests {
 
     fn count(path: &Path) -> usize {
         let b = std::fs::read(path).unwrap();
-        mcap::MessageStream::new(&b).unwrap().map(|m| m.unwrap()).count()
+        mcap::MessageStream::new(&b)
+            .unwrap()
+            .map(|m| m.unwrap())
+            .count()
     }
 
     #[test]
@@ -295,7 +355,13 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let full = dir.path().join("full.mcap");
         // Small uncompressed chunks: a cut loses at most the record it cuts.
-        let bytes = write_log(&full, 1000, mcap::WriteOptions::new().compression(None).chunk_size(Some(4096)));
+        let bytes = write_log(
+            &full,
+            1000,
+            mcap::WriteOptions::new()
+                .compression(None)
+                .chunk_size(Some(4096)),
+        );
         let broken = dir.path().join("broken.mcap");
         let fixed = dir.path().join("fixed.mcap");
         let cut = bytes.len() * 6 / 10;
@@ -316,7 +382,11 @@ mod tests {
         assert!(r.was_complete);
         // zstd chunks: whole chunks before the cut survive.
         let zfull = dir.path().join("z.mcap");
-        let zb = write_log(&zfull, 1000, mcap::WriteOptions::new().chunk_size(Some(2048)));
+        let zb = write_log(
+            &zfull,
+            1000,
+            mcap::WriteOptions::new().chunk_size(Some(2048)),
+        );
         std::fs::write(&broken, &zb[..zb.len() * 7 / 10]).unwrap();
         let r = recover(&broken, &fixed).unwrap();
         assert!(r.messages > 0 && r.messages < 1000, "{r:?}");

@@ -40,7 +40,9 @@ pub fn candidates(all: bool) -> BTreeMap<String, String> {
         if let Ok(rd) = std::fs::read_dir(dir) {
             for e in rd.flatten() {
                 let name = e.file_name().to_string_lossy().into_owned();
-                if prefixes.iter().any(|p| name.starts_with(p)) && (prefixes != [""] || name.parse::<u32>().is_ok()) {
+                if prefixes.iter().any(|p| name.starts_with(p))
+                    && (prefixes != [""] || name.parse::<u32>().is_ok())
+                {
                     let path = format!("{dir}/{name}");
                     out.entry(path).or_insert_with(|| what.to_string());
                 }
