@@ -67,7 +67,7 @@ impl Default for BoardConfig {
 
 impl BoardConfig {
     fn validate(&self) -> Result<(), HwError> {
-        let us = self.sample_period_s * 1e6;
+        let us = math::round(self.sample_period_s * 1e6);
         if !(us.is_finite() && (50.0..=1e6).contains(&us)) {
             return Err(HwError::Protocol(format!(
                 "board sample period must be between 50 us and 1 s, got {} s",
