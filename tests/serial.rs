@@ -121,8 +121,8 @@ fn proxied(
                 for &b in &buf[..n] {
                     let k = count.fetch_add(1, Ordering::Relaxed) + 1;
                     match m {
-                        Mischief::Corrupt(every) if k % every == 0 => out.push(b ^ 0x5A),
-                        Mischief::Drop(every) if k % every == 0 => {}
+                        Mischief::Corrupt(every) if k.is_multiple_of(every) => out.push(b ^ 0x5A),
+                        Mischief::Drop(every) if k.is_multiple_of(every) => {}
                         _ => out.push(b),
                     }
                 }

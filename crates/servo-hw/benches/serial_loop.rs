@@ -17,12 +17,18 @@ fn loop_over_pty(period_s: f64, iters: u64) -> (Duration, String) {
     let (mut master, slave) = serialport::TTYPort::pair().expect("pty pair");
     let stop = Arc::new(AtomicBool::new(false));
     let s2 = stop.clone();
-    let cfg = BoardConfig { sample_period_s: period_s, physics_substeps: 1, ..BoardConfig::default() };
+    let cfg = BoardConfig {
+        sample_period_s: period_s,
+        physics_substeps: 1,
+        ..BoardConfig::default()
+    };
     let board = std::thread::spawn(move || {
-        let mut b = VirtualBoard::new(&Plant::nominal(), SensorConfig::default(), cfg).expect("board");
+        let mut b =
+            VirtualBoard::new(&Plant::nominal(), SensorConfig::default(), cfg).expect("board");
         b.serve(&mut master, &s2).expect("serve")
     });
-    let mut be = SerialBackend::from_port(Box::new(slave), SerialConfig::default()).expect("handshake");
+    let mut be =
+        SerialBackend::from_port(Box::new(slave), SerialConfig::default()).expect("handshake");
     let t = Instant::now();
     for _ in 0..iters {
         let s = be.sample().expect("sample");
@@ -43,13 +49,16 @@ fn bench(c: &mut Criterion) {
     g.throughput(Throughput::Elements(1));
     for period_us in [50.0, 1000.0] {
         let mut last = String::new();
-        g.bench_function(format!("sample+apply over pty, board period {period_us} us"), |b| {
-            b.iter_custom(|iters| {
-                let (d, s) = loop_over_pty(period_us * 1e-6, iters.max(2));
-                last = s;
-                d * (iters as u32) / (iters.max(2) as u32)
-            })
-        });
+        g.bench_function(
+            format!("sample+apply over pty, board period {period_us} us"),
+            |b| {
+                b.iter_custom(|iters| {
+                    let (d, s) = loop_over_pty(period_us * 1e-6, iters.max(2));
+                    last = s;
+                    d * (iters as u32) / (iters.max(2) as u32)
+                })
+            },
+        );
         eprintln!("{last}");
     }
     g.finish();

@@ -457,7 +457,7 @@ impl VirtualBoard {
             Message::SetVoltage { seq, u_v } => {
                 let newer = r
                     .last_seq_applied
-                    .map_or(true, |l| (seq.wrapping_sub(l) as i32) > 0);
+                    .is_none_or(|l| (seq.wrapping_sub(l) as i32) > 0);
                 if !newer {
                     return Ok(true);
                 }

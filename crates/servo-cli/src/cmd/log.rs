@@ -9,7 +9,7 @@
 //! (its messages are counted as "unreadable tail bytes").
 
 use anyhow::{bail, Context};
-use mcap::records::{self, Record};
+use mcap::records::Record;
 use std::collections::BTreeSet;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
@@ -329,7 +329,7 @@ mod tests {
             .unwrap();
         for i in 0..n {
             let data = format!("{{\"k\":{i}}}");
-            let h = records::MessageHeader {
+            let h = mcap::records::MessageHeader {
                 channel_id: ch,
                 sequence: i as u32,
                 log_time: i * 1_000_000,
@@ -344,10 +344,8 @@ mod tests {
 
     fn count(path: &Path) -> usize {
         let b = std::fs::read(path).unwrap();
-        mcap::MessageStream::new(&b)
-            .unwrap()
-            .map(|m| m.unwrap())
-            .count()
+        let msgs: Result<Vec<_>, _> = mcap::MessageStream::new(&b).unwrap().collect();
+        msgs.unwrap().len()
     }
 
     #[test]
