@@ -529,3 +529,247 @@ fn onboard_loop_tracks_the_reference() {
     assert_eq!(u_end, 0.0);
     assert!(rep.faults.is_empty(), "{:?}", rep.faults);
 }
+
+// ---- The binaries: `servo board --pty` and `servo run --backend serial` as separate processes.
+
+mod cli {
+    use super::realtime;
+    use servo_e2e::{servo, servo_bin};
+    use std::path::{Path, PathBuf};
+    use std::process::{Child, Command, Stdio};
+    use std::time::{Duration, Instant};
+
+    struct BoardProc {
+        child: Child,
+        port: String,
+    }
+
+    impl BoardProc {
+        fn start(dir: &Path) -> BoardProc {
+            let pf = dir.join("port.txt");
+            let _ = std::fs::remove_file(&pf);
+            let child = Command::new(servo_bin())
+                .args(["board", "--pty", "--path-file"])
+                .arg(&pf)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("spawn servo board");
+            let t = Instant::now();
+            while !pf.exists() && t.elapsed() < Duration::from_secs(20) {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let port = std::fs::read_to_string(&pf)
+                .expect("board wrote its pty path")
+                .trim()
+                .to_string();
+            assert!(port.starts_with("/dev/"), "{port}");
+            BoardProc { child, port }
+        }
+        fn signal(&self, sig: &str) {
+            let ok = Command::new("kill")
+                .args([sig, &self.child.id().to_string()])
+                .status()
+                .unwrap();
+            assert!(ok.success());
+        }
+        /// Ctrl-C, then its stdout.
+        fn quit(mut self) -> String {
+            self.signal("-INT");
+            let t = Instant::now();
+            while self.child.try_wait().unwrap().is_none() && t.elapsed() < Duration::from_secs(10)
+            {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let _ = self.child.kill();
+            let out = self.child.wait_with_output().unwrap();
+            String::from_utf8_lossy(&out.stdout).into_owned()
+        }
+    }
+
+    fn gains(dir: &Path) -> PathBuf {
+        let g = dir.join("gains.toml");
+        let (ok, _, err) = servo(&[
+            "design",
+            "--pm",
+            "60",
+            "--wc",
+            "30",
+            "-o",
+            g.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        g
+    }
+
+    fn run_args<'a>(g: &'a str, port: &'a str, log: &'a str, duration: &'a str) -> Vec<&'a str> {
+        vec![
+            "run",
+            "--backend",
+            "serial",
+            "--port",
+            port,
+            "--gains",
+            g,
+            "--ref",
+            "step:1",
+            "--duration",
+            duration,
+            "--log",
+            log,
+        ]
+    }
+
+    fn theta(path: &Path) -> Vec<(f64, f64)> {
+        let r = servo_cli::io::read_log(path, None).expect("log readable");
+        let th = r.theta_l_rad.expect("theta_l in the log");
+        r.time_s.into_iter().zip(th).collect()
+    }
+
+    #[test]
+    fn serial_run_through_the_binaries_matches_the_simulator() {
+        let _rt = realtime();
+        let dir = tempfile::tempdir().unwrap();
+        let g = gains(dir.path());
+        let board = BoardProc::start(dir.path());
+        let ser_log = dir.path().join("serial.mcap");
+        let (ok, out, err) = servo(&run_args(
+            g.to_str().unwrap(),
+            &board.port,
+            ser_log.to_str().unwrap(),
+            "1",
+        ));
+        let board_out = board.quit();
+        assert!(ok, "{out}\n{err}");
+        assert!(
+            out.contains("serial link:") && out.contains("period jitter"),
+            "{out}"
+        );
+        assert!(board_out.contains("1 run(s)"), "{board_out}");
+        let sim_log = dir.path().join("sim.mcap");
+        let (ok, _, err) = servo(&[
+            "run",
+            "--gains",
+            g.to_str().unwrap(),
+            "--ref",
+            "step:1",
+            "--duration",
+            "1",
+            "--log",
+            sim_log.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        let (a, b) = (theta(&sim_log), theta(&ser_log));
+        assert_eq!(a.len(), 1000);
+        assert_eq!(b.len(), 1000);
+        let rms = (a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x.1 - y.1).powi(2))
+            .sum::<f64>()
+            / 1000.0)
+            .sqrt();
+        eprintln!("{out}\nbinary serial vs simulator: rms {rms:.4} rad");
+        assert!(rms < 0.05, "rms {rms}");
+        assert!(
+            (b[999].1 - 1.0).abs() < 0.05,
+            "serial run ends at {}",
+            b[999].1
+        );
+    }
+
+    #[test]
+    fn a_board_that_freezes_or_vanishes_ends_the_run_with_a_finished_log() {
+        let _rt = realtime();
+        let dir = tempfile::tempdir().unwrap();
+        let g = gains(dir.path());
+        for (case, sig) in [("frozen", "-STOP"), ("vanished", "-KILL")] {
+            let board = BoardProc::start(dir.path());
+            let log = dir.path().join(format!("{case}.mcap"));
+            let child = Command::new(servo_bin())
+                .args(run_args(
+                    g.to_str().unwrap(),
+                    &board.port,
+                    log.to_str().unwrap(),
+                    "30",
+                ))
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap();
+            std::thread::sleep(Duration::from_millis(1500));
+            board.signal(sig);
+            let t = Instant::now();
+            let out = child.wait_with_output().unwrap();
+            let took = t.elapsed();
+            if sig == "-STOP" {
+                board.signal("-CONT");
+            }
+            let _ = board.quit();
+            let err = String::from_utf8_lossy(&out.stderr);
+            eprintln!("{case}: {err}");
+            assert!(!out.status.success(), "{case}: the run must fail");
+            assert!(took < Duration::from_secs(10), "{case}: took {took:?}");
+            assert!(err.contains("error:"), "{case}: {err}");
+            assert!(
+                err.contains("0 V") && err.contains("finished"),
+                "{case}: {err}"
+            );
+            if sig == "-STOP" {
+                assert!(err.contains("did not answer"), "{case}: {err}");
+            }
+            // Finished log, complete up to the fault: contiguous samples from t = 0.
+            let th = theta(&log);
+            assert!(
+                th.len() > 300 && th.len() < 25_000,
+                "{case}: {} samples",
+                th.len()
+            );
+            for (k, (t, _)) in th.iter().enumerate() {
+                assert!((t - k as f64 * 1e-3).abs() < 1e-9, "{case}: gap at {k}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_killed_host_trips_the_board_watchdog_and_its_log_is_recovered() {
+        let _rt = realtime();
+        let dir = tempfile::tempdir().unwrap();
+        let g = gains(dir.path());
+        let board = BoardProc::start(dir.path());
+        let log = dir.path().join("killed.mcap");
+        let mut child = Command::new(servo_bin())
+            .args(run_args(
+                g.to_str().unwrap(),
+                &board.port,
+                log.to_str().unwrap(),
+                "30",
+            ))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(1500));
+        child.kill().unwrap(); // SIGKILL: no cleanup at all
+        child.wait().unwrap();
+        std::thread::sleep(Duration::from_millis(300));
+        let board_out = board.quit();
+        assert!(board_out.contains("fault Watchdog"), "{board_out}");
+        // The unfinished log is salvaged.
+        let fixed = dir.path().join("fixed.mcap");
+        let (ok, out, err) = servo(&[
+            "log",
+            "recover",
+            log.to_str().unwrap(),
+            "-o",
+            fixed.to_str().unwrap(),
+        ]);
+        assert!(ok, "{out}\n{err}");
+        assert!(out.contains("recovered"), "{out}");
+        let th = theta(&fixed);
+        assert!(th.len() > 200, "{} samples recovered", th.len());
+        for (k, (t, _)) in th.iter().enumerate() {
+            assert!((t - k as f64 * 1e-3).abs() < 1e-9, "gap at {k}");
+        }
+    }
+}
