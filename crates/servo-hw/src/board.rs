@@ -305,9 +305,10 @@ impl VirtualBoard {
                 let what = if r.onboard.is_some() {
                     "reference"
                 } else {
-                    "voltage command"
+                    "command"
                 };
-                let text = format!("watchdog: no {what} for {} ms", watchdog.as_millis());
+                // Fits the 32-byte fault text: "watchdog: no reference in 50 ms".
+                let text = format!("watchdog: no {what} in {} ms", watchdog.as_millis());
                 self.fault(port, FaultCode::Watchdog, &text)?;
                 return Ok((false, Link::Open));
             }
