@@ -7,6 +7,7 @@ pub mod io;
 pub mod model_file;
 pub mod plant_args;
 pub mod plot;
+pub mod reference_file;
 
 use clap::Parser;
 

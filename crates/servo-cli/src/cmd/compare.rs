@@ -1,10 +1,707 @@
-//! `servo compare` (not yet implemented).
+//! `servo compare`: simulate the model with the logged input, compare with the measurement, show
+//! how well it fits and where it fails, and add catalogue effects to watch the error fall.
 
+use crate::gains_file::{GainsFile, PidSection};
+use crate::model_file::ModelFile;
+use crate::plot::{line_chart_svg, Chart, Series};
+use anyhow::{anyhow, bail, Context};
+use serde_json::{json, Value};
+use servo_core::compare::quantum::encoder_quantum;
+use servo_core::compare::regimes::{detect_u_limit, Regime};
+use servo_core::compare::report::{describe_window, regime_phrase, with_unit};
+use servo_core::compare::{
+    compare, replay, ClosedLoop, CompareOptions, CompareReport, Controller, Figures, Measured, ReplayMode, SignalKind,
+};
+use servo_core::fit::{fit_model, EffectToFit, FitOptions};
+use servo_core::record::Record;
+use servo_core::Plant;
+use std::path::{Path, PathBuf};
+
+/// Compare a model with measurements; add effects and watch the error fall.
+///
+/// The replay mode is chosen and stated: closed-loop replay when the controller (`--gains`) and
+/// the reference are known, otherwise open-loop speed simulation (position of an integrating
+/// plant drifts open loop). `--mode` forces one.
 #[derive(Debug, clap::Parser)]
-pub struct Compare {}
+pub struct Compare {
+    /// Logs (servo MCAP or CSV; foreign CSV through --columns).
+    #[arg(required = true, value_name = "LOG")]
+    pub logs: Vec<PathBuf>,
+    /// Model file (TOML: [params], [effects.*]).
+    #[arg(long, value_name = "model.toml")]
+    pub model: PathBuf,
+    /// Column map for foreign CSVs, e.g. `time=t_s,theta_l=thl_meas_deg:deg,u=u_V,ref=thl_ref_deg:deg`.
+    #[arg(long, value_name = "MAP")]
+    pub columns: Option<String>,
+    /// Controller that ran during the log (gains file of `servo design`): enables closed-loop replay.
+    #[arg(long, value_name = "gains.toml")]
+    pub gains: Option<PathBuf>,
+    /// Replay mode: closed-loop, speed, k-step or segments (default: closed-loop when gains and
+    /// reference are known, else speed).
+    #[arg(long, value_parser = ["closed-loop", "speed", "k-step", "segments"])]
+    pub mode: Option<String>,
+    /// Prediction horizon of the k-step mode [samples].
+    #[arg(long, default_value_t = 20, value_name = "K")]
+    pub k_steps: usize,
+    /// Segment length of the segments mode [s].
+    #[arg(long, default_value_t = 0.5, value_name = "S")]
+    pub segment_s: f64,
+    /// Output limit of the board in closed-loop replay [V] (default: the gains file's u_limit_v,
+    /// else the plateau of the logged u, e.g. the +/-10 V of the DAC).
+    #[arg(long, value_name = "V")]
+    pub u_limit_v: Option<f64>,
+    /// Add a catalogue effect: `name[:key=value,...]`; given values are kept, the others fitted
+    /// together with the base parameters. Repeat to add several, in order.
+    #[arg(long = "add", value_name = "EFFECT")]
+    pub add: Vec<String>,
+    /// Write the (extended) model to this file.
+    #[arg(long, value_name = "model.toml")]
+    pub save: Option<PathBuf>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Write the figures (measurement vs model, residual, residual vs speed and position) as one SVG.
+    #[arg(long, value_name = "out.svg")]
+    pub plot: Option<PathBuf>,
+}
+
+/// One log, read and checked.
+pub struct LogData {
+    pub path: PathBuf,
+    pub record: Record,
+    pub measured: Measured,
+}
+
+/// The comparison of one model with every log.
+pub struct ModelComparison {
+    pub plant: Plant,
+    /// One report per log, in the order of the logs.
+    pub reports: Vec<CompareReport>,
+}
+
+/// How the model is driven, and why.
+#[derive(Debug, Clone)]
+pub struct ModeChoice {
+    pub mode: ReplayMode,
+    pub reason: String,
+}
+
+/// The PID of a gains file, as it runs on the board each sample: parallel form, integral by
+/// forward Euler, derivative on the error through the real derivative s/(T_L s + 1) discretised
+/// by backward Euler (ideal backward difference when T_L = 0), optional back-calculation
+/// anti-windup against the output limit.
+#[derive(Debug, Clone)]
+pub struct ReplayPid {
+    pid: PidSection,
+    dt_s: f64,
+    limit_v: Option<f64>,
+    integral: f64,
+    deriv: f64,
+    e_prev: Option<f64>,
+}
+
+impl ReplayPid {
+    pub fn new(pid: PidSection, dt_s: f64, limit_v: Option<f64>) -> ReplayPid {
+        ReplayPid { pid, dt_s, limit_v, integral: 0.0, deriv: 0.0, e_prev: None }
+    }
+}
+
+impl Controller for ReplayPid {
+    fn update(&mut self, reference_rad: f64, measured_rad: f64) -> f64 {
+        let p = &self.pid;
+        let e = reference_rad - measured_rad;
+        let de = match self.e_prev {
+            Some(ep) => e - ep,
+            None => 0.0,
+        };
+        self.e_prev = Some(e);
+        // D(z) = kd (1 - z^-1) / (T_L + dt - T_L z^-1): backward Euler of kd s / (T_L s + 1).
+        self.deriv = (p.tl_s * self.deriv + p.kd * de) / (p.tl_s + self.dt_s);
+        let v = p.kp * e + self.integral + self.deriv;
+        let sat = match self.limit_v {
+            Some(l) => v.clamp(-l, l),
+            None => v,
+        };
+        let aw = p.kw.map_or(0.0, |kw| kw * (sat - v));
+        self.integral += (p.ki * e + aw) * self.dt_s;
+        v
+    }
+}
+
+fn parse_mode(s: &str, k: usize, seg: usize) -> ReplayMode {
+    match s {
+        "closed-loop" => ReplayMode::ClosedLoop,
+        "k-step" => ReplayMode::KStep { k },
+        "segments" => ReplayMode::Segments { len: seg },
+        _ => ReplayMode::Speed,
+    }
+}
 
 impl Compare {
+    fn mode_for(&self, log: &LogData, gains: Option<&GainsFile>) -> anyhow::Result<ModeChoice> {
+        let m = &log.measured;
+        let seg = ((self.segment_s / m.dt_s).round() as usize).max(1);
+        let has_ref = m.ref_rad.is_some();
+        let has_pos = m.theta_l_rad.is_some();
+        if let Some(s) = &self.mode {
+            let mode = parse_mode(s, self.k_steps.max(1), seg);
+            if mode == ReplayMode::ClosedLoop {
+                if gains.is_none() {
+                    bail!("--mode closed-loop needs the controller: give --gains gains.toml");
+                }
+                if !has_ref || !has_pos {
+                    bail!(
+                        "--mode closed-loop needs the position reference and the measured position in {} (map them with --columns ref=...,theta_l=...)",
+                        log.path.display()
+                    );
+                }
+            }
+            if matches!(mode, ReplayMode::KStep { .. } | ReplayMode::Segments { .. }) && !has_pos {
+                bail!("--mode {s} re-initialises from the measured position, which {} does not have", log.path.display());
+            }
+            return Ok(ModeChoice { mode, reason: String::from("forced with --mode") });
+        }
+        Ok(match (gains.is_some(), has_ref && has_pos) {
+            (true, true) => ModeChoice {
+                mode: ReplayMode::ClosedLoop,
+                reason: String::from("controller gains and reference are known: the model runs in the logged loop, as the motor did"),
+            },
+            (true, false) => ModeChoice {
+                mode: ReplayMode::Speed,
+                reason: String::from("gains given but the log has no reference/position: open-loop speed simulation with the logged u"),
+            },
+            _ => ModeChoice {
+                mode: ReplayMode::Speed,
+                reason: String::from("no controller known (--gains): open-loop speed simulation with the logged u (position would drift)"),
+            },
+        })
+    }
+
+    fn compare_all(
+        &self,
+        plant: &Plant,
+        logs: &[LogData],
+        modes: &[ModeChoice],
+        gains: Option<&GainsFile>,
+        opts: &CompareOptions,
+    ) -> anyhow::Result<ModelComparison> {
+        let mut reports = Vec::new();
+        for (log, mc) in logs.iter().zip(modes) {
+            let m = &log.measured;
+            let rp = if mc.mode == ReplayMode::ClosedLoop {
+                let g = gains.ok_or_else(|| anyhow!("closed-loop replay without gains"))?;
+                let limit = self.u_limit_v.or(g.pid.u_limit_v).or_else(|| detect_u_limit(&m.u_v));
+                let mut pid = ReplayPid::new(g.pid, m.dt_s, limit);
+                let q = m.theta_l_rad.as_deref().and_then(encoder_quantum);
+                replay(
+                    plant,
+                    m,
+                    mc.mode,
+                    Some(ClosedLoop { controller: &mut pid, u_limit_v: limit, encoder_quantum_rad: q }),
+                )
+            } else {
+                replay(plant, m, mc.mode, None)
+            }
+            .with_context(|| format!("replaying {} on the model", log.path.display()))?;
+            reports.push(compare(m, &rp, plant.params.n, opts));
+        }
+        Ok(ModelComparison { plant: *plant, reports })
+    }
+
     pub fn run(self) -> anyhow::Result<()> {
-        anyhow::bail!("`servo compare` is not implemented yet")
+        let model_file = ModelFile::load(&self.model)?;
+        let mut plant = model_file.plant()?;
+        let gains = match &self.gains {
+            Some(p) => Some(GainsFile::load(p)?),
+            None => None,
+        };
+        if let Some(l) = self.u_limit_v {
+            if !(l.is_finite() && l > 0.0) {
+                bail!("--u-limit-v must be a positive voltage [V], got {l}");
+            }
+        }
+        if !(self.segment_s.is_finite() && self.segment_s > 0.0) {
+            bail!("--segment-s must be > 0 s, got {}", self.segment_s);
+        }
+        let adds: Vec<(String, EffectToFit)> = self
+            .add
+            .iter()
+            .map(|s| EffectToFit::parse(s).map(|e| (s.clone(), e)).map_err(|e| anyhow!("--add {s}: {e}")))
+            .collect::<anyhow::Result<_>>()?;
+        let opts = CompareOptions::default();
+        let mut logs = Vec::new();
+        for path in &self.logs {
+            let record = crate::io::read_log(path, self.columns.as_deref())
+                .with_context(|| format!("reading log {}", path.display()))?;
+            let measured = Measured::from_record(&record, plant.params.n, opts.speed_filter_hz)
+                .map_err(|e| anyhow!("log {}: {e}", path.display()))?;
+            logs.push(LogData { path: path.clone(), record, measured });
+        }
+        let modes: Vec<ModeChoice> = logs.iter().map(|l| self.mode_for(l, gains.as_ref())).collect::<anyhow::Result<_>>()?;
+
+        let mut ladder = Vec::new();
+        let first = self.compare_all(&plant, &logs, &modes, gains.as_ref(), &opts)?;
+        ladder.push(LadderStep { label: String::from("model as given"), effect: None, cmp_fit: pooled(&first), fitted: Vec::new() });
+        let mut current = first;
+        let records: Vec<Record> = logs.iter().map(|l| l.record.clone()).collect();
+        for (spec, eff) in &adds {
+            let fit = fit_model(&records, &plant, std::slice::from_ref(eff), &FitOptions::default())
+                .map_err(|e| anyhow!("--add {spec}: fitting the effect to the logs failed: {e}"))?;
+            plant = fit.plant;
+            let cmp = self.compare_all(&plant, &logs, &modes, gains.as_ref(), &opts)?;
+            let fitted = fit
+                .params
+                .iter()
+                .map(|p| {
+                    json!({
+                        "effect": p.effect.map(|k| k.name()),
+                        "key": p.key, "unit": p.unit, "value": p.value,
+                        "std_err": p.std_err, "fitted": p.fitted,
+                    })
+                })
+                .collect();
+            ladder.push(LadderStep { label: format!("+ {}", eff.effect.kind.name()), effect: Some(eff.effect.kind.name()), cmp_fit: pooled(&cmp), fitted });
+            current = cmp;
+        }
+
+        if let Some(path) = &self.save {
+            let mut mf = ModelFile::from_plant(&plant);
+            mf.sensors = model_file.sensors;
+            let mut prov = model_file.provenance.clone().unwrap_or_default();
+            prov.insert("compare_model".into(), toml::Value::String(self.model.display().to_string()));
+            prov.insert(
+                "compare_logs".into(),
+                toml::Value::Array(self.logs.iter().map(|p| toml::Value::String(p.display().to_string())).collect()),
+            );
+            if !self.add.is_empty() {
+                prov.insert("compare_added".into(), toml::Value::Array(self.add.iter().map(|s| toml::Value::String(s.clone())).collect()));
+            }
+            mf.provenance = Some(prov);
+            mf.save(path)?;
+        }
+        if let Some(path) = &self.plot {
+            let mut panels = Vec::new();
+            for (log, r) in logs.iter().zip(&current.reports) {
+                let name = log.path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+                for (_, svg) in compare_figures_svg(r, &name)? {
+                    panels.push(svg);
+                }
+            }
+            std::fs::write(path, stack_svg(&panels)).with_context(|| format!("writing plot {}", path.display()))?;
+        }
+        if self.json {
+            let v = to_json(&logs, &modes, &current, &ladder, &opts);
+            println!("{}", serde_json::to_string_pretty(&v)?);
+        } else {
+            print_text(&logs, &modes, &current, &ladder, &opts, self.save.as_deref(), self.plot.as_deref());
+        }
+        Ok(())
+    }
+}
+
+/// Figures of one rung of the error ladder.
+pub struct LadderStep {
+    pub label: String,
+    pub effect: Option<&'static str>,
+    /// Pooled figures of each signal over the logs.
+    pub cmp_fit: Vec<(SignalKind, Figures)>,
+    /// Fitted parameters (JSON rows) of this step.
+    pub fitted: Vec<Value>,
+}
+
+/// Figures of every signal pooled over the logs (the measurement and model concatenated), in the
+/// order of first appearance; the first is the headline of the first log.
+pub fn pooled(c: &ModelComparison) -> Vec<(SignalKind, Figures)> {
+    let mut kinds: Vec<SignalKind> = Vec::new();
+    if let Some(r) = c.reports.first() {
+        kinds.push(r.headline_signal().kind);
+    }
+    for r in &c.reports {
+        for s in &r.signals {
+            if !kinds.contains(&s.kind) {
+                kinds.push(s.kind);
+            }
+        }
+    }
+    kinds
+        .into_iter()
+        .map(|k| {
+            let (mut y, mut yh) = (Vec::new(), Vec::new());
+            for r in &c.reports {
+                if let Some(s) = r.signals.iter().find(|s| s.kind == k) {
+                    y.extend_from_slice(&s.measured);
+                    yh.extend_from_slice(&s.model);
+                }
+            }
+            (k, Figures::of(&y, &yh))
+        })
+        .collect()
+}
+
+fn figures_json(kind: SignalKind, f: &Figures) -> Value {
+    json!({
+        "signal": kind.name(), "unit": kind.unit(),
+        "fit_percent": finite(f.fit_percent), "rmse": finite(f.rmse), "max_error": finite(f.max_abs_error),
+        "mean_error": finite(f.mean_error), "samples": f.samples,
+    })
+}
+
+fn finite(v: f64) -> Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        Value::Null
+    }
+}
+
+/// Regime statistics pooled over the logs whose headline is `kind`.
+fn pooled_regimes(c: &ModelComparison, kind: SignalKind) -> Vec<Value> {
+    let mut per: Vec<(Regime, usize, f64, f64)> = Regime::ALL.iter().map(|r| (*r, 0, 0.0, 0.0)).collect();
+    let (mut total_n, mut total_se) = (0usize, 0.0);
+    for r in c.reports.iter().filter(|r| r.headline_signal().kind == kind) {
+        for (e, g) in r.residual.iter().zip(&r.classification.regime) {
+            let i = Regime::ALL.iter().position(|x| x == g).unwrap_or(0);
+            per[i].1 += 1;
+            per[i].2 += e * e;
+            per[i].3 += e;
+            total_n += 1;
+            total_se += e * e;
+        }
+    }
+    let first = c.reports.iter().find(|r| r.headline_signal().kind == kind);
+    per.iter()
+        .map(|(g, n, se, s)| {
+            let time = 100.0 * *n as f64 / total_n.max(1) as f64;
+            let err = if total_se > 0.0 { 100.0 * se / total_se } else { 0.0 };
+            json!({
+                "regime": g.name(),
+                "where": first.map(|r| regime_phrase(*g, &r.classification, &Default::default())),
+                "samples": n,
+                "time_share_pct": time,
+                "error_share_pct": err,
+                "rms": if *n > 0 { (se / *n as f64).sqrt() } else { 0.0 },
+                "mean": if *n > 0 { s / *n as f64 } else { 0.0 },
+                "concentration": if time > 0.0 { err / time } else { 0.0 },
+                "suspects": g.suspects(),
+            })
+        })
+        .collect()
+}
+
+fn to_json(logs: &[LogData], modes: &[ModeChoice], c: &ModelComparison, ladder: &[LadderStep], opts: &CompareOptions) -> Value {
+    let pooled_figs = pooled(c);
+    let (hk, hf) = pooled_figs[0];
+    let effects: Vec<Value> = c
+        .plant
+        .effects
+        .iter()
+        .map(|e| {
+            let params: serde_json::Map<String, Value> = e.iter().map(|(p, v)| (p.key.to_string(), json!(v))).collect();
+            let units: serde_json::Map<String, Value> = e.iter().map(|(p, _)| (p.key.to_string(), json!(p.unit))).collect();
+            json!({ "effect": e.kind.name(), "params": params, "units": units })
+        })
+        .collect();
+    let p = c.plant.params;
+    let base = json!({
+        "j_eq": p.j_eq(), "b_eq": c.plant.b_eq(), "tau_sf": c.plant.tau_sf(), "r_eq": p.r_eq(),
+        "k_e": p.k_e, "k_t": p.k_t, "k_drv": p.k_drv, "n": p.n,
+    });
+    let ladder_json: Vec<Value> = ladder
+        .iter()
+        .map(|s| {
+            let (k, f) = s.cmp_fit[0];
+            json!({
+                "step": s.label, "effect": s.effect, "signal": k.name(), "unit": k.unit(),
+                "fit_percent": finite(f.fit_percent), "rmse": finite(f.rmse), "max_error": finite(f.max_abs_error),
+                "signals": s.cmp_fit.iter().map(|(k, f)| figures_json(*k, f)).collect::<Vec<_>>(),
+                "fitted_params": s.fitted,
+            })
+        })
+        .collect();
+    let mut windows: Vec<(f64, Value)> = Vec::new();
+    let total_se: f64 = c.reports.iter().filter(|r| r.headline_signal().kind == hk).map(|r| r.residual.iter().map(|e| e * e).sum::<f64>()).sum();
+    for (log, r) in logs.iter().zip(&c.reports).filter(|(_, r)| r.headline_signal().kind == hk) {
+        let se_log: f64 = r.residual.iter().map(|e| e * e).sum();
+        for w in &r.worst_windows {
+            let share = if total_se > 0.0 { w.error_share_pct * se_log / total_se } else { 0.0 };
+            windows.push((
+                share,
+                json!({
+                    "log": log.path.display().to_string(),
+                    "t_start_s": w.t_start_s, "t_end_s": w.t_end_s,
+                    "error_share_pct": share, "rms": w.rms, "mean": w.mean,
+                    "regime": w.regime.name(),
+                    "omega_min_rad_s": w.omega_min_rad_s, "omega_max_rad_s": w.omega_max_rad_s,
+                    "u_abs_max_v": w.u_abs_max_v,
+                    "description": describe_window(w, r, opts),
+                }),
+            ));
+        }
+    }
+    windows.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let r0 = &c.reports[0];
+    let wh = &r0.whiteness;
+    let x = &r0.input_xcorr;
+    let per_log: Vec<Value> = logs
+        .iter()
+        .zip(c.reports.iter().zip(modes))
+        .map(|(l, (r, mc))| {
+            json!({
+                "log": l.path.display().to_string(),
+                "mode": r.mode.name(), "mode_reason": mc.reason,
+                "samples": r.time_s.len(), "dt_s": r.dt_s,
+                "speed_derived_from_position": l.measured.speed_derived,
+                "signal": r.headline_signal().kind.name(),
+                "signals": r.signals.iter().map(|s| figures_json(s.kind, &s.figures)).collect::<Vec<_>>(),
+                "whiteness": whiteness_json(r),
+                "periodic": r.periodic.iter().map(|p| json!({
+                    "angle": p.source.name(), "harmonic": p.harmonic, "share_pct": p.share_pct,
+                    "amplitude": p.amplitude, "phase_rad": p.phase_rad, "p_value": p.p_value, "significant": p.significant,
+                })).collect::<Vec<_>>(),
+                "findings": r.findings,
+            })
+        })
+        .collect();
+    json!({
+        "mode": r0.mode.name(),
+        "mode_reason": modes[0].reason,
+        "signal": hk.name(),
+        "unit": hk.unit(),
+        "fit_percent": finite(hf.fit_percent),
+        "rmse": finite(hf.rmse),
+        "max_error": finite(hf.max_abs_error),
+        "signals": pooled_figs.iter().map(|(k, f)| figures_json(*k, f)).collect::<Vec<_>>(),
+        "effects": effects,
+        "base": base,
+        "ladder": ladder_json,
+        "regimes": pooled_regimes(c, hk),
+        "worst_windows": windows.into_iter().take(opts.worst_count).map(|(_, v)| v).collect::<Vec<_>>(),
+        "whiteness": whiteness_json(r0),
+        "input_xcorr": json!({
+            "input": r0.input_name, "max_lag": x.max_lag, "bound99": x.bound99, "lags_outside": x.lags_outside,
+            "peak_lag": x.peak_lag, "peak": x.peak, "xcorr": x.xcorr,
+        }),
+        "findings": r0.findings,
+        "logs": per_log,
+    })
+}
+
+fn whiteness_json(r: &CompareReport) -> Value {
+    let w = &r.whiteness;
+    json!({
+        "signal": r.headline_signal().kind.name(),
+        "ljung_box_q": finite(w.ljung_box_q), "dof": w.ljung_box_dof, "p_value": finite(w.ljung_box_p), "white": w.white,
+        "bound99": w.bound99, "lags_outside": w.lags_outside, "correlation_lags": w.correlation_lags,
+        "autocorr": w.autocorr,
+    })
+}
+
+fn print_text(
+    logs: &[LogData],
+    modes: &[ModeChoice],
+    c: &ModelComparison,
+    ladder: &[LadderStep],
+    opts: &CompareOptions,
+    save: Option<&Path>,
+    plot: Option<&Path>,
+) {
+    for ((log, r), mc) in logs.iter().zip(&c.reports).zip(modes) {
+        println!("== {} ({} samples, {:.3} s, dt = {:.4} s)", log.path.display(), r.time_s.len(), r.time_s.len() as f64 * r.dt_s, r.dt_s);
+        println!("mode: {} -- {}", r.mode.name(), mc.reason);
+        if log.measured.speed_derived {
+            println!("speed: derived from position (zero-phase {:.0} Hz low-pass + central differences), model speed filtered the same way", opts.speed_filter_hz);
+        }
+        println!("{:<10} {:>9} {:>14} {:>14} {:>14}", "signal", "fit [%]", "RMSE", "max error", "mean error");
+        for s in &r.signals {
+            let f = &s.figures;
+            println!(
+                "{:<10} {:>9.2} {:>14} {:>14} {:>14}",
+                format!("{} [{}]", s.kind.name(), s.kind.unit()),
+                f.fit_percent,
+                format!("{:.4e}", f.rmse),
+                format!("{:.4e}", f.max_abs_error),
+                format!("{:.3e}", f.mean_error)
+            );
+        }
+        println!("where the {} error sits:", r.headline_signal().kind.words());
+        println!("  {:<16} {:>8} {:>9} {:>12}", "regime", "time %", "error %", "rms");
+        for s in r.regimes.iter().filter(|s| s.samples > 0) {
+            println!("  {:<16} {:>8.1} {:>9.1} {:>12.4e}", s.regime.name(), s.time_share_pct, s.error_share_pct, s.rms);
+        }
+        println!("findings:");
+        for f in &r.findings {
+            println!("  - {f}");
+        }
+        if !r.worst_windows.is_empty() {
+            println!("worst windows:");
+            for (i, w) in r.worst_windows.iter().enumerate() {
+                println!("  {}. {}", i + 1, describe_window(w, r, opts));
+            }
+        }
+        println!();
+    }
+    if ladder.len() > 1 || logs.len() > 1 {
+        let k = ladder[0].cmp_fit[0].0;
+        println!("error ladder ({} over all logs):", k.words());
+        let mut prev: Option<f64> = None;
+        for s in ladder {
+            let f = s.cmp_fit[0].1;
+            let change = prev.map(|p| format!(" ({:+.1} % RMSE)", 100.0 * (f.rmse - p) / p)).unwrap_or_default();
+            println!("  {:<24} fit {:>7.2} %   RMSE {}{}", s.label, f.fit_percent, with_unit(f.rmse, k), change);
+            prev = Some(f.rmse);
+        }
+    }
+    if ladder.len() > 1 {
+        println!("model after the added effects:");
+        for e in c.plant.effects.iter() {
+            let kv: Vec<String> = e.iter().map(|(p, v)| format!("{} = {:.4e} {}", p.key, v, p.unit)).collect();
+            println!("  {:<11} {}", e.kind.name(), kv.join(", "));
+        }
+        println!("  base        J_eq = {:.4e} kg m^2, R_eq = {:.4} ohm, k_drv = {:.4}", c.plant.params.j_eq(), c.plant.params.r_eq(), c.plant.params.k_drv);
+    }
+    if let Some(p) = save {
+        println!("model written to {}", p.display());
+    }
+    if let Some(p) = plot {
+        println!("figures written to {}", p.display());
+    }
+}
+
+/// Mean of `y` in `bins` equal bins of `x` over [lo, hi]; bins with fewer than 3 samples are
+/// skipped. Returns (bin centres, means).
+fn binned_mean(x: &[f64], y: &[f64], lo: f64, hi: f64, bins: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut s = vec![0.0; bins];
+    let mut n = vec![0usize; bins];
+    let w = (hi - lo) / bins as f64;
+    if !(w > 0.0) {
+        return (Vec::new(), Vec::new());
+    }
+    for (a, b) in x.iter().zip(y) {
+        if *a < lo || *a > hi {
+            continue;
+        }
+        let i = (((a - lo) / w) as usize).min(bins - 1);
+        s[i] += b;
+        n[i] += 1;
+    }
+    let (mut cx, mut cy) = (Vec::new(), Vec::new());
+    for i in 0..bins {
+        if n[i] >= 3 {
+            cx.push(lo + (i as f64 + 0.5) * w);
+            cy.push(s[i] / n[i] as f64);
+        }
+    }
+    (cx, cy)
+}
+
+/// The compare figures of one report as inline SVG strings (title, svg): measurement vs model of
+/// the headline signal, the residual over time, the residual against the measured speed and
+/// against the measured position (binned means). Used by `--plot` and the diagnose HTML report.
+pub fn compare_figures_svg(r: &CompareReport, name: &str) -> anyhow::Result<Vec<(String, String)>> {
+    let h = r.headline_signal();
+    let (k, unit) = (h.kind.name(), h.kind.unit());
+    let mut out = Vec::new();
+    let t1 = format!("{name}: {} measured vs model ({}, fit {:.1} %)", h.kind.words(), r.mode.name(), h.figures.fit_percent);
+    let yl = format!("{k} [{unit}]");
+    let svg = line_chart_svg(
+        &Chart { title: &t1, x_label: "t [s]", y_label: &yl, ..Default::default() },
+        &[
+            Series { label: "measured", x: &r.time_s, y: &h.measured },
+            Series { label: "model", x: &r.time_s, y: &h.model },
+        ],
+    )?;
+    out.push((t1, svg));
+    let t2 = format!("{name}: residual (measured - model), RMSE {:.3e} {unit}", h.figures.rmse);
+    let rl = format!("residual [{unit}]");
+    out.push((
+        t2.clone(),
+        line_chart_svg(
+            &Chart { title: &t2, x_label: "t [s]", y_label: &rl, ..Default::default() },
+            &[Series { label: "residual", x: &r.time_s, y: &r.residual }],
+        )?,
+    ));
+    let w = &r.omega_l_rad_s;
+    let lim = servo_core::compare::regimes::abs_percentile(w, 0.995).max(1e-9);
+    let (bx, by) = binned_mean(w, &r.residual, -lim, lim, 60);
+    let t3 = format!("{name}: residual vs measured load speed (mean per speed bin)");
+    out.push((
+        t3.clone(),
+        line_chart_svg(
+            &Chart { title: &t3, x_label: "omega_l [rad/s]", y_label: &rl, ..Default::default() },
+            &[Series { label: "mean residual", x: &bx, y: &by }],
+        )?,
+    ));
+    if let Some(th) = &r.theta_l_rad {
+        let (lo, hi) = th.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
+        let tau = std::f64::consts::TAU;
+        let (xs, lo, hi, xl): (Vec<f64>, f64, f64, &str) = if hi - lo > tau {
+            (th.iter().map(|v| v.rem_euclid(tau)).collect(), 0.0, tau, "theta_l mod 2 pi [rad]")
+        } else {
+            (th.clone(), lo, hi, "theta_l [rad]")
+        };
+        let (bx, by) = binned_mean(&xs, &r.residual, lo, hi, 90);
+        let t4 = format!("{name}: residual vs measured load position (mean per position bin)");
+        out.push((
+            t4.clone(),
+            line_chart_svg(
+                &Chart { title: &t4, x_label: xl, y_label: &rl, ..Default::default() },
+                &[Series { label: "mean residual", x: &bx, y: &by }],
+            )?,
+        ));
+    }
+    Ok(out)
+}
+
+/// Stacks SVG documents vertically into one SVG document.
+pub fn stack_svg(panels: &[String]) -> String {
+    let mut y = 0u32;
+    let mut width = 0u32;
+    let mut body = String::new();
+    for p in panels {
+        let (w, h) = svg_size(p).unwrap_or((900, 400));
+        let inner = match p.find("<svg") {
+            Some(i) => &p[i..],
+            None => p.as_str(),
+        };
+        body.push_str(&inner.replacen("<svg", &format!("<svg x=\"0\" y=\"{y}\""), 1));
+        body.push('\n');
+        y += h;
+        width = width.max(w);
+    }
+    format!(
+        "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width}\" height=\"{y}\" viewBox=\"0 0 {width} {y}\">\n{body}</svg>\n"
+    )
+}
+
+fn svg_size(svg: &str) -> Option<(u32, u32)> {
+    let i = svg.find("<svg")?;
+    let head = &svg[i..i + svg[i..].find('>')?];
+    let attr = |name: &str| -> Option<u32> {
+        let j = head.find(&format!("{name}=\""))? + name.len() + 2;
+        let rest = &head[j..];
+        rest[..rest.find('"')?].trim_end_matches("px").parse().ok()
+    };
+    Some((attr("width")?, attr("height")?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn replay_pid_matches_hand_values() {
+        let pid = PidSection { kp: 2.0, ki: 10.0, kd: 0.1, tl_s: 0.0, ts_s: 1e-3, kw: None, u_limit_v: None };
+        let mut c = ReplayPid::new(pid, 1e-3, None);
+        // e = 1: u = 2 + 0 + 0 (no previous error), then integral = 0.01
+        assert!((c.update(1.0, 0.0) - 2.0).abs() < 1e-12);
+        // e = 0.5: u = 1 + 0.01 + 0.1 * (-0.5) / 1e-3 = 1.01 - 50
+        assert!((c.update(0.5, 0.0) - (1.01 - 50.0)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn stacks_panels() {
+        let a = line_chart_svg(&Chart::default(), &[Series { label: "a", x: &[0.0, 1.0], y: &[0.0, 1.0] }]).unwrap();
+        let s = stack_svg(&[a.clone(), a]);
+        assert!(s.contains("height=\"800\"") && s.matches("<svg").count() == 3, "{}", &s[..200]);
     }
 }

@@ -7,6 +7,7 @@ pub mod design;
 pub mod diagnose;
 pub mod export;
 pub mod identify;
+pub mod identify_ramp;
 pub mod log;
 pub mod params;
 pub mod ports;

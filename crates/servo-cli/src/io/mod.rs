@@ -1,16 +1,157 @@
 //! Reading and writing logs: servo's MCAP, servo's CSV and foreign CSVs through a column map.
 //!
-//! Every command that reads a log calls [`read_log`].
+//! Every command that reads a log calls [`read_log`] (or [`read_log_with_meta`] for the run's
+//! metadata: gains, plant, reference).
+//!
+//! * [`units`]: signal names (`time`, `u`, `theta_l`, ...) and the units columns may use.
+//! * [`columns`]: the `--columns` map, servo's own header, guessing from header suffixes.
+//! * [`csv_read`], [`csv_write`]: CSV logs.
+//! * [`loop_msg`]: the `/servo/loop` JSON message and its JSON schema.
+//! * [`mcap_write`], [`mcap_read`]: MCAP logs (Foxglove/PlotJuggler compatible).
 
+pub mod columns;
+pub mod csv_read;
+pub mod csv_write;
+pub mod loop_msg;
+pub mod mcap_read;
+pub mod mcap_write;
+pub mod units;
+
+pub use loop_msg::LoopMsg;
+pub use mcap_write::{McapLog, McapLogOptions};
+
+pub use columns::ColumnMap;
+pub use csv_write::write_csv;
+pub use units::{Signal, Unit};
+
+use anyhow::{bail, Context};
 use servo_core::record::Record;
+use std::collections::BTreeMap;
 use std::path::Path;
 
-/// Reads a log (MCAP or CSV, by extension) into a [`Record`] in SI units.
+/// Log file formats, by extension.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LogFormat {
+    Mcap,
+    Csv,
+}
+
+impl LogFormat {
+    /// The format of `path` from its extension (`.mcap`, `.csv`, `.txt`, `.tsv`).
+    pub fn of(path: &Path) -> anyhow::Result<LogFormat> {
+        let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+        match ext.as_str() {
+            "mcap" => Ok(LogFormat::Mcap),
+            "csv" | "txt" | "tsv" => Ok(LogFormat::Csv),
+            _ => bail!("{}: unknown log format `.{ext}`; expected a .mcap or .csv file", path.display()),
+        }
+    }
+}
+
+/// What a log says about the run besides its samples.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LogMeta {
+    /// The column map used for a CSV (`--columns` form).
+    pub columns: Option<String>,
+    /// Key/value metadata of an MCAP run (`servo_version`, `gains_toml`, `plant_toml`, ...).
+    pub entries: BTreeMap<String, String>,
+    /// End-of-run summary of an MCAP run (tracking error, overshoot, ...), if written.
+    pub summary: BTreeMap<String, String>,
+    /// Notes for the user: guessed column map, data lost at a truncated end, missing values.
+    pub notes: Vec<String>,
+}
+
+/// Metadata keys of a servo MCAP run (values are strings; TOML documents for files).
+pub mod meta_keys {
+    /// servo version that wrote the log.
+    pub const SERVO_VERSION: &str = "servo_version";
+    /// Backend name (`sim`, `serial`).
+    pub const BACKEND: &str = "backend";
+    /// Board or simulator firmware string.
+    pub const FIRMWARE: &str = "firmware";
+    /// Control period [s].
+    pub const SAMPLE_PERIOD_S: &str = "sample_period_s";
+    /// Requested run duration [s].
+    pub const DURATION_S: &str = "duration_s";
+    /// The reference as given (`step:1.5`) or the experiment file's text.
+    pub const REFERENCE: &str = "reference";
+    /// The controller, as a gains file (TOML, `[pid]`).
+    pub const GAINS_TOML: &str = "gains_toml";
+    /// The simulated plant (truth), as a model file (TOML); simulator runs only.
+    pub const PLANT_TOML: &str = "plant_toml";
+    /// Effects of the simulated plant, `name:key=value` list; simulator runs only.
+    pub const PLANT_EFFECTS: &str = "plant_effects";
+    /// The model used for feedforward, as a model file (TOML).
+    pub const MODEL_TOML: &str = "model_toml";
+    /// Feedforward terms in use (`inertia,friction` or `none`).
+    pub const FEEDFORWARD: &str = "feedforward";
+    /// Simulator noise seed.
+    pub const SEED: &str = "seed";
+    /// Voltage limit applied to the controller output [V].
+    pub const U_LIMIT_V: &str = "u_limit_v";
+    /// Encoder resolution [counts/rev].
+    pub const COUNTS_PER_REV: &str = "counts_per_rev";
+    /// The command line that made the log.
+    pub const COMMAND: &str = "command";
+}
+
+impl LogMeta {
+    /// A metadata entry.
+    pub fn get(&self, key: &str) -> Option<&str> {
+        self.entries.get(key).map(String::as_str)
+    }
+    /// The controller of the run (`None` when the log has none, e.g. a CSV or open loop).
+    pub fn gains(&self) -> anyhow::Result<Option<crate::gains_file::GainsFile>> {
+        self.get(meta_keys::GAINS_TOML)
+            .map(|t| crate::gains_file::GainsFile::parse(t).context("in the log's gains metadata"))
+            .transpose()
+    }
+    /// The simulated plant (truth) of a simulator run.
+    pub fn plant(&self) -> anyhow::Result<Option<crate::model_file::ModelFile>> {
+        self.get(meta_keys::PLANT_TOML)
+            .map(|t| crate::model_file::ModelFile::parse(t).context("in the log's plant metadata"))
+            .transpose()
+    }
+    /// The model used for feedforward, if any.
+    pub fn model(&self) -> anyhow::Result<Option<crate::model_file::ModelFile>> {
+        self.get(meta_keys::MODEL_TOML)
+            .map(|t| crate::model_file::ModelFile::parse(t).context("in the log's model metadata"))
+            .transpose()
+    }
+    /// The reference as given on the command line or in the experiment file.
+    pub fn reference(&self) -> Option<&str> {
+        self.get(meta_keys::REFERENCE)
+    }
+}
+
+/// Reads a log (MCAP or CSV, by extension) into a [`Record`] in SI units, printing notes (a
+/// guessed column map, data lost from a truncated MCAP) to stderr.
 ///
 /// `columns` is the `--columns` map for foreign CSVs, e.g.
 /// `time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A`; `None` means servo's own columns
-/// (`time_s,u_V,theta_l_rad,i_a_A[,ref_rad]`).
+/// (`time_s,u_V,theta_l_rad,i_a_A[,ref_rad]`) or a guess from the header's unit suffixes.
 pub fn read_log(path: &Path, columns: Option<&str>) -> anyhow::Result<Record> {
-    let _ = columns;
-    anyhow::bail!("reading logs is not implemented yet ({})", path.display())
+    let (rec, meta) = read_log_with_meta(path, columns)?;
+    for n in &meta.notes {
+        eprintln!("note: {n}");
+    }
+    Ok(rec)
+}
+
+/// Like [`read_log`], returning the metadata and notes instead of printing them.
+pub fn read_log_with_meta(path: &Path, columns: Option<&str>) -> anyhow::Result<(Record, LogMeta)> {
+    match LogFormat::of(path)? {
+        LogFormat::Csv => {
+            let imp = csv_read::read_csv(path, columns)?;
+            Ok((imp.record, LogMeta { columns: Some(imp.map.to_string()), notes: imp.notes, ..LogMeta::default() }))
+        }
+        LogFormat::Mcap => {
+            if columns.is_some() {
+                bail!("{}: --columns applies to CSV logs only; an MCAP log names its own signals", path.display());
+            }
+            let run = mcap_read::read_mcap(path)?;
+            let meta = LogMeta { columns: None, entries: run.metadata, summary: run.summary, notes: run.notes };
+            Ok((run.record, meta))
+        }
+    }
 }

@@ -288,3 +288,149 @@ impl Feedforward {
         self.terms(r.vel_rad_s, r.acc_rad_s2)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Table 2 with identified J_eq = 7e-7 kg m^2, B_eq = 1e-6 N m s/rad, tau_sf = 0.01 N m.
+    fn params() -> PlantParams {
+        PlantParams {
+            j_eq: Some(7e-7),
+            b_eq: Some(1e-6),
+            tau_sf: Some(0.01),
+            ..PlantParams::TABLE2
+        }
+    }
+
+    #[test]
+    fn terms_by_hand() {
+        // R_eq/(k_t k_drv) = 3.1/(7.682e-3 * 0.6) = 672.5679 V/(N m). At omega_l = 2 rad/s,
+        // a_l = 10 rad/s^2:
+        //   inertia  672.5679 * 7e-7 * 14 * 10 = 0.0659117 V
+        //   viscous  672.5679 * 1e-6 * 14 * 2  = 0.0188319 V
+        //   Coulomb  672.5679 * 0.01 / 14      = 0.4804056 V (exact sign)
+        //   back-EMF 7.68e-3 * 14 * 2 / 0.6   = 0.3584 V
+        let cfg = FeedforwardConfig {
+            sign: SmoothSign::Exact,
+            ..FeedforwardConfig::FULL
+        };
+        let ff = Feedforward::new(FeedforwardParams::from_params(&params()), cfg).unwrap();
+        let t = ff.terms(2.0, 10.0);
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-6;
+        assert!(close(t.inertia_v, 0.0659117), "{t:?}");
+        assert!(close(t.viscous_v, 0.0188319), "{t:?}");
+        assert!(close(t.coulomb_v, 0.4804056), "{t:?}");
+        assert!(close(t.back_emf_v, 0.3584), "{t:?}");
+        assert!(close(t.total_v, 0.0659117 + 0.0188319 + 0.4804056 + 0.3584));
+        // Reversal: odd in speed and acceleration.
+        let m = ff.terms(-2.0, -10.0);
+        assert!(close(m.total_v, -t.total_v));
+        // At rest with the exact sign: nothing.
+        assert_eq!(ff.voltage(0.0, 0.0), 0.0);
+        // Presets switch the terms.
+        let p = FeedforwardParams::from_params(&params());
+        let i = Feedforward::new(p, FeedforwardConfig::INERTIA)
+            .unwrap()
+            .terms(2.0, 10.0);
+        assert!(close(i.total_v, 0.0659117 + 0.3584) && i.coulomb_v == 0.0 && i.viscous_v == 0.0);
+        let f = Feedforward::new(
+            p,
+            FeedforwardConfig {
+                sign: SmoothSign::Exact,
+                ..FeedforwardConfig::FRICTION
+            },
+        )
+        .unwrap()
+        .terms(2.0, 10.0);
+        assert!(
+            close(f.total_v, 0.0188319 + 0.4804056) && f.inertia_v == 0.0 && f.back_emf_v == 0.0
+        );
+        assert_eq!(
+            Feedforward::new(p, FeedforwardConfig::OFF)
+                .unwrap()
+                .voltage(2.0, 10.0),
+            0.0
+        );
+    }
+
+    #[test]
+    fn smoothed_sign() {
+        let tanh = SmoothSign::Tanh {
+            omega_eps_rad_s: 0.05,
+        };
+        assert!((tanh.eval(0.025) - 0.46211715726000974).abs() < 1e-12); // tanh(0.5)
+        assert_eq!(tanh.eval(0.0), 0.0);
+        assert!((tanh.eval(1.0) - 1.0).abs() < 1e-12);
+        let lin = SmoothSign::Linear {
+            omega_eps_rad_s: 0.1,
+        };
+        assert!(
+            (lin.eval(0.05) - 0.5).abs() < 1e-15 && lin.eval(0.3) == 1.0 && lin.eval(-0.3) == -1.0
+        );
+        assert_eq!(SmoothSign::Exact.eval(-1e-9), -1.0);
+        // Coulomb part with tanh at omega_eps/2: 0.4804056 * tanh(0.5) = 0.2220037 V.
+        let cfg = FeedforwardConfig {
+            inertia: false,
+            viscous: false,
+            back_emf: false,
+            ..FeedforwardConfig::FULL
+        };
+        let ff = Feedforward::new(FeedforwardParams::from_params(&params()), cfg).unwrap();
+        assert!((ff.voltage(0.025, 0.0) - 0.2220037).abs() < 1e-6);
+    }
+
+    #[test]
+    fn from_plant_reads_the_friction_effects_and_validates() {
+        let plant = Plant::from_params(params()).unwrap();
+        assert_eq!(
+            FeedforwardParams::from_plant(&plant),
+            FeedforwardParams::from_params(&params())
+        );
+        let bad = FeedforwardParams {
+            k_t: 0.0,
+            ..FeedforwardParams::from_params(&params())
+        };
+        assert!(matches!(
+            Feedforward::new(bad, FeedforwardConfig::FULL),
+            Err(ControlError::NotPositive { key: "k_t", .. })
+        ));
+        let p = FeedforwardParams::from_params(&params());
+        let cfg = FeedforwardConfig {
+            sign: SmoothSign::Tanh {
+                omega_eps_rad_s: 0.0,
+            },
+            ..FeedforwardConfig::FULL
+        };
+        assert!(matches!(
+            Feedforward::new(p, cfg),
+            Err(ControlError::NotPositive {
+                key: "omega_eps_rad_s",
+                ..
+            })
+        ));
+    }
+
+    /// Open loop, feedforward only, on the simulator with the same friction: the steady load
+    /// speed equals the reference speed (the compensation is the exact steady-state inverse).
+    #[test]
+    fn open_loop_feedforward_reaches_the_reference_speed_on_the_simulator() {
+        let plant = Plant::from_params(params()).unwrap();
+        let ff = Feedforward::new(
+            FeedforwardParams::from_plant(&plant),
+            FeedforwardConfig::FULL,
+        )
+        .unwrap();
+        let mut sim = crate::sim::PlantSim::new(&plant, 1e-3).unwrap();
+        let omega_ref = 2.0;
+        let u = ff.voltage(omega_ref, 0.0);
+        for _ in 0..1500 {
+            sim.step(u);
+        }
+        let w = sim.state().omega_l_rad_s;
+        assert!(
+            (w - omega_ref).abs() < 0.01 * omega_ref,
+            "steady load speed {w} rad/s for {omega_ref}"
+        );
+    }
+}

@@ -93,7 +93,8 @@ pub enum Shape {
         duty: f64,
     },
     /// Maximal-length pseudo-random binary sequence of +-`amplitude_rad`, one bit every `bit_s`,
-    /// from a Galois LFSR of `order` bits (period 2^order - 1 bits) started from `seed`.
+    /// from a Galois LFSR of `order` bits (period 2^order - 1 bits) started from `seed`
+    /// (random access: the value at any time costs O(order^2), not O(time)).
     Prbs {
         amplitude_rad: f64,
         bit_s: f64,
@@ -113,25 +114,51 @@ pub struct Reference {
     pub offset_rad: f64,
 }
 
-/// Galois LFSR toggle masks giving maximal-length sequences, indexed by order (2..=16).
+/// Galois LFSR toggle masks giving maximal-length sequences, indexed by order (2..=16)
+/// (right-shift form; mask bit i is the tap x^(i+1)).
 const LFSR_MASKS: [u32; 17] = [
     0, 0, 0x3, 0x6, 0xC, 0x14, 0x30, 0x60, 0xB8, 0x110, 0x240, 0x500, 0x829, 0x100D, 0x2015,
     0x6000, 0xD008,
 ];
 
-/// Bit `k` (0 or 1) of the maximal-length sequence of `order` started from `seed`.
+/// The primitive polynomial of degree `order` of [`LFSR_MASKS`], bit i = coefficient of x^i.
+fn lfsr_poly(order: u32) -> u32 {
+    (1 << order) | (LFSR_MASKS[order as usize] << 1) | 1
+}
+
+/// a * b mod p in GF(2)[x], for polynomials of degree < `order`.
+fn gf2_mulmod(mut a: u32, mut b: u32, p: u32, order: u32) -> u32 {
+    let mut r = 0;
+    while b != 0 {
+        if b & 1 != 0 {
+            r ^= a;
+        }
+        b >>= 1;
+        a <<= 1;
+        if a & (1 << order) != 0 {
+            a ^= p;
+        }
+    }
+    r
+}
+
+/// Bit `k` (0 or 1) of the maximal-length sequence of `order` started from `seed`: bit 0 of
+/// s_0 x^k mod p(x) (the state of a left-shift Galois LFSR after k steps), computed by
+/// square-and-multiply in O(order^2) operations, independent of k.
 fn prbs_bit(order: u8, seed: u32, k: u64) -> u32 {
-    let order = order.clamp(2, 16);
+    let order = order.clamp(2, 16) as u32;
     let period = (1u64 << order) - 1;
-    let mask = LFSR_MASKS[order as usize];
+    let p = lfsr_poly(order);
     // Any non-zero state of `order` bits is on the single maximal cycle.
     let mut s = (seed as u64 % period + 1) as u32;
-    for _ in 0..(k % period) {
-        let lsb = s & 1;
-        s >>= 1;
-        if lsb != 0 {
-            s ^= mask;
+    let mut e = k % period;
+    let mut base = 2; // x
+    while e != 0 {
+        if e & 1 != 0 {
+            s = gf2_mulmod(s, base, p, order);
         }
+        base = gf2_mulmod(base, base, p, order);
+        e >>= 1;
     }
     s & 1
 }
@@ -781,24 +808,34 @@ mod tests {
     }
 
     #[test]
-    fn lfsr_masks_are_maximal_length() {
-        for order in 2u8..=16 {
+    fn lfsr_masks_are_maximal_length_and_jump_equals_stepping() {
+        for order in 2u32..=16 {
             let period = (1u32 << order) - 1;
-            let mask = LFSR_MASKS[order as usize];
+            let p = lfsr_poly(order);
+            let step = |s: u32| {
+                let s = s << 1;
+                if s & (1 << order) != 0 {
+                    s ^ p
+                } else {
+                    s
+                }
+            };
             let mut s = 1u32;
             let mut n = 0u32;
             loop {
-                let lsb = s & 1;
-                s >>= 1;
-                if lsb != 0 {
-                    s ^= mask;
-                }
+                s = step(s);
                 n += 1;
                 if s == 1 || n > period {
                     break;
                 }
             }
             assert_eq!(n, period, "order {order}");
+            // The square-and-multiply jump agrees with stepping (seed 5 -> state 5 % period + 1).
+            let mut s = 5 % period + 1;
+            for k in 0..300u64 {
+                assert_eq!(prbs_bit(order as u8, 5, k), s & 1, "order {order} k {k}");
+                s = step(s);
+            }
         }
     }
 

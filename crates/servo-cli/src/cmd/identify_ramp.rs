@@ -1,0 +1,232 @@
+//! `servo identify --ramp`: the identification experiments of the handout run on a backend.
+//!
+//! * friction (4.1): a closed-loop speed staircase (recipe `experiments/identify_friction.toml`);
+//! * inertia (4.2): constant acceleration/deceleration ramps (`experiments/identify_inertia.toml`).
+//!
+//! The speed loop is a PI on the motor speed (differentiated encoder angle, first-order filtered)
+//! with a back-EMF and inertia feedforward from the nominal parameters, designed for a 50 rad/s
+//! crossover on the reduced model k_m / (T_m s + 1); it talks to the [`Backend`] trait directly.
+
+use anyhow::{bail, Context};
+use servo_core::record::Record;
+use servo_core::PlantParams;
+use servo_hw::backend::Backend;
+use std::path::Path;
+
+use super::identify::Identify;
+
+/// Friction staircase recipe.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrictionRecipe {
+    /// Constant motor speeds [rad/s].
+    pub speeds_rad_s: Vec<f64>,
+    /// Time at each speed [s].
+    pub step_duration_s: f64,
+    /// Positive then negative staircase.
+    #[serde(default = "yes")]
+    pub both_directions: bool,
+    /// Rest before each direction [s].
+    #[serde(default = "one")]
+    pub rest_s: f64,
+}
+
+/// Inertia ramps recipe.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InertiaRecipe {
+    /// Acceleration magnitude [rad/s^2].
+    pub accel_rad_s2: f64,
+    /// Peak motor speed [rad/s].
+    pub peak_speed_rad_s: f64,
+    /// Lowest motor speed of a cycle [rad/s].
+    #[serde(default)]
+    pub base_speed_rad_s: f64,
+    /// Up/down cycles.
+    pub cycles: u32,
+    /// Rest before the first cycle [s].
+    #[serde(default = "half")]
+    pub rest_s: f64,
+}
+
+fn yes() -> bool {
+    true
+}
+fn one() -> f64 {
+    1.0
+}
+fn half() -> f64 {
+    0.5
+}
+
+fn load_toml<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> anyhow::Result<T> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {what} recipe {}", path.display()))?;
+    toml::from_str(&text).with_context(|| format!("in {what} recipe {}", path.display()))
+}
+
+impl FrictionRecipe {
+    pub fn load(path: &Path) -> anyhow::Result<FrictionRecipe> {
+        let r: FrictionRecipe = load_toml(path, "friction")?;
+        if r.speeds_rad_s.is_empty() || r.speeds_rad_s.iter().any(|w| !(w.is_finite() && *w > 0.0)) {
+            bail!("{}: speeds_rad_s must be a non-empty list of positive motor speeds [rad/s]", path.display());
+        }
+        if !(r.step_duration_s >= 1.0 && r.step_duration_s.is_finite()) {
+            bail!("{}: step_duration_s must be >= 1 s (the estimator needs settled segments), got {}", path.display(), r.step_duration_s);
+        }
+        if !(r.rest_s >= 0.0 && r.rest_s.is_finite()) {
+            bail!("{}: rest_s must be >= 0 s, got {}", path.display(), r.rest_s);
+        }
+        Ok(r)
+    }
+    /// Speed reference [rad/s] at time `t` [s]; None after the end.
+    pub fn reference(&self, t: f64) -> Option<f64> {
+        let one_dir = self.rest_s + self.step_duration_s * self.speeds_rad_s.len() as f64;
+        let dirs = if self.both_directions { 2.0 } else { 1.0 };
+        if t >= one_dir * dirs {
+            return None;
+        }
+        let sign = if t < one_dir { 1.0 } else { -1.0 };
+        let tt = t % one_dir - self.rest_s;
+        if tt < 0.0 {
+            return Some(0.0);
+        }
+        let k = ((tt / self.step_duration_s) as usize).min(self.speeds_rad_s.len() - 1);
+        Some(sign * self.speeds_rad_s[k])
+    }
+}
+
+impl InertiaRecipe {
+    pub fn load(path: &Path) -> anyhow::Result<InertiaRecipe> {
+        let r: InertiaRecipe = load_toml(path, "inertia")?;
+        if !(r.accel_rad_s2 > 0.0 && r.accel_rad_s2.is_finite()) {
+            bail!("{}: accel_rad_s2 must be > 0 rad/s^2, got {}", path.display(), r.accel_rad_s2);
+        }
+        if !(r.peak_speed_rad_s > r.base_speed_rad_s && r.base_speed_rad_s >= 0.0 && r.peak_speed_rad_s.is_finite()) {
+            bail!("{}: need 0 <= base_speed_rad_s < peak_speed_rad_s", path.display());
+        }
+        if r.cycles < 2 {
+            bail!("{}: cycles must be >= 2 (eq. 69 averages over pairs; one pair gives no uncertainty)", path.display());
+        }
+        Ok(r)
+    }
+    /// (speed [rad/s], acceleration [rad/s^2]) reference at `t`; None after the end.
+    pub fn reference(&self, t: f64) -> Option<(f64, f64)> {
+        let half = (self.peak_speed_rad_s - self.base_speed_rad_s) / self.accel_rad_s2;
+        // Reach the base speed first (at the same acceleration), then cycle.
+        let lead = self.base_speed_rad_s / self.accel_rad_s2;
+        let t = t - self.rest_s;
+        if t < 0.0 {
+            return Some((0.0, 0.0));
+        }
+        if t < lead {
+            return Some((self.accel_rad_s2 * t, self.accel_rad_s2));
+        }
+        let tc = t - lead;
+        if tc >= 2.0 * half * self.cycles as f64 {
+            return None;
+        }
+        let p = tc % (2.0 * half);
+        if p < half {
+            Some((self.base_speed_rad_s + self.accel_rad_s2 * p, self.accel_rad_s2))
+        } else {
+            Some((self.peak_speed_rad_s - self.accel_rad_s2 * (p - half), -self.accel_rad_s2))
+        }
+    }
+}
+
+/// Closed-loop speed control of `backend` following `reference(t) -> (w_ref, a_ref)` until it
+/// returns None; returns the log.
+pub fn run_speed_loop(
+    backend: &mut dyn Backend,
+    p: &PlantParams,
+    source: &str,
+    mut reference: impl FnMut(f64) -> Option<(f64, f64)>,
+) -> anyhow::Result<Record> {
+    let info = backend.info();
+    let dt = info.sample_period_s;
+    let u_max = info.voltage_limit_v;
+    // Reduced model k_m / (T_m s + 1) from the nominal parameters; PI cancels the pole.
+    let (k_m, t_m) = (p.k_m(), p.t_m());
+    let omega_c = 50.0;
+    let kp = omega_c * t_m / k_m;
+    let ki = kp / t_m;
+    let tau_f = 0.005; // speed filter time constant [s]
+    let mut rec = Record { source: source.to_string(), ..Record::default() };
+    let (mut u_log, mut th_log, mut i_log) = (Vec::new(), Vec::new(), Vec::new());
+    let mut last_theta: Option<f64> = None;
+    let (mut w_f, mut integ) = (0.0, 0.0);
+    let mut k = 0usize;
+    let result = (|| -> anyhow::Result<()> {
+        loop {
+            let s = backend.sample()?;
+            let t = k as f64 * dt;
+            let Some((w_ref, a_ref)) = reference(t) else { break };
+            let w_meas = match last_theta {
+                Some(th) => (s.theta_l_rad - th) / dt * p.n,
+                None => 0.0,
+            };
+            last_theta = Some(s.theta_l_rad);
+            w_f += (w_meas - w_f) * dt / (tau_f + dt);
+            let err = w_ref - w_f;
+            let ff = (p.k_e * w_ref + p.r_eq() * p.j_eq() * a_ref / p.k_t) / p.k_drv;
+            let u_unsat = ff + kp * err + integ;
+            let u = u_unsat.clamp(-u_max, u_max);
+            // Conditional integration (anti-windup).
+            if u == u_unsat || err.signum() != u_unsat.signum() {
+                integ += ki * err * dt;
+            }
+            backend.apply(u)?;
+            rec.time_s.push(s.time_s);
+            th_log.push(s.theta_l_rad);
+            i_log.push(s.i_a_a);
+            u_log.push(u);
+            k += 1;
+        }
+        Ok(())
+    })();
+    backend.stop()?;
+    result?;
+    rec.u_v = Some(u_log);
+    rec.theta_l_rad = Some(th_log);
+    rec.i_a_a = Some(i_log);
+    Ok(rec)
+}
+
+/// Runs both experiments on the simulator described by the command's plant options and returns
+/// their records (friction staircase, inertia ramps).
+pub fn run_experiments(args: &Identify, p: &PlantParams) -> anyhow::Result<Vec<Record>> {
+    let fr = FrictionRecipe::load(&args.friction_recipe).context("--friction-recipe")?;
+    let ir = InertiaRecipe::load(&args.inertia_recipe).context("--inertia-recipe")?;
+    let (plant, sensors) = args.plant.load()?;
+    let dt = 1e-3;
+    let mut out = Vec::new();
+    let mut b = servo_hw::sim::SimBackend::new(&plant, sensors, dt)?;
+    out.push(run_speed_loop(&mut b, p, "ramp: friction staircase (sim)", |t| fr.reference(t).map(|w| (w, 0.0)))?);
+    let mut b = servo_hw::sim::SimBackend::new(&plant, sensors, dt)?;
+    out.push(run_speed_loop(&mut b, p, "ramp: inertia ramps (sim)", |t| ir.reference(t))?);
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn staircase_reference_steps_through_the_speeds() {
+        let r = FrictionRecipe { speeds_rad_s: vec![10.0, 20.0], step_duration_s: 2.0, both_directions: true, rest_s: 1.0 };
+        assert_eq!(r.reference(0.5), Some(0.0));
+        assert_eq!(r.reference(1.5), Some(10.0));
+        assert_eq!(r.reference(3.5), Some(20.0));
+        assert_eq!(r.reference(5.5), Some(0.0));
+        assert_eq!(r.reference(6.5), Some(-10.0));
+        assert_eq!(r.reference(10.0), None);
+    }
+
+    #[test]
+    fn ramps_reference_is_a_triangle() {
+        let r = InertiaRecipe { accel_rad_s2: 100.0, peak_speed_rad_s: 100.0, base_speed_rad_s: 0.0, cycles: 2, rest_s: 0.0 };
+        assert_eq!(r.reference(0.5), Some((50.0, 100.0)));
+        assert_eq!(r.reference(1.5), Some((50.0, -100.0)));
+        assert!(r.reference(4.1).is_none());
+    }
+}

@@ -1,0 +1,258 @@
+//! The column map of a CSV log: which column holds which signal, in which unit.
+//!
+//! Written by users as `--columns time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A` (signal =
+//! column header, optional `:unit`, SI when omitted), recognised for servo's own CSV, or guessed
+//! from common header suffixes (`_deg`, `_rad`, `_rpm`, `_deg_per_s`, `_A`, `_V`, ...).
+
+use super::units::{Signal, Unit};
+use anyhow::{anyhow, bail};
+use std::fmt;
+
+/// One entry: the column `column` holds `signal` in `unit`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ColumnSpec {
+    pub signal: Signal,
+    pub column: String,
+    pub unit: Unit,
+}
+
+/// Which columns hold which signals.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ColumnMap {
+    pub entries: Vec<ColumnSpec>,
+}
+
+impl fmt::Display for ColumnMap {
+    /// The `--columns` form of the map.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, e) in self.entries.iter().enumerate() {
+            if i > 0 {
+                f.write_str(",")?;
+            }
+            write!(f, "{}={}", e.signal, e.column)?;
+            if e.unit != e.signal.si_unit() {
+                write!(f, ":{}", e.unit)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// An example `--columns` value for error messages.
+pub const EXAMPLE: &str = "time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A";
+
+impl ColumnMap {
+    /// Parses a `--columns` value.
+    pub fn parse(text: &str) -> anyhow::Result<ColumnMap> {
+        let mut entries: Vec<ColumnSpec> = Vec::new();
+        for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let (sig, rest) = item.split_once('=').ok_or_else(|| {
+                anyhow!("--columns: `{item}` is not `signal=column[:unit]` (example: --columns {EXAMPLE})")
+            })?;
+            let sig = sig.trim();
+            let signal = Signal::from_name(sig)
+                .ok_or_else(|| anyhow!("--columns: unknown signal `{sig}`; signals are {}", Signal::name_list()))?;
+            let (column, unit_text) = match rest.split_once(':') {
+                Some((c, u)) => (c.trim(), Some(u.trim())),
+                None => (rest.trim(), None),
+            };
+            if column.is_empty() {
+                bail!("--columns: `{item}` names no column (example: --columns {EXAMPLE})");
+            }
+            let unit = match unit_text {
+                Some(u) => Unit::parse(u).and_then(|x| x.check_for(signal, u)).map_err(|e| anyhow!("--columns: `{item}`: {e}"))?,
+                None => signal.si_unit(),
+            };
+            if entries.iter().any(|e| e.signal == signal) {
+                bail!("--columns: signal `{sig}` is given twice");
+            }
+            entries.push(ColumnSpec { signal, column: column.to_string(), unit });
+        }
+        if !entries.iter().any(|e| e.signal == Signal::Time) {
+            bail!("--columns: `time=<column>` is required (example: --columns {EXAMPLE})");
+        }
+        if entries.len() < 2 {
+            bail!("--columns: give at least one signal besides time (example: --columns {EXAMPLE})");
+        }
+        Ok(ColumnMap { entries })
+    }
+
+    /// The map of servo's own CSV if every header column is one of servo's column names
+    /// (`time_s,u_V,theta_l_rad,i_a_A[,ref_rad,...]`, case-insensitive) and `time_s` is present.
+    pub fn servo_own(header: &[&str]) -> Option<ColumnMap> {
+        let mut entries = Vec::new();
+        for h in header {
+            let signal = Signal::ALL.into_iter().find(|s| s.csv_column().eq_ignore_ascii_case(h.trim()))?;
+            if entries.iter().any(|e: &ColumnSpec| e.signal == signal) {
+                return None;
+            }
+            entries.push(ColumnSpec { signal, column: h.to_string(), unit: signal.si_unit() });
+        }
+        entries.iter().any(|e| e.signal == Signal::Time).then_some(ColumnMap { entries })
+    }
+
+    /// Guesses the map from header names with unit suffixes, e.g. `t_s`, `thl_meas_deg`,
+    /// `thl_ref_deg`, `u_V`, `ia_A`, `wm_rpm`, `wl_rad_per_s`. Returns the map and the columns it
+    /// left out, or an error showing the header and an example `--columns`.
+    pub fn guess(header: &[&str]) -> anyhow::Result<(ColumnMap, Vec<String>)> {
+        let mut entries: Vec<ColumnSpec> = Vec::new();
+        let mut ignored = Vec::new();
+        for h in header {
+            match guess_column(h.trim()) {
+                Some((signal, unit)) if !entries.iter().any(|e| e.signal == signal) => {
+                    entries.push(ColumnSpec { signal, column: h.trim().to_string(), unit })
+                }
+                _ => ignored.push(h.trim().to_string()),
+            }
+        }
+        let has_time = entries.iter().any(|e| e.signal == Signal::Time);
+        if !has_time || entries.len() < 2 {
+            bail!(
+                "cannot tell which column holds which signal from the header `{}`; give a column map, e.g. \
+                 --columns {EXAMPLE} (signals: {}; units after a colon: s, ms, rad, deg, rev, counts:4096, rad/s, \
+                 deg/s, rpm, V, A, mA)",
+                header.join(","),
+                Signal::name_list()
+            );
+        }
+        Ok((ColumnMap { entries }, ignored))
+    }
+
+    /// The entry for `signal`, if mapped.
+    pub fn get(&self, signal: Signal) -> Option<&ColumnSpec> {
+        self.entries.iter().find(|e| e.signal == signal)
+    }
+}
+
+/// Unit suffixes recognised at the end of a header name (case-sensitive for V/A to avoid
+/// matching words; longest first). `None`: a derivative we do not import (acceleration).
+const SUFFIXES: [(&str, Option<&str>); 26] = [
+    ("_deg_per_s2", None),
+    ("_rad_per_s2", None),
+    ("_rpm_per_s", None),
+    ("_deg_per_s", Some("deg/s")),
+    ("_rad_per_s", Some("rad/s")),
+    ("_rev_per_s", Some("rev/s")),
+    ("_deg_s", Some("deg/s")),
+    ("_rad_s", Some("rad/s")),
+    ("_rpm", Some("rpm")),
+    ("_rps", Some("rev/s")),
+    ("_deg", Some("deg")),
+    ("_rad", Some("rad")),
+    ("_rev", Some("rev")),
+    ("_counts", None),
+    ("_ms", Some("ms")),
+    ("_us", Some("us")),
+    ("_s", Some("s")),
+    ("_sec", Some("s")),
+    ("_mV", Some("mV")),
+    ("_V", Some("V")),
+    ("_v", Some("V")),
+    ("_mA", Some("mA")),
+    ("_A", Some("A")),
+    ("_a", Some("A")),
+    ("_Nm", None),
+    ("_N_m", None),
+];
+
+/// Base-name words that identify a signal (after splitting on `_`).
+fn signal_from_word(word: &str) -> Option<Signal> {
+    Some(match word {
+        "t" | "time" => Signal::Time,
+        "u" | "v" | "volt" | "voltage" | "vin" | "uin" => Signal::U,
+        "thl" | "thetal" | "theta" | "pos" | "position" | "angle" | "ql" => Signal::ThetaL,
+        "thm" | "thetam" => Signal::ThetaM,
+        "wl" | "omegal" => Signal::OmegaL,
+        "wm" | "omegam" => Signal::OmegaM,
+        "ia" | "i" | "current" | "cur" | "curr" => Signal::IA,
+        _ => return None,
+    })
+}
+
+/// Guesses (signal, unit) of one header name, or `None`.
+fn guess_column(name: &str) -> Option<(Signal, Unit)> {
+    let (base, unit) = SUFFIXES.iter().find_map(|(suf, unit)| {
+        let base = name.strip_suffix(suf)?;
+        (!base.is_empty()).then_some((base, *unit))
+    })?;
+    let unit = Unit::parse(unit?).ok()?;
+    let lower = base.to_ascii_lowercase();
+    // Joined forms first (`theta_l`, `omega_m`, `i_a`), then single words.
+    let joined = lower.replace('_', "");
+    let words: Vec<&str> = lower.split('_').filter(|w| !w.is_empty()).collect();
+    if words.iter().any(|w| matches!(*w, "err" | "error" | "e")) {
+        return None;
+    }
+    let is_ref = words.iter().any(|w| matches!(*w, "ref" | "reference" | "setpoint" | "sp" | "target" | "des" | "desired"));
+    let mut signal = signal_from_word(&joined).or_else(|| words.iter().find_map(|w| signal_from_word(w)))?;
+    if is_ref {
+        if signal.dimension() != super::units::Dimension::Angle {
+            return None;
+        }
+        signal = Signal::Ref;
+    }
+    // The unit decides between look-alikes: `v` with an angle unit is not a voltage.
+    (unit.dimension() == signal.dimension()).then_some((signal, unit))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parse_and_display() {
+        let m = ColumnMap::parse("time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A:mA,theta_m=enc:counts:4096").unwrap();
+        assert_eq!(m.entries.len(), 5);
+        assert_eq!(m.get(Signal::ThetaL).unwrap().unit, Unit::Deg);
+        assert_eq!(m.get(Signal::ThetaM).unwrap().unit, Unit::Counts(4096.0));
+        assert_eq!(m.get(Signal::U).unwrap().unit, Unit::Volt);
+        assert_eq!(m.to_string(), "time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A:mA,theta_m=enc:counts:4096");
+        assert_eq!(ColumnMap::parse(&m.to_string()).unwrap(), m);
+    }
+
+    #[test]
+    fn parse_errors() {
+        for (bad, needle) in [
+            ("time=t,speed=w", "unknown signal `speed`"),
+            ("time=t,theta_l=x:rpm", "not an angle unit"),
+            ("theta_l=x", "time=<column>"),
+            ("time=t,u=a,u=b", "twice"),
+            ("time=t,u", "signal=column"),
+            ("time=t,u=x:parsec", "unknown unit"),
+        ] {
+            let e = format!("{:#}", ColumnMap::parse(bad).unwrap_err());
+            assert!(e.contains(needle), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn own_header() {
+        let m = ColumnMap::servo_own(&["time_s", "u_V", "theta_l_rad", "i_a_A", "ref_rad"]).unwrap();
+        assert_eq!(m.entries.len(), 5);
+        assert!(ColumnMap::servo_own(&["time_s", "u_V", "other"]).is_none());
+        assert!(ColumnMap::servo_own(&["u_V", "theta_l_rad"]).is_none());
+    }
+
+    #[test]
+    fn guesses_lab_headers() {
+        let (m, ign) =
+            ColumnMap::guess(&["t_s", "thl_meas_deg", "thl_ref_deg", "u_V", "ia_A", "wm_deg_per_s", "err_deg"]).unwrap();
+        assert_eq!(m.to_string(), "time=t_s,theta_l=thl_meas_deg:deg,ref=thl_ref_deg:deg,u=u_V,i_a=ia_A,omega_m=wm_deg_per_s:deg/s");
+        assert_eq!(ign, ["err_deg"]);
+        let (m, ign) = ColumnMap::guess(&["t_s", "wm_rpm", "am_rpm_per_s", "ia_A", "ia2_A"]).unwrap();
+        assert_eq!(m.to_string(), "time=t_s,omega_m=wm_rpm:rpm,i_a=ia_A");
+        assert_eq!(ign, ["am_rpm_per_s", "ia2_A"]);
+        let (m, _) = ColumnMap::guess(&["t_s", "ia_A", "wl_rad_per_s", "al_rad_per_s2"]).unwrap();
+        assert_eq!(m.to_string(), "time=t_s,i_a=ia_A,omega_l=wl_rad_per_s");
+        let (m, _) = ColumnMap::guess(&["t_s", "thl_meas_deg", "thl_ref_deg", "ch2_probably_ia_A"]).unwrap();
+        assert_eq!(m.get(Signal::IA).unwrap().column, "ch2_probably_ia_A");
+        let (m, _) = ColumnMap::guess(&["time_ms", "theta_l_rad", "i_a_mA"]).unwrap();
+        assert_eq!(m.to_string(), "time=time_ms:ms,theta_l=theta_l_rad,i_a=i_a_mA:mA");
+    }
+
+    #[test]
+    fn guess_fails_with_header_and_example() {
+        let e = format!("{:#}", ColumnMap::guess(&["a", "b", "c"]).unwrap_err());
+        assert!(e.contains("`a,b,c`") && e.contains("--columns time="), "{e}");
+    }
+}

@@ -1,0 +1,219 @@
+//! Reading a CSV log (servo's own or a foreign one through a [`ColumnMap`]) into a [`Record`].
+
+use super::columns::ColumnMap;
+use super::units::Signal;
+use anyhow::{anyhow, bail, Context};
+use servo_core::record::Record;
+use std::path::Path;
+
+/// A CSV read into a record, with the column map used and notes for the user (guessed map,
+/// ignored columns, missing values).
+#[derive(Debug, Clone)]
+pub struct CsvImport {
+    pub record: Record,
+    pub map: ColumnMap,
+    pub notes: Vec<String>,
+}
+
+/// Picks the delimiter from the first non-comment line: `,` unless only `;` or tabs appear.
+fn sniff_delimiter(text: &str) -> u8 {
+    let line = text.lines().find(|l| !l.trim_start().starts_with('#') && !l.trim().is_empty()).unwrap_or("");
+    if line.contains(',') {
+        b','
+    } else if line.contains(';') {
+        b';'
+    } else if line.contains('\t') {
+        b'\t'
+    } else {
+        b','
+    }
+}
+
+/// Reads `path`. `columns` is the user's `--columns` map; `None` means servo's own header or a
+/// guess from the header's unit suffixes (stated in the notes).
+pub fn read_csv(path: &Path, columns: Option<&str>) -> anyhow::Result<CsvImport> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading CSV log {}", path.display()))?;
+    parse_csv(&text, &path.display().to_string(), columns)
+}
+
+/// Parses CSV `text`; `source` names the file in messages.
+pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Result<CsvImport> {
+    let mut rdr = csv::ReaderBuilder::new()
+        .delimiter(sniff_delimiter(text))
+        .comment(Some(b'#'))
+        .trim(csv::Trim::All)
+        .has_headers(true)
+        .from_reader(text.as_bytes());
+    let header: Vec<String> = rdr
+        .headers()
+        .map_err(|e| anyhow!("{source}: cannot read the CSV header: {e}"))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    let header_refs: Vec<&str> = header.iter().map(String::as_str).collect();
+    if header.iter().all(|h| h.is_empty()) {
+        bail!("{source}: the file is empty or has no header line (expected e.g. `time_s,u_V,theta_l_rad,i_a_A`)");
+    }
+    let mut notes = Vec::new();
+    let map = match columns {
+        Some(c) => ColumnMap::parse(c)?,
+        None => match ColumnMap::servo_own(&header_refs) {
+            Some(m) => m,
+            None => {
+                let (m, ignored) = ColumnMap::guess(&header_refs).with_context(|| format!("{source}"))?;
+                let mut note = format!("{source}: guessed the column map --columns {m}");
+                if !ignored.is_empty() {
+                    note.push_str(&format!(" (ignored: {})", ignored.join(", ")));
+                }
+                notes.push(note);
+                m
+            }
+        },
+    };
+    // Column index of every mapped signal.
+    let mut idx = Vec::with_capacity(map.entries.len());
+    for e in &map.entries {
+        let i = header.iter().position(|h| h == &e.column).ok_or_else(|| {
+            anyhow!(
+                "{source}: no column `{}` (for signal `{}`); the header is `{}`",
+                e.column,
+                e.signal,
+                header.join(",")
+            )
+        })?;
+        idx.push(i);
+    }
+    let mut data: Vec<Vec<f64>> = vec![Vec::new(); map.entries.len()];
+    let mut nan_counts = vec![0usize; map.entries.len()];
+    let mut last_t = f64::NEG_INFINITY;
+    let mut row = csv::StringRecord::new();
+    loop {
+        match rdr.read_record(&mut row) {
+            Ok(true) => {}
+            Ok(false) => break,
+            Err(e) => {
+                let line = e.position().map(|p| p.line()).unwrap_or(0);
+                bail!("{source}: line {line}: {}", csv_error_text(&e));
+            }
+        }
+        let line = row.position().map(|p| p.line()).unwrap_or(0);
+        for (k, (e, &i)) in map.entries.iter().zip(&idx).enumerate() {
+            let cell = row.get(i).unwrap_or("");
+            let v = if cell.is_empty() || cell.eq_ignore_ascii_case("nan") {
+                f64::NAN
+            } else {
+                cell.parse::<f64>().map_err(|_| {
+                    anyhow!(
+                        "{source}: line {line}, column {} (`{}`, signal `{}`): expected a number in {}, got `{cell}`",
+                        i + 1,
+                        e.column,
+                        e.signal,
+                        e.unit
+                    )
+                })?
+            };
+            if e.signal == Signal::Time {
+                let t = e.unit.to_si(v);
+                if !t.is_finite() {
+                    bail!("{source}: line {line}, column {} (`{}`): time must be a finite number, got `{cell}`", i + 1, e.column);
+                }
+                if t <= last_t {
+                    bail!(
+                        "{source}: line {line}, column {} (`{}`): time must increase strictly, got {t} s after {last_t} s",
+                        i + 1,
+                        e.column
+                    );
+                }
+                last_t = t;
+                data[k].push(t);
+            } else {
+                if !v.is_finite() {
+                    nan_counts[k] += 1;
+                }
+                data[k].push(e.unit.to_si(v));
+            }
+        }
+    }
+    let mut rec = Record { source: source.to_string(), ..Record::default() };
+    for ((e, col), nans) in map.entries.iter().zip(data).zip(nan_counts) {
+        if nans > 0 {
+            notes.push(format!("{source}: column `{}` has {nans} empty or non-finite values (kept as NaN)", e.column));
+        }
+        match e.signal {
+            Signal::Time => rec.time_s = col,
+            Signal::U => rec.u_v = Some(col),
+            Signal::ThetaL => rec.theta_l_rad = Some(col),
+            Signal::ThetaM => rec.theta_m_rad = Some(col),
+            Signal::OmegaL => rec.omega_l_rad_s = Some(col),
+            Signal::OmegaM => rec.omega_m_rad_s = Some(col),
+            Signal::IA => rec.i_a_a = Some(col),
+            Signal::Ref => rec.ref_rad = Some(col),
+        }
+    }
+    if rec.time_s.is_empty() {
+        bail!("{source}: no data rows after the header `{}`", header.join(","));
+    }
+    Ok(CsvImport { record: rec, map, notes })
+}
+
+fn csv_error_text(e: &csv::Error) -> String {
+    match e.kind() {
+        csv::ErrorKind::UnequalLengths { expected_len, len, .. } => {
+            format!("expected {expected_len} fields like the header, found {len}")
+        }
+        csv::ErrorKind::Utf8 { .. } => "not valid UTF-8 text".to_string(),
+        _ => e.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn own_csv() {
+        let t = "time_s,u_V,theta_l_rad,i_a_A,ref_rad\n0,1,0,0.1,1\n0.001,2,0.01,0.2,1\n";
+        let r = parse_csv(t, "x.csv", None).unwrap();
+        assert!(r.notes.is_empty());
+        assert_eq!(r.record.time_s, [0.0, 0.001]);
+        assert_eq!(r.record.u_v.as_deref(), Some(&[1.0, 2.0][..]));
+        assert_eq!(r.record.ref_rad.as_deref(), Some(&[1.0, 1.0][..]));
+        assert!(r.record.theta_m_rad.is_none());
+    }
+
+    #[test]
+    fn foreign_with_map_and_units() {
+        let t = "t_ms;pos_deg;I_mA\n0;180;100\n1;90;-50\n";
+        let r = parse_csv(t, "f.csv", Some("time=t_ms:ms,theta_l=pos_deg:deg,i_a=I_mA:mA")).unwrap();
+        assert_eq!(r.record.time_s, [0.0, 0.001]);
+        let th = r.record.theta_l_rad.unwrap();
+        assert!((th[0] - std::f64::consts::PI).abs() < 1e-12);
+        assert!((r.record.i_a_a.unwrap()[1] + 0.05).abs() < 1e-15);
+    }
+
+    #[test]
+    fn guessed_map_is_noted() {
+        let t = "t_s,thl_meas_deg,u_V\n0,0,1\n0.001,1,1\n";
+        let r = parse_csv(t, "g.csv", None).unwrap();
+        assert!(r.notes[0].contains("--columns time=t_s,theta_l=thl_meas_deg:deg,u=u_V"), "{:?}", r.notes);
+    }
+
+    #[test]
+    fn errors_name_line_and_column() {
+        let t = "time_s,u_V,theta_l_rad\n0,1,0\n0.001,abc,0\n";
+        let e = format!("{:#}", parse_csv(t, "bad.csv", None).unwrap_err());
+        assert!(e.contains("bad.csv: line 3, column 2 (`u_V`") && e.contains("got `abc`"), "{e}");
+        let t = "time_s,u_V\n0,1\n0,2\n";
+        let e = format!("{:#}", parse_csv(t, "bad.csv", None).unwrap_err());
+        assert!(e.contains("line 3") && e.contains("increase strictly"), "{e}");
+        let t = "time_s,u_V\n0,1\n0.001,2,3\n";
+        let e = format!("{:#}", parse_csv(t, "bad.csv", None).unwrap_err());
+        assert!(e.contains("line 3") && e.contains("expected 2 fields"), "{e}");
+        let e = format!("{:#}", parse_csv(t, "bad.csv", Some("time=t,u=u_V")).unwrap_err());
+        assert!(e.contains("no column `t`") && e.contains("time_s,u_V"), "{e}");
+        let e = format!("{:#}", parse_csv("a,b\n1,2\n", "bad.csv", None).unwrap_err());
+        assert!(e.contains("bad.csv") && e.contains("`a,b`") && e.contains("--columns"), "{e}");
+        let e = format!("{:#}", parse_csv("time_s,u_V\n", "empty.csv", None).unwrap_err());
+        assert!(e.contains("no data rows"), "{e}");
+    }
+}

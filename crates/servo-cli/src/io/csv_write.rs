@@ -1,0 +1,96 @@
+//! Writing a [`Record`] as servo's CSV: `time_s,u_V,theta_l_rad,i_a_A[,ref_rad,theta_m_rad,
+//! omega_l_rad_s,omega_m_rad_s]` (only the signals present), SI units, shortest round-trip
+//! number format.
+
+use super::units::Signal;
+use anyhow::{bail, Context};
+use servo_core::record::Record;
+use std::io::Write;
+use std::path::Path;
+
+/// Column order of servo's CSV.
+pub const ORDER: [Signal; 8] =
+    [Signal::Time, Signal::U, Signal::ThetaL, Signal::IA, Signal::Ref, Signal::ThetaM, Signal::OmegaL, Signal::OmegaM];
+
+/// The samples of `signal` in `rec`, if present.
+pub fn signal_of(rec: &Record, signal: Signal) -> Option<&[f64]> {
+    match signal {
+        Signal::Time => Some(&rec.time_s),
+        Signal::U => rec.u_v.as_deref(),
+        Signal::ThetaL => rec.theta_l_rad.as_deref(),
+        Signal::ThetaM => rec.theta_m_rad.as_deref(),
+        Signal::OmegaL => rec.omega_l_rad_s.as_deref(),
+        Signal::OmegaM => rec.omega_m_rad_s.as_deref(),
+        Signal::IA => rec.i_a_a.as_deref(),
+        Signal::Ref => rec.ref_rad.as_deref(),
+    }
+}
+
+/// Writes `rec` to `out` as servo's CSV.
+pub fn write_csv_to(out: &mut dyn Write, rec: &Record) -> anyhow::Result<()> {
+    let cols: Vec<(Signal, &[f64])> = ORDER.iter().filter_map(|&s| signal_of(rec, s).map(|v| (s, v))).collect();
+    for (s, v) in &cols {
+        if v.len() != rec.time_s.len() {
+            bail!("signal `{s}` has {} samples but time_s has {}", v.len(), rec.time_s.len());
+        }
+    }
+    let header: Vec<&str> = cols.iter().map(|(s, _)| s.csv_column()).collect();
+    let mut line = String::with_capacity(128);
+    line.push_str(&header.join(","));
+    line.push('\n');
+    out.write_all(line.as_bytes())?;
+    for k in 0..rec.time_s.len() {
+        line.clear();
+        for (j, (_, v)) in cols.iter().enumerate() {
+            if j > 0 {
+                line.push(',');
+            }
+            use std::fmt::Write as _;
+            let _ = write!(line, "{}", v[k]);
+        }
+        line.push('\n');
+        out.write_all(line.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// Writes `rec` to the file `path` as servo's CSV.
+pub fn write_csv(path: &Path, rec: &Record) -> anyhow::Result<()> {
+    let f = std::fs::File::create(path).with_context(|| format!("creating CSV {}", path.display()))?;
+    let mut w = std::io::BufWriter::new(f);
+    write_csv_to(&mut w, rec).with_context(|| format!("writing CSV {}", path.display()))?;
+    w.flush().with_context(|| format!("writing CSV {}", path.display()))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_exact() {
+        let rec = Record {
+            source: "mem".into(),
+            time_s: vec![0.0, 0.001, 0.002],
+            u_v: Some(vec![1.0 / 3.0, -2.5, 1e-17]),
+            theta_l_rad: Some(vec![0.1, 0.2, std::f64::consts::PI]),
+            i_a_a: Some(vec![0.0, 0.5, -0.123456789012345]),
+            ref_rad: Some(vec![1.5; 3]),
+            omega_l_rad_s: Some(vec![0.0, 100.0, f64::NAN]),
+            ..Record::default()
+        };
+        let mut buf = Vec::new();
+        write_csv_to(&mut buf, &rec).unwrap();
+        let text = String::from_utf8(buf).unwrap();
+        assert!(text.starts_with("time_s,u_V,theta_l_rad,i_a_A,ref_rad,omega_l_rad_s\n"), "{text}");
+        let back = super::super::csv_read::parse_csv(&text, "mem", None).unwrap();
+        assert!(back.notes.iter().all(|n| n.contains("non-finite")), "{:?}", back.notes);
+        let b = back.record;
+        assert_eq!(b.time_s, rec.time_s);
+        assert_eq!(b.u_v, rec.u_v);
+        assert_eq!(b.theta_l_rad, rec.theta_l_rad);
+        assert_eq!(b.i_a_a, rec.i_a_a);
+        assert_eq!(b.ref_rad, rec.ref_rad);
+        assert!(b.omega_l_rad_s.unwrap()[2].is_nan());
+    }
+}

@@ -1,0 +1,117 @@
+//! The `/servo/loop` message: one per control sample, JSON with a JSON schema (units in the field
+//! names and in the schema descriptions) so Foxglove and PlotJuggler plot it directly.
+
+use serde::{Deserialize, Serialize};
+
+/// Topic of the per-sample loop message.
+pub const LOOP_TOPIC: &str = "/servo/loop";
+/// Schema name of [`LoopMsg`].
+pub const LOOP_SCHEMA_NAME: &str = "servo.Loop";
+
+/// One control sample. Row convention: measurements taken at `time_s`, `u_v` applied from then
+/// until the next sample. Fields that do not apply (no reference in an open-loop run) are null.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LoopMsg {
+    /// Run time of the sample [s].
+    pub time_s: f64,
+    /// Position reference at the load [rad] (null in open loop).
+    #[serde(with = "nullable")]
+    pub ref_rad: f64,
+    /// Measured load angle theta_l [rad].
+    pub theta_l_rad: f64,
+    /// Load speed estimate omega_l [rad/s].
+    pub omega_l_rad_s: f64,
+    /// Tracking error ref - theta_l [rad] (null in open loop).
+    #[serde(with = "nullable")]
+    pub err_rad: f64,
+    /// Driver input u applied until the next sample [V], after the output limit.
+    pub u_v: f64,
+    /// Feedforward part of u [V].
+    pub ff_v: f64,
+    /// Proportional term [V].
+    pub p_v: f64,
+    /// Integral term [V].
+    pub i_v: f64,
+    /// Derivative term [V].
+    pub d_v: f64,
+    /// Measured armature current i_a [A].
+    pub i_a_a: f64,
+    /// True when the controller output was clipped at the voltage limit.
+    pub saturated: bool,
+}
+
+/// JSON schema of [`LoopMsg`] (draft 2020-12, as Foxglove reads it).
+pub fn loop_schema() -> String {
+    let num = |d: &str| serde_json::json!({ "type": "number", "description": d });
+    let nnum = |d: &str| serde_json::json!({ "type": ["number", "null"], "description": d });
+    serde_json::json!({
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": LOOP_SCHEMA_NAME,
+        "description": "servo position loop, one message per control sample: measurements taken at time_s, u_v applied from then until the next sample",
+        "type": "object",
+        "properties": {
+            "time_s": num("run time of the sample [s]"),
+            "ref_rad": nnum("position reference at the load [rad] (null in open loop)"),
+            "theta_l_rad": num("measured load angle theta_l [rad]"),
+            "omega_l_rad_s": num("load speed estimate omega_l [rad/s]"),
+            "err_rad": nnum("tracking error ref - theta_l [rad] (null in open loop)"),
+            "u_v": num("driver input voltage u applied until the next sample [V] (after the limit)"),
+            "ff_v": num("feedforward part of u [V]"),
+            "p_v": num("PID proportional term [V]"),
+            "i_v": num("PID integral term [V]"),
+            "d_v": num("PID derivative term [V]"),
+            "i_a_a": num("measured armature current i_a [A]"),
+            "saturated": { "type": "boolean", "description": "controller output clipped at the voltage limit" }
+        },
+        "required": ["time_s", "theta_l_rad", "u_v", "i_a_a"]
+    })
+    .to_string()
+}
+
+/// NaN <-> JSON null for optional numbers (JSON has no NaN).
+mod nullable {
+    use serde::{Deserialize, Deserializer, Serializer};
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_finite() {
+            s.serialize_f64(*v)
+        } else {
+            s.serialize_none()
+        }
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_round_trip_and_schema() {
+        let m = LoopMsg {
+            time_s: 0.123,
+            ref_rad: f64::NAN,
+            theta_l_rad: 1.0 / 3.0,
+            omega_l_rad_s: -2.0,
+            err_rad: f64::NAN,
+            u_v: 9.999999999,
+            ff_v: 0.0,
+            p_v: 1e-300,
+            i_v: -0.5,
+            d_v: 0.25,
+            i_a_a: 0.1,
+            saturated: true,
+        };
+        let s = serde_json::to_string(&m).unwrap();
+        assert!(s.contains("\"ref_rad\":null"), "{s}");
+        let b: LoopMsg = serde_json::from_str(&s).unwrap();
+        assert!(b.ref_rad.is_nan() && b.err_rad.is_nan());
+        assert_eq!((b.time_s, b.theta_l_rad, b.u_v, b.p_v), (m.time_s, m.theta_l_rad, m.u_v, m.p_v));
+        let schema: serde_json::Value = serde_json::from_str(&loop_schema()).unwrap();
+        let props = schema["properties"].as_object().unwrap();
+        for k in serde_json::from_str::<serde_json::Value>(&s).unwrap().as_object().unwrap().keys() {
+            assert!(props.contains_key(k), "schema lacks {k}");
+        }
+    }
+}

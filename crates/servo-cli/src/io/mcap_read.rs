@@ -1,0 +1,233 @@
+//! Reading a servo MCAP log back: the `/servo/loop` messages into a [`Record`], the run metadata,
+//! robust to a truncated file (a killed run): everything up to the last complete chunk is read and
+//! the notes say what was lost.
+
+use super::loop_msg::{LoopMsg, LOOP_TOPIC};
+use super::mcap_write::{RUN_METADATA, SUMMARY_METADATA};
+use anyhow::{anyhow, bail, Context};
+use mcap::read::{ChunkFlattener, Options};
+use mcap::records::Record as McapRecord;
+use servo_core::record::Record;
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+
+/// A servo MCAP log as read.
+#[derive(Debug, Clone, Default)]
+pub struct McapRun {
+    /// Signals in SI units (u, theta_l, omega_l estimate, i_a, ref when present).
+    pub record: Record,
+    /// Every loop message, as written.
+    pub loop_msgs: Vec<LoopMsg>,
+    /// The run metadata record ([`RUN_METADATA`]).
+    pub metadata: BTreeMap<String, String>,
+    /// The end-of-run summary record ([`SUMMARY_METADATA`]), if the run got that far.
+    pub summary: BTreeMap<String, String>,
+    /// True when the file ends properly (footer and end magic).
+    pub finished: bool,
+    /// What was lost and why, for a truncated or damaged file.
+    pub notes: Vec<String>,
+}
+
+/// Reads the MCAP file `path`.
+pub fn read_mcap(path: &Path) -> anyhow::Result<McapRun> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading MCAP log {}", path.display()))?;
+    parse_mcap(&bytes, &path.display().to_string())
+}
+
+/// Parses MCAP `bytes`; `source` names the file in messages.
+pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
+    if bytes.len() < mcap::MAGIC.len() || &bytes[..mcap::MAGIC.len()] != mcap::MAGIC {
+        bail!("{source}: not an MCAP file (bad magic bytes at the start)");
+    }
+    let reader = ChunkFlattener::new_with_options(bytes, Options::IgnoreEndMagic | Options::ValidateChunkCrcs)
+        .map_err(|e| anyhow!("{source}: {e}"))?;
+    let mut topics: HashMap<u16, String> = HashMap::new();
+    let mut run = McapRun::default();
+    let mut data_end = false;
+    let mut other_topics: BTreeMap<String, u64> = BTreeMap::new();
+    for item in reader {
+        let rec = match item {
+            Ok(r) => r,
+            Err(e) => {
+                if !data_end {
+                    let upto = run.loop_msgs.last().map(|m| format!("{} s", m.time_s)).unwrap_or_else(|| "the start".into());
+                    run.notes.push(format!(
+                        "{source}: the log is truncated or damaged ({e}); read {} samples up to {upto}, \
+                         the rest (the unflushed chunk, at most 100 ms of a killed run) is lost",
+                        run.loop_msgs.len()
+                    ));
+                }
+                break;
+            }
+        };
+        match rec {
+            McapRecord::Channel(c) => {
+                topics.insert(c.id, c.topic);
+            }
+            McapRecord::Message { header, data } if !data_end => {
+                let topic = topics.get(&header.channel_id).map(String::as_str).unwrap_or("");
+                if topic == LOOP_TOPIC {
+                    let m: LoopMsg = serde_json::from_slice(&data).map_err(|e| {
+                        anyhow!("{source}: message {} on {LOOP_TOPIC} is not a servo loop message: {e}", header.sequence)
+                    })?;
+                    run.loop_msgs.push(m);
+                } else {
+                    *other_topics.entry(topic.to_string()).or_default() += 1;
+                }
+            }
+            McapRecord::Metadata(m) if m.name == RUN_METADATA => run.metadata = m.metadata,
+            McapRecord::Metadata(m) if m.name == SUMMARY_METADATA => run.summary = m.metadata,
+            McapRecord::DataEnd(_) => data_end = true,
+            McapRecord::Footer(_) => run.finished = true,
+            _ => {}
+        }
+    }
+    if !run.finished && run.notes.is_empty() {
+        run.notes.push(format!(
+            "{source}: the log was not finished (run killed?); read {} samples up to {} s",
+            run.loop_msgs.len(),
+            run.loop_msgs.last().map(|m| m.time_s).unwrap_or(0.0)
+        ));
+    }
+    if run.loop_msgs.is_empty() {
+        let others: Vec<String> = other_topics.iter().map(|(t, n)| format!("{t} ({n})")).collect();
+        bail!(
+            "{source}: no {LOOP_TOPIC} messages{}{}",
+            if others.is_empty() { String::new() } else { format!("; topics found: {}", others.join(", ")) },
+            run.notes.first().map(|n| format!("; {n}")).unwrap_or_default()
+        );
+    }
+    run.record = record_of(&run.loop_msgs, source);
+    Ok(run)
+}
+
+/// The [`Record`] of a sequence of loop messages (`ref` only when present).
+pub fn record_of(msgs: &[LoopMsg], source: &str) -> Record {
+    let col = |f: fn(&LoopMsg) -> f64| msgs.iter().map(f).collect::<Vec<f64>>();
+    let has_ref = msgs.iter().any(|m| m.ref_rad.is_finite());
+    Record {
+        source: source.to_string(),
+        time_s: col(|m| m.time_s),
+        u_v: Some(col(|m| m.u_v)),
+        theta_l_rad: Some(col(|m| m.theta_l_rad)),
+        omega_l_rad_s: Some(col(|m| m.omega_l_rad_s)),
+        i_a_a: Some(col(|m| m.i_a_a)),
+        ref_rad: has_ref.then(|| col(|m| m.ref_rad)),
+        ..Record::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::mcap_write::{McapLog, McapLogOptions};
+    use super::*;
+
+    fn msg(k: usize) -> LoopMsg {
+        let t = k as f64 * 1e-3;
+        LoopMsg {
+            time_s: t,
+            ref_rad: if k < 3 { f64::NAN } else { 1.5 },
+            theta_l_rad: (t * 7.0).sin() / 3.0,
+            omega_l_rad_s: (t * 7.0).cos() * 7.0 / 3.0,
+            err_rad: 1.5 - (t * 7.0).sin() / 3.0,
+            u_v: (k as f64 * 0.37).sin() * 10.0,
+            ff_v: 0.1,
+            p_v: 1.0 / (k as f64 + 1.0),
+            i_v: -0.25,
+            d_v: 1e-9 * k as f64,
+            i_a_a: 0.01 * k as f64,
+            saturated: k % 7 == 0,
+        }
+    }
+
+    fn write(path: &Path, n: usize, finish: bool) {
+        let mut meta = BTreeMap::new();
+        meta.insert("gains_toml".to_string(), "[pid]\nkp = 1.0\n".to_string());
+        let mut log = McapLog::create(path, &meta, McapLogOptions { start_unix_ns: 5, ..McapLogOptions::default() }).unwrap();
+        for k in 0..n {
+            log.write_loop(&msg(k)).unwrap();
+        }
+        if finish {
+            log.finish().unwrap();
+        } else {
+            log.flush().unwrap();
+            std::mem::forget(log);
+        }
+    }
+
+    fn same(a: &LoopMsg, b: &LoopMsg) -> bool {
+        let eq = |x: f64, y: f64| x == y || (x.is_nan() && y.is_nan());
+        eq(a.time_s, b.time_s)
+            && eq(a.ref_rad, b.ref_rad)
+            && eq(a.theta_l_rad, b.theta_l_rad)
+            && eq(a.omega_l_rad_s, b.omega_l_rad_s)
+            && eq(a.err_rad, b.err_rad)
+            && eq(a.u_v, b.u_v)
+            && eq(a.ff_v, b.ff_v)
+            && eq(a.p_v, b.p_v)
+            && eq(a.i_v, b.i_v)
+            && eq(a.d_v, b.d_v)
+            && eq(a.i_a_a, b.i_a_a)
+            && a.saturated == b.saturated
+    }
+
+    #[test]
+    fn round_trip_equal() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("r.mcap");
+        write(&p, 1000, true);
+        let run = read_mcap(&p).unwrap();
+        assert!(run.finished && run.notes.is_empty(), "{:?}", run.notes);
+        assert_eq!(run.loop_msgs.len(), 1000);
+        for (k, m) in run.loop_msgs.iter().enumerate() {
+            assert!(same(m, &msg(k)), "message {k}: {m:?} != {:?}", msg(k));
+        }
+        assert_eq!(run.metadata["gains_toml"], "[pid]\nkp = 1.0\n");
+        assert_eq!(run.record.len(), 1000);
+        assert_eq!(run.record.u_v.as_ref().unwrap()[10], msg(10).u_v);
+        assert!(run.record.ref_rad.as_ref().unwrap()[0].is_nan());
+        // Also readable by the library's strict reader (proper summary and footer).
+        let bytes = std::fs::read(&p).unwrap();
+        assert_eq!(mcap::MessageStream::new(&bytes).unwrap().count(), 1000);
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        assert_eq!(summary.stats.unwrap().message_count, 1000);
+    }
+
+    #[test]
+    fn truncated_file_keeps_flushed_chunks() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("t.mcap");
+        write(&p, 1000, true);
+        let full = std::fs::read(&p).unwrap();
+        // Cut anywhere: what is read is always a prefix of what was written.
+        let mut last = 0;
+        for cut in (200..full.len()).step_by(full.len() / 37) {
+            match parse_mcap(&full[..cut], "cut") {
+                Ok(run) => {
+                    assert!(!run.finished);
+                    assert!(!run.notes.is_empty());
+                    assert!(run.loop_msgs.len() >= last);
+                    last = run.loop_msgs.len();
+                    for (k, m) in run.loop_msgs.iter().enumerate() {
+                        assert!(same(m, &msg(k)));
+                    }
+                }
+                Err(e) => assert!(format!("{e:#}").contains("no /servo/loop messages"), "{e:#}"),
+            }
+        }
+        assert!(last > 800, "{last}");
+        // An unfinished (dropped without footer) log reads up to its last flush.
+        let p2 = dir.path().join("u.mcap");
+        write(&p2, 1000, false);
+        let run = read_mcap(&p2).unwrap();
+        assert!(!run.finished);
+        assert_eq!(run.loop_msgs.len(), 1000);
+        assert!(run.notes[0].contains("not finished"), "{:?}", run.notes);
+    }
+
+    #[test]
+    fn not_mcap() {
+        let e = format!("{:#}", parse_mcap(b"time_s,u_V\n", "x.mcap").unwrap_err());
+        assert!(e.contains("not an MCAP file"), "{e}");
+    }
+}

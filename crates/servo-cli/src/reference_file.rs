@@ -1,0 +1,350 @@
+//! Experiment files (TOML, in `experiments/`): a sequence of reference segments for the closed
+//! loop and/or open-loop voltage segments, played one after the other.
+//!
+//! ```toml
+//! [experiment]
+//! name = "padova-steps"              # optional (default: the file name)
+//! description = "..."                # optional
+//! repeat = 1                         # optional: play the segment list this many times
+//!
+//! [[segment]]
+//! ref = "step:10deg"                 # closed loop: load-angle reference, `--ref` syntax
+//! duration_s = 2                     # [s]; optional for `trap` (defaults to the profile time)
+//! label = "10 deg"                   # optional, for logs and plots
+//!
+//! [[segment]]
+//! ref = "ramp:speed=-1"
+//! duration_s = 1
+//! chain = true                       # add the previous position segment's final value
+//!
+//! [[segment]]
+//! u = "step:2"                       # open loop: driver input u [V]; the generator's values
+//! duration_s = 1                     # (rad in the `--ref` syntax) are read as volts
+//! ```
+//!
+//! Within a segment, time restarts at 0 (a generator's `@t0` is relative to the segment's
+//! start). Before the first segment its initial value holds; after the last one a position holds
+//! its final value and a voltage is 0 V. The segment semantics are those of
+//! [`servo_core::control::sequence`], shared with the allocation-free sequences of the core.
+
+use anyhow::{anyhow, bail, Context};
+use servo_core::control::sequence::{duration_s, setpoint_at, PlacedSegment};
+use servo_core::control::{Reference, Segment, SegmentMode, Setpoint, Target};
+use std::path::Path;
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileToml {
+    #[serde(default)]
+    experiment: Option<HeaderToml>,
+    #[serde(default, rename = "segment")]
+    segments: Vec<SegmentToml>,
+}
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct HeaderToml {
+    name: Option<String>,
+    description: Option<String>,
+    repeat: Option<u32>,
+}
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SegmentToml {
+    #[serde(rename = "ref")]
+    reference: Option<toml::Spanned<String>>,
+    u: Option<toml::Spanned<String>>,
+    duration_s: Option<f64>,
+    #[serde(default)]
+    chain: bool,
+    label: Option<String>,
+}
+
+/// An experiment: what to apply at every instant of a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Experiment {
+    /// Name (the `[experiment] name`, else the file stem, else the reference text).
+    pub name: String,
+    /// Free-form description.
+    pub description: Option<String>,
+    /// Segments with their start times (repeats expanded).
+    pub segments: Vec<PlacedSegment>,
+    /// Label of each segment (same length as `segments`).
+    pub labels: Vec<Option<String>>,
+}
+
+impl Experiment {
+    /// A single closed-loop reference lasting `duration_s` [s] (what `--ref` gives).
+    pub fn from_reference(reference: Reference, duration_s: f64) -> anyhow::Result<Experiment> {
+        let seg = PlacedSegment::after(&[], Segment::position(reference, duration_s))
+            .map_err(|e| anyhow!("{e}"))?;
+        Ok(Experiment {
+            name: reference.to_string(),
+            description: None,
+            segments: vec![seg],
+            labels: vec![None],
+        })
+    }
+
+    /// Parses a `--ref` text (see [`servo_core::control::reference`]) into a one-segment
+    /// experiment of `duration_s` [s].
+    pub fn from_ref_text(text: &str, duration_s: f64) -> anyhow::Result<Experiment> {
+        let r = Reference::parse(text).map_err(|e| anyhow!("--ref `{text}`: {e}"))?;
+        Self::from_reference(r, duration_s)
+    }
+
+    /// Total duration [s].
+    pub fn duration_s(&self) -> f64 {
+        duration_s(&self.segments)
+    }
+
+    /// What to apply at time `t_s` [s]: a position reference (closed loop) or a voltage.
+    pub fn at(&self, t_s: f64) -> Setpoint {
+        setpoint_at(&self.segments, t_s)
+    }
+
+    /// Index of the segment active at `t_s` (the last one after the end).
+    pub fn segment_index_at(&self, t_s: f64) -> usize {
+        self.segments
+            .partition_point(|p| p.start_s <= t_s)
+            .saturating_sub(1)
+    }
+
+    /// Whether any segment is closed loop (needs gains).
+    pub fn has_closed_loop(&self) -> bool {
+        self.segments
+            .iter()
+            .any(|s| s.segment.target == Target::Position)
+    }
+
+    /// Whether any segment is open loop.
+    pub fn has_open_loop(&self) -> bool {
+        self.segments
+            .iter()
+            .any(|s| s.segment.target == Target::Voltage)
+    }
+
+    /// Parses experiment TOML; `origin` names the source in errors (e.g. the path).
+    pub fn parse(text: &str, origin: &str) -> anyhow::Result<Experiment> {
+        let file: FileToml =
+            toml::from_str(text).map_err(|e| anyhow!("{origin}: {}", e.to_string().trim_end()))?;
+        let line_of = |span: core::ops::Range<usize>| {
+            text[..span.start.min(text.len())].lines().count().max(1)
+        };
+        let header = file.experiment;
+        let repeat = header.as_ref().and_then(|h| h.repeat).unwrap_or(1);
+        if repeat == 0 {
+            bail!("{origin}: [experiment] `repeat` must be >= 1");
+        }
+        if file.segments.is_empty() {
+            bail!("{origin}: no [[segment]]; expected at least one with `ref = \"...\"` or `u = \"...\"` and `duration_s`");
+        }
+        let mut one_pass = Vec::with_capacity(file.segments.len());
+        for (i, s) in file.segments.iter().enumerate() {
+            let n = i + 1;
+            let (text_sp, target, key) = match (&s.reference, &s.u) {
+                (Some(r), None) => (r, Target::Position, "ref"),
+                (None, Some(u)) => (u, Target::Voltage, "u"),
+                (Some(r), Some(_)) => bail!(
+                    "{origin}:{}: segment {n} has both `ref` and `u`; a segment is either closed loop (`ref`, rad) or open loop (`u`, V)",
+                    line_of(r.span())
+                ),
+                (None, None) => bail!("{origin}: segment {n} needs `ref = \"...\"` (closed loop, rad) or `u = \"...\"` (open loop, V)"),
+            };
+            let line = line_of(text_sp.span());
+            let reference = Reference::parse(text_sp.get_ref()).map_err(|e| {
+                anyhow!(
+                    "{origin}:{line}: segment {n}, `{key} = \"{}\"`: {e}",
+                    text_sp.get_ref()
+                )
+            })?;
+            let duration_s = match (s.duration_s, reference.shape.trapezoid_duration_s()) {
+                (Some(d), _) => d,
+                (None, Some(d)) => reference.t0_s + d,
+                (None, None) => bail!("{origin}:{line}: segment {n} needs `duration_s` [s]"),
+            };
+            let mode = if s.chain {
+                SegmentMode::Chained
+            } else {
+                SegmentMode::Absolute
+            };
+            one_pass.push((
+                Segment {
+                    reference,
+                    duration_s,
+                    mode,
+                    target,
+                },
+                s.label.clone(),
+                line,
+                n,
+            ));
+        }
+        let mut segments = Vec::with_capacity(one_pass.len() * repeat as usize);
+        let mut labels = Vec::with_capacity(segments.capacity());
+        for _ in 0..repeat {
+            for (seg, label, line, n) in &one_pass {
+                let placed = PlacedSegment::after(&segments, *seg).map_err(|e| {
+                    // The core's error counts from 0 over the expanded list; name the file's segment.
+                    let msg = e.to_string();
+                    let msg = msg
+                        .split_once(": ")
+                        .map_or(msg.as_str(), |(_, m)| m)
+                        .to_string();
+                    anyhow!("{origin}:{line}: segment {n}: {msg}")
+                })?;
+                segments.push(placed);
+                labels.push(label.clone());
+            }
+        }
+        let name = header
+            .as_ref()
+            .and_then(|h| h.name.clone())
+            .unwrap_or_else(|| {
+                Path::new(origin)
+                    .file_stem()
+                    .map_or_else(|| origin.to_string(), |s| s.to_string_lossy().into_owned())
+            });
+        Ok(Experiment {
+            name,
+            description: header.and_then(|h| h.description),
+            segments,
+            labels,
+        })
+    }
+}
+
+/// Reads an experiment file.
+pub fn load_experiment(path: &Path) -> anyhow::Result<Experiment> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading experiment file {}", path.display()))?;
+    Experiment::parse(&text, &path.display().to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use servo_core::control::RefSample;
+    use std::f64::consts::PI;
+
+    fn pos(s: Setpoint) -> RefSample {
+        match s {
+            Setpoint::Position(r) => r,
+            Setpoint::Voltage { u_v } => panic!("expected a position, got {u_v} V"),
+        }
+    }
+
+    fn experiments_dir() -> std::path::PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments")
+    }
+
+    #[test]
+    fn padova_steps_recipe() {
+        let e = load_experiment(&experiments_dir().join("steps.toml")).unwrap();
+        assert_eq!(e.name, "padova-steps");
+        assert!(e.has_closed_loop() && !e.has_open_loop());
+        assert_eq!(e.duration_s(), 24.0);
+        let deg = |t: f64| pos(e.at(t)).pos_rad * 180.0 / PI;
+        let expected = [
+            10.0, 0.0, 30.0, 0.0, 50.0, 0.0, 90.0, 0.0, 180.0, 0.0, 360.0, 360.0,
+        ];
+        for (k, want) in expected.iter().enumerate() {
+            let t = 2.0 * k as f64 + 1.0;
+            assert!(
+                (deg(t) - want).abs() < 1e-9,
+                "t = {t}: {} deg, expected {want}",
+                deg(t)
+            );
+        }
+        assert_eq!(e.segment_index_at(4.5), 2);
+    }
+
+    #[test]
+    fn chirp_and_open_loop_recipes() {
+        let e = load_experiment(&experiments_dir().join("chirp.toml")).unwrap();
+        assert!(e.duration_s() > 10.0);
+        // A chirp segment has analytic speed for the feedforward.
+        let s = pos(e.at(e.segments[1].start_s + 0.5));
+        assert!(s.vel_rad_s != 0.0);
+        let e = load_experiment(&experiments_dir().join("openloop_sweep.toml")).unwrap();
+        assert!(e.has_open_loop());
+        assert!(matches!(e.at(0.5), Setpoint::Voltage { .. }));
+        // Every voltage stays within the driver's +-10 V input range.
+        let mut t = 0.0;
+        while t < e.duration_s() {
+            if let Setpoint::Voltage { u_v } = e.at(t) {
+                assert!(u_v.abs() <= 10.0, "{u_v} V at {t} s");
+            }
+            t += 1e-3;
+        }
+        assert_eq!(e.at(e.duration_s() + 1.0), Setpoint::Voltage { u_v: 0.0 });
+    }
+
+    #[test]
+    fn chain_repeat_trap_default_duration_and_voltage() {
+        let text = r#"
+[experiment]
+repeat = 2
+[[segment]]
+ref = "trap:distance=1,vmax=1,amax=1"
+[[segment]]
+ref = "step:0"
+duration_s = 0.5
+chain = true
+[[segment]]
+u = "sine:amp=2,freq=1"
+duration_s = 1
+"#;
+        let e = Experiment::parse(text, "inline.toml").unwrap();
+        assert_eq!(e.name, "inline");
+        // Trapezoid of 1 rad at 1 rad/s, 1 rad/s^2: 1 s accelerating + 1 s decelerating.
+        assert_eq!(e.segments.len(), 6);
+        assert!((e.duration_s() - 2.0 * (2.0 + 0.5 + 1.0)).abs() < 1e-12);
+        assert!((pos(e.at(2.2)).pos_rad - 1.0).abs() < 1e-12); // chained hold at 1 rad
+        match e.at(2.75) {
+            Setpoint::Voltage { u_v } => assert!((u_v - 2.0).abs() < 1e-9, "{u_v}"),
+            s => panic!("{s:?}"),
+        }
+        assert!((pos(e.at(4.5)).pos_rad - 0.5).abs() < 1e-12); // second pass, mid-trapezoid
+    }
+
+    #[test]
+    fn errors_name_file_line_and_key() {
+        let err = |t: &str| format!("{:#}", Experiment::parse(t, "x.toml").unwrap_err());
+        let m = err("[[segment]]\nduration_s = 1\nref = \"sine:amp=1,frq=2\"\n");
+        assert!(
+            m.contains("x.toml:3") && m.contains("segment 1") && m.contains("`frq`"),
+            "{m}"
+        );
+        let m = err("[[segment]]\nref = \"step:1\"\n");
+        assert!(m.contains("x.toml:2") && m.contains("duration_s"), "{m}");
+        let m = err("[[segment]]\nref = \"step:1\"\nu = \"step:1\"\nduration_s = 1\n");
+        assert!(m.contains("both `ref` and `u`"), "{m}");
+        let m = err("[[segment]]\nduration_s = 1\n");
+        assert!(m.contains("needs `ref"), "{m}");
+        let m = err("[[segment]]\nref = \"step:1\"\nduration_s = -1\n");
+        assert!(m.contains("x.toml:2") && m.contains("duration_s"), "{m}");
+        let m = err("[[segment]]\nref = \"step:1\"\nduration_s = 1\nspeed = 3\n");
+        assert!(m.contains("speed"), "{m}");
+        assert!(err("").contains("no [[segment]]"));
+        assert!(
+            err("[experiment]\nrepeat = 0\n[[segment]]\nref = \"step:1\"\nduration_s = 1\n")
+                .contains("repeat")
+        );
+    }
+
+    #[test]
+    fn from_ref_text() {
+        let e = Experiment::from_ref_text("step:1.5@0.1", 5.0).unwrap();
+        assert_eq!(e.duration_s(), 5.0);
+        assert_eq!(pos(e.at(0.05)).pos_rad, 0.0);
+        assert_eq!(pos(e.at(1.0)).pos_rad, 1.5);
+        let m = format!(
+            "{:#}",
+            Experiment::from_ref_text("stepp:1", 5.0).unwrap_err()
+        );
+        assert!(m.contains("--ref") && m.contains("stepp"), "{m}");
+        assert!(Experiment::from_ref_text("step:1", 0.0).is_err());
+    }
+}
