@@ -2,8 +2,13 @@
 //! in a folder and printing where.
 //!
 //! The demo is a list of [`Stage`]s run in order on a shared [`DemoContext`]; each prints a
-//! headline and returns the files it wrote. Later stages (identify, compare, diagnose, add the
-//! effect) are appended to [`stages`] as they land.
+//! headline and returns the files it wrote. The story: design a PID on the nominal model, run it on
+//! a simulated motor with a hidden effect ([`HIDDEN_EFFECT`]), run an open-loop identification
+//! experiment on the same motor, identify the base model (viscous + Coulomb friction, J_eq) with
+//! `servo identify`, compare it with the measurements (`servo compare`: fit and where it fails),
+//! diagnose the missing effect (`servo diagnose`), add it (`servo compare --add`: the error falls)
+//! and diagnose again (nothing significant left). The later stages call the real commands, so the
+//! demo prints exactly what a user gets, and each stage shows the equivalent command line.
 
 use crate::gains_file::{GainsFile, PidSection};
 use crate::io::{meta_keys, write_csv, McapLog, McapLogOptions};
@@ -13,10 +18,10 @@ use crate::runner::{self, Program, RunConfig, RunOutput};
 use anyhow::{anyhow, Context};
 use servo_core::control::sequence::{PlacedSegment, Segment};
 use servo_core::control::Reference;
-use servo_core::effects::Effect;
+use servo_core::effects::{Effect, EffectKind};
 use servo_core::sim::SensorConfig;
 use servo_core::{Plant, PlantParams};
-use servo_hw::SimBackend;
+use servo_hw::{Backend, SimBackend};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -26,9 +31,13 @@ pub struct Demo {
     /// Folder for the demo's logs, plots and files (created if missing).
     #[arg(long, value_name = "DIR", default_value = "servo-demo")]
     pub out: PathBuf,
-    /// Seed of the simulated sensor noise.
+    /// Seed of the simulated sensor noise and of the identification experiment.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The effect hidden in the simulated motor (catalogue syntax `name:key=value,...`), which
+    /// the story must find.
+    #[arg(long, value_name = "EFFECT", default_value = HIDDEN_EFFECT)]
+    pub hidden: String,
 }
 
 /// What the stages share.
@@ -47,6 +56,14 @@ pub struct DemoContext {
     pub run_log: Option<PathBuf>,
     /// Path of the run's CSV log.
     pub run_csv: Option<PathBuf>,
+    /// Path of the open-loop identification log (CSV).
+    pub ident_log: Option<PathBuf>,
+    /// Model file identified by `servo identify`.
+    pub ident_model: Option<PathBuf>,
+    /// Effect named by the first diagnosis.
+    pub winner: Option<EffectKind>,
+    /// Model file with the winner added (`servo compare --add --save`).
+    pub extended_model: Option<PathBuf>,
 }
 
 /// A stage's body: returns its headline and the files it wrote.
@@ -73,21 +90,119 @@ pub fn stages() -> Vec<Stage> {
         },
         Stage {
             name: "run",
-            what: "step sequence on a simulated motor with friction the model does not know",
+            what: "step sequence on a simulated motor with an effect the model does not know",
             run: stage_run,
+        },
+        Stage {
+            name: "excite",
+            what: "open-loop identification experiment on the same motor: voltage steps and ramps",
+            run: stage_excite,
+        },
+        Stage {
+            name: "identify",
+            what: "servo identify: base model (viscous + Coulomb friction, J_eq) from the open-loop log",
+            run: stage_identify,
+        },
+        Stage {
+            name: "compare",
+            what: "servo compare: the identified model against both logs, and where it fails",
+            run: stage_compare,
+        },
+        Stage {
+            name: "diagnose",
+            what: "servo diagnose: which catalogue effect is the model missing?",
+            run: stage_diagnose,
+        },
+        Stage {
+            name: "add",
+            what: "servo compare --add <winner>: fit the effect with the base parameters, watch the error fall",
+            run: stage_add,
+        },
+        Stage {
+            name: "re-diagnose",
+            what: "servo diagnose on the extended model: is anything significant left?",
+            run: stage_rediagnose,
         },
     ]
 }
 
-/// The demo's simulated motor: Table 2 plus Coulomb and Stribeck friction of the size measured on
-/// the Padova motors (tau_sf about 0.01 N m at the load).
-pub fn demo_truth() -> anyhow::Result<Plant> {
-    let mut plant = Plant::from_params(PlantParams::TABLE2).map_err(|e| anyhow!("{e}"))?;
-    for spec in ["coulomb:tau_sf=0.0098", "stribeck:tau_s=0.014,omega_s=0.5"] {
-        let e = Effect::parse(spec).map_err(|e| anyhow!("demo effect `{spec}`: {e}"))?;
-        plant.effects.insert(e);
+/// The effect hidden in the demo's motor: what the base model lacks and the diagnosis must find.
+///
+/// An eccentric load mass of 0.01 N m (the size of the Coulomb friction): the identified base
+/// model cannot explain a torque that follows the load angle. (`--hidden` picks another one.)
+pub const HIDDEN_EFFECT: &str = "imbalance:amplitude=0.01,phase=0.5";
+
+/// Coulomb friction of the demo's motor [N m, load side], the size measured on the Padova motors.
+pub const DEMO_TAU_SF: f64 = 0.0098;
+
+/// The demo's simulated motor: Table 2 with viscous and Coulomb friction (tau_sf about 0.01 N m at
+/// the load, as measured on the Padova motors) plus the hidden effect `hidden` (e.g.
+/// [`HIDDEN_EFFECT`]).
+pub fn demo_truth(hidden: &str) -> anyhow::Result<Plant> {
+    let params = PlantParams {
+        tau_sf: Some(DEMO_TAU_SF),
+        ..PlantParams::TABLE2
+    };
+    let mut plant = Plant::from_params(params).map_err(|e| anyhow!("demo motor: {e}"))?;
+    let e = Effect::parse(hidden).map_err(|e| anyhow!("--hidden `{hidden}`: {e}"))?;
+    if matches!(e.kind, EffectKind::Viscous | EffectKind::Coulomb) {
+        return Err(anyhow!(
+            "--hidden `{hidden}`: viscous and Coulomb friction are part of the base model; hide another catalogue effect"
+        ));
     }
+    plant.effects.insert(e);
     Ok(plant)
+}
+
+/// The hidden effect of `truth` (the first effect that is not viscous or Coulomb friction).
+fn hidden_effect(truth: &Plant) -> Option<Effect> {
+    truth
+        .effects
+        .iter()
+        .find(|e| !matches!(e.kind, EffectKind::Viscous | EffectKind::Coulomb))
+        .copied()
+}
+
+/// The parameter that sizes an effect (the one quoted in the headlines).
+fn main_param(kind: EffectKind) -> Option<&'static str> {
+    match kind {
+        EffectKind::Viscous => Some("b_eq"),
+        EffectKind::Coulomb => Some("tau_sf"),
+        EffectKind::Stribeck => Some("tau_s"),
+        EffectKind::Asymmetry => Some("tau_sf_pos"),
+        EffectKind::Backlash => Some("gap"),
+        EffectKind::Cogging | EffectKind::Imbalance => Some("amplitude"),
+        EffectKind::Saturation => Some("limit"),
+        EffectKind::Deadzone => Some("width"),
+        EffectKind::Delay => Some("delay"),
+    }
+}
+
+/// Unit of an effect's main parameter.
+fn main_unit(kind: EffectKind) -> &'static str {
+    match kind {
+        EffectKind::Viscous => "N m s/rad",
+        EffectKind::Backlash => "rad",
+        EffectKind::Saturation | EffectKind::Deadzone => "V",
+        EffectKind::Delay => "s",
+        _ => "N m",
+    }
+}
+
+/// Prints the command line a user would type for a stage, and parses it with the command's own
+/// parser.
+fn command<T: clap::Parser>(args: &[String]) -> anyhow::Result<T> {
+    println!("   $ servo {}", args.join(" "));
+    T::try_parse_from(args).map_err(|e| anyhow!("demo command `servo {}`: {e}", args.join(" ")))
+}
+
+fn path_arg(p: &Path) -> String {
+    p.display().to_string()
+}
+
+fn need<'a>(p: &'a Option<PathBuf>, what: &str) -> anyhow::Result<&'a PathBuf> {
+    p.as_ref()
+        .ok_or_else(|| anyhow!("{what} is missing (an earlier stage failed)"))
 }
 
 /// The demo's reference: steps of 10, 30, 90 and -45 deg, 1.5 s each (like the lab's tests).
@@ -238,6 +353,308 @@ fn stage_run(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
     ))
 }
 
+/// Length of the open-loop identification experiment [s].
+const EXCITE_S: f64 = 16.0;
+/// Time each voltage step or ramp of the identification experiment lasts [s].
+const EXCITE_STEP_S: f64 = 0.4;
+
+/// Open-loop identification experiment on the truth: every 0.4 s either a voltage step of random
+/// size (0.8-7.8 V) and sign, or (one time in four) a ramp through zero from +/-(3-6) V to the
+/// opposite value; seeded, so the log is the same on every run.
+fn stage_excite(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
+    use servo_core::record::Record;
+    use servo_core::sim::sensors::SplitMix64;
+    let dt = 1e-3;
+    let sensors = SensorConfig {
+        seed: ctx.sensors.seed.wrapping_add(1),
+        ..ctx.sensors
+    };
+    let mut backend = SimBackend::new(&ctx.truth, sensors, dt).context("simulator")?;
+    let mut rng = SplitMix64(ctx.sensors.seed ^ 0x5EED);
+    let n = (EXCITE_S / dt).round() as usize;
+    let per = (EXCITE_STEP_S / dt).round() as usize;
+    let mut rec = Record {
+        source: String::from("servo demo: open-loop identification experiment (sim)"),
+        ..Record::default()
+    };
+    let (mut th, mut ia, mut uv) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut u, mut ramp): (f64, Option<(f64, f64)>) = (0.0, None);
+    let (mut steps, mut ramps) = (0usize, 0usize);
+    for k in 0..n {
+        if k % per == 0 {
+            if rng.uniform() < 0.25 {
+                let a = 3.0 + 3.0 * rng.uniform();
+                let a = if rng.uniform() < 0.5 { a } else { -a };
+                ramp = Some((a, -2.0 * a / EXCITE_STEP_S));
+                ramps += 1;
+            } else {
+                ramp = None;
+                let mag = 0.8 + 7.0 * rng.uniform();
+                u = if rng.uniform() < 0.5 { -mag } else { mag };
+                steps += 1;
+            }
+        }
+        if let Some((a, slope)) = ramp {
+            u = a + slope * ((k % per) as f64 * dt);
+        }
+        let s = backend.sample()?;
+        rec.time_s.push(s.time_s);
+        th.push(s.theta_l_rad);
+        ia.push(s.i_a_a);
+        uv.push(u);
+        backend.apply(u)?;
+    }
+    backend.stop()?;
+    rec.theta_l_rad = Some(th);
+    rec.i_a_a = Some(ia);
+    rec.u_v = Some(uv);
+    let path = ctx.out.join("identify_openloop.csv");
+    write_csv(&path, &rec)?;
+    let plot = ctx.out.join("identify_openloop.svg");
+    {
+        use crate::plot::{line_chart, Chart, Series};
+        let t = &rec.time_s;
+        let u = rec.u_v.as_deref().unwrap_or(&[]);
+        let th = rec.theta_l_rad.as_deref().unwrap_or(&[]);
+        line_chart(
+            &plot,
+            &Chart {
+                title: "open-loop identification experiment",
+                x_label: "time [s]",
+                y_label: "u [V], theta_l [rad]",
+                ..Chart::default()
+            },
+            &[
+                Series {
+                    label: "u [V]",
+                    x: t,
+                    y: u,
+                },
+                Series {
+                    label: "theta_l [rad]",
+                    x: t,
+                    y: th,
+                },
+            ],
+        )?;
+    }
+    ctx.ident_log = Some(path.clone());
+    Ok((
+        format!(
+            "{EXCITE_S:.0} s at 1 kHz: {steps} voltage steps and {ramps} ramps through zero, u, theta_l and i_a logged"
+        ),
+        vec![path, plot],
+    ))
+}
+
+fn stage_identify(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
+    let log = need(&ctx.ident_log, "the identification log")?;
+    let model = ctx.out.join("model_identified.toml");
+    let cmd: super::identify::Identify = command(&[
+        "identify".into(),
+        path_arg(log),
+        "-o".into(),
+        path_arg(&model),
+    ])?;
+    cmd.run()?;
+    let id = ModelFile::load(&model)?.plant()?;
+    let t = &ctx.truth;
+    ctx.ident_model = Some(model.clone());
+    Ok((
+        format!(
+            "J_eq = {:.3e} kg m^2 (truth {:.3e}), B_eq = {:.3e} N m s/rad (truth {:.3e}), tau_sf = {:.4} N m (truth {:.4}); no {} in the model",
+            id.params.j_eq(),
+            t.params.j_eq(),
+            id.b_eq(),
+            t.b_eq(),
+            id.tau_sf(),
+            t.tau_sf(),
+            hidden_effect(t).map_or("hidden effect", |e| e.kind.name()),
+        ),
+        vec![model],
+    ))
+}
+
+/// The logs every model is judged on: the closed-loop run and the open-loop experiment.
+fn story_logs(ctx: &DemoContext) -> anyhow::Result<Vec<String>> {
+    Ok(vec![
+        path_arg(need(&ctx.run_log, "the run log")?),
+        path_arg(need(&ctx.ident_log, "the identification log")?),
+    ])
+}
+
+fn stage_compare(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
+    let model = need(&ctx.ident_model, "the identified model")?.clone();
+    let plot = ctx.out.join("compare.svg");
+    let mut args = vec!["compare".to_string()];
+    args.extend(story_logs(ctx)?);
+    args.extend([
+        "--model".into(),
+        path_arg(&model),
+        "--plot".into(),
+        path_arg(&plot),
+    ]);
+    let cmd: super::compare::Compare = command(&args)?;
+    let (ladder, cmp) = cmd.run_report()?;
+    let (kind, f) = ladder
+        .first()
+        .and_then(|s| s.cmp_fit.first())
+        .ok_or_else(|| anyhow!("compare gave no figures"))?;
+    // Where it fails: the finding (of any log) that puts the largest share of the error in one
+    // regime or pattern ("NN % of the squared error sits ...").
+    let where_ = cmp
+        .reports
+        .iter()
+        .flat_map(|r| r.findings.iter())
+        .filter_map(|f| {
+            let pct: f64 = f.split(" % ").next()?.trim().parse().ok()?;
+            Some((pct, f))
+        })
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, f)| format!("; where it fails: {f}"))
+        .unwrap_or_default();
+    Ok((
+        format!(
+            "fit {:.1} % on {} over both logs{where_}",
+            f.fit_percent,
+            kind.words()
+        ),
+        vec![plot],
+    ))
+}
+
+fn stage_diagnose(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
+    let model = need(&ctx.ident_model, "the identified model")?.clone();
+    let report = ctx.out.join("diagnose.html");
+    let mut args = vec!["diagnose".to_string()];
+    args.extend(story_logs(ctx)?);
+    args.extend([
+        "--model".into(),
+        path_arg(&model),
+        "--report".into(),
+        path_arg(&report),
+    ]);
+    let cmd: super::diagnose::Diagnose = command(&args)?;
+    let (_, diags) = cmd.run_report()?;
+    let d = diags
+        .first()
+        .ok_or_else(|| anyhow!("diagnose gave no result"))?;
+    let hidden = hidden_effect(&ctx.truth);
+    let truth_words = hidden.map_or(String::from("none"), |e| e.to_string());
+    let Some(w) = d.winner() else {
+        ctx.winner = None;
+        return Ok((
+            format!(
+                "nothing significant found (hidden: {truth_words}): {}",
+                d.verdict
+            ),
+            vec![report],
+        ));
+    };
+    ctx.winner = Some(w.effect);
+    let main = main_param(w.effect)
+        .and_then(|k| w.params.iter().find(|p| p.key == k))
+        .map(|p| format!(", {} {:.4} {}", p.key, p.value, p.unit))
+        .unwrap_or_default();
+    let verdict = if hidden.map(|h| h.kind) == Some(w.effect) {
+        "the hidden effect"
+    } else {
+        "NOT the hidden effect"
+    };
+    Ok((
+        format!(
+            "missing effect: {} (error -{:.1} %{main}); {verdict} ({truth_words})",
+            w.effect.name(),
+            w.error_reduction_pct
+        ),
+        vec![report],
+    ))
+}
+
+fn stage_add(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
+    let model = need(&ctx.ident_model, "the identified model")?.clone();
+    let Some(winner) = ctx.winner else {
+        return Ok((
+            String::from("nothing to add: the diagnosis found no missing effect"),
+            vec![],
+        ));
+    };
+    let saved = ctx.out.join(format!("model_plus_{}.toml", winner.name()));
+    let plot = ctx.out.join(format!("compare_plus_{}.svg", winner.name()));
+    let mut args = vec!["compare".to_string()];
+    args.extend(story_logs(ctx)?);
+    args.extend([
+        "--model".into(),
+        path_arg(&model),
+        "--add".into(),
+        winner.name().into(),
+        "--save".into(),
+        path_arg(&saved),
+        "--plot".into(),
+        path_arg(&plot),
+    ]);
+    let cmd: super::compare::Compare = command(&args)?;
+    let (ladder, cmp) = cmd.run_report()?;
+    let fit = |i: usize| ladder.get(i).and_then(|s| s.cmp_fit.first()).map(|f| f.1);
+    let (Some(before), Some(after)) = (fit(0), fit(ladder.len().saturating_sub(1))) else {
+        return Err(anyhow!("compare --add gave no ladder"));
+    };
+    let param = main_param(winner)
+        .and_then(|k| cmp.plant.effects.value(winner, k).map(|v| (k, v)))
+        .map(|(k, v)| {
+            let truth = ctx
+                .truth
+                .effects
+                .value(winner, k)
+                .map(|t| format!(", truth {t:.4}"))
+                .unwrap_or_default();
+            format!(" ({k} {v:.4} {}{truth})", main_unit(winner))
+        })
+        .unwrap_or_default();
+    ctx.extended_model = Some(saved.clone());
+    Ok((
+        format!(
+            "fit {:.1} % -> {:.1} % after adding {}{param}; RMSE {:.2e} -> {:.2e} ({:+.0} %)",
+            before.fit_percent,
+            after.fit_percent,
+            winner.name(),
+            before.rmse,
+            after.rmse,
+            100.0 * (after.rmse - before.rmse) / before.rmse
+        ),
+        vec![saved, plot],
+    ))
+}
+
+fn stage_rediagnose(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
+    let Some(model) = ctx.extended_model.clone() else {
+        return Ok((String::from("skipped: no effect was added"), vec![]));
+    };
+    let report = ctx.out.join("diagnose_after.html");
+    let mut args = vec!["diagnose".to_string()];
+    args.extend(story_logs(ctx)?);
+    args.extend([
+        "--model".into(),
+        path_arg(&model),
+        "--report".into(),
+        path_arg(&report),
+    ]);
+    let cmd: super::diagnose::Diagnose = command(&args)?;
+    let (_, diags) = cmd.run_report()?;
+    let d = diags
+        .first()
+        .ok_or_else(|| anyhow!("diagnose gave no result"))?;
+    let headline = match d.winner() {
+        None => String::from("nothing significant left: the model explains the data"),
+        Some(w) => format!(
+            "still missing: {} (error -{:.1} %)",
+            w.effect.name(),
+            w.error_reduction_pct
+        ),
+    };
+    Ok((headline, vec![report]))
+}
+
 impl Demo {
     pub fn run(self) -> anyhow::Result<()> {
         std::fs::create_dir_all(&self.out)
@@ -248,12 +665,16 @@ impl Demo {
         };
         let mut ctx = DemoContext {
             out: self.out.clone(),
-            truth: demo_truth()?,
+            truth: demo_truth(&self.hidden)?,
             sensors,
             gains: None,
             run: None,
             run_log: None,
             run_csv: None,
+            ident_log: None,
+            ident_model: None,
+            winner: None,
+            extended_model: None,
         };
         let all = stages();
         let t0 = std::time::Instant::now();

@@ -53,6 +53,12 @@ pub struct Diagnose {
 
 impl Diagnose {
     pub fn run(self) -> anyhow::Result<()> {
+        self.run_report().map(|_| ())
+    }
+
+    /// As [`Diagnose::run`] (prints the same output, writes the same files), also returning the
+    /// ladder and the diagnoses (used by `servo demo`).
+    pub fn run_report(self) -> anyhow::Result<(Vec<Rung>, Vec<Diagnosis>)> {
         let model_file = ModelFile::load(&self.model)?;
         let model = model_file.plant()?;
         let mut records = Vec::new();
@@ -118,7 +124,7 @@ impl Diagnose {
                 println!("model saved to {}", path.display());
             }
         }
-        Ok(())
+        Ok((ladder, diags))
     }
 }
 
