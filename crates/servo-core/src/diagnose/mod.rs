@@ -356,11 +356,7 @@ fn judge(
     let oe_ok = oe_drop.is_some_and(|d| d >= opts.min_oe_drop);
     // Backlash is judged on the simulation alone, which is less specific than an equation
     // residual (initial contact state, stick-slip transients): ask for a clear drop.
-    let min_drop = if backlash {
-        opts.min_backlash_oe_drop
-    } else {
-        opts.min_eq_drop
-    };
+    let min_drop = if backlash { opts.min_backlash_oe_drop } else { opts.min_eq_drop };
     let significant = bic_gain > opts.min_bic_gain && eq_drop >= min_drop && oe_ok;
     // Detection floor: RMS of what the effect explains versus the sensor-noise torque/voltage.
     let explained: f64 = {

@@ -287,11 +287,7 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
                 // the fit sees, while the measured response holds none of it: taper them out.
                 let fc = ds.opts.filter_hz;
                 let taper = move |r: &RecData, k: usize| {
-                    let w = if cog {
-                        r.omega_raw[k]
-                    } else {
-                        r.omega_raw[k] / n
-                    };
+                    let w = if cog { r.omega_raw[k] } else { r.omega_raw[k] / n };
                     let f = h * w.abs() / math::TAU;
                     ((4.0 * fc - f) / (2.0 * fc)).clamp(0.0, 1.0)
                 };
