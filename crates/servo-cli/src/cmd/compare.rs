@@ -6,13 +6,14 @@ use crate::model_file::ModelFile;
 use crate::plot::{line_chart_svg, Chart, Series};
 use anyhow::{anyhow, bail, Context};
 use serde_json::{json, Value};
+use servo_core::compare::controller_check::{check_controller, ControllerCheck};
 use servo_core::compare::quantum::encoder_quantum;
 use servo_core::compare::regimes::{detect_u_limit, Regime};
 use servo_core::compare::report::{describe_window, regime_phrase, with_unit};
 use servo_core::compare::{
-    compare, replay, ClosedLoop, CompareOptions, CompareReport, Controller, Figures, Measured,
-    ReplayMode, SignalKind,
+    compare, replay, ClosedLoop, CompareOptions, CompareReport, Figures, Measured, ReplayMode, SignalKind,
 };
+use servo_core::control::pid::{AntiWindup, Pid, PidConfig, PidGains};
 use servo_core::fit::{fit_model, EffectToFit, FitOptions};
 use servo_core::record::Record;
 use servo_core::Plant;
@@ -37,6 +38,10 @@ pub struct Compare {
     /// Controller that ran during the log (gains file of `servo design`): enables closed-loop replay.
     #[arg(long, value_name = "gains.toml")]
     pub gains: Option<PathBuf>,
+    /// Closed-loop replay with the PID gains that best reproduce the logged u (least squares on
+    /// the logged reference, position and u), instead of --gains or the log's metadata.
+    #[arg(long)]
+    pub gains_from_log: bool,
     /// Replay mode: closed-loop, speed, k-step or segments (default: closed-loop when gains and
     /// reference are known, else speed).
     #[arg(long, value_parser = ["closed-loop", "speed", "k-step", "segments"])]
@@ -71,6 +76,11 @@ pub struct LogData {
     pub path: PathBuf,
     pub record: Record,
     pub measured: Measured,
+    /// The controller of the log (--gains, the log's metadata or --gains-from-log) and where it
+    /// came from.
+    pub gains: Option<(PidSection, String)>,
+    /// How well that controller reproduces the logged u.
+    pub check: Option<ControllerCheck>,
 }
 
 /// The comparison of one model with every log.
@@ -87,53 +97,18 @@ pub struct ModeChoice {
     pub reason: String,
 }
 
-/// The PID of a gains file, as it runs on the board each sample: parallel form, integral by
-/// forward Euler, derivative on the error through the real derivative s/(T_L s + 1) discretised
-/// by backward Euler (ideal backward difference when T_L = 0), optional back-calculation
-/// anti-windup against the output limit.
-#[derive(Debug, Clone)]
-pub struct ReplayPid {
-    pid: PidSection,
-    dt_s: f64,
-    limit_v: Option<f64>,
-    integral: f64,
-    deriv: f64,
-    e_prev: Option<f64>,
-}
-
-impl ReplayPid {
-    pub fn new(pid: PidSection, dt_s: f64, limit_v: Option<f64>) -> ReplayPid {
-        ReplayPid {
-            pid,
-            dt_s,
-            limit_v,
-            integral: 0.0,
-            deriv: 0.0,
-            e_prev: None,
-        }
+/// servo's discrete PID ([`servo_core::control::Pid`], backward Euler, derivative on the error)
+/// configured from a gains file for a replay at sample period `dt_s` [s], with the board's output
+/// limit and the file's back-calculation anti-windup, if any.
+pub fn replay_pid(pid: &PidSection, dt_s: f64, limit_v: Option<f64>) -> anyhow::Result<Pid> {
+    let mut cfg = PidConfig::new(PidGains { kp: pid.kp, ki: pid.ki, kd: pid.kd, tl_s: pid.tl_s }, dt_s);
+    if let Some(l) = limit_v {
+        cfg = cfg.with_symmetric_limit(l);
     }
-}
-
-impl Controller for ReplayPid {
-    fn update(&mut self, reference_rad: f64, measured_rad: f64) -> f64 {
-        let p = &self.pid;
-        let e = reference_rad - measured_rad;
-        let de = match self.e_prev {
-            Some(ep) => e - ep,
-            None => 0.0,
-        };
-        self.e_prev = Some(e);
-        // D(z) = kd (1 - z^-1) / (T_L + dt - T_L z^-1): backward Euler of kd s / (T_L s + 1).
-        self.deriv = (p.tl_s * self.deriv + p.kd * de) / (p.tl_s + self.dt_s);
-        let v = p.kp * e + self.integral + self.deriv;
-        let sat = match self.limit_v {
-            Some(l) => v.clamp(-l, l),
-            None => v,
-        };
-        let aw = p.kw.map_or(0.0, |kw| kw * (sat - v));
-        self.integral += (p.ki * e + aw) * self.dt_s;
-        v
+    if let Some(kw) = pid.kw {
+        cfg.anti_windup = AntiWindup::BackCalculation { kw };
     }
+    Pid::new(cfg).map_err(|e| anyhow!("gains: {e}"))
 }
 
 fn parse_mode(s: &str, k: usize, seg: usize) -> ReplayMode {
@@ -146,7 +121,8 @@ fn parse_mode(s: &str, k: usize, seg: usize) -> ReplayMode {
 }
 
 impl Compare {
-    fn mode_for(&self, log: &LogData, gains: Option<&GainsFile>) -> anyhow::Result<ModeChoice> {
+    fn mode_for(&self, log: &LogData) -> anyhow::Result<ModeChoice> {
+        let gains = log.gains.as_ref();
         let m = &log.measured;
         let seg = ((self.segment_s / m.dt_s).round() as usize).max(1);
         let has_ref = m.ref_rad.is_some();
@@ -155,7 +131,7 @@ impl Compare {
             let mode = parse_mode(s, self.k_steps.max(1), seg);
             if mode == ReplayMode::ClosedLoop {
                 if gains.is_none() {
-                    bail!("--mode closed-loop needs the controller: give --gains gains.toml");
+                    bail!("--mode closed-loop needs the controller of {}: give --gains gains.toml or --gains-from-log", log.path.display());
                 }
                 if !has_ref || !has_pos {
                     bail!(
@@ -165,20 +141,17 @@ impl Compare {
                 }
             }
             if matches!(mode, ReplayMode::KStep { .. } | ReplayMode::Segments { .. }) && !has_pos {
-                bail!(
-                    "--mode {s} re-initialises from the measured position, which {} does not have",
-                    log.path.display()
-                );
+                bail!("--mode {s} re-initialises from the measured position, which {} does not have", log.path.display());
             }
-            return Ok(ModeChoice {
-                mode,
-                reason: String::from("forced with --mode"),
-            });
+            return Ok(ModeChoice { mode, reason: String::from("forced with --mode") });
         }
         Ok(match (gains.is_some(), has_ref && has_pos) {
             (true, true) => ModeChoice {
                 mode: ReplayMode::ClosedLoop,
-                reason: String::from("controller gains and reference are known: the model runs in the logged loop, as the motor did"),
+                reason: format!(
+                    "controller ({}) and reference are known: the model runs in the logged loop, as the motor did",
+                    gains.map(|g| g.1.as_str()).unwrap_or_default()
+                ),
             },
             (true, false) => ModeChoice {
                 mode: ReplayMode::Speed,
@@ -196,29 +169,21 @@ impl Compare {
         plant: &Plant,
         logs: &[LogData],
         modes: &[ModeChoice],
-        gains: Option<&GainsFile>,
         opts: &CompareOptions,
     ) -> anyhow::Result<ModelComparison> {
         let mut reports = Vec::new();
         for (log, mc) in logs.iter().zip(modes) {
             let m = &log.measured;
             let rp = if mc.mode == ReplayMode::ClosedLoop {
-                let g = gains.ok_or_else(|| anyhow!("closed-loop replay without gains"))?;
-                let limit = self
-                    .u_limit_v
-                    .or(g.pid.u_limit_v)
-                    .or_else(|| detect_u_limit(&m.u_v));
-                let mut pid = ReplayPid::new(g.pid, m.dt_s, limit);
+                let (g, _) = log.gains.as_ref().ok_or_else(|| anyhow!("closed-loop replay without gains"))?;
+                let limit = self.u_limit(g, m);
+                let mut pid = replay_pid(g, m.dt_s, limit)?;
                 let q = m.theta_l_rad.as_deref().and_then(encoder_quantum);
                 replay(
                     plant,
                     m,
                     mc.mode,
-                    Some(ClosedLoop {
-                        controller: &mut pid,
-                        u_limit_v: limit,
-                        encoder_quantum_rad: q,
-                    }),
+                    Some(ClosedLoop { controller: &mut pid, u_limit_v: limit, encoder_quantum_rad: q }),
                 )
             } else {
                 replay(plant, m, mc.mode, None)
@@ -226,10 +191,54 @@ impl Compare {
             .with_context(|| format!("replaying {} on the model", log.path.display()))?;
             reports.push(compare(m, &rp, plant.params.n, opts));
         }
-        Ok(ModelComparison {
-            plant: *plant,
-            reports,
-        })
+        Ok(ModelComparison { plant: *plant, reports })
+    }
+
+    /// The board's output limit for a replay: --u-limit-v, the gains file's limit, or the plateau
+    /// of the logged u.
+    fn u_limit(&self, g: &PidSection, m: &Measured) -> Option<f64> {
+        self.u_limit_v.or(g.u_limit_v).or_else(|| detect_u_limit(&m.u_v))
+    }
+
+    /// Checks the log's controller against the logged u; with --gains-from-log replaces it by the
+    /// least-squares PID.
+    fn check_gains(&self, log: &mut LogData) -> anyhow::Result<()> {
+        let m = &log.measured;
+        let (Some(r), Some(th)) = (&m.ref_rad, &m.theta_l_rad) else {
+            if self.gains_from_log {
+                bail!("--gains-from-log needs the reference and the position in {}", log.path.display());
+            }
+            return Ok(());
+        };
+        let probe = PidSection { kp: 1.0, ki: 0.0, kd: 0.0, tl_s: 0.0, ts_s: m.dt_s, kw: None, u_limit_v: None };
+        let limit = self.u_limit(log.gains.as_ref().map_or(&probe, |g| &g.0), m);
+        let given = log.gains.as_ref().map(|g| g.0).unwrap_or(probe);
+        let mut pid = replay_pid(&given, m.dt_s, None)?;
+        let check = check_controller(&mut pid, r, th, &m.u_v, limit, m.dt_s);
+        if self.gains_from_log {
+            let [kp, ki, kd] = check.ls_gains.ok_or_else(|| {
+                anyhow!("--gains-from-log: the logged u of {} does not determine PID gains (singular least squares)", log.path.display())
+            })?;
+            if !(kp >= 0.0 && ki >= 0.0 && kd >= 0.0) {
+                bail!(
+                    "--gains-from-log: the least-squares PID of {} has a negative gain (kp = {kp:.4}, ki = {ki:.4}, kd = {kd:.4}); the logged u is not a PID on the logged error",
+                    log.path.display()
+                );
+            }
+            let pid = PidSection { kp, ki, kd, tl_s: 0.0, ts_s: m.dt_s, kw: None, u_limit_v: limit };
+            log.gains = Some((
+                pid,
+                format!(
+                    "PID fitted to the logged u: kp = {kp:.4} V/rad, ki = {ki:.4} V/(rad s), kd = {kd:.4} V s/rad, fit {:.1} %",
+                    check.ls_fit_percent
+                ),
+            ));
+            let mut fitted = replay_pid(&pid, m.dt_s, None)?;
+            log.check = Some(check_controller(&mut fitted, r, th, &m.u_v, limit, m.dt_s));
+        } else if log.gains.is_some() {
+            log.check = Some(check);
+        }
+        Ok(())
     }
 
     pub fn run(self) -> anyhow::Result<()> {
@@ -250,50 +259,41 @@ impl Compare {
         let adds: Vec<(String, EffectToFit)> = self
             .add
             .iter()
-            .map(|s| {
-                EffectToFit::parse(s)
-                    .map(|e| (s.clone(), e))
-                    .map_err(|e| anyhow!("--add {s}: {e}"))
-            })
+            .map(|s| EffectToFit::parse(s).map(|e| (s.clone(), e)).map_err(|e| anyhow!("--add {s}: {e}")))
             .collect::<anyhow::Result<_>>()?;
         let opts = CompareOptions::default();
         let mut logs = Vec::new();
         for path in &self.logs {
-            let record = crate::io::read_log(path, self.columns.as_deref())
+            let (record, meta) = crate::io::read_log_with_meta(path, self.columns.as_deref())
                 .with_context(|| format!("reading log {}", path.display()))?;
+            if !self.json {
+                for n in &meta.notes {
+                    eprintln!("note: {n}");
+                }
+            }
             let measured = Measured::from_record(&record, plant.params.n, opts.speed_filter_hz)
                 .map_err(|e| anyhow!("log {}: {e}", path.display()))?;
-            logs.push(LogData {
-                path: path.clone(),
-                record,
-                measured,
-            });
+            let mut log = LogData { path: path.clone(), record, measured, gains: None, check: None };
+            log.gains = match (&gains, meta.gains()?) {
+                (Some(g), _) => Some((g.pid, format!("gains from {}", self.gains.as_deref().map(|p| p.display().to_string()).unwrap_or_default()))),
+                (None, Some(g)) => Some((g.pid, String::from("gains from the log's metadata"))),
+                (None, None) => None,
+            };
+            self.check_gains(&mut log)?;
+            logs.push(log);
         }
-        let modes: Vec<ModeChoice> = logs
-            .iter()
-            .map(|l| self.mode_for(l, gains.as_ref()))
-            .collect::<anyhow::Result<_>>()?;
+        let modes: Vec<ModeChoice> = logs.iter().map(|l| self.mode_for(l)).collect::<anyhow::Result<_>>()?;
 
         let mut ladder = Vec::new();
-        let first = self.compare_all(&plant, &logs, &modes, gains.as_ref(), &opts)?;
-        ladder.push(LadderStep {
-            label: String::from("model as given"),
-            effect: None,
-            cmp_fit: pooled(&first),
-            fitted: Vec::new(),
-        });
+        let first = self.compare_all(&plant, &logs, &modes, &opts)?;
+        ladder.push(LadderStep { label: String::from("model as given"), effect: None, cmp_fit: pooled(&first), fitted: Vec::new() });
         let mut current = first;
         let records: Vec<Record> = logs.iter().map(|l| l.record.clone()).collect();
         for (spec, eff) in &adds {
-            let fit = fit_model(
-                &records,
-                &plant,
-                std::slice::from_ref(eff),
-                &FitOptions::default(),
-            )
-            .map_err(|e| anyhow!("--add {spec}: fitting the effect to the logs failed: {e}"))?;
+            let fit = fit_model(&records, &plant, std::slice::from_ref(eff), &FitOptions::default())
+                .map_err(|e| anyhow!("--add {spec}: fitting the effect to the logs failed: {e}"))?;
             plant = fit.plant;
-            let cmp = self.compare_all(&plant, &logs, &modes, gains.as_ref(), &opts)?;
+            let cmp = self.compare_all(&plant, &logs, &modes, &opts)?;
             let fitted = fit
                 .params
                 .iter()
@@ -305,12 +305,7 @@ impl Compare {
                     })
                 })
                 .collect();
-            ladder.push(LadderStep {
-                label: format!("+ {}", eff.effect.kind.name()),
-                effect: Some(eff.effect.kind.name()),
-                cmp_fit: pooled(&cmp),
-                fitted,
-            });
+            ladder.push(LadderStep { label: format!("+ {}", eff.effect.kind.name()), effect: Some(eff.effect.kind.name()), cmp_fit: pooled(&cmp), fitted });
             current = cmp;
         }
 
@@ -318,29 +313,13 @@ impl Compare {
             let mut mf = ModelFile::from_plant(&plant);
             mf.sensors = model_file.sensors;
             let mut prov = model_file.provenance.clone().unwrap_or_default();
-            prov.insert(
-                "compare_model".into(),
-                toml::Value::String(self.model.display().to_string()),
-            );
+            prov.insert("compare_model".into(), toml::Value::String(self.model.display().to_string()));
             prov.insert(
                 "compare_logs".into(),
-                toml::Value::Array(
-                    self.logs
-                        .iter()
-                        .map(|p| toml::Value::String(p.display().to_string()))
-                        .collect(),
-                ),
+                toml::Value::Array(self.logs.iter().map(|p| toml::Value::String(p.display().to_string())).collect()),
             );
             if !self.add.is_empty() {
-                prov.insert(
-                    "compare_added".into(),
-                    toml::Value::Array(
-                        self.add
-                            .iter()
-                            .map(|s| toml::Value::String(s.clone()))
-                            .collect(),
-                    ),
-                );
+                prov.insert("compare_added".into(), toml::Value::Array(self.add.iter().map(|s| toml::Value::String(s.clone())).collect()));
             }
             mf.provenance = Some(prov);
             mf.save(path)?;
@@ -348,31 +327,18 @@ impl Compare {
         if let Some(path) = &self.plot {
             let mut panels = Vec::new();
             for (log, r) in logs.iter().zip(&current.reports) {
-                let name = log
-                    .path
-                    .file_name()
-                    .map(|s| s.to_string_lossy().into_owned())
-                    .unwrap_or_default();
+                let name = log.path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
                 for (_, svg) in compare_figures_svg(r, &name)? {
                     panels.push(svg);
                 }
             }
-            std::fs::write(path, stack_svg(&panels))
-                .with_context(|| format!("writing plot {}", path.display()))?;
+            std::fs::write(path, stack_svg(&panels)).with_context(|| format!("writing plot {}", path.display()))?;
         }
         if self.json {
             let v = to_json(&logs, &modes, &current, &ladder, &opts);
             println!("{}", serde_json::to_string_pretty(&v)?);
         } else {
-            print_text(
-                &logs,
-                &modes,
-                &current,
-                &ladder,
-                &opts,
-                self.save.as_deref(),
-                self.plot.as_deref(),
-            );
+            print_text(&logs, &modes, &current, &ladder, &opts, self.save.as_deref(), self.plot.as_deref());
         }
         Ok(())
     }
@@ -435,14 +401,9 @@ fn finite(v: f64) -> Value {
 
 /// Regime statistics pooled over the logs whose headline is `kind`.
 fn pooled_regimes(c: &ModelComparison, kind: SignalKind) -> Vec<Value> {
-    let mut per: Vec<(Regime, usize, f64, f64)> =
-        Regime::ALL.iter().map(|r| (*r, 0, 0.0, 0.0)).collect();
+    let mut per: Vec<(Regime, usize, f64, f64)> = Regime::ALL.iter().map(|r| (*r, 0, 0.0, 0.0)).collect();
     let (mut total_n, mut total_se) = (0usize, 0.0);
-    for r in c
-        .reports
-        .iter()
-        .filter(|r| r.headline_signal().kind == kind)
-    {
+    for r in c.reports.iter().filter(|r| r.headline_signal().kind == kind) {
         for (e, g) in r.residual.iter().zip(&r.classification.regime) {
             let i = Regime::ALL.iter().position(|x| x == g).unwrap_or(0);
             per[i].1 += 1;
@@ -456,11 +417,7 @@ fn pooled_regimes(c: &ModelComparison, kind: SignalKind) -> Vec<Value> {
     per.iter()
         .map(|(g, n, se, s)| {
             let time = 100.0 * *n as f64 / total_n.max(1) as f64;
-            let err = if total_se > 0.0 {
-                100.0 * se / total_se
-            } else {
-                0.0
-            };
+            let err = if total_se > 0.0 { 100.0 * se / total_se } else { 0.0 };
             json!({
                 "regime": g.name(),
                 "where": first.map(|r| regime_phrase(*g, &r.classification, &Default::default())),
@@ -476,13 +433,7 @@ fn pooled_regimes(c: &ModelComparison, kind: SignalKind) -> Vec<Value> {
         .collect()
 }
 
-fn to_json(
-    logs: &[LogData],
-    modes: &[ModeChoice],
-    c: &ModelComparison,
-    ladder: &[LadderStep],
-    opts: &CompareOptions,
-) -> Value {
+fn to_json(logs: &[LogData], modes: &[ModeChoice], c: &ModelComparison, ladder: &[LadderStep], opts: &CompareOptions) -> Value {
     let pooled_figs = pooled(c);
     let (hk, hf) = pooled_figs[0];
     let effects: Vec<Value> = c
@@ -490,14 +441,8 @@ fn to_json(
         .effects
         .iter()
         .map(|e| {
-            let params: serde_json::Map<String, Value> = e
-                .iter()
-                .map(|(p, v)| (p.key.to_string(), json!(v)))
-                .collect();
-            let units: serde_json::Map<String, Value> = e
-                .iter()
-                .map(|(p, _)| (p.key.to_string(), json!(p.unit)))
-                .collect();
+            let params: serde_json::Map<String, Value> = e.iter().map(|(p, v)| (p.key.to_string(), json!(v))).collect();
+            let units: serde_json::Map<String, Value> = e.iter().map(|(p, _)| (p.key.to_string(), json!(p.unit))).collect();
             json!({ "effect": e.kind.name(), "params": params, "units": units })
         })
         .collect();
@@ -519,24 +464,11 @@ fn to_json(
         })
         .collect();
     let mut windows: Vec<(f64, Value)> = Vec::new();
-    let total_se: f64 = c
-        .reports
-        .iter()
-        .filter(|r| r.headline_signal().kind == hk)
-        .map(|r| r.residual.iter().map(|e| e * e).sum::<f64>())
-        .sum();
-    for (log, r) in logs
-        .iter()
-        .zip(&c.reports)
-        .filter(|(_, r)| r.headline_signal().kind == hk)
-    {
+    let total_se: f64 = c.reports.iter().filter(|r| r.headline_signal().kind == hk).map(|r| r.residual.iter().map(|e| e * e).sum::<f64>()).sum();
+    for (log, r) in logs.iter().zip(&c.reports).filter(|(_, r)| r.headline_signal().kind == hk) {
         let se_log: f64 = r.residual.iter().map(|e| e * e).sum();
         for w in &r.worst_windows {
-            let share = if total_se > 0.0 {
-                w.error_share_pct * se_log / total_se
-            } else {
-                0.0
-            };
+            let share = if total_se > 0.0 { w.error_share_pct * se_log / total_se } else { 0.0 };
             windows.push((
                 share,
                 json!({
@@ -553,7 +485,6 @@ fn to_json(
     }
     windows.sort_by(|a, b| b.0.total_cmp(&a.0));
     let r0 = &c.reports[0];
-    let wh = &r0.whiteness;
     let x = &r0.input_xcorr;
     let per_log: Vec<Value> = logs
         .iter()
@@ -564,6 +495,7 @@ fn to_json(
                 "mode": r.mode.name(), "mode_reason": mc.reason,
                 "samples": r.time_s.len(), "dt_s": r.dt_s,
                 "speed_derived_from_position": l.measured.speed_derived,
+                "controller": controller_json(l),
                 "signal": r.headline_signal().kind.name(),
                 "signals": r.signals.iter().map(|s| figures_json(s.kind, &s.figures)).collect::<Vec<_>>(),
                 "whiteness": whiteness_json(r),
@@ -578,6 +510,7 @@ fn to_json(
     json!({
         "mode": r0.mode.name(),
         "mode_reason": modes[0].reason,
+        "controller": controller_json(&logs[0]),
         "signal": hk.name(),
         "unit": hk.unit(),
         "fit_percent": finite(hf.fit_percent),
@@ -596,6 +529,36 @@ fn to_json(
         }),
         "findings": r0.findings,
         "logs": per_log,
+    })
+}
+
+/// The controller check in words (None without a controller).
+pub fn controller_words(log: &LogData) -> Option<String> {
+    let c = log.check.as_ref()?;
+    let mut s = format!(
+        "controller check: the controller reproduces the logged u with fit {:.1} % (RMS {:.3} V over {} samples inside the output limit)",
+        c.fit_percent, c.rms_v, c.samples
+    );
+    if c.fit_percent < 90.0 {
+        if let Some([kp, ki, kd]) = c.ls_gains {
+            s.push_str(&format!(
+                "\nWARNING: these gains do not reproduce the logged u, so the replay will differ for reasons unrelated to the plant. The PID that best reproduces it is kp = {kp:.4} V/rad, ki = {ki:.4} V/(rad s), kd = {kd:.4} V s/rad (fit {:.1} %): try --gains-from-log.",
+                c.ls_fit_percent
+            ));
+        }
+    }
+    Some(s)
+}
+
+fn controller_json(log: &LogData) -> Value {
+    let Some((g, source)) = &log.gains else { return Value::Null };
+    let c = log.check.as_ref();
+    json!({
+        "source": source, "kp": g.kp, "ki": g.ki, "kd": g.kd, "tl_s": g.tl_s,
+        "check_fit_percent": c.map(|c| finite(c.fit_percent)),
+        "check_rms_v": c.map(|c| finite(c.rms_v)),
+        "ls_gains": c.and_then(|c| c.ls_gains).map(|[kp, ki, kd]| json!({"kp": kp, "ki": ki, "kd": kd})),
+        "ls_fit_percent": c.map(|c| finite(c.ls_fit_percent)),
     })
 }
 
@@ -619,21 +582,15 @@ fn print_text(
     plot: Option<&Path>,
 ) {
     for ((log, r), mc) in logs.iter().zip(&c.reports).zip(modes) {
-        println!(
-            "== {} ({} samples, {:.3} s, dt = {:.4} s)",
-            log.path.display(),
-            r.time_s.len(),
-            r.time_s.len() as f64 * r.dt_s,
-            r.dt_s
-        );
+        println!("== {} ({} samples, {:.3} s, dt = {:.4} s)", log.path.display(), r.time_s.len(), r.time_s.len() as f64 * r.dt_s, r.dt_s);
         println!("mode: {} -- {}", r.mode.name(), mc.reason);
+        if let Some(line) = controller_words(log) {
+            println!("{line}");
+        }
         if log.measured.speed_derived {
             println!("speed: derived from position (zero-phase {:.0} Hz low-pass + central differences), model speed filtered the same way", opts.speed_filter_hz);
         }
-        println!(
-            "{:<10} {:>9} {:>14} {:>14} {:>14}",
-            "signal", "fit [%]", "RMSE", "max error", "mean error"
-        );
+        println!("{:<10} {:>9} {:>14} {:>14} {:>14}", "signal", "fit [%]", "RMSE", "max error", "mean error");
         for s in &r.signals {
             let f = &s.figures;
             println!(
@@ -646,18 +603,9 @@ fn print_text(
             );
         }
         println!("where the {} error sits:", r.headline_signal().kind.words());
-        println!(
-            "  {:<16} {:>8} {:>9} {:>12}",
-            "regime", "time %", "error %", "rms"
-        );
+        println!("  {:<16} {:>8} {:>9} {:>12}", "regime", "time %", "error %", "rms");
         for s in r.regimes.iter().filter(|s| s.samples > 0) {
-            println!(
-                "  {:<16} {:>8.1} {:>9.1} {:>12.4e}",
-                s.regime.name(),
-                s.time_share_pct,
-                s.error_share_pct,
-                s.rms
-            );
+            println!("  {:<16} {:>8.1} {:>9.1} {:>12.4e}", s.regime.name(), s.time_share_pct, s.error_share_pct, s.rms);
         }
         println!("findings:");
         for f in &r.findings {
@@ -677,34 +625,18 @@ fn print_text(
         let mut prev: Option<f64> = None;
         for s in ladder {
             let f = s.cmp_fit[0].1;
-            let change = prev
-                .map(|p| format!(" ({:+.1} % RMSE)", 100.0 * (f.rmse - p) / p))
-                .unwrap_or_default();
-            println!(
-                "  {:<24} fit {:>7.2} %   RMSE {}{}",
-                s.label,
-                f.fit_percent,
-                with_unit(f.rmse, k),
-                change
-            );
+            let change = prev.map(|p| format!(" ({:+.1} % RMSE)", 100.0 * (f.rmse - p) / p)).unwrap_or_default();
+            println!("  {:<24} fit {:>7.2} %   RMSE {}{}", s.label, f.fit_percent, with_unit(f.rmse, k), change);
             prev = Some(f.rmse);
         }
     }
     if ladder.len() > 1 {
         println!("model after the added effects:");
         for e in c.plant.effects.iter() {
-            let kv: Vec<String> = e
-                .iter()
-                .map(|(p, v)| format!("{} = {:.4e} {}", p.key, v, p.unit))
-                .collect();
+            let kv: Vec<String> = e.iter().map(|(p, v)| format!("{} = {:.4e} {}", p.key, v, p.unit)).collect();
             println!("  {:<11} {}", e.kind.name(), kv.join(", "));
         }
-        println!(
-            "  base        J_eq = {:.4e} kg m^2, R_eq = {:.4} ohm, k_drv = {:.4}",
-            c.plant.params.j_eq(),
-            c.plant.params.r_eq(),
-            c.plant.params.k_drv
-        );
+        println!("  base        J_eq = {:.4e} kg m^2, R_eq = {:.4} ohm, k_drv = {:.4}", c.plant.params.j_eq(), c.plant.params.r_eq(), c.plant.params.k_drv);
     }
     if let Some(p) = save {
         println!("model written to {}", p.display());
@@ -748,53 +680,23 @@ pub fn compare_figures_svg(r: &CompareReport, name: &str) -> anyhow::Result<Vec<
     let h = r.headline_signal();
     let (k, unit) = (h.kind.name(), h.kind.unit());
     let mut out = Vec::new();
-    let t1 = format!(
-        "{name}: {} measured vs model ({}, fit {:.1} %)",
-        h.kind.words(),
-        r.mode.name(),
-        h.figures.fit_percent
-    );
+    let t1 = format!("{name}: {} measured vs model ({}, fit {:.1} %)", h.kind.words(), r.mode.name(), h.figures.fit_percent);
     let yl = format!("{k} [{unit}]");
     let svg = line_chart_svg(
-        &Chart {
-            title: &t1,
-            x_label: "t [s]",
-            y_label: &yl,
-            ..Default::default()
-        },
+        &Chart { title: &t1, x_label: "t [s]", y_label: &yl, ..Default::default() },
         &[
-            Series {
-                label: "measured",
-                x: &r.time_s,
-                y: &h.measured,
-            },
-            Series {
-                label: "model",
-                x: &r.time_s,
-                y: &h.model,
-            },
+            Series { label: "measured", x: &r.time_s, y: &h.measured },
+            Series { label: "model", x: &r.time_s, y: &h.model },
         ],
     )?;
     out.push((t1, svg));
-    let t2 = format!(
-        "{name}: residual (measured - model), RMSE {:.3e} {unit}",
-        h.figures.rmse
-    );
+    let t2 = format!("{name}: residual (measured - model), RMSE {:.3e} {unit}", h.figures.rmse);
     let rl = format!("residual [{unit}]");
     out.push((
         t2.clone(),
         line_chart_svg(
-            &Chart {
-                title: &t2,
-                x_label: "t [s]",
-                y_label: &rl,
-                ..Default::default()
-            },
-            &[Series {
-                label: "residual",
-                x: &r.time_s,
-                y: &r.residual,
-            }],
+            &Chart { title: &t2, x_label: "t [s]", y_label: &rl, ..Default::default() },
+            &[Series { label: "residual", x: &r.time_s, y: &r.residual }],
         )?,
     ));
     let w = &r.omega_l_rad_s;
@@ -804,33 +706,15 @@ pub fn compare_figures_svg(r: &CompareReport, name: &str) -> anyhow::Result<Vec<
     out.push((
         t3.clone(),
         line_chart_svg(
-            &Chart {
-                title: &t3,
-                x_label: "omega_l [rad/s]",
-                y_label: &rl,
-                ..Default::default()
-            },
-            &[Series {
-                label: "mean residual",
-                x: &bx,
-                y: &by,
-            }],
+            &Chart { title: &t3, x_label: "omega_l [rad/s]", y_label: &rl, ..Default::default() },
+            &[Series { label: "mean residual", x: &bx, y: &by }],
         )?,
     ));
     if let Some(th) = &r.theta_l_rad {
-        let (lo, hi) = th
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                (a.min(*v), b.max(*v))
-            });
+        let (lo, hi) = th.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
         let tau = std::f64::consts::TAU;
         let (xs, lo, hi, xl): (Vec<f64>, f64, f64, &str) = if hi - lo > tau {
-            (
-                th.iter().map(|v| v.rem_euclid(tau)).collect(),
-                0.0,
-                tau,
-                "theta_l mod 2 pi [rad]",
-            )
+            (th.iter().map(|v| v.rem_euclid(tau)).collect(), 0.0, tau, "theta_l mod 2 pi [rad]")
         } else {
             (th.clone(), lo, hi, "theta_l [rad]")
         };
@@ -839,17 +723,8 @@ pub fn compare_figures_svg(r: &CompareReport, name: &str) -> anyhow::Result<Vec<
         out.push((
             t4.clone(),
             line_chart_svg(
-                &Chart {
-                    title: &t4,
-                    x_label: xl,
-                    y_label: &rl,
-                    ..Default::default()
-                },
-                &[Series {
-                    label: "mean residual",
-                    x: &bx,
-                    y: &by,
-                }],
+                &Chart { title: &t4, x_label: xl, y_label: &rl, ..Default::default() },
+                &[Series { label: "mean residual", x: &bx, y: &by }],
             )?,
         ));
     }
@@ -894,38 +769,21 @@ mod tests {
 
     #[test]
     fn replay_pid_matches_hand_values() {
-        let pid = PidSection {
-            kp: 2.0,
-            ki: 10.0,
-            kd: 0.1,
-            tl_s: 0.0,
-            ts_s: 1e-3,
-            kw: None,
-            u_limit_v: None,
-        };
-        let mut c = ReplayPid::new(pid, 1e-3, None);
-        // e = 1: u = 2 + 0 + 0 (no previous error), then integral = 0.01
-        assert!((c.update(1.0, 0.0) - 2.0).abs() < 1e-12);
-        // e = 0.5: u = 1 + 0.01 + 0.1 * (-0.5) / 1e-3 = 1.01 - 50
-        assert!((c.update(0.5, 0.0) - (1.01 - 50.0)).abs() < 1e-9);
+        use servo_core::compare::Controller;
+        let pid = PidSection { kp: 2.0, ki: 10.0, kd: 0.1, tl_s: 0.0, ts_s: 1e-3, kw: None, u_limit_v: None };
+        let mut c = replay_pid(&pid, 1e-3, Some(100.0)).unwrap();
+        // Backward Euler: I_0 = 10 * 1e-3 * 1 = 0.01; no derivative kick at the first sample.
+        assert!((Controller::update(&mut c, 1.0, 0.0) - 2.01).abs() < 1e-12);
+        // e = 0.5: P = 1, I = 0.015, D = 0.1 * (-0.5) / 1e-3 = -50
+        assert!((Controller::update(&mut c, 0.5, 0.0) - (1.015 - 50.0)).abs() < 1e-9);
+        // The limit holds.
+        assert_eq!(Controller::update(&mut c, 1e3, 0.0), 100.0);
     }
 
     #[test]
     fn stacks_panels() {
-        let a = line_chart_svg(
-            &Chart::default(),
-            &[Series {
-                label: "a",
-                x: &[0.0, 1.0],
-                y: &[0.0, 1.0],
-            }],
-        )
-        .unwrap();
+        let a = line_chart_svg(&Chart::default(), &[Series { label: "a", x: &[0.0, 1.0], y: &[0.0, 1.0] }]).unwrap();
         let s = stack_svg(&[a.clone(), a]);
-        assert!(
-            s.contains("height=\"800\"") && s.matches("<svg").count() == 3,
-            "{}",
-            &s[..200]
-        );
+        assert!(s.contains("height=\"800\"") && s.matches("<svg").count() == 3, "{}", &s[..200]);
     }
 }

@@ -225,9 +225,14 @@ impl Identify {
             logs.push(path.clone());
         }
         if self.ramp {
-            for rec in crate::cmd::identify_ramp::run_experiments(&self, &params.params)? {
-                logs.push(PathBuf::from(&rec.source));
+            for path in crate::cmd::identify_ramp::run_experiments(&self, &params.params)? {
+                let rec = crate::io::read_log(&path, None)
+                    .with_context(|| format!("reading log {}", path.display()))?;
+                if !self.json {
+                    println!("logged {}", path.display());
+                }
                 records.push(rec);
+                logs.push(path);
             }
         }
         let mut exps = Vec::new();

@@ -11,9 +11,11 @@ use anyhow::{bail, Context};
 use servo_core::record::Record;
 use servo_core::PlantParams;
 use servo_hw::backend::Backend;
-use std::path::Path;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
 use super::identify::Identify;
+use crate::io::{LoopMsg, McapLog, McapLogOptions};
 
 /// Friction staircase recipe.
 #[derive(Debug, Clone, serde::Deserialize)]
@@ -169,8 +171,20 @@ pub fn run_speed_loop(
     backend: &mut dyn Backend,
     p: &PlantParams,
     source: &str,
-    mut reference: impl FnMut(f64) -> Option<(f64, f64)>,
+    reference: impl FnMut(f64) -> Option<(f64, f64)>,
 ) -> anyhow::Result<Record> {
+    Ok(run_speed_loop_logged(backend, p, source, reference)?.0)
+}
+
+/// As [`run_speed_loop`], also returning one [`LoopMsg`] per sample for the MCAP log (no position
+/// reference: `ref_rad` and `err_rad` are null; `omega_l_rad_s` is the differenced encoder speed).
+pub fn run_speed_loop_logged(
+    backend: &mut dyn Backend,
+    p: &PlantParams,
+    source: &str,
+    mut reference: impl FnMut(f64) -> Option<(f64, f64)>,
+) -> anyhow::Result<(Record, Vec<LoopMsg>)> {
+    let mut msgs = Vec::new();
     let info = backend.info();
     let dt = info.sample_period_s;
     let u_max = info.voltage_limit_v;
@@ -210,6 +224,20 @@ pub fn run_speed_loop(
                 integ += ki * err * dt;
             }
             backend.apply(u)?;
+            msgs.push(LoopMsg {
+                time_s: s.time_s,
+                ref_rad: f64::NAN,
+                theta_l_rad: s.theta_l_rad,
+                omega_l_rad_s: w_meas / p.n,
+                err_rad: f64::NAN,
+                u_v: u,
+                ff_v: ff,
+                p_v: kp * err,
+                i_v: integ,
+                d_v: 0.0,
+                i_a_a: s.i_a_a,
+                saturated: u != u_unsat,
+            });
             rec.time_s.push(s.time_s);
             th_log.push(s.theta_l_rad);
             i_log.push(s.i_a_a);
@@ -223,31 +251,43 @@ pub fn run_speed_loop(
     rec.u_v = Some(u_log);
     rec.theta_l_rad = Some(th_log);
     rec.i_a_a = Some(i_log);
-    Ok(rec)
+    Ok((rec, msgs))
 }
 
-/// Runs both experiments on the simulator described by the command's plant options and returns
-/// their records (friction staircase, inertia ramps).
-pub fn run_experiments(args: &Identify, p: &PlantParams) -> anyhow::Result<Vec<Record>> {
+/// Runs both experiments on the simulator described by the command's plant options, logs each
+/// to MCAP in `--log-dir` (identify_friction.mcap, identify_inertia.mcap) and returns the paths.
+pub fn run_experiments(args: &Identify, p: &PlantParams) -> anyhow::Result<Vec<PathBuf>> {
     let fr = FrictionRecipe::load(&args.friction_recipe).context("--friction-recipe")?;
     let ir = InertiaRecipe::load(&args.inertia_recipe).context("--inertia-recipe")?;
     let (plant, sensors) = args.plant.load()?;
     let dt = 1e-3;
+    std::fs::create_dir_all(&args.log_dir)
+        .with_context(|| format!("--log-dir {}", args.log_dir.display()))?;
     let mut out = Vec::new();
-    let mut b = servo_hw::sim::SimBackend::new(&plant, sensors, dt)?;
-    out.push(run_speed_loop(
-        &mut b,
-        p,
-        "ramp: friction staircase (sim)",
-        |t| fr.reference(t).map(|w| (w, 0.0)),
-    )?);
-    let mut b = servo_hw::sim::SimBackend::new(&plant, sensors, dt)?;
-    out.push(run_speed_loop(
-        &mut b,
-        p,
-        "ramp: inertia ramps (sim)",
-        |t| ir.reference(t),
-    )?);
+    for (name, recipe) in [
+        ("identify_friction", &args.friction_recipe),
+        ("identify_inertia", &args.inertia_recipe),
+    ] {
+        let mut b = servo_hw::sim::SimBackend::new(&plant, sensors, dt)?;
+        let source = format!("servo identify --ramp: {name} (sim)");
+        let (_, msgs) = if name == "identify_friction" {
+            run_speed_loop_logged(&mut b, p, &source, |t| fr.reference(t).map(|w| (w, 0.0)))?
+        } else {
+            run_speed_loop_logged(&mut b, p, &source, |t| ir.reference(t))?
+        };
+        let path = args.log_dir.join(format!("{name}.mcap"));
+        let mut meta = BTreeMap::new();
+        meta.insert("experiment".to_string(), name.to_string());
+        meta.insert("recipe".to_string(), recipe.display().to_string());
+        meta.insert("backend".to_string(), "sim".to_string());
+        let mut log = McapLog::create(&path, &meta, McapLogOptions::default())
+            .with_context(|| format!("creating log {}", path.display()))?;
+        for m in &msgs {
+            log.write_loop(m)?;
+        }
+        log.finish()?;
+        out.push(path);
+    }
     Ok(out)
 }
 

@@ -29,7 +29,8 @@ pub enum BackendKind {
     /// The simulated gearmotor (`--plant`, `--plant-effect`), faster than real time unless
     /// `--realtime`.
     Sim,
-    // Serial: a board on `--port` at `--baud` (added with the serial backend).
+    /// A board (or `servo board --pty`) on `--port` at `--baud`; its clock paces the loop.
+    Serial,
 }
 
 /// Run the position loop and log it.
@@ -80,6 +81,18 @@ pub struct Run {
     /// Pace the simulator to wall-clock time.
     #[arg(long)]
     pub realtime: bool,
+
+    /// Serial port of the board (`--backend serial`), e.g. /dev/ttyACM0 (see `servo ports`).
+    #[arg(long, value_name = "PATH", default_value = "/dev/ttyACM0")]
+    pub port: String,
+
+    /// Baud rate of the serial port [bit/s] (ignored by USB CDC and pseudo-terminals).
+    #[arg(long, value_name = "BAUD", default_value_t = 115_200)]
+    pub baud: u32,
+
+    /// A board silent for this long during a run is lost: 0 V, log closed, error [ms].
+    #[arg(long = "board-timeout-ms", value_name = "MS", default_value_t = 250.0)]
+    pub board_timeout_ms: f64,
 
     /// Control period T_s [s] of the simulator (default: the gains file's ts_s, else 1e-3).
     #[arg(long, value_name = "SECONDS")]
@@ -260,6 +273,32 @@ impl Run {
                 meta.insert(meta_keys::SEED.into(), sensors.seed.to_string());
                 (Box::new(sim), meta)
             }
+            BackendKind::Serial => {
+                let cfg = servo_hw::SerialConfig {
+                    port: self.port.clone(),
+                    baud: self.baud,
+                    timeout_s: self.board_timeout_ms * 1e-3,
+                    limits: servo_core::safety::SafetyLimits {
+                        voltage_limit_v: u_limit_v,
+                        ..Default::default()
+                    },
+                    ..Default::default()
+                };
+                let be = servo_hw::SerialBackend::open(cfg)
+                    .with_context(|| format!("--backend serial --port {}", self.port))?;
+                let board_ts = be.info().sample_period_s;
+                if (board_ts - ts_s).abs() > 1e-9 {
+                    bail!(
+                        "the board on {} samples every {board_ts} s but the controller is for T_s = {ts_s} s \
+                         (--ts or the gains file); start the board with that period or redesign",
+                        self.port
+                    );
+                }
+                let mut meta = BTreeMap::new();
+                meta.insert("serial_port".into(), self.port.clone());
+                meta.insert("serial_baud".into(), self.baud.to_string());
+                (Box::new(be), meta)
+            }
         };
         let info = backend.info();
         meta.insert(
@@ -326,19 +365,38 @@ impl Run {
             &cfg,
             log.as_mut().map(|l| l as &mut dyn runner::LogSink),
         );
+        let link = backend.link_stats();
         let out = match out {
             Ok(o) => o,
             Err(e) => {
+                if let Some(ls) = &link {
+                    eprintln!("{ls}");
+                }
                 if let Some(l) = log.as_mut() {
+                    if let Some(ls) = &link {
+                        let _ = l.write_summary(&ls.to_map());
+                    }
                     let _ = l.finish();
+                    eprintln!(
+                        "the board was commanded to 0 V; log {} finished with the {} samples before the fault",
+                        l.path().display(),
+                        l.messages()
+                    );
                 }
                 return Err(e);
             }
         };
         let summary = out.summary();
         println!("{summary}");
+        if let Some(ls) = &link {
+            println!("{ls}");
+        }
         if let Some(l) = log.as_mut() {
-            l.write_summary(&summary.to_map())?;
+            let mut map = summary.to_map();
+            if let Some(ls) = &link {
+                map.extend(ls.to_map());
+            }
+            l.write_summary(&map)?;
             l.finish()?;
             println!(
                 "log: {} ({} samples, MCAP: open in Foxglove/PlotJuggler, or `servo export`)",

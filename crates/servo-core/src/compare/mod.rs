@@ -13,6 +13,7 @@
 //!   encoder grid).
 
 pub mod chi2;
+pub mod controller_check;
 pub mod derivative;
 pub mod figures;
 pub mod measured;

@@ -62,6 +62,13 @@ impl<F: FnMut(f64, f64) -> f64> Controller for F {
     }
 }
 
+/// servo's discrete PID ([`crate::control::Pid`]) as the controller of a replay (no feedforward).
+impl Controller for crate::control::Pid {
+    fn update(&mut self, reference_rad: f64, measured_rad: f64) -> f64 {
+        crate::control::Pid::update(self, reference_rad, measured_rad, 0.0).u_v
+    }
+}
+
 /// What closes the loop in [`ReplayMode::ClosedLoop`].
 pub struct ClosedLoop<'a> {
     /// The controller as it ran on the board (fresh state at the start of the log).
