@@ -199,6 +199,25 @@ fn exact_achieves_the_spec_measured_independently() {
 }
 
 #[test]
+fn exact_on_the_default_full_discrete_loop() {
+    let h = json(&["--wc", "30", "--pm", "60"]);
+    let v = json(&["--wc", "30", "--pm", "60", "--exact"]);
+    let d = &v["achieved"]["discrete"];
+    assert_eq!(d["plant"], "full");
+    assert!(
+        (f(d, "pm_deg") - 60.0).abs() < 0.1 && rel(f(d, "wgc"), 30.0) < 0.005,
+        "{d}"
+    );
+    // the handout gains miss the spec on the same loop by more than the tolerance
+    let hd = &h["achieved"]["discrete"];
+    assert!(
+        (f(hd, "pm_deg") - 60.0).abs() > 0.5 || rel(f(hd, "wgc"), 30.0) > 0.02,
+        "{hd}"
+    );
+    assert!(rel(f(&v, "kp"), f(&h, "kp")) > 0.01);
+}
+
+#[test]
 fn time_domain_specs() {
     // rise time: w_gc = 1.8 / t_r (eq. 39)
     let v = json(&["--rise-time", "0.06", "--pm", "60"]);

@@ -8,6 +8,7 @@ pub mod model_file;
 pub mod plant_args;
 pub mod plot;
 pub mod reference_file;
+pub mod runner;
 
 use clap::Parser;
 

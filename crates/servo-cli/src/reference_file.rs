@@ -62,7 +62,7 @@ struct SegmentToml {
 }
 
 /// An experiment: what to apply at every instant of a run.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Experiment {
     /// Name (the `[experiment] name`, else the file stem, else the reference text).
     pub name: String,
@@ -94,6 +94,16 @@ impl Experiment {
         Self::from_reference(r, duration_s)
     }
 
+    /// What a `--ref` argument names: an experiment file when it ends in `.toml` (its own
+    /// durations apply), else a reference text lasting `duration_s` [s].
+    pub fn from_arg(arg: &str, duration_s: f64) -> anyhow::Result<Experiment> {
+        if arg.trim_end().to_ascii_lowercase().ends_with(".toml") {
+            load_experiment(Path::new(arg.trim()))
+        } else {
+            Self::from_ref_text(arg, duration_s)
+        }
+    }
+
     /// Total duration [s].
     pub fn duration_s(&self) -> f64 {
         duration_s(&self.segments)
@@ -107,7 +117,7 @@ impl Experiment {
     /// Index of the segment active at `t_s` (the last one after the end).
     pub fn segment_index_at(&self, t_s: f64) -> usize {
         self.segments
-            .partition_point(|p| p.start_s <= t_s)
+            .partition_point(|p| p.start_s <= t_s + servo_core::control::reference::TIME_EPS_S)
             .saturating_sub(1)
     }
 
@@ -346,5 +356,25 @@ duration_s = 1
         );
         assert!(m.contains("--ref") && m.contains("stepp"), "{m}");
         assert!(Experiment::from_ref_text("step:1", 0.0).is_err());
+        let steps = experiments_dir().join("steps.toml");
+        let e = Experiment::from_arg(steps.to_str().unwrap(), 5.0).unwrap();
+        assert_eq!((e.name.as_str(), e.duration_s()), ("padova-steps", 24.0));
+        assert_eq!(
+            Experiment::from_arg("ramp:speed=1", 3.0)
+                .unwrap()
+                .duration_s(),
+            3.0
+        );
+        let m = format!(
+            "{:#}",
+            Experiment::from_arg("missing.toml", 3.0).unwrap_err()
+        );
+        assert!(m.contains("missing.toml"), "{m}");
+        // Experiments serialise (for the run's metadata).
+        let json = serde_json::to_string(&e).unwrap();
+        assert!(
+            json.contains("padova-steps") && json.contains("duration_s"),
+            "{json}"
+        );
     }
 }

@@ -41,12 +41,21 @@ fn record() -> Record {
         w.push(wk + 2.0 * rng.normal());
         ia.push(tau / kt + 2e-3 * rng.normal());
     }
-    Record { source: "bench".into(), time_s: t, omega_m_rad_s: Some(w), i_a_a: Some(ia), ..Record::default() }
+    Record {
+        source: "bench".into(),
+        time_s: t,
+        omega_m_rad_s: Some(w),
+        i_a_a: Some(ia),
+        ..Record::default()
+    }
 }
 
 fn bench(c: &mut Criterion) {
     let rec = record();
-    let p = PlantParams { k_t: 7.68e-3, ..PlantParams::TABLE2 };
+    let p = PlantParams {
+        k_t: 7.68e-3,
+        ..PlantParams::TABLE2
+    };
     let mut g = c.benchmark_group("ident");
     g.sample_size(10);
     g.bench_function("10min_1kHz_friction+inertia+combined", |bch| {
@@ -57,6 +66,36 @@ fn bench(c: &mut Criterion) {
             let j = identify_inertia(exps, Some(&f), &PhaseConfig::default()).unwrap();
             let c = identify_combined(exps, p.n, &CombinedConfig::default()).unwrap();
             (f.b_eq.value, j.j_eq.value, c.j_eq.value)
+        })
+    });
+    let e = Experiment::from_record(&rec, &p).unwrap();
+    let exps = std::slice::from_ref(&e);
+    let f = identify_friction(exps, p.n, &FrictionConfig::default()).unwrap();
+    g.bench_function("part_prepare", |bch| {
+        bch.iter(|| Experiment::from_record(&rec, &p).unwrap().time_s.len())
+    });
+    g.bench_function("part_friction", |bch| {
+        bch.iter(|| {
+            identify_friction(exps, p.n, &FrictionConfig::default())
+                .unwrap()
+                .b_eq
+                .value
+        })
+    });
+    g.bench_function("part_inertia", |bch| {
+        bch.iter(|| {
+            identify_inertia(exps, Some(&f), &PhaseConfig::default())
+                .unwrap()
+                .j_eq
+                .value
+        })
+    });
+    g.bench_function("part_combined", |bch| {
+        bch.iter(|| {
+            identify_combined(exps, p.n, &CombinedConfig::default())
+                .unwrap()
+                .j_eq
+                .value
         })
     });
     g.finish();

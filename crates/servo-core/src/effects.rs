@@ -16,6 +16,9 @@
 //! | `saturation` | `limit` V on the driver input u (symmetric) |
 //! | `deadzone` | `width` V: dead band (half width) on the driver input u |
 //! | `delay` | `delay` s: input transport delay beyond the one-sample zero-order hold |
+//!
+//! The physics of every effect (torque versus speed or angle, input nonlinearity u -> u_in) is
+//! defined once in [`torque`], used by the simulator and as regressors by the fit and diagnosis.
 
 pub mod torque;
 

@@ -68,13 +68,16 @@ impl SafetyLimits {
         if !(self.voltage_limit_v > 0.0 && self.voltage_limit_v.is_finite()) {
             return Err(LimitsError::VoltageLimit(self.voltage_limit_v));
         }
-        if !(self.theta_min_rad < self.theta_max_rad) {
+        if self.theta_min_rad.is_nan()
+            || self.theta_max_rad.is_nan()
+            || self.theta_min_rad >= self.theta_max_rad
+        {
             return Err(LimitsError::PositionLimits(
                 self.theta_min_rad,
                 self.theta_max_rad,
             ));
         }
-        if !(self.i_trip_a > 0.0) {
+        if self.i_trip_a.is_nan() || self.i_trip_a <= 0.0 {
             return Err(LimitsError::CurrentTrip(self.i_trip_a));
         }
         Ok(())

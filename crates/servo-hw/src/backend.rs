@@ -63,4 +63,8 @@ pub trait Backend {
     fn apply(&mut self, u_v: f64) -> Result<(), HwError>;
     /// Commands 0 V and ends the run.
     fn stop(&mut self) -> Result<(), HwError>;
+    /// Loop-timing and link statistics, for backends with a real link (serial); `None` else.
+    fn link_stats(&self) -> Option<crate::serial::LinkStats> {
+        None
+    }
 }

@@ -22,6 +22,7 @@
 
 use crate::backend::HwError;
 use serialport::SerialPort;
+use servo_core::control::{AntiWindup, Pid, PidConfig, PidGains};
 use servo_core::math;
 use servo_core::protocol::{
     fixed_text, flags, Decoder, Fault, FaultCode, Frame, HelloAck, LoopGains, Message, Sample,
@@ -66,7 +67,7 @@ impl Default for BoardConfig {
 
 impl BoardConfig {
     fn validate(&self) -> Result<(), HwError> {
-        let us = self.sample_period_s * 1e6;
+        let us = math::round(self.sample_period_s * 1e6);
         if !(us.is_finite() && (50.0..=1e6).contains(&us)) {
             return Err(HwError::Protocol(format!(
                 "board sample period must be between 50 us and 1 s, got {} s",
@@ -118,44 +119,11 @@ pub struct BoardReport {
     pub framing_errors: u64,
     /// The host side of the port closed.
     pub disconnected: bool,
-}
-
-/// A discrete PID with filtered derivative for the on-board loop (firmware arithmetic).
-#[derive(Debug, Clone, Copy)]
-struct OnboardPid {
-    g: LoopGains,
-    integral_v: f64,
-    d_v: f64,
-    e_prev: Option<f64>,
-}
-
-impl OnboardPid {
-    fn new(g: LoopGains) -> Self {
-        OnboardPid {
-            g,
-            integral_v: 0.0,
-            d_v: 0.0,
-            e_prev: None,
-        }
-    }
-    /// u [V] for error `e_rad`, period `t_s`, clipped to `limit_v` with integrator clamping.
-    fn update(&mut self, e_rad: f64, t_s: f64, limit_v: f64) -> f64 {
-        let (kp, ki, kd, tau) = (
-            self.g.kp as f64,
-            self.g.ki as f64,
-            self.g.kd as f64,
-            self.g.tau_f_s as f64,
-        );
-        let de = self.e_prev.map_or(0.0, |p| e_rad - p);
-        self.e_prev = Some(e_rad);
-        self.d_v = (tau * self.d_v + kd * de) / (tau + t_s);
-        let i_new = self.integral_v + ki * e_rad * t_s;
-        let u = kp * e_rad + i_new + self.d_v;
-        if u.abs() <= limit_v || u.signum() != e_rad.signum() {
-            self.integral_v = i_new;
-        }
-        (kp * e_rad + self.integral_v + self.d_v).clamp(-limit_v, limit_v)
-    }
+    /// A run was still driving the motor when serving ended (stop flag): the board had not
+    /// gone to 0 V on its own (Stop, watchdog, trip or disconnect).
+    pub driving_at_exit: bool,
+    /// Driver input at that moment [V].
+    pub output_at_exit_v: f64,
 }
 
 /// State of one run (between Start and Stop/fault).
@@ -171,7 +139,7 @@ struct Run {
     u_v: f64,
     clipped: bool,
     count0: i64,
-    onboard: Option<(OnboardPid, f64)>,
+    onboard: Option<(Pid, f64)>,
 }
 
 /// The virtual board.
@@ -185,6 +153,8 @@ pub struct VirtualBoard {
     report: BoardReport,
     idle_since: Instant,
     bad_cmd_reported: bool,
+    /// Driver input being applied now [V] (0 when idle).
+    output_v: f64,
 }
 
 enum Link {
@@ -210,6 +180,7 @@ impl VirtualBoard {
             report: BoardReport::default(),
             idle_since: Instant::now(),
             bad_cmd_reported: false,
+            output_v: 0.0,
         })
     }
 
@@ -229,6 +200,11 @@ impl VirtualBoard {
     /// The true plant simulator behind the board.
     pub fn plant_sim(&self) -> &PlantSim {
         &self.sim
+    }
+
+    /// The driver input the board applies right now [V]: 0 V whenever no run is active.
+    pub fn output_v(&self) -> f64 {
+        self.output_v
     }
 
     /// What happened so far.
@@ -275,15 +251,25 @@ impl VirtualBoard {
                     if keep {
                         run = Some(r);
                     } else {
+                        self.output_v = 0.0;
                         self.idle_since = Instant::now();
                     }
                     if let Link::Closed = link {
+                        self.output_v = 0.0;
                         self.report.disconnected = true;
+                        let text = "host side of the port closed during a run";
+                        self.report
+                            .faults
+                            .push((FaultCode::Other, text.to_string()));
                         break;
                     }
                 }
             }
         }
+        // Whatever ended serving (Ctrl-C, a closed port), the driver goes to 0 V.
+        self.report.driving_at_exit = run.is_some();
+        self.report.output_at_exit_v = self.output_v;
+        self.output_v = 0.0;
         Ok(self.report())
     }
 
@@ -319,12 +305,14 @@ impl VirtualBoard {
                 let what = if r.onboard.is_some() {
                     "reference"
                 } else {
-                    "voltage command"
+                    "command"
                 };
-                let text = format!("watchdog: no {what} for {} ms", watchdog.as_millis());
+                // Fits the 32-byte fault text: "watchdog: no reference in 50 ms".
+                let text = format!("watchdog: no {what} in {} ms", watchdog.as_millis());
                 self.fault(port, FaultCode::Watchdog, &text)?;
                 return Ok((false, Link::Open));
             }
+            self.output_v = r.u_v;
             self.sim.step(r.u_v);
         }
         // The period is over: sample k+1.
@@ -386,12 +374,7 @@ impl VirtualBoard {
             return Ok(false);
         }
         if let Some((pid, ref_rad)) = r.onboard.as_mut() {
-            let u = pid.update(
-                *ref_rad - theta,
-                self.cfg.sample_period_s,
-                self.cfg.limits.voltage_limit_v,
-            );
-            r.u_v = u;
+            r.u_v = pid.update(*ref_rad, theta, 0.0).u_v;
         }
         let sample = Sample {
             seq: r.k,
@@ -414,7 +397,7 @@ impl VirtualBoard {
         &mut self,
         port: &mut dyn SerialPort,
         at: Instant,
-        onboard: Option<(OnboardPid, f64)>,
+        onboard: Option<(Pid, f64)>,
     ) -> Result<Option<Run>, HwError> {
         self.coast_idle();
         self.report.runs += 1;
@@ -450,9 +433,10 @@ impl VirtualBoard {
             Message::Stop => self.send(port, &Message::Stopped)?,
             Message::LoopGains(g) => self.set_gains(port, g)?,
             Message::LoopReference { ref_rad, .. } => match self.gains {
-                Some(g) if ref_rad.is_finite() => {
-                    return self.start_run(port, at, Some((OnboardPid::new(g), ref_rad as f64)))
-                }
+                Some(g) if ref_rad.is_finite() => match self.onboard_pid(g) {
+                    Some(pid) => return self.start_run(port, at, Some((pid, ref_rad as f64))),
+                    None => self.bad_command(port, "invalid loop gains")?,
+                },
                 _ => self.bad_command(port, "LoopReference without valid gains")?,
             },
             Message::SetVoltage { .. } => self.bad_command(port, "SetVoltage while not started")?,
@@ -474,7 +458,7 @@ impl VirtualBoard {
             Message::SetVoltage { seq, u_v } => {
                 let newer = r
                     .last_seq_applied
-                    .map_or(true, |l| (seq.wrapping_sub(l) as i32) > 0);
+                    .is_none_or(|l| (seq.wrapping_sub(l) as i32) > 0);
                 if !newer {
                     return Ok(true);
                 }
@@ -504,9 +488,14 @@ impl VirtualBoard {
                     self.fault(port, FaultCode::BadCommand, "non-finite reference")?;
                     return Ok(false);
                 }
-                match r.onboard.as_mut() {
-                    Some((_, rf)) => *rf = ref_rad as f64,
-                    None => r.onboard = Some((OnboardPid::new(g), ref_rad as f64)),
+                match (r.onboard.as_mut(), self.onboard_pid(g)) {
+                    (Some((_, rf)), _) => *rf = ref_rad as f64,
+                    (None, Some(pid)) => r.onboard = Some((pid, ref_rad as f64)),
+                    (None, None) => {
+                        r.u_v = 0.0;
+                        self.fault(port, FaultCode::BadCommand, "invalid loop gains")?;
+                        return Ok(false);
+                    }
                 }
                 r.last_cmd_at = at;
             }
@@ -538,9 +527,25 @@ impl VirtualBoard {
         self.send(port, &Message::HelloAck(self.hello_ack()))
     }
 
+    /// The firmware's PID for the on-board loop: servo's discrete PID (backward Euler, real
+    /// derivative with T_L = tau_f_s, clamping anti-windup, limited to the voltage limit).
+    fn onboard_pid(&self, g: LoopGains) -> Option<Pid> {
+        let gains = PidGains {
+            kp: g.kp as f64,
+            ki: g.ki as f64,
+            kd: g.kd as f64,
+            tl_s: g.tau_f_s as f64,
+        };
+        let cfg = PidConfig {
+            anti_windup: AntiWindup::Clamping,
+            ..PidConfig::new(gains, self.cfg.sample_period_s)
+                .with_symmetric_limit(self.cfg.limits.voltage_limit_v)
+        };
+        Pid::new(cfg).ok()
+    }
+
     fn set_gains(&mut self, port: &mut dyn SerialPort, g: LoopGains) -> Result<(), HwError> {
-        let ok = [g.kp, g.ki, g.kd, g.tau_f_s].iter().all(|v| v.is_finite()) && g.tau_f_s >= 0.0;
-        if !ok {
+        if self.onboard_pid(g).is_none() {
             return self.bad_command(port, "invalid loop gains");
         }
         self.gains = Some(g);

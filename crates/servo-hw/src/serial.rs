@@ -106,6 +106,30 @@ impl std::fmt::Display for LinkStats {
     }
 }
 
+impl LinkStats {
+    /// The figures as key/value strings with units in the keys (for the log's summary record).
+    pub fn to_map(&self) -> std::collections::BTreeMap<String, String> {
+        let mut m = std::collections::BTreeMap::new();
+        let mut put = |k: &str, v: String| {
+            m.insert(format!("link_{k}"), v);
+        };
+        put("samples", self.samples.to_string());
+        put("period_s", self.period_s.to_string());
+        put("jitter_p50_s", self.jitter_p50_s.to_string());
+        put("jitter_p99_s", self.jitter_p99_s.to_string());
+        put("jitter_max_s", self.jitter_max_s.to_string());
+        put("rtt_p50_s", self.rtt_p50_s.to_string());
+        put("rtt_p99_s", self.rtt_p99_s.to_string());
+        put("rtt_max_s", self.rtt_max_s.to_string());
+        put("missed_deadlines", self.missed_deadlines.to_string());
+        put("crc_errors", self.crc_errors.to_string());
+        put("framing_errors", self.framing_errors.to_string());
+        put("lost_frames", self.lost_frames.to_string());
+        put("out_of_order", self.out_of_order.to_string());
+        m
+    }
+}
+
 /// p-quantile (0..=1) of `v` by nearest rank; 0 for an empty set.
 fn quantile(v: &mut [f64], p: f64) -> f64 {
     if v.is_empty() {
@@ -245,7 +269,8 @@ impl SerialBackend {
         let v = h.voltage_limit_v as f64;
         if !(v > 0.0 && v.is_finite())
             || h.sample_period_us == 0
-            || !(h.current_scale_a_per_lsb > 0.0)
+            || h.current_scale_a_per_lsb.is_nan()
+            || h.current_scale_a_per_lsb <= 0.0
         {
             return Err(HwError::Protocol(format!(
                 "board reported an invalid description: {h:?}"
@@ -398,6 +423,10 @@ fn port_error(port: &str, e: std::io::Error) -> HwError {
 impl Backend for SerialBackend {
     fn info(&self) -> BoardInfo {
         self.info
+    }
+
+    fn link_stats(&self) -> Option<LinkStats> {
+        Some(self.stats())
     }
 
     fn sample(&mut self) -> Result<Sample, HwError> {

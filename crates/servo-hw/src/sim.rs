@@ -1,4 +1,12 @@
 //! The simulator backend: a [`PlantSim`] behind sensors, driven by a simulated clock.
+//!
+//! Each control period: [`Backend::sample`] measures the true state at the start of the period
+//! through the sensor model (encoder quantisation, current noise and offset, seeded), then
+//! [`Backend::apply`] holds the voltage for the period and advances the plant by one period
+//! (log convention: row k = measurements at time_s[k] and the voltage applied from then until
+//! row k+1). The simulated clock advances by one period per `apply`; with `realtime(true)` the
+//! backend also sleeps so that simulated time tracks wall time. Deterministic: the same plant,
+//! sensor seed and inputs give the same samples.
 
 use crate::backend::{Backend, BoardInfo, HwError, Sample};
 use servo_core::sim::{PlantSim, SensorConfig, Sensors};
@@ -31,9 +39,24 @@ impl SimBackend {
         self.realtime = on.then(std::time::Instant::now);
         self
     }
-    /// The underlying plant simulator (true state).
+    /// Sets the board's symmetric voltage limit [V] (default 10 V, the SRV-02 amplifier input
+    /// range); the plant's own `saturation` effect, if any, acts after it.
+    pub fn with_voltage_limit(mut self, limit_v: f64) -> Result<Self, HwError> {
+        if !(limit_v > 0.0 && limit_v.is_finite()) {
+            return Err(HwError::Safety(format!(
+                "voltage limit must be > 0 V and finite, got {limit_v}"
+            )));
+        }
+        self.voltage_limit_v = limit_v;
+        Ok(self)
+    }
+    /// The underlying plant simulator (true state, per-effect torques).
     pub fn plant_sim(&self) -> &PlantSim {
         &self.sim
+    }
+    /// The true (noise-free, unquantised) state of the plant.
+    pub fn true_state(&self) -> &servo_core::sim::PlantState {
+        self.sim.state()
     }
 }
 
@@ -64,6 +87,14 @@ impl Backend for SimBackend {
         })
     }
     fn apply(&mut self, u_v: f64) -> Result<(), HwError> {
+        if !u_v.is_finite() {
+            // Hold 0 V for the period so the plant stays consistent, and report the fault.
+            self.last_u_v = 0.0;
+            self.sim.step(0.0);
+            return Err(HwError::Safety(format!(
+                "non-finite voltage command {u_v} V (0 V applied)"
+            )));
+        }
         let u = u_v.clamp(-self.voltage_limit_v, self.voltage_limit_v);
         self.last_u_v = u;
         self.sim.step(u);
@@ -72,5 +103,64 @@ impl Backend for SimBackend {
     fn stop(&mut self) -> Result<(), HwError> {
         self.last_u_v = 0.0;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use servo_core::effects::Effect;
+
+    fn backend(seed: u64) -> SimBackend {
+        let mut plant = Plant::nominal();
+        plant
+            .effects
+            .insert(Effect::parse("coulomb:tau_sf=0.004").unwrap());
+        let cfg = SensorConfig {
+            seed,
+            ..SensorConfig::default()
+        };
+        SimBackend::new(&plant, cfg, 1e-3).unwrap()
+    }
+
+    fn run(b: &mut SimBackend, n: usize) -> Vec<Sample> {
+        (0..n)
+            .map(|k| {
+                let s = b.sample().unwrap();
+                b.apply(if k < 300 { 4.0 } else { 20.0 }).unwrap();
+                s
+            })
+            .collect()
+    }
+
+    #[test]
+    fn samples_follow_the_clock_the_grid_and_the_limit() {
+        let mut b = backend(1);
+        let samples = run(&mut b, 600);
+        let q = std::f64::consts::TAU / 4096.0;
+        for (k, s) in samples.iter().enumerate() {
+            assert!((s.time_s - k as f64 * 1e-3).abs() < 1e-12);
+            assert!((s.theta_l_rad / q - (s.theta_l_rad / q).round()).abs() < 1e-9);
+            assert_eq!(s.encoder_count as f64, (s.theta_l_rad / q).round());
+        }
+        assert_eq!(samples[0].u_applied_v, 0.0);
+        assert_eq!(samples[1].u_applied_v, 4.0);
+        // Commands above the board limit are clipped to 10 V.
+        assert_eq!(samples[599].u_applied_v, 10.0);
+        assert!(samples[599].theta_l_rad > 0.5);
+        assert!(b.apply(f64::NAN).is_err());
+        assert_eq!(b.sample().unwrap().u_applied_v, 0.0);
+    }
+
+    #[test]
+    fn deterministic_per_seed() {
+        let a = run(&mut backend(7), 200);
+        let b = run(&mut backend(7), 200);
+        let c = run(&mut backend(8), 200);
+        assert_eq!(a, b);
+        assert_ne!(
+            a.iter().map(|s| s.i_a_a).collect::<Vec<_>>(),
+            c.iter().map(|s| s.i_a_a).collect::<Vec<_>>()
+        );
     }
 }

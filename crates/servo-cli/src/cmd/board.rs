@@ -1,10 +1,150 @@
-//! `servo board` (not yet implemented).
+//! `servo board --pty`: a virtual board (firmware behaviour + simulated gearmotor in real time)
+//! on a pseudo-terminal, for running `servo run --backend serial` without hardware.
 
+use crate::plant_args::PlantArgs;
+use anyhow::{bail, Context};
+use serialport::SerialPort;
+use servo_core::safety::SafetyLimits;
+use servo_hw::board::{BoardConfig, BoardReport, VirtualBoard};
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// Run a virtual board on a pseudo-terminal (or an existing serial port) until Ctrl-C.
 #[derive(Debug, clap::Parser)]
-pub struct Board {}
+pub struct Board {
+    /// Create a pseudo-terminal and serve on it; its path is printed ("board ready on PATH").
+    #[arg(long, required_unless_present = "port")]
+    pub pty: bool,
+    /// Serve on an existing serial port instead of a pty.
+    #[arg(long, value_name = "PATH", conflicts_with = "pty")]
+    pub port: Option<String>,
+    /// Baud rate for --port [bit/s].
+    #[arg(long, default_value_t = 115_200, value_name = "BAUD")]
+    pub baud: u32,
+    /// Also write the pty path to this file (for scripts).
+    #[arg(long = "path-file", value_name = "FILE")]
+    pub path_file: Option<PathBuf>,
+    /// Control (sample) period of the board [ms].
+    #[arg(long = "period-ms", default_value_t = 1.0, value_name = "MS")]
+    pub period_ms: f64,
+    /// Board watchdog: no voltage command for this long means 0 V and a fault [ms].
+    #[arg(long = "watchdog-ms", default_value_t = 50.0, value_name = "MS")]
+    pub watchdog_ms: f64,
+    /// Voltage limit of the driver input [V].
+    #[arg(long = "voltage-limit-v", default_value_t = SafetyLimits::default().voltage_limit_v, value_name = "V")]
+    pub voltage_limit_v: f64,
+    /// Soft lower position limit of the load [rad].
+    #[arg(long = "theta-min-rad", default_value_t = SafetyLimits::default().theta_min_rad, value_name = "RAD", allow_hyphen_values = true)]
+    pub theta_min_rad: f64,
+    /// Soft upper position limit of the load [rad].
+    #[arg(long = "theta-max-rad", default_value_t = SafetyLimits::default().theta_max_rad, value_name = "RAD", allow_hyphen_values = true)]
+    pub theta_max_rad: f64,
+    /// Over-current trip level [A].
+    #[arg(long = "i-trip-a", default_value_t = SafetyLimits::default().i_trip_a, value_name = "A")]
+    pub i_trip_a: f64,
+    /// Current-sense scale reported to the host [A/LSB].
+    #[arg(
+        long = "current-scale-a",
+        default_value_t = 1e-3,
+        value_name = "A_PER_LSB"
+    )]
+    pub current_scale_a: f64,
+    #[command(flatten)]
+    pub plant: PlantArgs,
+}
 
 impl Board {
+    pub fn config(&self) -> anyhow::Result<BoardConfig> {
+        if !(self.period_ms.is_finite() && self.period_ms > 0.0) {
+            bail!("--period-ms must be > 0 ms, got {}", self.period_ms);
+        }
+        let cfg = BoardConfig {
+            sample_period_s: self.period_ms * 1e-3,
+            watchdog_s: self.watchdog_ms * 1e-3,
+            limits: SafetyLimits {
+                voltage_limit_v: self.voltage_limit_v,
+                theta_min_rad: self.theta_min_rad,
+                theta_max_rad: self.theta_max_rad,
+                i_trip_a: self.i_trip_a,
+            },
+            current_scale_a_per_lsb: self.current_scale_a,
+            ..BoardConfig::default()
+        };
+        cfg.limits
+            .validate()
+            .context("--voltage-limit-v / --theta-min-rad / --theta-max-rad / --i-trip-a")?;
+        Ok(cfg)
+    }
+
     pub fn run(self) -> anyhow::Result<()> {
-        anyhow::bail!("`servo board` is not implemented yet")
+        let (plant, sensors) = self.plant.load()?;
+        let cfg = self.config()?;
+        let mut board = VirtualBoard::new(&plant, sensors, cfg)
+            .context("virtual board (--period-ms, --watchdog-ms, --current-scale-a)")?;
+        let stop = Arc::new(AtomicBool::new(false));
+        {
+            let stop = stop.clone();
+            ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
+                .context("installing the Ctrl-C handler")?;
+        }
+        let report = if self.pty {
+            let (mut master, slave) =
+                serialport::TTYPort::pair().context("creating a pseudo-terminal")?;
+            let path = slave.name().context("the pseudo-terminal has no path")?;
+            if let Some(f) = &self.path_file {
+                std::fs::write(f, format!("{path}\n"))
+                    .with_context(|| format!("--path-file {}", f.display()))?;
+            }
+            println!("board ready on {path}");
+            println!(
+                "  {} | period {} ms | watchdog {} ms | limits ±{} V, [{}, {}] rad, {} A | Ctrl-C to quit",
+                servo_hw::board::FIRMWARE,
+                self.period_ms,
+                self.watchdog_ms,
+                cfg.limits.voltage_limit_v,
+                cfg.limits.theta_min_rad,
+                cfg.limits.theta_max_rad,
+                cfg.limits.i_trip_a
+            );
+            let _ = std::io::stdout().flush();
+            // The slave stays open here so that hosts can come and go without hanging up the pty.
+            let r = board
+                .serve(&mut master, &stop)
+                .context("serving on the pseudo-terminal")?;
+            drop(slave);
+            r
+        } else {
+            let Some(port) = &self.port else {
+                bail!("give --pty or --port PATH")
+            };
+            let mut p = serialport::new(port, self.baud)
+                .open()
+                .with_context(|| format!("opening --port {port}"))?;
+            println!("board ready on {port}");
+            let _ = std::io::stdout().flush();
+            board
+                .serve(&mut *p, &stop)
+                .with_context(|| format!("serving on {port}"))?
+        };
+        print_report(&report);
+        Ok(())
+    }
+}
+
+fn print_report(r: &BoardReport) {
+    println!(
+        "board stopped: {} run(s), {} samples sent, {} missed deadlines, {} late ticks (max {:.1} ms late), {} CRC errors, {} framing errors",
+        r.runs,
+        r.samples,
+        r.missed_deadlines,
+        r.late_ticks,
+        r.max_lateness_s * 1e3,
+        r.crc_errors,
+        r.framing_errors
+    );
+    for (code, text) in &r.faults {
+        println!("  fault {code:?}: {text}");
     }
 }

@@ -1,10 +1,85 @@
-//! `servo export` (not yet implemented).
+//! `servo export`: convert a log between MCAP and servo's CSV.
+//!
+//! ```text
+//! servo export run.mcap -o run.csv            MCAP -> CSV (time_s,u_V,theta_l_rad,i_a_A,ref_rad,omega_l_rad_s)
+//! servo export lab.csv -o lab.mcap --columns time=t_s,theta_l=thl_meas_deg:deg,u=u_V
+//! ```
+//!
+//! A truncated MCAP (killed run) exports what is readable and says what was lost.
 
+use crate::io::mcap_read::loop_msgs_of;
+use crate::io::{meta_keys, read_log_with_meta, write_csv, LogFormat, McapLog, McapLogOptions};
+use anyhow::bail;
+use std::path::PathBuf;
+
+/// Convert a log: MCAP -> CSV, or CSV (servo's or foreign with --columns) -> MCAP/CSV.
 #[derive(Debug, clap::Parser)]
-pub struct Export {}
+pub struct Export {
+    /// Input log (.mcap or .csv).
+    pub input: PathBuf,
+    /// Output file; the format follows the extension (.csv or .mcap). Default: the input with
+    /// .csv (or .mcap for a CSV input).
+    #[arg(short = 'o', long = "output", value_name = "FILE")]
+    pub output: Option<PathBuf>,
+    /// Column map of a foreign CSV input, e.g. `time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A`.
+    #[arg(long, value_name = "MAP")]
+    pub columns: Option<String>,
+}
 
 impl Export {
     pub fn run(self) -> anyhow::Result<()> {
-        anyhow::bail!("`servo export` is not implemented yet")
+        let in_fmt = LogFormat::of(&self.input)?;
+        let output = match &self.output {
+            Some(o) => o.clone(),
+            None => self.input.with_extension(match in_fmt {
+                LogFormat::Mcap => "csv",
+                LogFormat::Csv => "mcap",
+            }),
+        };
+        if output == self.input {
+            bail!(
+                "the output {} is the input; give another name with -o",
+                output.display()
+            );
+        }
+        let out_fmt = LogFormat::of(&output)?;
+        let (rec, meta) = read_log_with_meta(&self.input, self.columns.as_deref())?;
+        for n in &meta.notes {
+            eprintln!("note: {n}");
+        }
+        match out_fmt {
+            LogFormat::Csv => write_csv(&output, &rec)?,
+            LogFormat::Mcap => {
+                let mut entries = meta.entries.clone();
+                entries
+                    .entry(meta_keys::SERVO_VERSION.into())
+                    .or_insert_with(|| env!("CARGO_PKG_VERSION").into());
+                entries.insert("converted_from".into(), self.input.display().to_string());
+                if let Some(c) = &meta.columns {
+                    entries.insert("columns".into(), c.clone());
+                }
+                let opts = McapLogOptions {
+                    start_unix_ns: 0,
+                    ..McapLogOptions::default()
+                };
+                let mut log = McapLog::create(&output, &entries, opts)?;
+                for m in loop_msgs_of(&rec) {
+                    log.write_loop(&m)?;
+                }
+                if !meta.summary.is_empty() {
+                    log.write_summary(&meta.summary)?;
+                }
+                log.finish()?;
+            }
+        }
+        println!(
+            "{} -> {}: {} samples, {:.3} s, signals {}",
+            self.input.display(),
+            output.display(),
+            rec.len(),
+            rec.time_s.last().copied().unwrap_or(0.0) - rec.time_s.first().copied().unwrap_or(0.0),
+            rec.signals().join(", ")
+        );
+        Ok(())
     }
 }

@@ -15,7 +15,9 @@
 use anyhow::{anyhow, bail, Context};
 use servo_core::ident::combined::{identify_combined, CombinedConfig, CombinedFit};
 use servo_core::ident::electrical::{identify_electrical, ElectricalFit};
-use servo_core::ident::friction::{friction_points, identify_friction, FrictionConfig, FrictionFit};
+use servo_core::ident::friction::{
+    friction_points, identify_friction, FrictionConfig, FrictionFit,
+};
 use servo_core::ident::inertia::{identify_inertia, identify_inertia_ls, InertiaFit};
 use servo_core::ident::phases::{find_phases, PhaseConfig};
 use servo_core::ident::{Estimate, Experiment, IdentError};
@@ -115,9 +117,17 @@ pub struct Identify {
     pub ramp: bool,
 
     /// Recipes of the `--ramp` experiments.
-    #[arg(long = "friction-recipe", value_name = "TOML", default_value = "experiments/identify_friction.toml")]
+    #[arg(
+        long = "friction-recipe",
+        value_name = "TOML",
+        default_value = "experiments/identify_friction.toml"
+    )]
     pub friction_recipe: PathBuf,
-    #[arg(long = "inertia-recipe", value_name = "TOML", default_value = "experiments/identify_inertia.toml")]
+    #[arg(
+        long = "inertia-recipe",
+        value_name = "TOML",
+        default_value = "experiments/identify_inertia.toml"
+    )]
     pub inertia_recipe: PathBuf,
 
     /// Directory for the `--ramp` logs.
@@ -181,7 +191,10 @@ impl Identify {
             }
         }
         if !(self.cutoff_hz > 0.0 && self.cutoff_hz.is_finite()) {
-            bail!("--cutoff-hz must be a positive frequency in Hz, got {}", self.cutoff_hz);
+            bail!(
+                "--cutoff-hz must be a positive frequency in Hz, got {}",
+                self.cutoff_hz
+            );
         }
         if let Some(a) = self.min_accel {
             if !(a > 0.0 && a.is_finite()) {
@@ -206,29 +219,40 @@ impl Identify {
                 1 => Some(self.columns[0].as_str()),
                 _ => Some(self.columns[k].as_str()),
             };
-            let rec = crate::io::read_log(path, cols).with_context(|| format!("reading log {}", path.display()))?;
+            let rec = crate::io::read_log(path, cols)
+                .with_context(|| format!("reading log {}", path.display()))?;
             records.push(rec);
             logs.push(path.clone());
         }
         if self.ramp {
-            for rec in crate::cmd::identify_ramp::run_experiments(&self, &params.params)? {
-                logs.push(PathBuf::from(&rec.source));
+            for path in crate::cmd::identify_ramp::run_experiments(&self, &params.params)? {
+                let rec = crate::io::read_log(&path, None)
+                    .with_context(|| format!("reading log {}", path.display()))?;
+                if !self.json {
+                    println!("logged {}", path.display());
+                }
                 records.push(rec);
+                logs.push(path);
             }
         }
         let mut exps = Vec::new();
         for (rec, path) in records.iter().zip(&logs) {
-            let e = Experiment::from_record(rec, &params.params).with_context(|| format!("log {}", path.display()))?;
+            let e = Experiment::from_record(rec, &params.params)
+                .with_context(|| format!("log {}", path.display()))?;
             exps.push(e);
         }
         let report = self.estimate(&exps, &params.params)?;
         if self.json {
-            println!("{}", serde_json::to_string_pretty(&self.json_report(&report, &logs))?);
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&self.json_report(&report, &logs))?
+            );
         } else {
             print!("{}", self.text_report(&report, &logs, &params.params));
         }
         if let Some(path) = &self.plot {
-            std::fs::write(path, plot_svg(&report, &exps)?).with_context(|| format!("writing --plot {}", path.display()))?;
+            std::fs::write(path, plot_svg(&report, &exps)?)
+                .with_context(|| format!("writing --plot {}", path.display()))?;
         }
         if let Some(out) = &self.output {
             let mut file = params.clone();
@@ -245,7 +269,9 @@ impl Identify {
             if let Some((e, _)) = j {
                 file.params.j_eq = Some(e.value);
             }
-            file.params.validate().map_err(|e| anyhow!("identified parameters are not physical: {e}"))?;
+            file.params
+                .validate()
+                .map_err(|e| anyhow!("identified parameters are not physical: {e}"))?;
             file.provenance = Some(provenance(&report, &logs));
             file.save(out)?;
             if !self.json {
@@ -256,24 +282,35 @@ impl Identify {
     }
 
     fn friction_cfg(&self) -> FrictionConfig {
-        FrictionConfig { samples: self.samples, ..FrictionConfig::default() }
+        FrictionConfig {
+            samples: self.samples,
+            ..FrictionConfig::default()
+        }
     }
     fn phase_cfg(&self) -> PhaseConfig {
-        PhaseConfig { cutoff_hz: self.cutoff_hz, min_accel_rad_s2: self.min_accel, ..PhaseConfig::default() }
+        PhaseConfig {
+            cutoff_hz: self.cutoff_hz,
+            min_accel_rad_s2: self.min_accel,
+            ..PhaseConfig::default()
+        }
     }
 
     /// Runs the chosen (or every applicable) method.
     pub fn estimate(&self, exps: &[Experiment], p: &PlantParams) -> anyhow::Result<Report> {
         let fcfg = self.friction_cfg();
         let pcfg = self.phase_cfg();
-        let ccfg = CombinedConfig { cutoff_hz: self.cutoff_hz, ..CombinedConfig::default() };
-        let mut r = Report::default();
-        let inertia = |exps: &[Experiment], f: Option<&FrictionFit>| -> Result<InertiaFit, IdentError> {
-            match self.inertia_method {
-                InertiaMethod::Phases => identify_inertia(exps, f, &pcfg),
-                InertiaMethod::Ls => identify_inertia_ls(exps, f, &pcfg),
-            }
+        let ccfg = CombinedConfig {
+            cutoff_hz: self.cutoff_hz,
+            ..CombinedConfig::default()
         };
+        let mut r = Report::default();
+        let inertia =
+            |exps: &[Experiment], f: Option<&FrictionFit>| -> Result<InertiaFit, IdentError> {
+                match self.inertia_method {
+                    InertiaMethod::Phases => identify_inertia(exps, f, &pcfg),
+                    InertiaMethod::Ls => identify_inertia_ls(exps, f, &pcfg),
+                }
+            };
         match self.method {
             Some(Method::Friction) => r.friction = Some(identify_friction(exps, p.n, &fcfg)?),
             Some(Method::Combined) => r.combined = Some(identify_combined(exps, p.n, &ccfg)?),
@@ -283,7 +320,11 @@ impl Identify {
                 if ir.is_empty() {
                     inertia(exps, None)?; // produces the explanation
                 }
-                let f = if fr.is_empty() { None } else { identify_friction(&fr, p.n, &fcfg).ok() };
+                let f = if fr.is_empty() {
+                    None
+                } else {
+                    identify_friction(&fr, p.n, &fcfg).ok()
+                };
                 r.friction = f.clone();
                 r.inertia = Some(inertia(&ir, f.as_ref())?);
             }
@@ -322,7 +363,10 @@ impl Identify {
                     }
                 }
                 if r.b_eq().is_none() && r.j_eq().is_none() {
-                    bail!("nothing could be identified from these logs:\n  {}", r.skipped.join("\n  "));
+                    bail!(
+                        "nothing could be identified from these logs:\n  {}",
+                        r.skipped.join("\n  ")
+                    );
                 }
             }
         }
@@ -345,7 +389,10 @@ impl Identify {
             )
         };
         if let Some(f) = &r.friction {
-            s.push_str(&format!("friction (4.1): {} constant-speed segments\n", f.points.len()));
+            s.push_str(&format!(
+                "friction (4.1): {} constant-speed segments\n",
+                f.points.len()
+            ));
             for pt in &f.points {
                 s.push_str(&format!(
                     "    log {} {:7.3}..{:7.3} s  w_m = {:9.2} rad/s  tau_m = {:+.4e} N m\n",
@@ -465,7 +512,9 @@ fn split_logs(
     for e in exps {
         let pts = friction_points(std::slice::from_ref(e), fcfg)?;
         let mags: Vec<f64> = pts.iter().map(|p| p.omega_m_rad_s.abs()).collect();
-        let (lo, hi) = mags.iter().fold((f64::INFINITY, 0.0_f64), |(a, b), &m| (a.min(m), b.max(m)));
+        let (lo, hi) = mags
+            .iter()
+            .fold((f64::INFINITY, 0.0_f64), |(a, b), &m| (a.min(m), b.max(m)));
         if pts.len() >= 2 && hi - lo > 0.1 * hi {
             fr.push(e.clone());
         }
@@ -478,24 +527,44 @@ fn split_logs(
 
 fn provenance(r: &Report, logs: &[PathBuf]) -> toml::Table {
     let mut t = toml::Table::new();
-    t.insert("tool".into(), toml::Value::String(format!("servo identify {}", env!("CARGO_PKG_VERSION"))));
+    t.insert(
+        "tool".into(),
+        toml::Value::String(format!("servo identify {}", env!("CARGO_PKG_VERSION"))),
+    );
     t.insert("date".into(), toml::Value::String(utc_now()));
     t.insert(
         "logs".into(),
-        toml::Value::Array(logs.iter().map(|p| toml::Value::String(p.display().to_string())).collect()),
+        toml::Value::Array(
+            logs.iter()
+                .map(|p| toml::Value::String(p.display().to_string()))
+                .collect(),
+        ),
     );
     let mut methods = Vec::new();
-    for (key, e) in [("b_eq", r.b_eq()), ("tau_sf", r.tau_sf()), ("j_eq", r.j_eq())] {
+    for (key, e) in [
+        ("b_eq", r.b_eq()),
+        ("tau_sf", r.tau_sf()),
+        ("j_eq", r.j_eq()),
+    ] {
         if let Some((e, how)) = e {
             methods.push(format!("{key}: {how}"));
-            t.insert(format!("{key}_ci95"), toml::Value::Array(vec![e.ci95.0.into(), e.ci95.1.into()]));
+            t.insert(
+                format!("{key}_ci95"),
+                toml::Value::Array(vec![e.ci95.0.into(), e.ci95.1.into()]),
+            );
             t.insert(format!("{key}_std_err"), toml::Value::Float(e.std_err));
         }
     }
     t.insert("method".into(), toml::Value::String(methods.join(", ")));
     if let Some(el) = &r.electrical {
-        t.insert("k_drv_identified".into(), toml::Value::Float(el.k_drv.value));
-        t.insert("r_eq_identified_ohm".into(), toml::Value::Float(el.r_eq.value));
+        t.insert(
+            "k_drv_identified".into(),
+            toml::Value::Float(el.k_drv.value),
+        );
+        t.insert(
+            "r_eq_identified_ohm".into(),
+            toml::Value::Float(el.r_eq.value),
+        );
     }
     t
 }
@@ -516,7 +585,12 @@ fn utc_now() -> String {
     let d = doy - (153 * mp + 2) / 5 + 1;
     let m = if mp < 10 { mp + 3 } else { mp - 9 };
     let y = yoe + era * 400 + if m <= 2 { 1 } else { 0 };
-    format!("{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem % 3600 / 60, rem % 60)
+    format!(
+        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
 }
 
 /// The plot: torque vs speed (plateau means and the fitted friction line) and, when there are
@@ -525,7 +599,11 @@ fn plot_svg(r: &Report, exps: &[Experiment]) -> anyhow::Result<String> {
     use crate::plot::{line_chart_svg, Chart, Series};
     let mut charts = Vec::new();
     if let Some(f) = &r.friction {
-        let mut pts: Vec<(f64, f64)> = f.points.iter().map(|p| (p.omega_m_rad_s, p.tau_m_nm)).collect();
+        let mut pts: Vec<(f64, f64)> = f
+            .points
+            .iter()
+            .map(|p| (p.omega_m_rad_s, p.tau_m_nm))
+            .collect();
         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
         let (px, py): (Vec<f64>, Vec<f64>) = pts.into_iter().unzip();
         let wmax = px.iter().fold(0.0_f64, |m, w| m.max(w.abs()));
@@ -540,14 +618,26 @@ fn plot_svg(r: &Report, exps: &[Experiment]) -> anyhow::Result<String> {
         charts.push(line_chart_svg(
             &chart,
             &[
-                Series { label: "plateau means (measured)", x: &px, y: &py },
-                Series { label: "fit B_eq w + tau_sf/N sign(w)", x: &lx, y: &ly },
+                Series {
+                    label: "plateau means (measured)",
+                    x: &px,
+                    y: &py,
+                },
+                Series {
+                    label: "fit B_eq w + tau_sf/N sign(w)",
+                    x: &lx,
+                    y: &ly,
+                },
             ],
         )?);
     }
     if let Some(i) = &r.inertia {
         if !i.phases.is_empty() {
-            let mut pts: Vec<(f64, f64)> = i.phases.iter().map(|p| (p.accel_rad_s2, p.tau_i_nm)).collect();
+            let mut pts: Vec<(f64, f64)> = i
+                .phases
+                .iter()
+                .map(|p| (p.accel_rad_s2, p.tau_i_nm))
+                .collect();
             pts.sort_by(|a, b| a.0.total_cmp(&b.0));
             let (px, py): (Vec<f64>, Vec<f64>) = pts.into_iter().unzip();
             let amax = px.iter().fold(0.0_f64, |m, a| m.max(a.abs()));
@@ -561,7 +651,18 @@ fn plot_svg(r: &Report, exps: &[Experiment]) -> anyhow::Result<String> {
             };
             charts.push(line_chart_svg(
                 &chart,
-                &[Series { label: "phase means (measured)", x: &px, y: &py }, Series { label: "fit J_eq a_m", x: &lx, y: &ly }],
+                &[
+                    Series {
+                        label: "phase means (measured)",
+                        x: &px,
+                        y: &py,
+                    },
+                    Series {
+                        label: "fit J_eq a_m",
+                        x: &lx,
+                        y: &ly,
+                    },
+                ],
             )?);
             // Speed record with the phases marked.
             if let Some(e) = exps.get(i.phases[0].experiment) {
@@ -570,20 +671,39 @@ fn plot_svg(r: &Report, exps: &[Experiment]) -> anyhow::Result<String> {
                 let wy: Vec<f64> = e.omega_m_rad_s.iter().step_by(step).copied().collect();
                 let mut mx = Vec::new();
                 let mut my = Vec::new();
-                for p in i.phases.iter().filter(|p| p.experiment == i.phases[0].experiment) {
+                for p in i
+                    .phases
+                    .iter()
+                    .filter(|p| p.experiment == i.phases[0].experiment)
+                {
                     let w0 = e.omega_m_rad_s[p.start];
                     mx.extend([e.time_s[p.start], e.time_s[p.end - 1]]);
-                    my.extend([w0, w0 + p.accel_rad_s2 * (e.time_s[p.end - 1] - e.time_s[p.start])]);
+                    my.extend([
+                        w0,
+                        w0 + p.accel_rad_s2 * (e.time_s[p.end - 1] - e.time_s[p.start]),
+                    ]);
                 }
                 let chart = Chart {
-                    title: "Inertia test: motor speed and the detected constant-acceleration phases",
+                    title:
+                        "Inertia test: motor speed and the detected constant-acceleration phases",
                     x_label: "t [s]",
                     y_label: "omega_m [rad/s]",
                     ..Chart::default()
                 };
                 charts.push(line_chart_svg(
                     &chart,
-                    &[Series { label: "omega_m", x: &tx, y: &wy }, Series { label: "phases (fitted slopes)", x: &mx, y: &my }],
+                    &[
+                        Series {
+                            label: "omega_m",
+                            x: &tx,
+                            y: &wy,
+                        },
+                        Series {
+                            label: "phases (fitted slopes)",
+                            x: &mx,
+                            y: &my,
+                        },
+                    ],
                 )?);
             }
         }
@@ -604,8 +724,14 @@ fn stack_svgs(parts: &[String]) -> String {
     );
     for (k, p) in parts.iter().enumerate() {
         let body = p.trim_start_matches(|c| c != '<');
-        let body = if body.starts_with("<?xml") { body.split_once("?>").map(|x| x.1).unwrap_or(body) } else { body };
-        let body = body.trim_start().replacen("<svg ", &format!("<svg y=\"{}\" ", k * h), 1);
+        let body = if body.starts_with("<?xml") {
+            body.split_once("?>").map(|x| x.1).unwrap_or(body)
+        } else {
+            body
+        };
+        let body = body
+            .trim_start()
+            .replacen("<svg ", &format!("<svg y=\"{}\" ", k * h), 1);
         s.push_str(&body);
         s.push('\n');
     }

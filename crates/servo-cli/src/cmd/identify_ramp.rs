@@ -11,9 +11,11 @@ use anyhow::{bail, Context};
 use servo_core::record::Record;
 use servo_core::PlantParams;
 use servo_hw::backend::Backend;
-use std::path::Path;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
 use super::identify::Identify;
+use crate::io::{LoopMsg, McapLog, McapLogOptions};
 
 /// Friction staircase recipe.
 #[derive(Debug, Clone, serde::Deserialize)]
@@ -60,21 +62,34 @@ fn half() -> f64 {
 }
 
 fn load_toml<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> anyhow::Result<T> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {what} recipe {}", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading {what} recipe {}", path.display()))?;
     toml::from_str(&text).with_context(|| format!("in {what} recipe {}", path.display()))
 }
 
 impl FrictionRecipe {
     pub fn load(path: &Path) -> anyhow::Result<FrictionRecipe> {
         let r: FrictionRecipe = load_toml(path, "friction")?;
-        if r.speeds_rad_s.is_empty() || r.speeds_rad_s.iter().any(|w| !(w.is_finite() && *w > 0.0)) {
-            bail!("{}: speeds_rad_s must be a non-empty list of positive motor speeds [rad/s]", path.display());
+        if r.speeds_rad_s.is_empty() || r.speeds_rad_s.iter().any(|w| !(w.is_finite() && *w > 0.0))
+        {
+            bail!(
+                "{}: speeds_rad_s must be a non-empty list of positive motor speeds [rad/s]",
+                path.display()
+            );
         }
         if !(r.step_duration_s >= 1.0 && r.step_duration_s.is_finite()) {
-            bail!("{}: step_duration_s must be >= 1 s (the estimator needs settled segments), got {}", path.display(), r.step_duration_s);
+            bail!(
+                "{}: step_duration_s must be >= 1 s (the estimator needs settled segments), got {}",
+                path.display(),
+                r.step_duration_s
+            );
         }
         if !(r.rest_s >= 0.0 && r.rest_s.is_finite()) {
-            bail!("{}: rest_s must be >= 0 s, got {}", path.display(), r.rest_s);
+            bail!(
+                "{}: rest_s must be >= 0 s, got {}",
+                path.display(),
+                r.rest_s
+            );
         }
         Ok(r)
     }
@@ -99,10 +114,20 @@ impl InertiaRecipe {
     pub fn load(path: &Path) -> anyhow::Result<InertiaRecipe> {
         let r: InertiaRecipe = load_toml(path, "inertia")?;
         if !(r.accel_rad_s2 > 0.0 && r.accel_rad_s2.is_finite()) {
-            bail!("{}: accel_rad_s2 must be > 0 rad/s^2, got {}", path.display(), r.accel_rad_s2);
+            bail!(
+                "{}: accel_rad_s2 must be > 0 rad/s^2, got {}",
+                path.display(),
+                r.accel_rad_s2
+            );
         }
-        if !(r.peak_speed_rad_s > r.base_speed_rad_s && r.base_speed_rad_s >= 0.0 && r.peak_speed_rad_s.is_finite()) {
-            bail!("{}: need 0 <= base_speed_rad_s < peak_speed_rad_s", path.display());
+        if !(r.peak_speed_rad_s > r.base_speed_rad_s
+            && r.base_speed_rad_s >= 0.0
+            && r.peak_speed_rad_s.is_finite())
+        {
+            bail!(
+                "{}: need 0 <= base_speed_rad_s < peak_speed_rad_s",
+                path.display()
+            );
         }
         if r.cycles < 2 {
             bail!("{}: cycles must be >= 2 (eq. 69 averages over pairs; one pair gives no uncertainty)", path.display());
@@ -127,9 +152,15 @@ impl InertiaRecipe {
         }
         let p = tc % (2.0 * half);
         if p < half {
-            Some((self.base_speed_rad_s + self.accel_rad_s2 * p, self.accel_rad_s2))
+            Some((
+                self.base_speed_rad_s + self.accel_rad_s2 * p,
+                self.accel_rad_s2,
+            ))
         } else {
-            Some((self.peak_speed_rad_s - self.accel_rad_s2 * (p - half), -self.accel_rad_s2))
+            Some((
+                self.peak_speed_rad_s - self.accel_rad_s2 * (p - half),
+                -self.accel_rad_s2,
+            ))
         }
     }
 }
@@ -140,8 +171,20 @@ pub fn run_speed_loop(
     backend: &mut dyn Backend,
     p: &PlantParams,
     source: &str,
-    mut reference: impl FnMut(f64) -> Option<(f64, f64)>,
+    reference: impl FnMut(f64) -> Option<(f64, f64)>,
 ) -> anyhow::Result<Record> {
+    Ok(run_speed_loop_logged(backend, p, source, reference)?.0)
+}
+
+/// As [`run_speed_loop`], also returning one [`LoopMsg`] per sample for the MCAP log (no position
+/// reference: `ref_rad` and `err_rad` are null; `omega_l_rad_s` is the differenced encoder speed).
+pub fn run_speed_loop_logged(
+    backend: &mut dyn Backend,
+    p: &PlantParams,
+    source: &str,
+    mut reference: impl FnMut(f64) -> Option<(f64, f64)>,
+) -> anyhow::Result<(Record, Vec<LoopMsg>)> {
+    let mut msgs = Vec::new();
     let info = backend.info();
     let dt = info.sample_period_s;
     let u_max = info.voltage_limit_v;
@@ -151,7 +194,10 @@ pub fn run_speed_loop(
     let kp = omega_c * t_m / k_m;
     let ki = kp / t_m;
     let tau_f = 0.005; // speed filter time constant [s]
-    let mut rec = Record { source: source.to_string(), ..Record::default() };
+    let mut rec = Record {
+        source: source.to_string(),
+        ..Record::default()
+    };
     let (mut u_log, mut th_log, mut i_log) = (Vec::new(), Vec::new(), Vec::new());
     let mut last_theta: Option<f64> = None;
     let (mut w_f, mut integ) = (0.0, 0.0);
@@ -160,7 +206,9 @@ pub fn run_speed_loop(
         loop {
             let s = backend.sample()?;
             let t = k as f64 * dt;
-            let Some((w_ref, a_ref)) = reference(t) else { break };
+            let Some((w_ref, a_ref)) = reference(t) else {
+                break;
+            };
             let w_meas = match last_theta {
                 Some(th) => (s.theta_l_rad - th) / dt * p.n,
                 None => 0.0,
@@ -176,6 +224,20 @@ pub fn run_speed_loop(
                 integ += ki * err * dt;
             }
             backend.apply(u)?;
+            msgs.push(LoopMsg {
+                time_s: s.time_s,
+                ref_rad: f64::NAN,
+                theta_l_rad: s.theta_l_rad,
+                omega_l_rad_s: w_meas / p.n,
+                err_rad: f64::NAN,
+                u_v: u,
+                ff_v: ff,
+                p_v: kp * err,
+                i_v: integ,
+                d_v: 0.0,
+                i_a_a: s.i_a_a,
+                saturated: u != u_unsat,
+            });
             rec.time_s.push(s.time_s);
             th_log.push(s.theta_l_rad);
             i_log.push(s.i_a_a);
@@ -189,21 +251,43 @@ pub fn run_speed_loop(
     rec.u_v = Some(u_log);
     rec.theta_l_rad = Some(th_log);
     rec.i_a_a = Some(i_log);
-    Ok(rec)
+    Ok((rec, msgs))
 }
 
-/// Runs both experiments on the simulator described by the command's plant options and returns
-/// their records (friction staircase, inertia ramps).
-pub fn run_experiments(args: &Identify, p: &PlantParams) -> anyhow::Result<Vec<Record>> {
+/// Runs both experiments on the simulator described by the command's plant options, logs each
+/// to MCAP in `--log-dir` (identify_friction.mcap, identify_inertia.mcap) and returns the paths.
+pub fn run_experiments(args: &Identify, p: &PlantParams) -> anyhow::Result<Vec<PathBuf>> {
     let fr = FrictionRecipe::load(&args.friction_recipe).context("--friction-recipe")?;
     let ir = InertiaRecipe::load(&args.inertia_recipe).context("--inertia-recipe")?;
     let (plant, sensors) = args.plant.load()?;
     let dt = 1e-3;
+    std::fs::create_dir_all(&args.log_dir)
+        .with_context(|| format!("--log-dir {}", args.log_dir.display()))?;
     let mut out = Vec::new();
-    let mut b = servo_hw::sim::SimBackend::new(&plant, sensors, dt)?;
-    out.push(run_speed_loop(&mut b, p, "ramp: friction staircase (sim)", |t| fr.reference(t).map(|w| (w, 0.0)))?);
-    let mut b = servo_hw::sim::SimBackend::new(&plant, sensors, dt)?;
-    out.push(run_speed_loop(&mut b, p, "ramp: inertia ramps (sim)", |t| ir.reference(t))?);
+    for (name, recipe) in [
+        ("identify_friction", &args.friction_recipe),
+        ("identify_inertia", &args.inertia_recipe),
+    ] {
+        let mut b = servo_hw::sim::SimBackend::new(&plant, sensors, dt)?;
+        let source = format!("servo identify --ramp: {name} (sim)");
+        let (_, msgs) = if name == "identify_friction" {
+            run_speed_loop_logged(&mut b, p, &source, |t| fr.reference(t).map(|w| (w, 0.0)))?
+        } else {
+            run_speed_loop_logged(&mut b, p, &source, |t| ir.reference(t))?
+        };
+        let path = args.log_dir.join(format!("{name}.mcap"));
+        let mut meta = BTreeMap::new();
+        meta.insert("experiment".to_string(), name.to_string());
+        meta.insert("recipe".to_string(), recipe.display().to_string());
+        meta.insert("backend".to_string(), "sim".to_string());
+        let mut log = McapLog::create(&path, &meta, McapLogOptions::default())
+            .with_context(|| format!("creating log {}", path.display()))?;
+        for m in &msgs {
+            log.write_loop(m)?;
+        }
+        log.finish()?;
+        out.push(path);
+    }
     Ok(out)
 }
 
@@ -213,7 +297,12 @@ mod tests {
 
     #[test]
     fn staircase_reference_steps_through_the_speeds() {
-        let r = FrictionRecipe { speeds_rad_s: vec![10.0, 20.0], step_duration_s: 2.0, both_directions: true, rest_s: 1.0 };
+        let r = FrictionRecipe {
+            speeds_rad_s: vec![10.0, 20.0],
+            step_duration_s: 2.0,
+            both_directions: true,
+            rest_s: 1.0,
+        };
         assert_eq!(r.reference(0.5), Some(0.0));
         assert_eq!(r.reference(1.5), Some(10.0));
         assert_eq!(r.reference(3.5), Some(20.0));
@@ -224,7 +313,13 @@ mod tests {
 
     #[test]
     fn ramps_reference_is_a_triangle() {
-        let r = InertiaRecipe { accel_rad_s2: 100.0, peak_speed_rad_s: 100.0, base_speed_rad_s: 0.0, cycles: 2, rest_s: 0.0 };
+        let r = InertiaRecipe {
+            accel_rad_s2: 100.0,
+            peak_speed_rad_s: 100.0,
+            base_speed_rad_s: 0.0,
+            cycles: 2,
+            rest_s: 0.0,
+        };
         assert_eq!(r.reference(0.5), Some((50.0, 100.0)));
         assert_eq!(r.reference(1.5), Some((50.0, -100.0)));
         assert!(r.reference(4.1).is_none());

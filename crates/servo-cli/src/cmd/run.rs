@@ -1,10 +1,474 @@
-//! `servo run` (not yet implemented).
+//! `servo run`: the position loop on the simulator (default) or a board, logged to MCAP/CSV,
+//! with a summary of tracking error, overshoot, settling and saturation at the end.
+//!
+//! ```text
+//! servo run --gains gains.toml --ref step:1.5 --duration 5 --log run.mcap
+//! servo run --gains gains.toml --ref step:90deg --plant-effect backlash:gap=0.04 --csv run.csv
+//! servo run --voltage step:3 --duration 2 --log open_loop.mcap        (open loop, no gains)
+//! servo run --experiment experiments/steps.toml --gains gains.toml --log steps.mcap
+//! ```
 
+use crate::gains_file::GainsFile;
+use crate::io::{meta_keys, write_csv, McapLog, McapLogOptions};
+use crate::model_file::ModelFile;
+use crate::plant_args::PlantArgs;
+use crate::reference_file::load_experiment;
+use crate::runner::controller::{
+    ff_name, parse_ff, pid_config, AntiWindupArg, DerivativeOnArg, DiscretizationArg, PidOptions,
+};
+use crate::runner::{self, Program, RunConfig, RunOutput, StopReason};
+use anyhow::{anyhow, bail, Context};
+use servo_core::control::{Feedforward, FeedforwardParams, Reference};
+use servo_hw::{Backend, SimBackend};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Which backend runs the loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackendKind {
+    /// The simulated gearmotor (`--plant`, `--plant-effect`), faster than real time unless
+    /// `--realtime`.
+    Sim,
+    /// A board (or `servo board --pty`) on `--port` at `--baud`; its clock paces the loop.
+    Serial,
+}
+
+/// Run the position loop and log it.
 #[derive(Debug, clap::Parser)]
-pub struct Run {}
+pub struct Run {
+    /// Backend that runs the loop.
+    #[arg(long, value_enum, default_value = "sim")]
+    pub backend: BackendKind,
+
+    #[command(flatten)]
+    pub plant: PlantArgs,
+
+    /// Controller gains file (from `servo design -o gains.toml`); needed for closed loop.
+    #[arg(long, value_name = "FILE")]
+    pub gains: Option<PathBuf>,
+
+    /// Position reference at the load, e.g. `step:1.5`, `step:90deg@0.5`, `sine:amp=0.5,freq=1`,
+    /// `trap:distance=3,vmax=10,amax=100`, `square:amp=1,period=2`, `prbs:amp=0.5,bit=0.05`.
+    #[arg(long = "ref", value_name = "REF", conflicts_with_all = ["voltage", "experiment"])]
+    pub reference: Option<String>,
+
+    /// Experiment file (TOML, see `experiments/`): a sequence of closed-loop reference and
+    /// open-loop voltage segments. The run lasts the experiment's duration unless --duration.
+    #[arg(long, value_name = "FILE", conflicts_with = "voltage")]
+    pub experiment: Option<PathBuf>,
+
+    /// Open loop: driver input u [V] from a generator read in volts, e.g. `step:3`,
+    /// `sine:amp=2,freq=1`, `prbs:amp=3,bit=0.02`.
+    #[arg(long, value_name = "REF")]
+    pub voltage: Option<String>,
+
+    /// Run length [s] (default: the experiment's duration, else 5 s).
+    #[arg(long, value_name = "SECONDS")]
+    pub duration: Option<f64>,
+
+    /// Write the run to this MCAP file (Foxglove, PlotJuggler; `servo export` makes a CSV).
+    #[arg(long, value_name = "FILE.mcap")]
+    pub log: Option<PathBuf>,
+
+    /// Write the run to this CSV file (time_s,u_V,theta_l_rad,i_a_A,ref_rad,omega_l_rad_s).
+    #[arg(long, value_name = "FILE.csv")]
+    pub csv: Option<PathBuf>,
+
+    /// Write a plot of reference, angle and voltage (SVG).
+    #[arg(long, value_name = "FILE.svg")]
+    pub plot: Option<PathBuf>,
+
+    /// Pace the simulator to wall-clock time.
+    #[arg(long)]
+    pub realtime: bool,
+
+    /// Serial port of the board (`--backend serial`), e.g. /dev/ttyACM0 (see `servo ports`).
+    #[arg(long, value_name = "PATH", default_value = "/dev/ttyACM0")]
+    pub port: String,
+
+    /// Baud rate of the serial port [bit/s] (ignored by USB CDC and pseudo-terminals).
+    #[arg(long, value_name = "BAUD", default_value_t = 115_200)]
+    pub baud: u32,
+
+    /// A board silent for this long during a run is lost: 0 V, log closed, error [ms].
+    #[arg(long = "board-timeout-ms", value_name = "MS", default_value_t = 250.0)]
+    pub board_timeout_ms: f64,
+
+    /// Control period T_s [s] of the simulator (default: the gains file's ts_s, else 1e-3).
+    #[arg(long, value_name = "SECONDS")]
+    pub ts: Option<f64>,
+
+    /// Driver input limit [V] (default: the gains file's u_limit_v, else 10 V).
+    #[arg(long = "u-limit", value_name = "VOLTS")]
+    pub u_limit: Option<f64>,
+
+    /// Feedforward terms from the reference's speed and acceleration: `inertia` (J_eq and
+    /// back-EMF), `friction` (B_eq and tau_sf), `viscous`, `coulomb`, `back_emf`, `all`, `none`.
+    #[arg(long, value_name = "TERMS")]
+    pub ff: Option<String>,
+
+    /// Model file for the feedforward constants (J_eq, B_eq, tau_sf, ...); default Table 2.
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
+
+    /// Anti-windup scheme.
+    #[arg(long = "anti-windup", value_enum, default_value = "auto")]
+    pub anti_windup: AntiWindupArg,
+
+    /// Back-calculation anti-windup gain K_w [1/s] (overrides the gains file's kw).
+    #[arg(long, value_name = "PER_SECOND")]
+    pub kw: Option<f64>,
+
+    /// What the derivative acts on.
+    #[arg(long = "derivative-on", value_enum, default_value = "error")]
+    pub derivative_on: DerivativeOnArg,
+
+    /// Discretisation of the integral and derivative.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub discretization: DiscretizationArg,
+
+    /// Bandwidth of the speed estimate [Hz] (tracking-loop estimator on the encoder angle).
+    #[arg(long = "speed-bandwidth-hz", value_name = "HZ", default_value_t = 50.0)]
+    pub speed_bandwidth_hz: f64,
+}
+
+/// Everything a finished run leaves behind.
+#[derive(Debug)]
+pub struct RunReport {
+    pub output: RunOutput,
+    pub summary: runner::RunSummary,
+}
 
 impl Run {
     pub fn run(self) -> anyhow::Result<()> {
-        anyhow::bail!("`servo run` is not implemented yet")
+        let report = self.execute()?;
+        if report.output.stop == StopReason::Interrupted {
+            let t = report.output.record.time_s.last().copied().unwrap_or(0.0);
+            bail!("interrupted by Ctrl-C at t = {t:.3} s; the board was stopped at 0 V and the logs are closed");
+        }
+        Ok(())
     }
+
+    /// The program and the text describing it (for the log's metadata).
+    fn program(&self, duration_s: Option<f64>) -> anyhow::Result<(Program, String)> {
+        let d = duration_s.unwrap_or(5.0);
+        match (&self.reference, &self.voltage, &self.experiment) {
+            (Some(r), None, None) => Ok((
+                Program::Position(Reference::parse(r).map_err(|e| anyhow!("--ref `{r}`: {e}"))?),
+                r.clone(),
+            )),
+            (None, Some(v), None) => {
+                let r = Reference::parse(v).map_err(|e| anyhow!("--voltage `{v}`: {e}"))?;
+                Ok((Program::open_loop(r, d)?, format!("voltage {v}")))
+            }
+            (None, None, Some(path)) => {
+                let exp = load_experiment(path)?;
+                let text = std::fs::read_to_string(path).unwrap_or_default();
+                Ok((Program::Segments(exp.segments), text))
+            }
+            (None, None, None) => bail!(
+                "give a position reference (--ref step:1.5), an open-loop voltage (--voltage step:3) \
+                 or an experiment file (--experiment experiments/steps.toml)"
+            ),
+            _ => bail!("--ref, --voltage and --experiment exclude each other"),
+        }
+    }
+
+    /// Runs and reports; used by `servo run` and by tests.
+    pub fn execute(&self) -> anyhow::Result<RunReport> {
+        for p in [&self.log, &self.csv, &self.plot].into_iter().flatten() {
+            if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+                if !dir.is_dir() {
+                    bail!(
+                        "cannot write {}: folder {} does not exist",
+                        p.display(),
+                        dir.display()
+                    );
+                }
+            }
+        }
+        if let Some(l) = &self.log {
+            if l.extension().is_none_or(|e| e != "mcap") {
+                bail!(
+                    "--log {}: expected a .mcap file name (use --csv for CSV)",
+                    l.display()
+                );
+            }
+        }
+        if let Some(d) = self.duration {
+            if !(d.is_finite() && d > 0.0) {
+                bail!("--duration must be > 0 s, got {d}");
+            }
+        }
+        let (program, program_text) = self.program(self.duration)?;
+        let duration_s = self.duration.or(program.duration_s()).unwrap_or(5.0);
+        let gains = match &self.gains {
+            Some(p) => Some(GainsFile::load(p)?),
+            None if program.needs_controller() => {
+                bail!("--gains is needed for a closed-loop run (make one with `servo design -o gains.toml`)")
+            }
+            None => None,
+        };
+        let u_limit_v = self
+            .u_limit
+            .or(gains.as_ref().and_then(|g| g.pid.u_limit_v))
+            .unwrap_or(10.0);
+        if !(u_limit_v.is_finite() && u_limit_v > 0.0) {
+            bail!("--u-limit must be > 0 V, got {u_limit_v}");
+        }
+        let ts_s = self
+            .ts
+            .or(gains.as_ref().map(|g| g.pid.ts_s))
+            .unwrap_or(1e-3);
+        if !(ts_s.is_finite() && ts_s > 0.0 && ts_s <= 0.1) {
+            bail!("--ts must be a sample period in (0, 0.1] s, got {ts_s}");
+        }
+        let opts = PidOptions {
+            anti_windup: self.anti_windup,
+            kw: self.kw,
+            derivative_on: self.derivative_on,
+            discretization: self.discretization,
+        };
+        let pid = gains
+            .as_ref()
+            .map(|g| pid_config(g, &opts, ts_s, u_limit_v))
+            .transpose()?;
+        let model = match &self.model {
+            Some(p) => Some(ModelFile::load(p).context("--model")?),
+            None => None,
+        };
+        let feedforward = match &self.ff {
+            Some(text) => {
+                let cfg = parse_ff(text)?;
+                let m = model.clone().unwrap_or_default();
+                if model.is_none() {
+                    eprintln!(
+                        "note: --ff without --model: feedforward constants from Table 2 (nominal)"
+                    );
+                }
+                let plant = m.plant().context("--model")?;
+                Some(
+                    Feedforward::new(FeedforwardParams::from_plant(&plant), cfg)
+                        .map_err(|e| anyhow!("feedforward: {e}"))?,
+                )
+            }
+            None => None,
+        };
+
+        // Backend.
+        let (mut backend, mut meta): (Box<dyn Backend>, BTreeMap<String, String>) = match self
+            .backend
+        {
+            BackendKind::Sim => {
+                let (plant, sensors) = self.plant.load()?;
+                let sim = SimBackend::new(&plant, sensors, ts_s)
+                    .context("simulator")?
+                    .realtime(self.realtime);
+                let mut meta = BTreeMap::new();
+                let mut mf = ModelFile::from_plant(&plant);
+                mf.sensors = Some(sensors);
+                meta.insert(meta_keys::PLANT_TOML.into(), mf.to_toml()?);
+                let effects: Vec<String> = plant.effects.iter().map(|e| e.to_string()).collect();
+                meta.insert(meta_keys::PLANT_EFFECTS.into(), effects.join(" "));
+                meta.insert(meta_keys::SEED.into(), sensors.seed.to_string());
+                (Box::new(sim), meta)
+            }
+            BackendKind::Serial => {
+                let cfg = servo_hw::SerialConfig {
+                    port: self.port.clone(),
+                    baud: self.baud,
+                    timeout_s: self.board_timeout_ms * 1e-3,
+                    limits: servo_core::safety::SafetyLimits {
+                        voltage_limit_v: u_limit_v,
+                        ..Default::default()
+                    },
+                    ..Default::default()
+                };
+                let be = servo_hw::SerialBackend::open(cfg)
+                    .with_context(|| format!("--backend serial --port {}", self.port))?;
+                let board_ts = be.info().sample_period_s;
+                if (board_ts - ts_s).abs() > 1e-9 {
+                    bail!(
+                        "the board on {} samples every {board_ts} s but the controller is for T_s = {ts_s} s \
+                         (--ts or the gains file); start the board with that period or redesign",
+                        self.port
+                    );
+                }
+                let mut meta = BTreeMap::new();
+                meta.insert("serial_port".into(), self.port.clone());
+                meta.insert("serial_baud".into(), self.baud.to_string());
+                (Box::new(be), meta)
+            }
+        };
+        let info = backend.info();
+        meta.insert(
+            meta_keys::SERVO_VERSION.into(),
+            env!("CARGO_PKG_VERSION").into(),
+        );
+        meta.insert(
+            meta_keys::BACKEND.into(),
+            format!("{:?}", self.backend).to_lowercase(),
+        );
+        meta.insert(meta_keys::FIRMWARE.into(), info.firmware.into());
+        meta.insert(
+            meta_keys::SAMPLE_PERIOD_S.into(),
+            info.sample_period_s.to_string(),
+        );
+        meta.insert(
+            meta_keys::COUNTS_PER_REV.into(),
+            info.counts_per_rev.to_string(),
+        );
+        meta.insert(meta_keys::DURATION_S.into(), duration_s.to_string());
+        meta.insert(
+            meta_keys::U_LIMIT_V.into(),
+            u_limit_v.min(info.voltage_limit_v).to_string(),
+        );
+        meta.insert(meta_keys::REFERENCE.into(), program_text);
+        if let Some(g) = &gains {
+            meta.insert(meta_keys::GAINS_TOML.into(), g.to_toml_commented());
+        }
+        if let Some(pid) = &pid {
+            meta.insert("pid_config".into(), format!("{pid:?}"));
+        }
+        meta.insert(
+            meta_keys::FEEDFORWARD.into(),
+            feedforward
+                .as_ref()
+                .map_or("none".into(), |f| ff_name(f.config())),
+        );
+        if feedforward.is_some() {
+            meta.insert(
+                meta_keys::MODEL_TOML.into(),
+                model.clone().unwrap_or_default().to_toml()?,
+            );
+        }
+        meta.insert(
+            meta_keys::COMMAND.into(),
+            std::env::args().collect::<Vec<_>>().join(" "),
+        );
+
+        let cfg = RunConfig {
+            program,
+            duration_s,
+            pid,
+            feedforward,
+            u_limit_v,
+            speed_bandwidth_rad_s: 2.0 * std::f64::consts::PI * self.speed_bandwidth_hz,
+            handle_ctrlc: true,
+        };
+        let mut log = match &self.log {
+            Some(p) => Some(McapLog::create(p, &meta, McapLogOptions::default())?),
+            None => None,
+        };
+        let out = runner::run_loop(
+            backend.as_mut(),
+            &cfg,
+            log.as_mut().map(|l| l as &mut dyn runner::LogSink),
+        );
+        let link = backend.link_stats();
+        let out = match out {
+            Ok(o) => o,
+            Err(e) => {
+                if let Some(ls) = &link {
+                    eprintln!("{ls}");
+                }
+                if let Some(l) = log.as_mut() {
+                    if let Some(ls) = &link {
+                        let _ = l.write_summary(&ls.to_map());
+                    }
+                    let _ = l.finish();
+                    eprintln!(
+                        "the board was commanded to 0 V; log {} finished with the {} samples before the fault",
+                        l.path().display(),
+                        l.messages()
+                    );
+                }
+                return Err(e);
+            }
+        };
+        let summary = out.summary();
+        println!("{summary}");
+        if let Some(ls) = &link {
+            println!("{ls}");
+        }
+        if let Some(l) = log.as_mut() {
+            let mut map = summary.to_map();
+            if let Some(ls) = &link {
+                map.extend(ls.to_map());
+            }
+            l.write_summary(&map)?;
+            l.finish()?;
+            println!(
+                "log: {} ({} samples, MCAP: open in Foxglove/PlotJuggler, or `servo export`)",
+                l.path().display(),
+                l.messages()
+            );
+        }
+        if let Some(p) = &self.csv {
+            write_csv(p, &out.record)?;
+            println!("csv: {}", p.display());
+        }
+        if let Some(p) = &self.plot {
+            plot_run(p, &out)?;
+            println!("plot: {}", p.display());
+        }
+        Ok(RunReport {
+            output: out,
+            summary,
+        })
+    }
+}
+
+/// Plots reference and angle [deg] over time, and the voltage (second SVG `<stem>_u.svg`).
+pub fn plot_run(path: &Path, out: &RunOutput) -> anyhow::Result<()> {
+    use crate::plot::{line_chart, Chart, Series};
+    let rec = &out.record;
+    let deg = |v: &Option<Vec<f64>>| {
+        v.as_ref()
+            .map(|v| v.iter().map(|x| x.to_degrees()).collect::<Vec<f64>>())
+    };
+    let th = deg(&rec.theta_l_rad).unwrap_or_default();
+    let r = deg(&rec.ref_rad);
+    let mut series = Vec::new();
+    if let Some(r) = &r {
+        series.push(Series {
+            label: "reference [deg]",
+            x: &rec.time_s,
+            y: r,
+        });
+    }
+    series.push(Series {
+        label: "theta_l [deg]",
+        x: &rec.time_s,
+        y: &th,
+    });
+    line_chart(
+        path,
+        &Chart {
+            title: "servo run: load angle",
+            x_label: "time [s]",
+            y_label: "angle [deg]",
+            ..Chart::default()
+        },
+        &series,
+    )?;
+    let u = rec.u_v.clone().unwrap_or_default();
+    let upath = path.with_file_name(format!(
+        "{}_u.svg",
+        path.file_stem().and_then(|s| s.to_str()).unwrap_or("run")
+    ));
+    line_chart(
+        &upath,
+        &Chart {
+            title: "servo run: driver input",
+            x_label: "time [s]",
+            y_label: "u [V]",
+            ..Chart::default()
+        },
+        &[Series {
+            label: "u [V]",
+            x: &rec.time_s,
+            y: &u,
+        }],
+    )
 }

@@ -50,8 +50,12 @@ impl ColumnMap {
                 anyhow!("--columns: `{item}` is not `signal=column[:unit]` (example: --columns {EXAMPLE})")
             })?;
             let sig = sig.trim();
-            let signal = Signal::from_name(sig)
-                .ok_or_else(|| anyhow!("--columns: unknown signal `{sig}`; signals are {}", Signal::name_list()))?;
+            let signal = Signal::from_name(sig).ok_or_else(|| {
+                anyhow!(
+                    "--columns: unknown signal `{sig}`; signals are {}",
+                    Signal::name_list()
+                )
+            })?;
             let (column, unit_text) = match rest.split_once(':') {
                 Some((c, u)) => (c.trim(), Some(u.trim())),
                 None => (rest.trim(), None),
@@ -60,19 +64,27 @@ impl ColumnMap {
                 bail!("--columns: `{item}` names no column (example: --columns {EXAMPLE})");
             }
             let unit = match unit_text {
-                Some(u) => Unit::parse(u).and_then(|x| x.check_for(signal, u)).map_err(|e| anyhow!("--columns: `{item}`: {e}"))?,
+                Some(u) => Unit::parse(u)
+                    .and_then(|x| x.check_for(signal, u))
+                    .map_err(|e| anyhow!("--columns: `{item}`: {e}"))?,
                 None => signal.si_unit(),
             };
             if entries.iter().any(|e| e.signal == signal) {
                 bail!("--columns: signal `{sig}` is given twice");
             }
-            entries.push(ColumnSpec { signal, column: column.to_string(), unit });
+            entries.push(ColumnSpec {
+                signal,
+                column: column.to_string(),
+                unit,
+            });
         }
         if !entries.iter().any(|e| e.signal == Signal::Time) {
             bail!("--columns: `time=<column>` is required (example: --columns {EXAMPLE})");
         }
         if entries.len() < 2 {
-            bail!("--columns: give at least one signal besides time (example: --columns {EXAMPLE})");
+            bail!(
+                "--columns: give at least one signal besides time (example: --columns {EXAMPLE})"
+            );
         }
         Ok(ColumnMap { entries })
     }
@@ -82,13 +94,22 @@ impl ColumnMap {
     pub fn servo_own(header: &[&str]) -> Option<ColumnMap> {
         let mut entries = Vec::new();
         for h in header {
-            let signal = Signal::ALL.into_iter().find(|s| s.csv_column().eq_ignore_ascii_case(h.trim()))?;
+            let signal = Signal::ALL
+                .into_iter()
+                .find(|s| s.csv_column().eq_ignore_ascii_case(h.trim()))?;
             if entries.iter().any(|e: &ColumnSpec| e.signal == signal) {
                 return None;
             }
-            entries.push(ColumnSpec { signal, column: h.to_string(), unit: signal.si_unit() });
+            entries.push(ColumnSpec {
+                signal,
+                column: h.to_string(),
+                unit: signal.si_unit(),
+            });
         }
-        entries.iter().any(|e| e.signal == Signal::Time).then_some(ColumnMap { entries })
+        entries
+            .iter()
+            .any(|e| e.signal == Signal::Time)
+            .then_some(ColumnMap { entries })
     }
 
     /// Guesses the map from header names with unit suffixes, e.g. `t_s`, `thl_meas_deg`,
@@ -99,9 +120,12 @@ impl ColumnMap {
         let mut ignored = Vec::new();
         for h in header {
             match guess_column(h.trim()) {
-                Some((signal, unit)) if !entries.iter().any(|e| e.signal == signal) => {
-                    entries.push(ColumnSpec { signal, column: h.trim().to_string(), unit })
-                }
+                Some((signal, unit)) if !entries.iter().any(|e| e.signal == signal) => entries
+                    .push(ColumnSpec {
+                        signal,
+                        column: h.trim().to_string(),
+                        unit,
+                    }),
                 _ => ignored.push(h.trim().to_string()),
             }
         }
@@ -183,8 +207,14 @@ fn guess_column(name: &str) -> Option<(Signal, Unit)> {
     if words.iter().any(|w| matches!(*w, "err" | "error" | "e")) {
         return None;
     }
-    let is_ref = words.iter().any(|w| matches!(*w, "ref" | "reference" | "setpoint" | "sp" | "target" | "des" | "desired"));
-    let mut signal = signal_from_word(&joined).or_else(|| words.iter().find_map(|w| signal_from_word(w)))?;
+    let is_ref = words.iter().any(|w| {
+        matches!(
+            *w,
+            "ref" | "reference" | "setpoint" | "sp" | "target" | "des" | "desired"
+        )
+    });
+    let mut signal =
+        signal_from_word(&joined).or_else(|| words.iter().find_map(|w| signal_from_word(w)))?;
     if is_ref {
         if signal.dimension() != super::units::Dimension::Angle {
             return None;
@@ -201,12 +231,18 @@ mod tests {
 
     #[test]
     fn parse_and_display() {
-        let m = ColumnMap::parse("time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A:mA,theta_m=enc:counts:4096").unwrap();
+        let m = ColumnMap::parse(
+            "time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A:mA,theta_m=enc:counts:4096",
+        )
+        .unwrap();
         assert_eq!(m.entries.len(), 5);
         assert_eq!(m.get(Signal::ThetaL).unwrap().unit, Unit::Deg);
         assert_eq!(m.get(Signal::ThetaM).unwrap().unit, Unit::Counts(4096.0));
         assert_eq!(m.get(Signal::U).unwrap().unit, Unit::Volt);
-        assert_eq!(m.to_string(), "time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A:mA,theta_m=enc:counts:4096");
+        assert_eq!(
+            m.to_string(),
+            "time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A:mA,theta_m=enc:counts:4096"
+        );
         assert_eq!(ColumnMap::parse(&m.to_string()).unwrap(), m);
     }
 
@@ -227,7 +263,8 @@ mod tests {
 
     #[test]
     fn own_header() {
-        let m = ColumnMap::servo_own(&["time_s", "u_V", "theta_l_rad", "i_a_A", "ref_rad"]).unwrap();
+        let m =
+            ColumnMap::servo_own(&["time_s", "u_V", "theta_l_rad", "i_a_A", "ref_rad"]).unwrap();
         assert_eq!(m.entries.len(), 5);
         assert!(ColumnMap::servo_own(&["time_s", "u_V", "other"]).is_none());
         assert!(ColumnMap::servo_own(&["u_V", "theta_l_rad"]).is_none());
@@ -235,24 +272,40 @@ mod tests {
 
     #[test]
     fn guesses_lab_headers() {
-        let (m, ign) =
-            ColumnMap::guess(&["t_s", "thl_meas_deg", "thl_ref_deg", "u_V", "ia_A", "wm_deg_per_s", "err_deg"]).unwrap();
+        let (m, ign) = ColumnMap::guess(&[
+            "t_s",
+            "thl_meas_deg",
+            "thl_ref_deg",
+            "u_V",
+            "ia_A",
+            "wm_deg_per_s",
+            "err_deg",
+        ])
+        .unwrap();
         assert_eq!(m.to_string(), "time=t_s,theta_l=thl_meas_deg:deg,ref=thl_ref_deg:deg,u=u_V,i_a=ia_A,omega_m=wm_deg_per_s:deg/s");
         assert_eq!(ign, ["err_deg"]);
-        let (m, ign) = ColumnMap::guess(&["t_s", "wm_rpm", "am_rpm_per_s", "ia_A", "ia2_A"]).unwrap();
+        let (m, ign) =
+            ColumnMap::guess(&["t_s", "wm_rpm", "am_rpm_per_s", "ia_A", "ia2_A"]).unwrap();
         assert_eq!(m.to_string(), "time=t_s,omega_m=wm_rpm:rpm,i_a=ia_A");
         assert_eq!(ign, ["am_rpm_per_s", "ia2_A"]);
         let (m, _) = ColumnMap::guess(&["t_s", "ia_A", "wl_rad_per_s", "al_rad_per_s2"]).unwrap();
         assert_eq!(m.to_string(), "time=t_s,i_a=ia_A,omega_l=wl_rad_per_s");
-        let (m, _) = ColumnMap::guess(&["t_s", "thl_meas_deg", "thl_ref_deg", "ch2_probably_ia_A"]).unwrap();
+        let (m, _) =
+            ColumnMap::guess(&["t_s", "thl_meas_deg", "thl_ref_deg", "ch2_probably_ia_A"]).unwrap();
         assert_eq!(m.get(Signal::IA).unwrap().column, "ch2_probably_ia_A");
         let (m, _) = ColumnMap::guess(&["time_ms", "theta_l_rad", "i_a_mA"]).unwrap();
-        assert_eq!(m.to_string(), "time=time_ms:ms,theta_l=theta_l_rad,i_a=i_a_mA:mA");
+        assert_eq!(
+            m.to_string(),
+            "time=time_ms:ms,theta_l=theta_l_rad,i_a=i_a_mA:mA"
+        );
     }
 
     #[test]
     fn guess_fails_with_header_and_example() {
         let e = format!("{:#}", ColumnMap::guess(&["a", "b", "c"]).unwrap_err());
-        assert!(e.contains("`a,b,c`") && e.contains("--columns time="), "{e}");
+        assert!(
+            e.contains("`a,b,c`") && e.contains("--columns time="),
+            "{e}"
+        );
     }
 }

@@ -17,7 +17,10 @@ pub struct CsvImport {
 
 /// Picks the delimiter from the first non-comment line: `,` unless only `;` or tabs appear.
 fn sniff_delimiter(text: &str) -> u8 {
-    let line = text.lines().find(|l| !l.trim_start().starts_with('#') && !l.trim().is_empty()).unwrap_or("");
+    let line = text
+        .lines()
+        .find(|l| !l.trim_start().starts_with('#') && !l.trim().is_empty())
+        .unwrap_or("");
     if line.contains(',') {
         b','
     } else if line.contains(';') {
@@ -32,7 +35,8 @@ fn sniff_delimiter(text: &str) -> u8 {
 /// Reads `path`. `columns` is the user's `--columns` map; `None` means servo's own header or a
 /// guess from the header's unit suffixes (stated in the notes).
 pub fn read_csv(path: &Path, columns: Option<&str>) -> anyhow::Result<CsvImport> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading CSV log {}", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading CSV log {}", path.display()))?;
     parse_csv(&text, &path.display().to_string(), columns)
 }
 
@@ -60,7 +64,8 @@ pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Res
         None => match ColumnMap::servo_own(&header_refs) {
             Some(m) => m,
             None => {
-                let (m, ignored) = ColumnMap::guess(&header_refs).with_context(|| format!("{source}"))?;
+                let (m, ignored) =
+                    ColumnMap::guess(&header_refs).with_context(|| source.to_string())?;
                 let mut note = format!("{source}: guessed the column map --columns {m}");
                 if !ignored.is_empty() {
                     note.push_str(&format!(" (ignored: {})", ignored.join(", ")));
@@ -134,10 +139,16 @@ pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Res
             }
         }
     }
-    let mut rec = Record { source: source.to_string(), ..Record::default() };
+    let mut rec = Record {
+        source: source.to_string(),
+        ..Record::default()
+    };
     for ((e, col), nans) in map.entries.iter().zip(data).zip(nan_counts) {
         if nans > 0 {
-            notes.push(format!("{source}: column `{}` has {nans} empty or non-finite values (kept as NaN)", e.column));
+            notes.push(format!(
+                "{source}: column `{}` has {nans} empty or non-finite values (kept as NaN)",
+                e.column
+            ));
         }
         match e.signal {
             Signal::Time => rec.time_s = col,
@@ -151,14 +162,23 @@ pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Res
         }
     }
     if rec.time_s.is_empty() {
-        bail!("{source}: no data rows after the header `{}`", header.join(","));
+        bail!(
+            "{source}: no data rows after the header `{}`",
+            header.join(",")
+        );
     }
-    Ok(CsvImport { record: rec, map, notes })
+    Ok(CsvImport {
+        record: rec,
+        map,
+        notes,
+    })
 }
 
 fn csv_error_text(e: &csv::Error) -> String {
     match e.kind() {
-        csv::ErrorKind::UnequalLengths { expected_len, len, .. } => {
+        csv::ErrorKind::UnequalLengths {
+            expected_len, len, ..
+        } => {
             format!("expected {expected_len} fields like the header, found {len}")
         }
         csv::ErrorKind::Utf8 { .. } => "not valid UTF-8 text".to_string(),
@@ -184,7 +204,12 @@ mod tests {
     #[test]
     fn foreign_with_map_and_units() {
         let t = "t_ms;pos_deg;I_mA\n0;180;100\n1;90;-50\n";
-        let r = parse_csv(t, "f.csv", Some("time=t_ms:ms,theta_l=pos_deg:deg,i_a=I_mA:mA")).unwrap();
+        let r = parse_csv(
+            t,
+            "f.csv",
+            Some("time=t_ms:ms,theta_l=pos_deg:deg,i_a=I_mA:mA"),
+        )
+        .unwrap();
         assert_eq!(r.record.time_s, [0.0, 0.001]);
         let th = r.record.theta_l_rad.unwrap();
         assert!((th[0] - std::f64::consts::PI).abs() < 1e-12);
@@ -195,25 +220,53 @@ mod tests {
     fn guessed_map_is_noted() {
         let t = "t_s,thl_meas_deg,u_V\n0,0,1\n0.001,1,1\n";
         let r = parse_csv(t, "g.csv", None).unwrap();
-        assert!(r.notes[0].contains("--columns time=t_s,theta_l=thl_meas_deg:deg,u=u_V"), "{:?}", r.notes);
+        assert!(
+            r.notes[0].contains("--columns time=t_s,theta_l=thl_meas_deg:deg,u=u_V"),
+            "{:?}",
+            r.notes
+        );
     }
 
     #[test]
     fn errors_name_line_and_column() {
         let t = "time_s,u_V,theta_l_rad\n0,1,0\n0.001,abc,0\n";
         let e = format!("{:#}", parse_csv(t, "bad.csv", None).unwrap_err());
-        assert!(e.contains("bad.csv: line 3, column 2 (`u_V`") && e.contains("got `abc`"), "{e}");
+        assert!(
+            e.contains("bad.csv: line 3, column 2 (`u_V`") && e.contains("got `abc`"),
+            "{e}"
+        );
         let t = "time_s,u_V\n0,1\n0,2\n";
         let e = format!("{:#}", parse_csv(t, "bad.csv", None).unwrap_err());
-        assert!(e.contains("line 3") && e.contains("increase strictly"), "{e}");
+        assert!(
+            e.contains("line 3") && e.contains("increase strictly"),
+            "{e}"
+        );
         let t = "time_s,u_V\n0,1\n0.001,2,3\n";
         let e = format!("{:#}", parse_csv(t, "bad.csv", None).unwrap_err());
-        assert!(e.contains("line 3") && e.contains("expected 2 fields"), "{e}");
-        let e = format!("{:#}", parse_csv(t, "bad.csv", Some("time=t,u=u_V")).unwrap_err());
-        assert!(e.contains("no column `t`") && e.contains("time_s,u_V"), "{e}");
-        let e = format!("{:#}", parse_csv("a,b\n1,2\n", "bad.csv", None).unwrap_err());
-        assert!(e.contains("bad.csv") && e.contains("`a,b`") && e.contains("--columns"), "{e}");
-        let e = format!("{:#}", parse_csv("time_s,u_V\n", "empty.csv", None).unwrap_err());
+        assert!(
+            e.contains("line 3") && e.contains("expected 2 fields"),
+            "{e}"
+        );
+        let e = format!(
+            "{:#}",
+            parse_csv(t, "bad.csv", Some("time=t,u=u_V")).unwrap_err()
+        );
+        assert!(
+            e.contains("no column `t`") && e.contains("time_s,u_V"),
+            "{e}"
+        );
+        let e = format!(
+            "{:#}",
+            parse_csv("a,b\n1,2\n", "bad.csv", None).unwrap_err()
+        );
+        assert!(
+            e.contains("bad.csv") && e.contains("`a,b`") && e.contains("--columns"),
+            "{e}"
+        );
+        let e = format!(
+            "{:#}",
+            parse_csv("time_s,u_V\n", "empty.csv", None).unwrap_err()
+        );
         assert!(e.contains("no data rows"), "{e}");
     }
 }

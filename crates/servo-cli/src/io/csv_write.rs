@@ -9,8 +9,16 @@ use std::io::Write;
 use std::path::Path;
 
 /// Column order of servo's CSV.
-pub const ORDER: [Signal; 8] =
-    [Signal::Time, Signal::U, Signal::ThetaL, Signal::IA, Signal::Ref, Signal::ThetaM, Signal::OmegaL, Signal::OmegaM];
+pub const ORDER: [Signal; 8] = [
+    Signal::Time,
+    Signal::U,
+    Signal::ThetaL,
+    Signal::IA,
+    Signal::Ref,
+    Signal::ThetaM,
+    Signal::OmegaL,
+    Signal::OmegaM,
+];
 
 /// The samples of `signal` in `rec`, if present.
 pub fn signal_of(rec: &Record, signal: Signal) -> Option<&[f64]> {
@@ -28,10 +36,17 @@ pub fn signal_of(rec: &Record, signal: Signal) -> Option<&[f64]> {
 
 /// Writes `rec` to `out` as servo's CSV.
 pub fn write_csv_to(out: &mut dyn Write, rec: &Record) -> anyhow::Result<()> {
-    let cols: Vec<(Signal, &[f64])> = ORDER.iter().filter_map(|&s| signal_of(rec, s).map(|v| (s, v))).collect();
+    let cols: Vec<(Signal, &[f64])> = ORDER
+        .iter()
+        .filter_map(|&s| signal_of(rec, s).map(|v| (s, v)))
+        .collect();
     for (s, v) in &cols {
         if v.len() != rec.time_s.len() {
-            bail!("signal `{s}` has {} samples but time_s has {}", v.len(), rec.time_s.len());
+            bail!(
+                "signal `{s}` has {} samples but time_s has {}",
+                v.len(),
+                rec.time_s.len()
+            );
         }
     }
     let header: Vec<&str> = cols.iter().map(|(s, _)| s.csv_column()).collect();
@@ -56,10 +71,12 @@ pub fn write_csv_to(out: &mut dyn Write, rec: &Record) -> anyhow::Result<()> {
 
 /// Writes `rec` to the file `path` as servo's CSV.
 pub fn write_csv(path: &Path, rec: &Record) -> anyhow::Result<()> {
-    let f = std::fs::File::create(path).with_context(|| format!("creating CSV {}", path.display()))?;
+    let f =
+        std::fs::File::create(path).with_context(|| format!("creating CSV {}", path.display()))?;
     let mut w = std::io::BufWriter::new(f);
     write_csv_to(&mut w, rec).with_context(|| format!("writing CSV {}", path.display()))?;
-    w.flush().with_context(|| format!("writing CSV {}", path.display()))?;
+    w.flush()
+        .with_context(|| format!("writing CSV {}", path.display()))?;
     Ok(())
 }
 
@@ -82,9 +99,16 @@ mod tests {
         let mut buf = Vec::new();
         write_csv_to(&mut buf, &rec).unwrap();
         let text = String::from_utf8(buf).unwrap();
-        assert!(text.starts_with("time_s,u_V,theta_l_rad,i_a_A,ref_rad,omega_l_rad_s\n"), "{text}");
+        assert!(
+            text.starts_with("time_s,u_V,theta_l_rad,i_a_A,ref_rad,omega_l_rad_s\n"),
+            "{text}"
+        );
         let back = super::super::csv_read::parse_csv(&text, "mem", None).unwrap();
-        assert!(back.notes.iter().all(|n| n.contains("non-finite")), "{:?}", back.notes);
+        assert!(
+            back.notes.iter().all(|n| n.contains("non-finite")),
+            "{:?}",
+            back.notes
+        );
         let b = back.record;
         assert_eq!(b.time_s, rec.time_s);
         assert_eq!(b.u_v, rec.u_v);

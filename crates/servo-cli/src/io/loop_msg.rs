@@ -9,7 +9,8 @@ pub const LOOP_TOPIC: &str = "/servo/loop";
 pub const LOOP_SCHEMA_NAME: &str = "servo.Loop";
 
 /// One control sample. Row convention: measurements taken at `time_s`, `u_v` applied from then
-/// until the next sample. Fields that do not apply (no reference in an open-loop run) are null.
+/// until the next sample. Fields that do not apply (no reference in an open-loop run) or were not
+/// measured are null (NaN in memory).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct LoopMsg {
     /// Run time of the sample [s].
@@ -18,23 +19,31 @@ pub struct LoopMsg {
     #[serde(with = "nullable")]
     pub ref_rad: f64,
     /// Measured load angle theta_l [rad].
+    #[serde(with = "nullable")]
     pub theta_l_rad: f64,
     /// Load speed estimate omega_l [rad/s].
+    #[serde(with = "nullable")]
     pub omega_l_rad_s: f64,
     /// Tracking error ref - theta_l [rad] (null in open loop).
     #[serde(with = "nullable")]
     pub err_rad: f64,
     /// Driver input u applied until the next sample [V], after the output limit.
+    #[serde(with = "nullable")]
     pub u_v: f64,
     /// Feedforward part of u [V].
+    #[serde(with = "nullable")]
     pub ff_v: f64,
     /// Proportional term [V].
+    #[serde(with = "nullable")]
     pub p_v: f64,
     /// Integral term [V].
+    #[serde(with = "nullable")]
     pub i_v: f64,
     /// Derivative term [V].
+    #[serde(with = "nullable")]
     pub d_v: f64,
     /// Measured armature current i_a [A].
+    #[serde(with = "nullable")]
     pub i_a_a: f64,
     /// True when the controller output was clipped at the voltage limit.
     pub saturated: bool,
@@ -42,8 +51,8 @@ pub struct LoopMsg {
 
 /// JSON schema of [`LoopMsg`] (draft 2020-12, as Foxglove reads it).
 pub fn loop_schema() -> String {
-    let num = |d: &str| serde_json::json!({ "type": "number", "description": d });
-    let nnum = |d: &str| serde_json::json!({ "type": ["number", "null"], "description": d });
+    let num = |d: &str| serde_json::json!({ "type": ["number", "null"], "description": d });
+
     serde_json::json!({
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": LOOP_SCHEMA_NAME,
@@ -51,10 +60,10 @@ pub fn loop_schema() -> String {
         "type": "object",
         "properties": {
             "time_s": num("run time of the sample [s]"),
-            "ref_rad": nnum("position reference at the load [rad] (null in open loop)"),
+            "ref_rad": num("position reference at the load [rad] (null in open loop)"),
             "theta_l_rad": num("measured load angle theta_l [rad]"),
             "omega_l_rad_s": num("load speed estimate omega_l [rad/s]"),
-            "err_rad": nnum("tracking error ref - theta_l [rad] (null in open loop)"),
+            "err_rad": num("tracking error ref - theta_l [rad] (null in open loop)"),
             "u_v": num("driver input voltage u applied until the next sample [V] (after the limit)"),
             "ff_v": num("feedforward part of u [V]"),
             "p_v": num("PID proportional term [V]"),
@@ -107,10 +116,18 @@ mod tests {
         assert!(s.contains("\"ref_rad\":null"), "{s}");
         let b: LoopMsg = serde_json::from_str(&s).unwrap();
         assert!(b.ref_rad.is_nan() && b.err_rad.is_nan());
-        assert_eq!((b.time_s, b.theta_l_rad, b.u_v, b.p_v), (m.time_s, m.theta_l_rad, m.u_v, m.p_v));
+        assert_eq!(
+            (b.time_s, b.theta_l_rad, b.u_v, b.p_v),
+            (m.time_s, m.theta_l_rad, m.u_v, m.p_v)
+        );
         let schema: serde_json::Value = serde_json::from_str(&loop_schema()).unwrap();
         let props = schema["properties"].as_object().unwrap();
-        for k in serde_json::from_str::<serde_json::Value>(&s).unwrap().as_object().unwrap().keys() {
+        for k in serde_json::from_str::<serde_json::Value>(&s)
+            .unwrap()
+            .as_object()
+            .unwrap()
+            .keys()
+        {
             assert!(props.contains_key(k), "schema lacks {k}");
         }
     }

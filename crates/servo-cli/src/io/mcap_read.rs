@@ -30,7 +30,8 @@ pub struct McapRun {
 
 /// Reads the MCAP file `path`.
 pub fn read_mcap(path: &Path) -> anyhow::Result<McapRun> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading MCAP log {}", path.display()))?;
+    let bytes =
+        std::fs::read(path).with_context(|| format!("reading MCAP log {}", path.display()))?;
     parse_mcap(&bytes, &path.display().to_string())
 }
 
@@ -39,8 +40,11 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
     if bytes.len() < mcap::MAGIC.len() || &bytes[..mcap::MAGIC.len()] != mcap::MAGIC {
         bail!("{source}: not an MCAP file (bad magic bytes at the start)");
     }
-    let reader = ChunkFlattener::new_with_options(bytes, Options::IgnoreEndMagic | Options::ValidateChunkCrcs)
-        .map_err(|e| anyhow!("{source}: {e}"))?;
+    let reader = ChunkFlattener::new_with_options(
+        bytes,
+        Options::IgnoreEndMagic | Options::ValidateChunkCrcs,
+    )
+    .map_err(|e| anyhow!("{source}: {e}"))?;
     let mut topics: HashMap<u16, String> = HashMap::new();
     let mut run = McapRun::default();
     let mut data_end = false;
@@ -50,7 +54,11 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
             Ok(r) => r,
             Err(e) => {
                 if !data_end {
-                    let upto = run.loop_msgs.last().map(|m| format!("{} s", m.time_s)).unwrap_or_else(|| "the start".into());
+                    let upto = run
+                        .loop_msgs
+                        .last()
+                        .map(|m| format!("{} s", m.time_s))
+                        .unwrap_or_else(|| "the start".into());
                     run.notes.push(format!(
                         "{source}: the log is truncated or damaged ({e}); read {} samples up to {upto}, \
                          the rest (the unflushed chunk, at most 100 ms of a killed run) is lost",
@@ -65,10 +73,16 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
                 topics.insert(c.id, c.topic);
             }
             McapRecord::Message { header, data } if !data_end => {
-                let topic = topics.get(&header.channel_id).map(String::as_str).unwrap_or("");
+                let topic = topics
+                    .get(&header.channel_id)
+                    .map(String::as_str)
+                    .unwrap_or("");
                 if topic == LOOP_TOPIC {
                     let m: LoopMsg = serde_json::from_slice(&data).map_err(|e| {
-                        anyhow!("{source}: message {} on {LOOP_TOPIC} is not a servo loop message: {e}", header.sequence)
+                        anyhow!(
+                            "{source}: message {} on {LOOP_TOPIC} is not a servo loop message: {e}",
+                            header.sequence
+                        )
                     })?;
                     run.loop_msgs.push(m);
                 } else {
@@ -90,31 +104,69 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
         ));
     }
     if run.loop_msgs.is_empty() {
-        let others: Vec<String> = other_topics.iter().map(|(t, n)| format!("{t} ({n})")).collect();
+        let others: Vec<String> = other_topics
+            .iter()
+            .map(|(t, n)| format!("{t} ({n})"))
+            .collect();
         bail!(
             "{source}: no {LOOP_TOPIC} messages{}{}",
-            if others.is_empty() { String::new() } else { format!("; topics found: {}", others.join(", ")) },
-            run.notes.first().map(|n| format!("; {n}")).unwrap_or_default()
+            if others.is_empty() {
+                String::new()
+            } else {
+                format!("; topics found: {}", others.join(", "))
+            },
+            run.notes
+                .first()
+                .map(|n| format!("; {n}"))
+                .unwrap_or_default()
         );
     }
     run.record = record_of(&run.loop_msgs, source);
     Ok(run)
 }
 
-/// The [`Record`] of a sequence of loop messages (`ref` only when present).
+/// The [`Record`] of a sequence of loop messages (a signal only when some sample has it).
 pub fn record_of(msgs: &[LoopMsg], source: &str) -> Record {
-    let col = |f: fn(&LoopMsg) -> f64| msgs.iter().map(f).collect::<Vec<f64>>();
-    let has_ref = msgs.iter().any(|m| m.ref_rad.is_finite());
+    let col = |f: fn(&LoopMsg) -> f64| {
+        let v: Vec<f64> = msgs.iter().map(f).collect();
+        v.iter().any(|x| x.is_finite()).then_some(v)
+    };
     Record {
         source: source.to_string(),
-        time_s: col(|m| m.time_s),
-        u_v: Some(col(|m| m.u_v)),
-        theta_l_rad: Some(col(|m| m.theta_l_rad)),
-        omega_l_rad_s: Some(col(|m| m.omega_l_rad_s)),
-        i_a_a: Some(col(|m| m.i_a_a)),
-        ref_rad: has_ref.then(|| col(|m| m.ref_rad)),
+        time_s: msgs.iter().map(|m| m.time_s).collect(),
+        u_v: col(|m| m.u_v),
+        theta_l_rad: col(|m| m.theta_l_rad),
+        omega_l_rad_s: col(|m| m.omega_l_rad_s),
+        i_a_a: col(|m| m.i_a_a),
+        ref_rad: col(|m| m.ref_rad),
         ..Record::default()
     }
+}
+
+/// Loop messages for a [`Record`] (e.g. a CSV converted to MCAP): signals the record lacks are
+/// null; controller terms are null (unknown).
+pub fn loop_msgs_of(rec: &Record) -> Vec<LoopMsg> {
+    let get = |v: &Option<Vec<f64>>, k: usize| v.as_ref().map_or(f64::NAN, |v| v[k]);
+    (0..rec.len())
+        .map(|k| {
+            let r = get(&rec.ref_rad, k);
+            let y = get(&rec.theta_l_rad, k);
+            LoopMsg {
+                time_s: rec.time_s[k],
+                ref_rad: r,
+                theta_l_rad: y,
+                omega_l_rad_s: get(&rec.omega_l_rad_s, k),
+                err_rad: r - y,
+                u_v: get(&rec.u_v, k),
+                ff_v: f64::NAN,
+                p_v: f64::NAN,
+                i_v: f64::NAN,
+                d_v: f64::NAN,
+                i_a_a: get(&rec.i_a_a, k),
+                saturated: false,
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -136,14 +188,22 @@ mod tests {
             i_v: -0.25,
             d_v: 1e-9 * k as f64,
             i_a_a: 0.01 * k as f64,
-            saturated: k % 7 == 0,
+            saturated: k.is_multiple_of(7),
         }
     }
 
     fn write(path: &Path, n: usize, finish: bool) {
         let mut meta = BTreeMap::new();
         meta.insert("gains_toml".to_string(), "[pid]\nkp = 1.0\n".to_string());
-        let mut log = McapLog::create(path, &meta, McapLogOptions { start_unix_ns: 5, ..McapLogOptions::default() }).unwrap();
+        let mut log = McapLog::create(
+            path,
+            &meta,
+            McapLogOptions {
+                start_unix_ns: 5,
+                ..McapLogOptions::default()
+            },
+        )
+        .unwrap();
         for k in 0..n {
             log.write_loop(&msg(k)).unwrap();
         }
@@ -212,7 +272,10 @@ mod tests {
                         assert!(same(m, &msg(k)));
                     }
                 }
-                Err(e) => assert!(format!("{e:#}").contains("no /servo/loop messages"), "{e:#}"),
+                Err(e) => assert!(
+                    format!("{e:#}").contains("no /servo/loop messages"),
+                    "{e:#}"
+                ),
             }
         }
         assert!(last > 800, "{last}");

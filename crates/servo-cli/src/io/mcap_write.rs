@@ -14,6 +14,8 @@ use std::path::{Path, PathBuf};
 pub const RUN_METADATA: &str = "servo.run";
 /// Name of the metadata record written at the end of a run with its summary figures.
 pub const SUMMARY_METADATA: &str = "servo.summary";
+/// Metadata key of the Unix time [ns] of run time 0 (`log_time = start + time_s`).
+pub const START_TIME_KEY: &str = "start_time_unix_ns";
 /// Profile string in the MCAP header.
 pub const PROFILE: &str = "";
 
@@ -36,7 +38,11 @@ impl Default for McapLogOptions {
             .duration_since(std::time::UNIX_EPOCH)
             .map(|d| d.as_nanos() as u64)
             .unwrap_or(0);
-        McapLogOptions { flush_period_s: 0.05, compress: true, start_unix_ns: now }
+        McapLogOptions {
+            flush_period_s: 0.05,
+            compress: true,
+            start_unix_ns: now,
+        }
     }
 }
 
@@ -54,7 +60,10 @@ pub struct McapLog {
 
 impl std::fmt::Debug for McapLog {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("McapLog").field("path", &self.path).field("messages", &self.messages).finish()
+        f.debug_struct("McapLog")
+            .field("path", &self.path)
+            .field("messages", &self.messages)
+            .finish()
     }
 }
 
@@ -68,11 +77,25 @@ impl McapLog {
     /// Creates `path` and writes the header, the schemas/channels and the run metadata
     /// (`metadata`: key/value strings, see [`RUN_METADATA`]); flushes so that the metadata
     /// survives a kill.
-    pub fn create(path: &Path, metadata: &BTreeMap<String, String>, opts: McapLogOptions) -> anyhow::Result<McapLog> {
-        let file = File::create(path).with_context(|| format!("creating MCAP log {}", path.display()))?;
+    pub fn create(
+        path: &Path,
+        metadata: &BTreeMap<String, String>,
+        opts: McapLogOptions,
+    ) -> anyhow::Result<McapLog> {
+        let file =
+            File::create(path).with_context(|| format!("creating MCAP log {}", path.display()))?;
         let wopts = mcap::WriteOptions::new()
-            .library(concat!("servo ", env!("CARGO_PKG_VERSION"), " / ", "mcap-rust"))
-            .compression(if opts.compress { Some(mcap::Compression::Zstd) } else { None })
+            .library(concat!(
+                "servo ",
+                env!("CARGO_PKG_VERSION"),
+                " / ",
+                "mcap-rust"
+            ))
+            .compression(if opts.compress {
+                Some(mcap::Compression::Zstd)
+            } else {
+                None
+            })
             // Chunks of 50-100 samples: one thread, fast level.
             .compression_threads(0)
             .compression_level(1)
@@ -86,8 +109,13 @@ impl McapLog {
         let loop_channel = writer
             .add_channel(schema, LOOP_TOPIC, "json", &BTreeMap::new())
             .map_err(mcap_err(path, "adding the channel"))?;
+        let mut metadata = metadata.clone();
+        metadata.insert(START_TIME_KEY.to_string(), opts.start_unix_ns.to_string());
         writer
-            .write_metadata(&mcap::records::Metadata { name: RUN_METADATA.to_string(), metadata: metadata.clone() })
+            .write_metadata(&mcap::records::Metadata {
+                name: RUN_METADATA.to_string(),
+                metadata,
+            })
             .map_err(mcap_err(path, "writing the metadata"))?;
         writer.flush().map_err(mcap_err(path, "flushing"))?;
         Ok(McapLog {
@@ -113,7 +141,9 @@ impl McapLog {
 
     fn log_time_ns(&self, time_s: f64) -> u64 {
         let ns = (time_s.max(0.0) * 1e9).round();
-        self.opts.start_unix_ns.saturating_add(if ns.is_finite() { ns as u64 } else { 0 })
+        self.opts
+            .start_unix_ns
+            .saturating_add(if ns.is_finite() { ns as u64 } else { 0 })
     }
 
     /// Writes one loop sample; ends the chunk and flushes when `flush_period_s` of run time has
@@ -128,11 +158,16 @@ impl McapLog {
             publish_time: t,
         };
         let path = self.path.clone();
-        let w = self.writer.as_mut().ok_or_else(|| anyhow!("MCAP log {}: already finished", path.display()))?;
-        w.write_to_known_channel(&header, &data).map_err(mcap_err(&path, "writing a message"))?;
+        let w = self
+            .writer
+            .as_mut()
+            .ok_or_else(|| anyhow!("MCAP log {}: already finished", path.display()))?;
+        w.write_to_known_channel(&header, &data)
+            .map_err(mcap_err(&path, "writing a message"))?;
         self.sequence = self.sequence.wrapping_add(1);
         self.messages += 1;
-        if !(msg.time_s - self.last_flush_s < self.opts.flush_period_s - 1e-9) {
+        if msg.time_s - self.last_flush_s >= self.opts.flush_period_s - 1e-9 || msg.time_s.is_nan()
+        {
             w.flush().map_err(mcap_err(&path, "flushing"))?;
             self.last_flush_s = msg.time_s;
         }
@@ -151,9 +186,15 @@ impl McapLog {
     /// Writes the end-of-run summary metadata record ([`SUMMARY_METADATA`]).
     pub fn write_summary(&mut self, summary: &BTreeMap<String, String>) -> anyhow::Result<()> {
         let path = self.path.clone();
-        let w = self.writer.as_mut().ok_or_else(|| anyhow!("MCAP log {}: already finished", path.display()))?;
-        w.write_metadata(&mcap::records::Metadata { name: SUMMARY_METADATA.to_string(), metadata: summary.clone() })
-            .map_err(mcap_err(&path, "writing the summary"))
+        let w = self
+            .writer
+            .as_mut()
+            .ok_or_else(|| anyhow!("MCAP log {}: already finished", path.display()))?;
+        w.write_metadata(&mcap::records::Metadata {
+            name: SUMMARY_METADATA.to_string(),
+            metadata: summary.clone(),
+        })
+        .map_err(mcap_err(&path, "writing the summary"))
     }
 
     /// Writes the summary section and the footer and closes the file. Safe to call twice.
@@ -162,7 +203,8 @@ impl McapLog {
         if let Some(mut w) = self.writer.take() {
             w.finish().map_err(mcap_err(&path, "finishing"))?;
             let mut inner = w.into_inner();
-            std::io::Write::flush(&mut inner).with_context(|| format!("MCAP log {}: flushing", path.display()))?;
+            std::io::Write::flush(&mut inner)
+                .with_context(|| format!("MCAP log {}: flushing", path.display()))?;
         }
         Ok(())
     }

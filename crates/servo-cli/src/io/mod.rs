@@ -39,11 +39,18 @@ pub enum LogFormat {
 impl LogFormat {
     /// The format of `path` from its extension (`.mcap`, `.csv`, `.txt`, `.tsv`).
     pub fn of(path: &Path) -> anyhow::Result<LogFormat> {
-        let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .unwrap_or_default();
         match ext.as_str() {
             "mcap" => Ok(LogFormat::Mcap),
             "csv" | "txt" | "tsv" => Ok(LogFormat::Csv),
-            _ => bail!("{}: unknown log format `.{ext}`; expected a .mcap or .csv file", path.display()),
+            _ => bail!(
+                "{}: unknown log format `.{ext}`; expected a .mcap or .csv file",
+                path.display()
+            ),
         }
     }
 }
@@ -143,14 +150,29 @@ pub fn read_log_with_meta(path: &Path, columns: Option<&str>) -> anyhow::Result<
     match LogFormat::of(path)? {
         LogFormat::Csv => {
             let imp = csv_read::read_csv(path, columns)?;
-            Ok((imp.record, LogMeta { columns: Some(imp.map.to_string()), notes: imp.notes, ..LogMeta::default() }))
+            Ok((
+                imp.record,
+                LogMeta {
+                    columns: Some(imp.map.to_string()),
+                    notes: imp.notes,
+                    ..LogMeta::default()
+                },
+            ))
         }
         LogFormat::Mcap => {
             if columns.is_some() {
-                bail!("{}: --columns applies to CSV logs only; an MCAP log names its own signals", path.display());
+                bail!(
+                    "{}: --columns applies to CSV logs only; an MCAP log names its own signals",
+                    path.display()
+                );
             }
             let run = mcap_read::read_mcap(path)?;
-            let meta = LogMeta { columns: None, entries: run.metadata, summary: run.summary, notes: run.notes };
+            let meta = LogMeta {
+                columns: None,
+                entries: run.metadata,
+                summary: run.summary,
+                notes: run.notes,
+            };
             Ok((run.record, meta))
         }
     }

@@ -55,8 +55,16 @@ impl Dimension {
 
 impl Signal {
     /// Every signal, in the order of servo's CSV columns.
-    pub const ALL: [Signal; 8] =
-        [Signal::Time, Signal::U, Signal::ThetaL, Signal::ThetaM, Signal::OmegaL, Signal::OmegaM, Signal::IA, Signal::Ref];
+    pub const ALL: [Signal; 8] = [
+        Signal::Time,
+        Signal::U,
+        Signal::ThetaL,
+        Signal::ThetaM,
+        Signal::OmegaL,
+        Signal::OmegaM,
+        Signal::IA,
+        Signal::Ref,
+    ];
 
     /// The name users type.
     pub const fn name(self) -> &'static str {
@@ -163,7 +171,10 @@ impl Unit {
     pub fn parse(text: &str) -> Result<Unit, UnitError> {
         let t = text.trim();
         let lower = t.to_ascii_lowercase();
-        if let Some(n) = lower.strip_prefix("counts:").or_else(|| lower.strip_prefix("counts/")) {
+        if let Some(n) = lower
+            .strip_prefix("counts:")
+            .or_else(|| lower.strip_prefix("counts/"))
+        {
             return match n.trim().parse::<f64>() {
                 Ok(n) if n > 0.0 && n.is_finite() => Ok(Unit::Counts(n)),
                 _ => Err(UnitError::BadCounts(n.to_string())),
@@ -205,7 +216,10 @@ impl Unit {
         if self.dimension() == signal.dimension() {
             Ok(self)
         } else {
-            Err(UnitError::Mismatch { unit: text.to_string(), signal })
+            Err(UnitError::Mismatch {
+                unit: text.to_string(),
+                signal,
+            })
         }
     }
 
@@ -269,16 +283,32 @@ mod tests {
         assert!((Unit::parse("ms").unwrap().to_si(5.0) - 0.005).abs() < 1e-15);
         assert_eq!(Unit::parse("V").unwrap().to_si(3.5), 3.5);
         assert_eq!(Unit::parse("deg/s").unwrap(), Unit::DegPerS);
-        assert_eq!(Unit::parse("counts:4096").unwrap().to_string(), "counts:4096");
+        assert_eq!(
+            Unit::parse("counts:4096").unwrap().to_string(),
+            "counts:4096"
+        );
     }
 
     #[test]
     fn rejects() {
         assert!(matches!(Unit::parse("furlong"), Err(UnitError::Unknown(_))));
-        assert!(matches!(Unit::parse("counts:0"), Err(UnitError::BadCounts(_))));
-        assert!(matches!(Unit::parse("counts"), Err(UnitError::BadCounts(_))));
-        let e = Unit::parse("rpm").unwrap().check_for(Signal::ThetaL, "rpm").unwrap_err().to_string();
+        assert!(matches!(
+            Unit::parse("counts:0"),
+            Err(UnitError::BadCounts(_))
+        ));
+        assert!(matches!(
+            Unit::parse("counts"),
+            Err(UnitError::BadCounts(_))
+        ));
+        let e = Unit::parse("rpm")
+            .unwrap()
+            .check_for(Signal::ThetaL, "rpm")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("theta_l") && e.contains("rad, deg"), "{e}");
-        assert!(Unit::parse("deg").unwrap().check_for(Signal::Ref, "deg").is_ok());
+        assert!(Unit::parse("deg")
+            .unwrap()
+            .check_for(Signal::Ref, "deg")
+            .is_ok());
     }
 }

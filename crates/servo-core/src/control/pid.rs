@@ -61,7 +61,9 @@ pub enum DerivativeOn {
     /// The error e = r - y (the linear controller C(s) of the design; kicks on reference steps).
     #[default]
     Error,
-    /// Minus the measurement, -y (no derivative kick on reference steps; same loop gain).
+    /// Minus the measurement, -y (no derivative kick on reference steps; same loop gain). When
+    /// tracking a moving reference with feedforward, prefer [`DerivativeOn::Error`]: on the
+    /// measurement the D term brakes the motion by K_D omega_ref and undoes part of the feedforward.
     Measurement,
 }
 
@@ -236,6 +238,8 @@ pub struct Pid {
     i_w1: f64,
     /// T_s K_w of back-calculation (0 otherwise).
     kw_ts: f64,
+    /// 1 / (1 + T_s K_w).
+    kw_den_inv: f64,
     // State.
     /// Integral term [V].
     i_v: f64,
@@ -261,6 +265,7 @@ impl Pid {
             i_w0: 0.0,
             i_w1: 0.0,
             kw_ts: 0.0,
+            kw_den_inv: 1.0,
             i_v: 0.0,
             f_rad_s: 0.0,
             e_prev: 0.0,
@@ -301,6 +306,7 @@ impl Pid {
             AntiWindup::BackCalculation { kw } => kw * ts,
             _ => 0.0,
         };
+        self.kw_den_inv = 1.0 / (1.0 + self.kw_ts);
     }
 
     /// The configuration in use.
@@ -329,6 +335,32 @@ impl Pid {
         if i_v.is_finite() {
             self.i_v = i_v;
         }
+    }
+
+    /// Restarts the controller so that it takes over from an output `u_v` [V] that was being
+    /// applied (open loop, another controller) without a bump: the history is primed with the
+    /// current error (no derivative kick) and the integral set to `u_v - K_P e - FF`. The next
+    /// [`update`](Self::update) with the same inputs then returns `u_v` plus one integral
+    /// increment (K_I T_s e).
+    pub fn bumpless_start(
+        &mut self,
+        u_v: f64,
+        reference_rad: f64,
+        measurement_rad: f64,
+        feedforward_v: f64,
+    ) {
+        self.reset();
+        let e = reference_rad - measurement_rad;
+        if !(e.is_finite() && u_v.is_finite() && feedforward_v.is_finite()) {
+            return;
+        }
+        self.x_prev = match self.cfg.derivative_on {
+            DerivativeOn::Error => e,
+            DerivativeOn::Measurement => -measurement_rad,
+        };
+        self.e_prev = e;
+        self.primed = true;
+        self.i_v = u_v - self.cfg.kp * e - feedforward_v;
     }
 
     /// Changes the gains without a bump in the output: the integral absorbs the change of
@@ -408,20 +440,15 @@ impl Pid {
             }
             AntiWindup::BackCalculation { .. } => {
                 if v_free > c.u_max_v {
-                    i = (i + self.kw_ts * (c.u_max_v - pdf)) / (1.0 + self.kw_ts);
+                    i = (i + self.kw_ts * (c.u_max_v - pdf)) * self.kw_den_inv;
                 } else if v_free < c.u_min_v {
-                    i = (i + self.kw_ts * (c.u_min_v - pdf)) / (1.0 + self.kw_ts);
+                    i = (i + self.kw_ts * (c.u_min_v - pdf)) * self.kw_den_inv;
                 }
             }
         }
         let v = pdf + i;
-        let u = if v > c.u_max_v {
-            c.u_max_v
-        } else if v < c.u_min_v {
-            c.u_min_v
-        } else {
-            v
-        };
+        // Branch-free clamp (limits validated ordered and not NaN; v is finite).
+        let u = v.max(c.u_min_v).min(c.u_max_v);
         self.i_v = i;
         self.f_rad_s = f;
         self.e_prev = e;
@@ -711,6 +738,26 @@ mod tests {
         let raw_bump = (new.kp - 2.0) * e_k + (new.kd - 0.2) * f_k;
         assert!(raw_bump.abs() > 4.0, "{raw_bump}");
         assert!(pid.set_gains(PidGains { kp: -1.0, ..new }).is_err());
+    }
+
+    #[test]
+    fn bumpless_start_from_an_open_loop_voltage() {
+        // K_P = 2, K_I = 10, T_s = 0.01, e = 0.3: I = 1.5 - 0.6 - 0.1 = 0.8, then the update adds
+        // K_I T_s e = 0.03 (both rules, since e_{k-1} = e_k): u = 0.6 + 0.83 + 0 + 0.1 = 1.53.
+        for disc in [Discretization::BackwardEuler, Discretization::Tustin] {
+            let mut pid = Pid::new(PidConfig {
+                discretization: disc,
+                ..cfg(2.0, 10.0, 0.5, 0.01, 0.01)
+            })
+            .unwrap();
+            pid.update(5.0, 0.0, 0.0); // some unrelated history
+            pid.bumpless_start(1.5, 1.0, 0.7, 0.1);
+            let o = pid.update(1.0, 0.7, 0.1);
+            assert!(
+                (o.u_v - 1.53).abs() < 1e-12 && o.d_v == 0.0,
+                "{disc:?}: {o:?}"
+            );
+        }
     }
 
     #[test]

@@ -26,11 +26,16 @@
 //! `sine:amp=0.5,freq=1`, `chirp:amp=0.2,f0=0.1,f1=20,duration=10,mode=log`,
 //! `trap:distance=3.0,vmax=10,amax=100`, `square:amp=1,period=2`, `prbs:amp=0.5,bit=0.05,seed=1`.
 //!
-//! After its `duration` a chirp keeps oscillating at f1 (phase-continuous); a trapezoid holds the
+//! Times within [`TIME_EPS_S`] (1 ns) of a start instant count as at it (floating-point sample
+//! times). After its `duration` a chirp keeps oscillating at f1 (phase-continuous); a trapezoid holds the
 //! final position.
 
 use crate::math;
 use core::fmt;
+
+/// Times within this tolerance [s] of a start or switching instant count as at the instant, so
+/// that sample times computed as `k * T_s` in floating point switch on the intended sample.
+pub const TIME_EPS_S: f64 = 1e-9;
 
 /// Reference position, speed and acceleration of the load at one instant.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -361,14 +366,14 @@ impl Reference {
     #[inline]
     pub fn at(&self, t_s: f64) -> RefSample {
         let tau = t_s - self.t0_s;
-        if tau < 0.0 {
+        if tau < -TIME_EPS_S {
             return RefSample {
                 pos_rad: self.offset_rad,
                 vel_rad_s: 0.0,
                 acc_rad_s2: 0.0,
             };
         }
-        let mut r = self.shape.at(tau);
+        let mut r = self.shape.at(tau.max(0.0));
         r.pos_rad += self.offset_rad;
         r
     }

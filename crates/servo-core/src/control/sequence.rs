@@ -10,13 +10,14 @@
 //! [`SegmentMode::Chained`] the final value of the previous segment of the same target is added,
 //! so that e.g. ramp, hold, ramp back continue from where the previous one ended.
 //!
-//! Before the first segment the first segment's value at its start holds; after the last one a
+//! Times within [`TIME_EPS_S`] (1 ns) of a segment boundary count as at it, so `k * T_s`
+//! sample times switch on the intended sample. Before the first segment the first segment's value at its start holds; after the last one a
 //! position holds its final value (speed 0) and a voltage is 0 V.
 //!
 //! The segment arithmetic works on slices of [`PlacedSegment`], so the allocation-free
 //! [`Sequence`] and a heap-backed list (the experiment files of servo-cli) share it.
 
-use super::reference::{RefParseError, RefSample, Reference};
+use super::reference::{RefParseError, RefSample, Reference, TIME_EPS_S};
 
 /// What a segment drives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -164,7 +165,7 @@ impl PlacedSegment {
     }
 
     fn local(&self, t_s: f64) -> RefSample {
-        let mut r = self.segment.reference.at(t_s - self.start_s);
+        let mut r = self.segment.reference.at((t_s - self.start_s).max(0.0));
         r.pos_rad += self.base;
         r
     }
@@ -189,7 +190,7 @@ pub fn setpoint_at(slots: &[PlacedSegment], t_s: f64) -> Setpoint {
     let Some(last) = slots.last() else {
         return Setpoint::Position(RefSample::default());
     };
-    if t_s >= last.end_s() {
+    if t_s >= last.end_s() - TIME_EPS_S {
         return match last.segment.target {
             Target::Position => Setpoint::Position(RefSample {
                 pos_rad: last.final_value(),
@@ -200,7 +201,7 @@ pub fn setpoint_at(slots: &[PlacedSegment], t_s: f64) -> Setpoint {
         };
     }
     let first = &slots[0];
-    if t_s < first.start_s {
+    if t_s < first.start_s - TIME_EPS_S {
         return match first.setpoint(first.start_s) {
             Setpoint::Position(r) => Setpoint::Position(RefSample {
                 pos_rad: r.pos_rad,
@@ -212,7 +213,7 @@ pub fn setpoint_at(slots: &[PlacedSegment], t_s: f64) -> Setpoint {
     }
     // Index of the last segment starting at or before t.
     let i = slots
-        .partition_point(|p| p.start_s <= t_s)
+        .partition_point(|p| p.start_s <= t_s + TIME_EPS_S)
         .saturating_sub(1);
     slots[i].setpoint(t_s)
 }
@@ -303,6 +304,10 @@ mod tests {
         assert!(deg(11.0).abs() < 1e-12);
         assert!(deg(100.0).abs() < 1e-12);
         assert!((deg(-1.0) - 10.0).abs() < 1e-12);
+        // Floating-point sample times just below a boundary switch on the intended sample:
+        // 8.001 - 0.001 = 7.999999999999999 is the start of the 50 deg segment.
+        assert!((deg(8.001 - 0.001) - 50.0).abs() < 1e-12);
+        assert!(deg(1.999_999_999_9).abs() < 1e-12);
     }
 
     #[test]

@@ -40,6 +40,8 @@ pub struct DiagnoseOptions {
     pub min_eq_drop: f64,
     /// Minimum relative drop of the held-out output-error cost (0.01 = 1 %).
     pub min_oe_drop: f64,
+    /// Minimum held-out output-error drop for backlash, judged on simulation alone (0.08 = 8 %).
+    pub min_backlash_oe_drop: f64,
     /// Kinds to try; empty: every kind the model lacks.
     pub candidates: Vec<EffectKind>,
     /// Run candidates on two threads (std builds).
@@ -56,6 +58,7 @@ impl Default for DiagnoseOptions {
             min_bic_gain: 10.0,
             min_eq_drop: 0.02,
             min_oe_drop: 0.01,
+            min_backlash_oe_drop: 0.08,
             candidates: Vec::new(),
             parallel: true,
         }
@@ -162,8 +165,12 @@ pub fn diagnose_dataset(
         }
     }
     ranking.sort_by(|a, b| {
+        // Significant first; then by the held-out simulation error reduction, the one figure
+        // comparable across equations; then by the equation residual reduction.
+        let oe = |c: &Candidate| c.oe_reduction_pct.unwrap_or(f64::NEG_INFINITY);
         b.significant
             .cmp(&a.significant)
+            .then(oe(b).total_cmp(&oe(a)))
             .then(b.error_reduction_pct.total_cmp(&a.error_reduction_pct))
     });
     let mut equations = Vec::new();
@@ -347,7 +354,10 @@ fn judge(
     };
     let error_reduction_pct = 100.0 * (1.0 - math::sqrt((1.0 - eq_drop).max(0.0)));
     let oe_ok = oe_drop.is_some_and(|d| d >= opts.min_oe_drop);
-    let significant = bic_gain > opts.min_bic_gain && eq_drop >= opts.min_eq_drop && oe_ok;
+    // Backlash is judged on the simulation alone, which is less specific than an equation
+    // residual (initial contact state, stick-slip transients): ask for a clear drop.
+    let min_drop = if backlash { opts.min_backlash_oe_drop } else { opts.min_eq_drop };
+    let significant = bic_gain > opts.min_bic_gain && eq_drop >= min_drop && oe_ok;
     // Detection floor: RMS of what the effect explains versus the sensor-noise torque/voltage.
     let explained: f64 = {
         let s: f64 = b

@@ -38,11 +38,17 @@ pub fn coulomb_torque_l(tau_sf: f64, omega_l: f64) -> f64 {
 /// Stribeck shape exp(-(omega_l / omega_s)^2) [-]: 1 at rest, 0 well above the Stribeck speed.
 ///
 /// `omega_l`, `omega_s` [rad/s], load side. The `stribeck` regressor for the excess
-/// (tau_s - tau_sf) is `sign(omega_l) * stribeck_shape(omega_l, omega_s)`.
+/// (tau_s - tau_sf) is `sign(omega_l) * stribeck_shape(omega_l, omega_s)`. Exactly 0 beyond
+/// 6 omega_s (where the exponential is below 2.4e-16).
 #[inline]
 pub fn stribeck_shape(omega_l: f64, omega_s: f64) -> f64 {
     let r = omega_l / omega_s;
-    math::exp(-r * r)
+    let r2 = r * r;
+    if r2 > 36.0 {
+        0.0
+    } else {
+        math::exp(-r2)
+    }
 }
 
 /// Kinetic friction level of Coulomb + Stribeck [N m] (magnitude, load side) at speed `omega_l`:

@@ -23,6 +23,8 @@ pub struct RecData {
     pub u_v: Vec<f64>,
     /// Motor angle [rad], raw (measured, or N times the load angle).
     pub theta_m_rad: Vec<f64>,
+    /// True when the angle measured is the load's (theta_m_rad = N theta_l).
+    pub angle_is_load: bool,
     /// Motor speed [rad/s] from a lightly filtered position (for nonlinear regressors).
     pub omega_raw: Vec<f64>,
     /// Motor speed [rad/s], zero-phase filtered.
@@ -56,23 +58,24 @@ impl RecData {
     /// transformed input, delayed by `delay_s`, held, then passed through the first-order lag
     /// `lag_s` (driver and armature) exactly for a zero-order-hold input: with no delay and a lag
     /// much shorter than the sample period, row k sees u[k-1].
-    pub fn input_point(
-        &self,
-        transform: impl Fn(f64) -> f64,
-        delay_s: f64,
-        lag_s: f64,
-    ) -> Vec<f64> {
+    pub fn input_point(&self, transform: impl Fn(f64) -> f64, delay_s: f64, lag_s: f64) -> Vec<f64> {
         let u_in: Vec<f64> = self.u_v.iter().map(|&u| transform(u)).collect();
-        let held = shift_hold(&u_in, 0.5 + delay_s / self.dt_s);
-        let a = if lag_s > 0.0 {
-            math::exp(-self.dt_s / lag_s)
-        } else {
-            0.0
-        };
-        let mut y = held.first().copied().unwrap_or(0.0);
-        held.iter()
-            .map(|&x| {
-                y = a * y + (1.0 - a) * x;
+        let n = u_in.len();
+        let m = (delay_s / self.dt_s).max(0.0);
+        let n0 = math::floor(m) as usize;
+        let frac = m - n0 as f64;
+        let decay = |t: f64| if lag_s > 0.0 { math::exp(-t / lag_s) } else { 0.0 };
+        let (a1, a2) = (decay(frac * self.dt_s), decay((1.0 - frac) * self.dt_s));
+        let at = |j: isize| u_in[j.clamp(0, n as isize - 1) as usize];
+        // Over [t_{k-1}, t_k) the delayed input is u[k-2-n0] for frac dt, then u[k-1-n0]; the
+        // lag's response to that piecewise-constant input is exact.
+        let mut y = at(0);
+        (0..n)
+            .map(|k| {
+                let k = k as isize - n0 as isize;
+                let (v1, v2) = (at(k - 2), at(k - 1));
+                let y1 = y * a1 + v1 * (1.0 - a1);
+                y = y1 * a2 + v2 * (1.0 - a2);
                 y
             })
             .collect()
@@ -129,6 +132,8 @@ pub struct Dataset {
     pub u_max_v: f64,
     /// Gear ratio N used to convert load and motor sides.
     pub gear_ratio: f64,
+    /// The Coulomb regressor sign(omega)/N, filtered, at the torque-balance rows (cached).
+    pub coulomb_col: Vec<f64>,
     pub opts: FitOptions,
 }
 
@@ -164,15 +169,21 @@ impl Dataset {
                 opts.min_speed_rad_s
             )));
         }
-        Ok(Dataset {
+        let mut ds = Dataset {
             recs,
             has_current,
             mech_rows,
             elec_rows,
             u_max_v,
             gear_ratio: params.n,
+            coulomb_col: Vec::new(),
             opts: opts.clone(),
-        })
+        };
+        let n = params.n;
+        ds.coulomb_col = ds.column(&ds.mech_rows, |r: &RecData| {
+            r.omega_raw.iter().map(|&w| super::shapes::coulomb_dir(w) / n).collect()
+        });
+        Ok(ds)
     }
 
     /// Samples a filtered full-rate signal of each record at `rows`.
@@ -226,6 +237,7 @@ fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecDat
     let u = r.u_v.clone().ok_or_else(|| {
         FitError::BadRecord(alloc::format!("{src}: the input voltage u is not logged"))
     })?;
+    let angle_is_load = r.theta_m_rad.is_none() && r.theta_l_rad.is_some();
     let theta_m: Vec<f64> = if let Some(t) = &r.theta_m_rad {
         t.clone()
     } else if let Some(t) = &r.theta_l_rad {
@@ -282,6 +294,7 @@ fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecDat
         time_s: r.time_s.clone(),
         u_v: u,
         theta_m_rad: theta_m,
+        angle_is_load,
         omega_raw,
         omega_f,
         accel_f,
@@ -295,9 +308,9 @@ fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecDat
 fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec: &mut Rows) {
     let n = r.omega_f.len();
     let fs = 1.0 / r.dt_s;
-    let edge = ((2.0 / opts.filter_hz) * fs).ceil() as usize + 2;
-    let dec = ((fs / (4.0 * opts.filter_hz)).floor() as usize).max(1);
-    let margin = (opts.margin_s * fs).ceil() as usize;
+    let edge = libm::ceil((2.0 / opts.filter_hz) * fs) as usize + 2;
+    let dec = (math::floor(fs / (4.0 * opts.filter_hz)) as usize).max(1);
+    let margin = libm::ceil(opts.margin_s * fs) as usize;
     // Stuck samples, dilated by the margin.
     let mut near_stuck = alloc::vec![false; n];
     let mut last_stuck: Option<usize> = None;
@@ -326,6 +339,27 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
             }
         }
     }
+    // With the load angle measured, the motor speed is not observable near velocity reversals
+    // when the gears have play: keep the electrical balance (which uses it) away from them.
+    let rev_win = libm::ceil(0.05 * fs) as usize;
+    let mut near_rev = alloc::vec![false; n];
+    if r.angle_is_load {
+        let mut last: Option<(usize, f64)> = None;
+        for k in 0..n {
+            let w = r.omega_f[k];
+            if w.abs() > opts.min_speed_rad_s {
+                let s = math::sign(w);
+                if let Some((k0, s0)) = last {
+                    if s0 != s {
+                        for f in near_rev.iter_mut().take((k + rev_win).min(n)).skip(k0.saturating_sub(rev_win)) {
+                            *f = true;
+                        }
+                    }
+                }
+                last = Some((k, s));
+            }
+        }
+    }
     // Fit / held-out blocks: the record is cut in blocks of `holdout_block_s`; every
     // `holdout_every`-th block is held out.
     let block = ((opts.holdout_block_s * fs) as usize).max(1);
@@ -338,9 +372,11 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
             mech.k.push(k);
             mech.fit.push(fit);
         }
-        elec.rec.push(ri);
-        elec.k.push(k);
-        elec.fit.push(fit);
+        if !near_rev[k] {
+            elec.rec.push(ri);
+            elec.k.push(k);
+            elec.fit.push(fit);
+        }
         k += dec;
     }
 }

@@ -62,8 +62,8 @@ impl Default for FitOptions {
     fn default() -> Self {
         FitOptions {
             filter_hz: 25.0,
-            min_speed_rad_s: 2.0,
-            margin_s: 0.02,
+            min_speed_rad_s: 1.0,
+            margin_s: 0.01,
             refit_base: true,
             max_delay_s: 0.02,
             max_cogging_harmonic: 40,
@@ -396,6 +396,27 @@ impl Dataset {
                 cfg.slots[i].set(key, x);
             }
         }
+        // A delay found in the electrical balance is sized to the sample only (the current
+        // settles within a period); the motion resolves the fraction: refine on the simulation.
+        if let Some(&(i, _)) = searched.iter().find(|(i, _)| cfg.slots[*i].kind == EffectKind::Delay) {
+            let d0 = cfg.slots[i].get("delay");
+            let dt = self.recs.iter().map(|r| r.dt_s).fold(f64::INFINITY, f64::min);
+            if self.has_current && d0 > 0.0 && dt.is_finite() {
+                let base = self.solve_config(&cfg)?;
+                let mut f = |d: f64| {
+                    let mut c = base.cfg.clone();
+                    c.slots[i].set("delay", d);
+                    match to_plant(&c, &base.mech, base.elec.as_ref()) {
+                        Ok(p) => oe::prediction_cost(self, &p, oe::Part::Fit).unwrap_or(f64::INFINITY),
+                        Err(_) => f64::INFINITY,
+                    }
+                };
+                let grid = search::linspace((d0 - dt).max(0.0), d0 + dt, 9);
+                if let Some((d, _)) = search::grid_then_golden(&grid, &mut f, 10) {
+                    cfg.slots[i].set("delay", d);
+                }
+            }
+        }
         let mut solved = self.solve_config(&cfg)?;
         if let Some(i) = backlash_gap {
             let lo = 0.0;
@@ -448,7 +469,7 @@ impl Dataset {
             (EffectKind::Saturation, _) => search::linspace(0.2 * umax, umax * 1.001, 33),
             (EffectKind::Deadzone, _) => search::linspace(0.0, (0.4 * umax).min(3.0), 31),
             (EffectKind::Delay, _) => {
-                let n = ((self.opts.max_delay_s / (0.5 * dt)).ceil() as usize).clamp(2, 200);
+                let n = (libm::ceil(self.opts.max_delay_s / (0.5 * dt)) as usize).clamp(2, 200);
                 search::linspace(0.0, self.opts.max_delay_s, n + 1)
             }
             (EffectKind::Backlash, _) => search::linspace(0.0, 0.2, 16),
@@ -498,7 +519,7 @@ impl Dataset {
             let (cw, sw) = el.coef(Coef::KeOverK).unwrap_or((f64::NAN, 0.0));
             let k_drv = p.k_drv;
             let se_k = k_drv * sw / cw;
-            let se_r = p.r_eq() * math::sqrt((si / ci).powi(2) + (sw / cw).powi(2));
+            let se_r = p.r_eq() * math::sqrt((si / ci) * (si / ci) + (sw / cw) * (sw / cw));
             out.push(ParamEstimate {
                 effect: None,
                 key: "k_drv",

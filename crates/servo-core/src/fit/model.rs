@@ -154,8 +154,9 @@ impl Config {
             .map(|s| s.get("width"))
             .filter(|v| v.is_finite());
         move |u| {
-            let u = lim.map_or(u, |l| shapes::saturation(u, l));
-            dz.map_or(u, |w| shapes::deadzone(u, w))
+            // Dead zone first, then saturation (as the simulator: |u_in| <= limit always).
+            let u = dz.map_or(u, |w| shapes::deadzone(u, w));
+            lim.map_or(u, |l| shapes::saturation(u, l))
         }
     }
     fn delay_s(&self) -> f64 {
@@ -197,14 +198,7 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
         .slots
         .iter()
         .position(|s| s.kind == EffectKind::Asymmetry);
-    let coulomb_col = || {
-        ds.column(rows, |r: &RecData| {
-            r.omega_raw
-                .iter()
-                .map(|&w| shapes::coulomb_dir(w) / n)
-                .collect()
-        })
-    };
+    let coulomb_col = || ds.coulomb_col.clone();
     if asym.is_none() && cfg.base.effects.contains(EffectKind::Coulomb) {
         terms.push(Term {
             col: coulomb_col(),
@@ -289,14 +283,22 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
                         r.theta_m_rad[k] / n
                     }
                 };
+                // Above about twice the filter cut-off the sampled sin/cos alias into the band
+                // the fit sees, while the measured response holds none of it: taper them out.
+                let fc = ds.opts.filter_hz;
+                let taper = move |r: &RecData, k: usize| {
+                    let w = if cog { r.omega_raw[k] } else { r.omega_raw[k] / n };
+                    let f = h * w.abs() / math::TAU;
+                    ((4.0 * fc - f) / (2.0 * fc)).clamp(0.0, 1.0)
+                };
                 let sin_col = ds.column(rows, |r: &RecData| {
                     (0..r.theta_m_rad.len())
-                        .map(|k| shapes::cogging_pair(angle(r, k), h).0 * scale)
+                        .map(|k| shapes::cogging_pair(angle(r, k), h).0 * scale * taper(r, k))
                         .collect()
                 });
                 let cos_col = ds.column(rows, |r: &RecData| {
                     (0..r.theta_m_rad.len())
-                        .map(|k| shapes::cogging_pair(angle(r, k), h).1 * scale)
+                        .map(|k| shapes::cogging_pair(angle(r, k), h).1 * scale * taper(r, k))
                         .collect()
                 });
                 let fit_amp = s.fits("amplitude") || s.fits("phase");

@@ -6,6 +6,7 @@
 
 use super::dataset::Dataset;
 use crate::math;
+use crate::effects::EffectKind;
 use crate::plant::Plant;
 use crate::sim::{PlantSim, PlantState};
 use alloc::vec::Vec;
@@ -28,7 +29,7 @@ pub fn segments(ds: &Dataset, part: Part) -> Vec<(usize, usize)> {
     for (ri, r) in ds.recs.iter().enumerate() {
         let fs = 1.0 / r.dt_s;
         let h = ((o.oe_horizon_s * fs) as usize).max(2);
-        let edge = ((2.0 / o.filter_hz) * fs).ceil() as usize + 2;
+        let edge = libm::ceil((2.0 / o.filter_hz) * fs) as usize + 2;
         let block = ((o.holdout_block_s * fs) as usize).max(1);
         let n = r.u_v.len();
         let mut k = edge.max(1);
@@ -82,20 +83,25 @@ pub fn prediction_cost_on(ds: &Dataset, plant: &Plant, segs: &[(usize, usize)]) 
             None => (p.k_drv * u_prev - p.k_e * w) / p.r_eq(),
         };
         let th = r.theta_m_rad[k0];
+        // With backlash and the load angle measured, start in contact on the driving flank.
+        let half_gap = plant.effects.value(EffectKind::Backlash, "gap").unwrap_or(0.0) * 0.5;
+        let dir = if w.abs() > ds.opts.min_speed_rad_s { math::sign(w) } else { math::sign(u_prev) };
+        let (th_m, th_l) = if r.angle_is_load { (th + p.n * half_gap * dir, th / p.n) } else { (th, th / p.n - half_gap * dir) };
         sim.reset(PlantState {
             time_s: r.time_s[k0],
             u_in_v: u_prev,
             u_drv_v: p.k_drv * u_prev,
             i_a_a: i,
             omega_m_rad_s: w,
-            theta_m_rad: th,
+            theta_m_rad: th_m,
             omega_l_rad_s: w / p.n,
-            theta_l_rad: th / p.n,
+            theta_l_rad: th_l,
             ..PlantState::default()
         });
         for j in 0..h {
             let s = sim.step(r.u_v[k0 + j]);
-            let e = s.theta_m_rad - r.theta_m_rad[k0 + j + 1];
+            let out = if r.angle_is_load { s.theta_l_rad * p.n } else { s.theta_m_rad };
+            let e = out - r.theta_m_rad[k0 + j + 1];
             if !e.is_finite() {
                 return None;
             }

@@ -15,6 +15,9 @@
 //!
 //! Units: SI. B_eq [N m s/rad] and J_eq [kg m^2] at motor side, tau_sf [N m] at load side.
 
+// `!(x > 0.0)` is deliberate throughout: it also rejects NaN. Index loops walk parallel slices.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
 pub mod combined;
 pub mod electrical;
 pub mod filter;

@@ -15,7 +15,9 @@
 //! `load_inertia_fraction`, imbalance acts on it), joined through the play `gap` at the load by a
 //! spring-damper contact (`stiffness`, `damping`, load side). Viscous friction B_eq is split
 //! between the bodies in the same ratio as the inertia, so that a rigid contact gives back eq. 20.
-//! Dry friction (Coulomb, Stribeck, asymmetry) acts on the motor-side body.
+//! Dry friction (Coulomb, Stribeck, asymmetry) acts at the load as in eq. 8 (on the load body
+//! with backlash): after a reversal the load stays where friction stopped it while the motor
+//! crosses the gap.
 //!
 //! # Integration
 //!
@@ -28,9 +30,10 @@
 //! the predicted end). A linear plant (no dry friction, cogging, imbalance or backlash) takes a
 //! single exact step per period, so the linear case equals the exact ZOH solution.
 //!
-//! Stick-slip uses a stuck/slipping state machine on the motor-side body: when the speed crosses
-//! zero the shaft sticks (omega_m = 0 exactly, the current keeps evolving); it breaks away when
-//! the net driving torque (motor torque minus cogging, imbalance or contact torque) exceeds the
+//! Stick-slip uses a stuck/slipping state machine on the body that carries the dry friction (the
+//! whole rigid drivetrain, or the load body with backlash): when its speed crosses zero it sticks
+//! (speed = 0 exactly, the current keeps evolving); it breaks away when the net driving torque on
+//! it (motor torque minus cogging and imbalance, or the contact torque with backlash) exceeds the
 //! breakaway torque of [`Friction::breakaway_l`] (tau_s with Stribeck, else the Coulomb level of
 //! that direction). Below breakaway the shaft does not creep and there is no chattering around
 //! zero speed. Events (sticking, breakaway, contact) are resolved at sub-step resolution.
@@ -42,6 +45,9 @@
 //!
 //! Row k of a log holds the measurements taken at `time_s[k]` and the voltage u applied from then
 //! until row k+1: `state()` at time t_k is measured, then `step(u_k)` advances to t_k + dt_s.
+
+// Small dense matrix code reads best with explicit indices.
+#![allow(clippy::needless_range_loop)]
 
 pub mod expm;
 pub mod sensors;
@@ -107,7 +113,8 @@ pub struct PlantState {
     pub omega_l_rad_s: f64,
     /// Load angle theta_l [rad] (theta_m / N without backlash).
     pub theta_l_rad: f64,
-    /// True while dry friction holds the motor-side shaft (omega_m = 0 exactly).
+    /// True while dry friction holds the shaft (omega_l = 0 exactly; with backlash the load body,
+    /// without it the whole drivetrain).
     pub stuck: bool,
 }
 
@@ -189,6 +196,8 @@ pub struct PlantSim {
     disc: [[Disc; 4]; 3],
     /// Lengths [s] of the three sub-step kinds.
     sub_len: [f64; 3],
+    /// Stuck-mode discretisation over a whole period (rigid drivetrain with dry friction only).
+    coarse_stuck: Option<Disc>,
     // State.
     x: [f64; NS],
     stuck: bool,
@@ -198,6 +207,9 @@ pub struct PlantSim {
     history: [f64; DELAY_CAPACITY],
     head: usize,
     state: PlantState,
+    /// Last (angle, torque) of cogging and imbalance, reused while the angle is unchanged.
+    cache_cog: (f64, f64),
+    cache_imb: (f64, f64),
 }
 
 impl PlantSim {
@@ -276,7 +288,7 @@ impl PlantSim {
         };
         let nonlinear = dry || cogging.is_some() || imbalance.is_some() || backlash.is_some();
         let substeps = if nonlinear {
-            math::floor(dt_s / max_substep_s - 1e-9) as usize + 1
+            (math::floor(dt_s / max_substep_s - 1e-9) as usize).saturating_add(1)
         } else {
             1
         };
@@ -299,9 +311,9 @@ impl PlantSim {
         }
         if f > 1.0 - 1e-9 {
             f = 0.0;
-            delay_k += 1;
+            delay_k = delay_k.saturating_add(1);
         }
-        if delay_k + 2 > DELAY_CAPACITY {
+        if delay_k.saturating_add(2) > DELAY_CAPACITY {
             return Err(SimError::DelayTooLong {
                 delay_s,
                 max_s: (DELAY_CAPACITY - 2) as f64 * dt_s,
@@ -340,6 +352,8 @@ impl PlantSim {
                 disc[li][mode] = discretise(plant, frac, backlash.as_ref(), mode, len);
             }
         }
+        let coarse_stuck = (dry && backlash.is_none() && substeps > 1)
+            .then(|| discretise(plant, frac, None, STUCK, dt_s));
         let state = PlantState {
             stuck: dry,
             ..PlantState::default()
@@ -361,6 +375,7 @@ impl PlantSim {
             switch_at,
             disc,
             sub_len: lengths,
+            coarse_stuck,
             x: [0.0; NS],
             stuck: dry,
             dir: 0.0,
@@ -369,6 +384,8 @@ impl PlantSim {
             history: [0.0; DELAY_CAPACITY],
             head: 0,
             state,
+            cache_cog: (f64::NAN, 0.0),
+            cache_imb: (f64::NAN, 0.0),
         })
     }
 
@@ -403,11 +420,16 @@ impl PlantSim {
             state.omega_l_rad_s,
             state.theta_l_rad,
         ];
-        self.stuck = self.dry && (state.stuck || state.omega_m_rad_s == 0.0);
-        if self.stuck {
-            self.x[2] = 0.0;
+        if self.backlash.is_none() {
+            self.x[4] = self.x[2] / self.n;
+            self.x[5] = self.x[3] / self.n;
         }
-        self.dir = math::sign(self.x[2]);
+        let w = self.fb_w();
+        self.stuck = self.dry && (state.stuck || self.x[w] == 0.0);
+        if self.stuck {
+            self.x[w] = 0.0;
+        }
+        self.dir = math::sign(self.x[w]);
         let t = if state.time_s.is_finite() {
             state.time_s
         } else {
@@ -434,7 +456,10 @@ impl PlantSim {
         let new = self.history[(self.head + DELAY_CAPACITY - self.delay_k) % DELAY_CAPACITY];
         let old = self.history[(self.head + DELAY_CAPACITY - self.delay_k - 1) % DELAY_CAPACITY];
         let mut carry = None;
-        match self.switch_at {
+        let switch_at = self.switch_at;
+        let held = switch_at.is_none() && self.stuck && self.stays_stuck_over_period(new);
+        match switch_at {
+            None if held => {}
             None => {
                 for _ in 0..self.substeps {
                     carry = self.substep(0, new, carry);
@@ -457,6 +482,33 @@ impl PlantSim {
         &self.state
     }
 
+    /// Shortcut for a rigid drivetrain held by dry friction: one exact step over the whole period
+    /// in the stuck mode, accepted when the driving torque stays below breakaway at both ends.
+    /// While stuck the angles are fixed and the current follows two first-order lags in series
+    /// (no overshoot), so the driving torque is monotone over the period and never exceeds
+    /// breakaway in between. Returns false (state untouched) otherwise.
+    fn stays_stuck_over_period(&mut self, u: f64) -> bool {
+        let Some(coarse) = &self.coarse_stuck else {
+            return false;
+        };
+        let x0 = self.x;
+        let x1 = advance::<4>(coarse, &x0, &[u, 0.0, 0.0, 0.0]);
+        let cogging = self.cogging_cached(x0[3]);
+        let imbalance = self.imbalance_cached(self.theta_l(&x0));
+        let holds = |sim: &Self, x: &[f64; NS]| {
+            let d = sim.drive_torque_l_with(x, cogging, imbalance);
+            d.abs() <= sim.friction.breakaway_l(math::sign(d))
+        };
+        if holds(self, &x0) && holds(self, &x1) {
+            self.x = x1;
+            self.x[2] = 0.0;
+            self.x[3] = x0[3];
+            true
+        } else {
+            false
+        }
+    }
+
     /// The torque of every effect at the current state.
     pub fn torques(&self) -> Torques {
         let x = &self.x;
@@ -472,9 +524,9 @@ impl PlantSim {
         let friction = if !self.dry {
             0.0
         } else if self.stuck {
-            self.drive_torque_m(x) * self.n
+            self.drive_torque_l(x)
         } else {
-            self.friction.torque_l(x[2] / self.n, self.dir)
+            self.friction.torque_l(self.fb_speed_l(x), self.dir)
         };
         let viscous = match self.backlash {
             Some(_) => {
@@ -540,41 +592,97 @@ impl PlantSim {
         }
     }
 
-    /// Net torque driving the motor-side body at rest [N m], motor side: motor torque minus
-    /// cogging and the load's reaction (imbalance, or the contact torque with backlash).
-    fn drive_torque_m(&self, x: &[f64; NS]) -> f64 {
-        let mut t = self.k_t * x[1];
-        if let Some((a, h, ph)) = self.cogging {
-            t -= torque::cogging_torque_m(a, h, ph, x[3]);
+    /// Index of the speed of the body that carries the dry friction (omega_m rigid, omega_l with
+    /// backlash); its angle is the next index.
+    #[inline]
+    fn fb_w(&self) -> usize {
+        if self.backlash.is_some() {
+            4
+        } else {
+            2
         }
+    }
+
+    /// Load-side speed of the friction body [rad/s].
+    #[inline]
+    fn fb_speed_l(&self, x: &[f64; NS]) -> f64 {
+        if self.backlash.is_some() {
+            x[4]
+        } else {
+            x[2] / self.n
+        }
+    }
+
+    /// Net torque driving the friction body at rest [N m], load side: without backlash N (k_t
+    /// i_a - cogging) - imbalance; with backlash contact torque - imbalance.
+    fn drive_torque_l(&self, x: &[f64; NS]) -> f64 {
+        let imbalance = match self.imbalance {
+            Some((a, ph)) => torque::imbalance_torque_l(a, ph, self.theta_l(x)),
+            None => 0.0,
+        };
+        let cogging = match self.cogging {
+            Some((a, h, ph)) => torque::cogging_torque_m(a, h, ph, x[3]),
+            None => 0.0,
+        };
+        self.drive_torque_l_with(x, cogging, imbalance)
+    }
+
+    /// [`Self::drive_torque_l`] with the cogging [N m, motor side] and imbalance [N m, load side]
+    /// torques given.
+    #[inline]
+    fn drive_torque_l_with(&self, x: &[f64; NS], cogging: f64, imbalance: f64) -> f64 {
         match self.backlash {
-            Some(_) => t -= self.contact_torque_l(x) / self.n,
-            None => {
-                if let Some((a, ph)) = self.imbalance {
-                    t -= torque::imbalance_torque_l(a, ph, x[3] / self.n) / self.n;
-                }
-            }
+            Some(_) => self.contact_torque_l(x) - imbalance,
+            None => (self.k_t * x[1] - cogging) * self.n - imbalance,
         }
-        t
+    }
+
+    /// Cogging torque at `theta_m` [N m], motor side; the last value is reused while the angle
+    /// does not change (stuck shaft).
+    #[inline]
+    fn cogging_cached(&mut self, theta_m: f64) -> f64 {
+        match self.cogging {
+            Some((a, h, ph)) => {
+                if theta_m != self.cache_cog.0 {
+                    self.cache_cog = (theta_m, torque::cogging_torque_m(a, h, ph, theta_m));
+                }
+                self.cache_cog.1
+            }
+            None => 0.0,
+        }
+    }
+
+    /// Imbalance torque at `theta_l` [N m], load side, cached like [`Self::cogging_cached`].
+    #[inline]
+    fn imbalance_cached(&mut self, theta_l: f64) -> f64 {
+        match self.imbalance {
+            Some((a, ph)) => {
+                if theta_l != self.cache_imb.0 {
+                    self.cache_imb = (theta_l, torque::imbalance_torque_l(a, ph, theta_l));
+                }
+                self.cache_imb.1
+            }
+            None => 0.0,
+        }
     }
 
     /// Nonlinear input torques (tau_m motor side, tau_l load side) at state `x`.
     #[inline]
-    fn nonlinear_torques(&self, x: &[f64; NS]) -> (f64, f64) {
-        let mut tau_m = 0.0;
-        if let Some((a, h, ph)) = self.cogging {
-            tau_m += torque::cogging_torque_m(a, h, ph, x[3]);
-        }
+    fn nonlinear_torques(&mut self, x: &[f64; NS]) -> (f64, f64) {
+        let mut tau_m = self.cogging_cached(x[3]);
+        let mut tau_l = self.imbalance_cached(self.theta_l(x));
         if self.dry && !self.stuck {
             // Friction of the current slip direction; a predicted reversal is held at zero speed
             // (the reversal itself is an event).
-            let w = if x[2] * self.dir < 0.0 { 0.0 } else { x[2] };
-            tau_m += self.friction.torque_l(w / self.n, self.dir) / self.n;
+            let w = self.fb_speed_l(x);
+            let w = if w * self.dir < 0.0 { 0.0 } else { w };
+            let f = self.friction.torque_l(w, self.dir);
+            if self.backlash.is_some() {
+                tau_l += f;
+            } else {
+                tau_m += f / self.n;
+            }
         }
-        let tau_l = match self.imbalance {
-            Some((a, ph)) => torque::imbalance_torque_l(a, ph, self.theta_l(x)),
-            None => 0.0,
-        };
         (tau_m, tau_l)
     }
 
@@ -584,9 +692,12 @@ impl PlantSim {
         let mut carry = carry;
         // Breakaway.
         if self.stuck {
-            let drive = self.drive_torque_m(&self.x);
+            let x = self.x;
+            let cogging = self.cogging_cached(x[3]);
+            let imbalance = self.imbalance_cached(self.theta_l(&x));
+            let drive = self.drive_torque_l_with(&x, cogging, imbalance);
             let dir = math::sign(drive);
-            if dir != 0.0 && dir * drive * self.n > self.friction.breakaway_l(dir) {
+            if dir != 0.0 && dir * drive > self.friction.breakaway_l(dir) {
                 self.stuck = false;
                 self.dir = dir;
                 carry = None;
@@ -611,38 +722,36 @@ impl PlantSim {
         }
         let (tm0, tl0) = match carry {
             Some(t) => t,
-            None => self.nonlinear_torques(&self.x),
+            None => {
+                let x = self.x;
+                self.nonlinear_torques(&x)
+            }
         };
         let d = &self.disc[li][mode];
-        let ns = self.ns;
         let x0 = self.x;
         let inp = [u, tm0, tl0, tau_offset];
-        let mut xp = [0.0; NS];
-        for i in 0..ns {
-            let mut acc = 0.0;
-            for j in 0..ns {
-                acc += d.phi[i][j] * x0[j];
-            }
-            for j in 0..NI {
-                acc += d.g0[i][j] * inp[j];
-            }
-            xp[i] = acc;
-        }
+        let mut xp = if self.ns == 4 {
+            advance::<4>(d, &x0, &inp)
+        } else {
+            advance::<6>(d, &x0, &inp)
+        };
         let (tm1, tl1) = self.nonlinear_torques(&xp);
         let (dm, dl) = (tm1 - tm0, tl1 - tl0);
-        for i in 0..ns {
+        let d = &self.disc[li][mode];
+        for i in 0..self.ns {
             xp[i] += d.g1[i][0] * dm + d.g1[i][1] * dl;
         }
         self.x = xp;
         let mut next = Some((tm1, tl1));
+        let w = self.fb_w();
         if mode & STUCK != 0 {
-            self.x[2] = 0.0;
-            self.x[3] = x0[3];
+            self.x[w] = 0.0;
+            self.x[w + 1] = x0[w + 1];
         } else if self.dry {
-            let w0 = x0[2];
-            let w1 = self.x[2];
+            let w0 = x0[w];
+            let w1 = self.x[w];
             if w1 * self.dir <= 0.0 {
-                // The motor-side shaft stops within this sub-step: it sticks at the zero crossing
+                // The friction body stops within this sub-step: it sticks at the zero crossing
                 // (the part of the sub-step after it is taken as stuck); breakaway is checked at
                 // the start of the next sub-step.
                 let h = self.sub_len[li];
@@ -651,8 +760,8 @@ impl PlantSim {
                 } else {
                     0.0
                 };
-                self.x[3] -= 0.5 * w1 * (h - tc);
-                self.x[2] = 0.0;
+                self.x[w + 1] -= 0.5 * w1 * (h - tc);
+                self.x[w] = 0.0;
                 self.stuck = true;
                 next = None;
             } else {
@@ -661,18 +770,36 @@ impl PlantSim {
         }
         if let Some(b) = &self.backlash {
             if mode & CONTACT == 0 {
-                // Entering contact during a free sub-step: put the load on the flank (no
-                // spurious spring energy), keep the speeds; contact starts next sub-step.
+                // Entering contact during a free sub-step: put the motor side back on the flank
+                // (no spurious spring energy; the load, which the encoder sees and friction may
+                // hold, is not moved), keep the speeds; contact starts next sub-step.
                 let delta = self.x[3] / self.n - self.x[5];
                 let p = torque::backlash_penetration_l(b.gap, delta);
                 if p != 0.0 {
-                    self.x[5] += p;
+                    self.x[3] -= p * self.n;
                     next = None;
                 }
             }
         }
         next
     }
+}
+
+/// x+ = Phi x + G0 inp over the first `N` states (4 rigid, 6 with backlash).
+#[inline(always)]
+fn advance<const N: usize>(d: &Disc, x0: &[f64; NS], inp: &[f64; NI]) -> [f64; NS] {
+    let mut xp = [0.0; NS];
+    for i in 0..N {
+        let mut acc = 0.0;
+        for j in 0..N {
+            acc += d.phi[i][j] * x0[j];
+        }
+        for j in 0..NI {
+            acc += d.g0[i][j] * inp[j];
+        }
+        xp[i] = acc;
+    }
+    xp
 }
 
 /// Exact discretisation of mode `mode` over a sub-step `h` [s] (zero-order hold of u_in and of
@@ -720,8 +847,10 @@ fn discretise(plant: &Plant, frac: f64, backlash: Option<&Backlash>, mode: usize
         }
     }
     if mode & STUCK != 0 {
-        a[2] = [0.0; NS];
-        b[2] = [0.0; NI];
+        // Dry friction holds the friction body: its speed row is zero.
+        let w = if backlash.is_some() { 4 } else { 2 };
+        a[w] = [0.0; NS];
+        b[w] = [0.0; NI];
     }
     // Augmented matrix (Van Loan): exp([[A h, B h, 0], [0, 0, E], [0, 0, 0]]) with E feeding the
     // ramp generators of the torque inputs.
@@ -813,6 +942,29 @@ mod tests {
             out
         };
         assert_eq!(run(), run());
+    }
+
+    #[test]
+    fn extreme_contact_stiffness_stays_bounded() {
+        for spec in [
+            "backlash:gap=0.02,stiffness=1e12,damping=0",
+            "backlash:gap=0,stiffness=1e9,damping=10",
+        ] {
+            let p = plant_with(&[spec, "coulomb:tau_sf=0.003"]);
+            let mut sim = PlantSim::new(&p, 1e-3).unwrap();
+            for k in 0..3000 {
+                let u = if (k / 200) & 1 == 0 { 10.0 } else { -10.0 };
+                let s = sim.step(u);
+                assert!(
+                    s.theta_l_rad.is_finite() && s.omega_l_rad_s.abs() < 200.0,
+                    "{spec}: {s:?}"
+                );
+                assert!(
+                    (s.theta_m_rad / 14.0 - s.theta_l_rad).abs() < 0.011 + 1e-3,
+                    "{spec}: {s:?}"
+                );
+            }
+        }
     }
 
     #[test]

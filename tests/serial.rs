@@ -1,0 +1,786 @@
+//! End-to-end tests of the serial path over real pseudo-terminals: the virtual board on one end,
+//! the serial backend on the other (threads of this process), optionally with a man-in-the-middle
+//! proxy that corrupts, drops, silences or closes the link.
+//!
+//! Real time over a pty on a busy 2-core machine is noisy: timeouts are generous and results are
+//! compared with tolerances, but every test checks the behaviour it is about.
+
+use serialport::{SerialPort, TTYPort};
+use servo_core::control::{AntiWindup, Pid, PidConfig, PidGains};
+use servo_core::protocol::{Decoder, Frame, LoopGains, Message, PROTOCOL_VERSION};
+use servo_core::sim::SensorConfig;
+use servo_core::Plant;
+use servo_hw::board::{BoardConfig, BoardReport, VirtualBoard};
+use servo_hw::{Backend, HwError, SerialBackend, SerialConfig, SimBackend};
+use std::io::{Read, Write};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+const GAINS: PidGains = PidGains {
+    kp: 8.0,
+    ki: 10.0,
+    kd: 0.15,
+    tl_s: 0.002,
+};
+const STEP_RAD: f64 = 1.0;
+const PERIODS: usize = 800;
+
+struct BoardThread {
+    stop: Arc<AtomicBool>,
+    handle: JoinHandle<(BoardReport, f64)>,
+}
+
+impl BoardThread {
+    /// Starts a board serving `port`; returns the thread. The f64 is the board's output [V] when
+    /// it was told to quit, NaN if a run was still driving the motor then.
+    fn spawn(mut port: TTYPort, cfg: BoardConfig) -> BoardThread {
+        let stop = Arc::new(AtomicBool::new(false));
+        let s2 = stop.clone();
+        let handle = std::thread::spawn(move || {
+            let mut b = VirtualBoard::new(&Plant::nominal(), SensorConfig::default(), cfg).unwrap();
+            let rep = b.serve(&mut port, &s2).unwrap();
+            // NaN if the board was still driving when told to quit (it had not stopped on its own).
+            let u = if rep.driving_at_exit {
+                f64::NAN
+            } else {
+                rep.output_at_exit_v
+            };
+            (rep, u)
+        });
+        BoardThread { stop, handle }
+    }
+    fn finish(self) -> (BoardReport, f64) {
+        self.stop.store(true, Ordering::Relaxed);
+        self.handle.join().unwrap()
+    }
+}
+
+/// A board whose watchdog tolerates a busy CI machine (tests not about the watchdog).
+fn tolerant() -> BoardConfig {
+    BoardConfig {
+        watchdog_s: 0.5,
+        ..BoardConfig::default()
+    }
+}
+
+fn host_cfg() -> SerialConfig {
+    SerialConfig {
+        port: "pty".into(),
+        timeout_s: 0.5,
+        ..SerialConfig::default()
+    }
+}
+
+/// Board directly on a pty pair; returns (host end, board thread).
+fn direct(cfg: BoardConfig) -> (TTYPort, BoardThread) {
+    let (master, slave) = TTYPort::pair().expect("pty pair");
+    (slave, BoardThread::spawn(master, cfg))
+}
+
+/// What the proxy does to the bytes.
+#[derive(Clone, Copy, Debug)]
+enum Mischief {
+    /// XOR a byte with 0x5A every `n` bytes, both directions.
+    Corrupt(u64),
+    /// Drop one byte every `n` bytes, both directions.
+    Drop(u64),
+    /// Stop forwarding board → host after this long.
+    SilenceBoardAfter(Duration),
+    /// Close the host's side after this long.
+    CloseAfter(Duration),
+}
+
+/// board ⇄ [pty A] ⇄ proxy ⇄ [pty B] ⇄ host. Returns (host end, board thread, proxy stop).
+fn proxied(
+    cfg: BoardConfig,
+    m: Mischief,
+) -> (TTYPort, BoardThread, Arc<AtomicBool>, Vec<JoinHandle<()>>) {
+    let (a_master, a_slave) = TTYPort::pair().expect("pty pair A");
+    let (b_master, b_slave) = TTYPort::pair().expect("pty pair B");
+    let board = BoardThread::spawn(a_master, cfg);
+    let stop = Arc::new(AtomicBool::new(false));
+    let t0 = Instant::now();
+    let count = Arc::new(AtomicU64::new(0));
+    let mut threads = Vec::new();
+    // to_host: from the board (a_slave) to the host (b_master); to_board the other way.
+    let ends = [
+        (
+            a_slave.try_clone_native().unwrap(),
+            b_master.try_clone_native().unwrap(),
+            true,
+        ),
+        (b_master, a_slave, false),
+    ];
+    for (mut from, mut to, to_host) in ends {
+        let stop = stop.clone();
+        let count = count.clone();
+        threads.push(std::thread::spawn(move || {
+            from.set_timeout(Duration::from_millis(20)).unwrap();
+            let mut buf = [0u8; 256];
+            while !stop.load(Ordering::Relaxed) {
+                let n = match from.read(&mut buf) {
+                    Ok(n) => n,
+                    Err(e) if e.kind() == std::io::ErrorKind::TimedOut => continue,
+                    Err(_) => break,
+                };
+                let mut out = Vec::with_capacity(n);
+                for &b in &buf[..n] {
+                    let k = count.fetch_add(1, Ordering::Relaxed) + 1;
+                    match m {
+                        Mischief::Corrupt(every) if k.is_multiple_of(every) => out.push(b ^ 0x5A),
+                        Mischief::Drop(every) if k.is_multiple_of(every) => {}
+                        _ => out.push(b),
+                    }
+                }
+                match m {
+                    Mischief::SilenceBoardAfter(d) if to_host && t0.elapsed() > d => continue,
+                    Mischief::CloseAfter(d) if t0.elapsed() > d => break,
+                    _ => {}
+                }
+                if to.write_all(&out).is_err() {
+                    break;
+                }
+            }
+            // Leaving drops our ends: with CloseAfter the host's pty loses its master.
+        }));
+    }
+    (b_slave, board, stop, threads)
+}
+
+/// Step response with the PID on `backend`; returns (time_s, theta_l_rad) per period and the
+/// error that ended the run early, if any.
+fn step_run(backend: &mut dyn Backend, periods: usize) -> (Vec<(f64, f64)>, Option<HwError>) {
+    let cfg = PidConfig {
+        anti_windup: AntiWindup::Clamping,
+        ..PidConfig::new(GAINS, backend.info().sample_period_s)
+    }
+    .with_symmetric_limit(backend.info().voltage_limit_v);
+    let mut pid = Pid::new(cfg).unwrap();
+    let mut out = Vec::with_capacity(periods);
+    for _ in 0..periods {
+        let s = match backend.sample() {
+            Ok(s) => s,
+            Err(e) => {
+                let _ = backend.stop();
+                return (out, Some(e));
+            }
+        };
+        out.push((s.time_s, s.theta_l_rad));
+        let u = pid.update(STEP_RAD, s.theta_l_rad, 0.0).u_v;
+        if let Err(e) = backend.apply(u) {
+            let _ = backend.stop();
+            return (out, Some(e));
+        }
+    }
+    backend.stop().unwrap();
+    (out, None)
+}
+
+fn sim_reference() -> Vec<(f64, f64)> {
+    let mut sim = SimBackend::new(&Plant::nominal(), SensorConfig::default(), 1e-3).unwrap();
+    let (r, e) = step_run(&mut sim, PERIODS);
+    assert!(e.is_none());
+    r
+}
+
+/// RMS and max of the angle difference between a run and the simulator reference, matched by
+/// board time (samples lost on the link are skipped) [rad].
+fn diff(sim: &[(f64, f64)], run: &[(f64, f64)]) -> (f64, f64) {
+    let mut ss = 0.0;
+    let mut mx: f64 = 0.0;
+    let mut n = 0;
+    for &(t, th) in run {
+        let k = (t / 1e-3).round() as usize;
+        let Some(&(ts, ths)) = sim.get(k) else {
+            continue;
+        };
+        assert!((ts - t).abs() < 1e-9, "time grids differ: {ts} vs {t}");
+        let d = th - ths;
+        ss += d * d;
+        mx = mx.max(d.abs());
+        n += 1;
+    }
+    assert!(
+        n > run.len() / 2,
+        "only {n} of {} samples matched",
+        run.len()
+    );
+    ((ss / n as f64).sqrt(), mx)
+}
+
+/// The real-time tests run one at a time: they would only steal each other's CPU.
+static REALTIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn realtime() -> std::sync::MutexGuard<'static, ()> {
+    REALTIME.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+#[test]
+fn handshake_reports_the_board() {
+    let _rt = realtime();
+    let cfg = BoardConfig {
+        sample_period_s: 2e-3,
+        ..BoardConfig::default()
+    };
+    let (host, board) = direct(cfg);
+    let be = SerialBackend::from_port(Box::new(host), host_cfg()).expect("handshake");
+    let info = be.info();
+    assert!(info.firmware.starts_with("servo-vboard"), "{info:?}");
+    assert_eq!(info.counts_per_rev, 4096);
+    assert_eq!(info.sample_period_s, 2e-3);
+    assert_eq!(info.voltage_limit_v, 10.0);
+    assert_eq!(be.hello().watchdog_ms, 50);
+    assert_eq!(be.hello().protocol_version, PROTOCOL_VERSION);
+    drop(be);
+    let (rep, _) = board.finish();
+    assert_eq!(rep.runs, 0);
+    assert!(rep.faults.is_empty());
+}
+
+#[test]
+fn no_board_is_a_clear_error() {
+    let _rt = realtime();
+    let (_master, slave) = TTYPort::pair().unwrap();
+    let cfg = SerialConfig {
+        handshake_timeout_s: 0.1,
+        ..host_cfg()
+    };
+    let e = SerialBackend::from_port(Box::new(slave), cfg)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no handshake answer"), "{e}");
+}
+
+#[test]
+fn closed_loop_through_serial_matches_the_simulator() {
+    let _rt = realtime();
+    let sim = sim_reference();
+    let (host, board) = direct(tolerant());
+    let mut be = SerialBackend::from_port(Box::new(host), host_cfg()).unwrap();
+    let (ser, err) = step_run(&mut be, PERIODS);
+    assert!(err.is_none(), "{err:?}");
+    let stats = be.stats();
+    eprintln!("{stats}");
+    drop(be);
+    let (rep, u_end) = board.finish();
+    eprintln!("{rep:?}");
+    assert_eq!(ser.len(), PERIODS);
+    // The loop did something: the step is reached.
+    assert!(
+        (sim[PERIODS - 1].1 - STEP_RAD).abs() < 0.05,
+        "sim ends at {}",
+        sim[PERIODS - 1].1
+    );
+    let (rms, max) = diff(&sim, &ser);
+    eprintln!("serial vs simulator: rms {rms:.4} rad, max {max:.4} rad over {PERIODS} periods");
+    // Timing effects only: command applied ~one sub-step late, and the odd missed deadline when
+    // the machine is busy.
+    let missed_frac = stats.missed_deadlines as f64 / PERIODS as f64;
+    assert!(
+        rms < 0.02 + 0.2 * missed_frac,
+        "rms {rms} (missed {missed_frac})"
+    );
+    assert!((ser[PERIODS - 1].1 - STEP_RAD).abs() < 0.05);
+    assert!(stats.samples as usize >= PERIODS);
+    assert_eq!(stats.crc_errors, 0);
+    assert_eq!(stats.lost_frames, 0);
+    assert!(stats.rtt_p50_s > 0.0 && stats.rtt_p50_s < 0.05);
+    assert_eq!(rep.runs, 1);
+    assert!(rep.faults.is_empty(), "{:?}", rep.faults);
+    assert_eq!(u_end, 0.0, "board left the motor at {u_end} V");
+}
+
+#[test]
+fn corrupted_bytes_are_rejected_and_the_loop_survives() {
+    let _rt = realtime();
+    let sim = sim_reference();
+    let (host, board, stop, threads) = proxied(tolerant(), Mischief::Corrupt(397));
+    let mut be = SerialBackend::from_port(Box::new(host), host_cfg()).unwrap();
+    let (ser, err) = step_run(&mut be, PERIODS);
+    assert!(err.is_none(), "{err:?}");
+    let stats = be.stats();
+    eprintln!("{stats}");
+    drop(be);
+    stop.store(true, Ordering::Relaxed);
+    threads.into_iter().for_each(|t| t.join().unwrap());
+    let (rep, _) = board.finish();
+    eprintln!("{rep:?}");
+    assert!(
+        stats.crc_errors + stats.framing_errors > 5,
+        "host saw no bad frames: {stats}"
+    );
+    assert!(stats.lost_frames > 5, "{stats}");
+    assert!(
+        rep.crc_errors + rep.framing_errors > 2,
+        "board saw no bad frames: {rep:?}"
+    );
+    assert!(rep.faults.is_empty(), "{:?}", rep.faults);
+    let (rms, _) = diff(&sim, &ser);
+    assert!(rms < 0.05, "rms {rms}");
+}
+
+#[test]
+fn dropped_bytes_are_resynchronised() {
+    let _rt = realtime();
+    let (host, board, stop, threads) = proxied(tolerant(), Mischief::Drop(301));
+    let mut be = SerialBackend::from_port(Box::new(host), host_cfg()).unwrap();
+    let (ser, err) = step_run(&mut be, PERIODS);
+    assert!(err.is_none(), "{err:?}");
+    let stats = be.stats();
+    eprintln!("{stats}");
+    drop(be);
+    stop.store(true, Ordering::Relaxed);
+    threads.into_iter().for_each(|t| t.join().unwrap());
+    let (rep, _) = board.finish();
+    assert!(
+        stats.lost_frames > 5 && stats.crc_errors + stats.framing_errors > 5,
+        "{stats}"
+    );
+    assert!(rep.faults.is_empty(), "{:?}", rep.faults);
+    assert!((ser[ser.len() - 1].1 - STEP_RAD).abs() < 0.05);
+}
+
+#[test]
+fn a_silent_board_is_detected_and_the_board_goes_to_zero_volts() {
+    let _rt = realtime();
+    let (host, board, stop, threads) = proxied(
+        tolerant(),
+        Mischief::SilenceBoardAfter(Duration::from_millis(400)),
+    );
+    let cfg = SerialConfig {
+        timeout_s: 0.2,
+        ..host_cfg()
+    };
+    let mut be = SerialBackend::from_port(Box::new(host), cfg).unwrap();
+    let t = Instant::now();
+    let (ser, err) = step_run(&mut be, 100_000);
+    let waited = t.elapsed();
+    assert!(matches!(err, Some(HwError::Timeout { .. })), "{err:?}");
+    assert!(
+        ser.len() > 100 && ser.len() < 5_000,
+        "{} samples",
+        ser.len()
+    );
+    assert!(waited < Duration::from_secs(10));
+    drop(be);
+    std::thread::sleep(Duration::from_millis(100));
+    stop.store(true, Ordering::Relaxed);
+    threads.into_iter().for_each(|t| t.join().unwrap());
+    let (rep, u_end) = board.finish();
+    // The host stopped commanding when the samples stopped: the board watchdog (or the host's
+    // Stop, which still gets through) brought the motor to 0 V.
+    assert_eq!(u_end, 0.0);
+    assert_eq!(rep.runs, 1);
+}
+
+#[test]
+fn a_port_closed_mid_run_is_an_error_and_the_board_watchdog_trips() {
+    let _rt = realtime();
+    let (host, board, _stop, threads) = proxied(
+        BoardConfig::default(),
+        Mischief::CloseAfter(Duration::from_millis(400)),
+    );
+    let mut be = SerialBackend::from_port(Box::new(host), host_cfg()).unwrap();
+    let (ser, err) = step_run(&mut be, 100_000);
+    let e = err.expect("the run must fail");
+    eprintln!("{e}");
+    assert!(
+        ser.len() > 100 && ser.len() < 5_000,
+        "{} samples",
+        ser.len()
+    );
+    drop(be);
+    threads.into_iter().for_each(|t| t.join().unwrap());
+    std::thread::sleep(Duration::from_millis(150));
+    let (rep, u_end) = board.finish();
+    assert_eq!(u_end, 0.0);
+    assert!(
+        rep.faults
+            .iter()
+            .any(|(c, t)| *c == servo_core::protocol::FaultCode::Watchdog || t.contains("closed")),
+        "{:?}",
+        rep.faults
+    );
+}
+
+#[test]
+fn a_vanished_host_trips_the_board_watchdog_within_50_ms() {
+    let _rt = realtime();
+    let (mut host, board) = direct(BoardConfig::default());
+    // Speak the protocol by hand: Start, answer 200 samples, then vanish (keep the port open).
+    host.write_all(&[0]).unwrap();
+    host.write_all(Frame::new(&Message::Start).as_bytes())
+        .unwrap();
+    host.set_timeout(Duration::from_millis(500)).unwrap();
+    let mut dec = Decoder::new();
+    let mut answered = 0u32;
+    let mut buf = [0u8; 256];
+    let mut fault = None;
+    let mut silent_since = None;
+    while fault.is_none() {
+        let n = host
+            .read(&mut buf)
+            .expect("board keeps talking until the watchdog trips");
+        let mut msgs = Vec::new();
+        dec.feed(&buf[..n], |r| msgs.extend(r.ok()));
+        for m in msgs {
+            match m {
+                Message::Sample(s) if answered < 200 => {
+                    host.write_all(
+                        Frame::new(&Message::SetVoltage {
+                            seq: s.seq,
+                            u_v: 2.0,
+                        })
+                        .as_bytes(),
+                    )
+                    .unwrap();
+                    answered += 1;
+                    if answered == 200 {
+                        silent_since = Some(Instant::now());
+                    }
+                }
+                Message::Fault(f) => fault = Some((f, silent_since.map(|t| t.elapsed()))),
+                _ => {}
+            }
+        }
+    }
+    let (f, after) = fault.unwrap();
+    assert_eq!(
+        f.code,
+        servo_core::protocol::FaultCode::Watchdog,
+        "{}",
+        f.text_str()
+    );
+    let after = after.expect("fault only after the host went silent");
+    assert!(
+        after >= Duration::from_millis(45),
+        "tripped after {after:?}"
+    );
+    assert!(
+        after < Duration::from_millis(1000),
+        "tripped after {after:?}"
+    );
+    let (rep, u_end) = board.finish();
+    assert_eq!(u_end, 0.0);
+    assert_eq!(rep.faults.len(), 1);
+}
+
+#[test]
+fn onboard_loop_tracks_the_reference() {
+    let _rt = realtime();
+    let (mut host, board) = direct(tolerant());
+    host.set_timeout(Duration::from_millis(500)).unwrap();
+    let g = LoopGains {
+        kp: GAINS.kp as f32,
+        ki: GAINS.ki as f32,
+        kd: GAINS.kd as f32,
+        tau_f_s: GAINS.tl_s as f32,
+    };
+    host.write_all(Frame::new(&Message::LoopGains(g)).as_bytes())
+        .unwrap();
+    let mut dec = Decoder::new();
+    let mut buf = [0u8; 256];
+    let mut last = None;
+    let mut acked = false;
+    let mut refs_sent = 0u32;
+    let t = Instant::now();
+    while t.elapsed() < Duration::from_secs(10) {
+        let n = host.read(&mut buf).unwrap();
+        let mut msgs = Vec::new();
+        dec.feed(&buf[..n], |r| msgs.extend(r.ok()));
+        for m in msgs {
+            match m {
+                Message::GainsAck => {
+                    acked = true;
+                    host.write_all(
+                        Frame::new(&Message::LoopReference {
+                            seq: 0,
+                            ref_rad: 1.0,
+                        })
+                        .as_bytes(),
+                    )
+                    .unwrap();
+                }
+                Message::Sample(s) => {
+                    assert!(s.flags & servo_core::protocol::flags::ONBOARD_LOOP != 0 || s.seq == 0);
+                    if s.seq % 10 == 0 {
+                        refs_sent += 1;
+                        let m = Message::LoopReference {
+                            seq: refs_sent,
+                            ref_rad: 1.0,
+                        };
+                        host.write_all(Frame::new(&m).as_bytes()).unwrap();
+                    }
+                    last = Some(s);
+                }
+                Message::Fault(f) => panic!("fault {}", f.text_str()),
+                _ => {}
+            }
+        }
+        if last.is_some_and(|s| s.seq >= 800) {
+            break;
+        }
+    }
+    assert!(acked);
+    host.write_all(Frame::new(&Message::Stop).as_bytes())
+        .unwrap();
+    let s = last.expect("samples");
+    let theta = s.encoder_count as f64 * std::f64::consts::TAU / 4096.0;
+    assert!(
+        (theta - 1.0).abs() < 0.05,
+        "on-board loop ends at {theta} rad"
+    );
+    std::thread::sleep(Duration::from_millis(50));
+    let (rep, u_end) = board.finish();
+    assert_eq!(u_end, 0.0);
+    assert!(rep.faults.is_empty(), "{:?}", rep.faults);
+}
+
+// ---- The binaries: `servo board --pty` and `servo run --backend serial` as separate processes.
+
+mod cli {
+    use super::realtime;
+    use servo_e2e::{servo, servo_bin};
+    use std::path::{Path, PathBuf};
+    use std::process::{Child, Command, Stdio};
+    use std::time::{Duration, Instant};
+
+    struct BoardProc {
+        child: Child,
+        port: String,
+    }
+
+    impl BoardProc {
+        fn start(dir: &Path) -> BoardProc {
+            let pf = dir.join("port.txt");
+            let _ = std::fs::remove_file(&pf);
+            let child = Command::new(servo_bin())
+                .args(["board", "--pty", "--watchdog-ms", "200", "--path-file"])
+                .arg(&pf)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("spawn servo board");
+            let t = Instant::now();
+            // The file is complete once it ends with a newline.
+            let mut port = String::new();
+            while t.elapsed() < Duration::from_secs(20) {
+                port = std::fs::read_to_string(&pf).unwrap_or_default();
+                if port.ends_with('\n') {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let port = port.trim().to_string();
+            assert!(port.starts_with("/dev/"), "{port}");
+            BoardProc { child, port }
+        }
+        fn signal(&self, sig: &str) {
+            let ok = Command::new("kill")
+                .args([sig, &self.child.id().to_string()])
+                .status()
+                .unwrap();
+            assert!(ok.success());
+        }
+        /// Ctrl-C, then its stdout.
+        fn quit(mut self) -> String {
+            self.signal("-INT");
+            let t = Instant::now();
+            while self.child.try_wait().unwrap().is_none() && t.elapsed() < Duration::from_secs(10)
+            {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let _ = self.child.kill();
+            let out = self.child.wait_with_output().unwrap();
+            String::from_utf8_lossy(&out.stdout).into_owned()
+        }
+    }
+
+    fn gains(dir: &Path) -> PathBuf {
+        let g = dir.join("gains.toml");
+        let (ok, _, err) = servo(&[
+            "design",
+            "--pm",
+            "60",
+            "--wc",
+            "30",
+            "-o",
+            g.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        g
+    }
+
+    fn run_args<'a>(g: &'a str, port: &'a str, log: &'a str, duration: &'a str) -> Vec<&'a str> {
+        vec![
+            "run",
+            "--backend",
+            "serial",
+            "--port",
+            port,
+            "--gains",
+            g,
+            "--ref",
+            "step:1",
+            "--duration",
+            duration,
+            "--log",
+            log,
+        ]
+    }
+
+    fn theta(path: &Path) -> Vec<(f64, f64)> {
+        let r = servo_cli::io::read_log(path, None).expect("log readable");
+        let th = r.theta_l_rad.expect("theta_l in the log");
+        r.time_s.into_iter().zip(th).collect()
+    }
+
+    #[test]
+    fn serial_run_through_the_binaries_matches_the_simulator() {
+        let _rt = realtime();
+        let dir = tempfile::tempdir().unwrap();
+        let g = gains(dir.path());
+        let board = BoardProc::start(dir.path());
+        let ser_log = dir.path().join("serial.mcap");
+        let (ok, out, err) = servo(&run_args(
+            g.to_str().unwrap(),
+            &board.port,
+            ser_log.to_str().unwrap(),
+            "1",
+        ));
+        let board_out = board.quit();
+        assert!(ok, "{out}\n{err}");
+        assert!(
+            out.contains("serial link:") && out.contains("period jitter"),
+            "{out}"
+        );
+        assert!(board_out.contains("1 run(s)"), "{board_out}");
+        let sim_log = dir.path().join("sim.mcap");
+        let (ok, _, err) = servo(&[
+            "run",
+            "--gains",
+            g.to_str().unwrap(),
+            "--ref",
+            "step:1",
+            "--duration",
+            "1",
+            "--log",
+            sim_log.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        let (a, b) = (theta(&sim_log), theta(&ser_log));
+        assert_eq!(a.len(), 1000);
+        assert_eq!(b.len(), 1000);
+        let rms = (a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x.1 - y.1).powi(2))
+            .sum::<f64>()
+            / 1000.0)
+            .sqrt();
+        eprintln!("{out}\nbinary serial vs simulator: rms {rms:.4} rad");
+        assert!(rms < 0.05, "rms {rms}");
+        assert!(
+            (b[999].1 - 1.0).abs() < 0.05,
+            "serial run ends at {}",
+            b[999].1
+        );
+    }
+
+    #[test]
+    fn a_board_that_freezes_or_vanishes_ends_the_run_with_a_finished_log() {
+        let _rt = realtime();
+        let dir = tempfile::tempdir().unwrap();
+        let g = gains(dir.path());
+        for (case, sig) in [("frozen", "-STOP"), ("vanished", "-KILL")] {
+            let board = BoardProc::start(dir.path());
+            let log = dir.path().join(format!("{case}.mcap"));
+            let child = Command::new(servo_bin())
+                .args(run_args(
+                    g.to_str().unwrap(),
+                    &board.port,
+                    log.to_str().unwrap(),
+                    "30",
+                ))
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap();
+            std::thread::sleep(Duration::from_millis(1500));
+            board.signal(sig);
+            let t = Instant::now();
+            let out = child.wait_with_output().unwrap();
+            let took = t.elapsed();
+            if sig == "-STOP" {
+                board.signal("-CONT");
+            }
+            let _ = board.quit();
+            let err = String::from_utf8_lossy(&out.stderr);
+            eprintln!("{case}: {err}");
+            assert!(!out.status.success(), "{case}: the run must fail");
+            assert!(took < Duration::from_secs(10), "{case}: took {took:?}");
+            assert!(err.contains("error:"), "{case}: {err}");
+            assert!(
+                err.contains("0 V") && err.contains("finished"),
+                "{case}: {err}"
+            );
+            if sig == "-STOP" {
+                assert!(err.contains("did not answer"), "{case}: {err}");
+            }
+            // Finished log, complete up to the fault: contiguous samples from t = 0.
+            let th = theta(&log);
+            assert!(
+                th.len() > 300 && th.len() < 25_000,
+                "{case}: {} samples",
+                th.len()
+            );
+            for (k, (t, _)) in th.iter().enumerate() {
+                assert!((t - k as f64 * 1e-3).abs() < 1e-9, "{case}: gap at {k}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_killed_host_trips_the_board_watchdog_and_its_log_is_recovered() {
+        let _rt = realtime();
+        let dir = tempfile::tempdir().unwrap();
+        let g = gains(dir.path());
+        let board = BoardProc::start(dir.path());
+        let log = dir.path().join("killed.mcap");
+        let mut child = Command::new(servo_bin())
+            .args(run_args(
+                g.to_str().unwrap(),
+                &board.port,
+                log.to_str().unwrap(),
+                "30",
+            ))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(1500));
+        child.kill().unwrap(); // SIGKILL: no cleanup at all
+        child.wait().unwrap();
+        std::thread::sleep(Duration::from_millis(300));
+        let board_out = board.quit();
+        assert!(board_out.contains("fault Watchdog"), "{board_out}");
+        // The unfinished log is salvaged.
+        let fixed = dir.path().join("fixed.mcap");
+        let (ok, out, err) = servo(&[
+            "log",
+            "recover",
+            log.to_str().unwrap(),
+            "-o",
+            fixed.to_str().unwrap(),
+        ]);
+        assert!(ok, "{out}\n{err}");
+        assert!(out.contains("recovered"), "{out}");
+        let th = theta(&fixed);
+        assert!(th.len() > 200, "{} samples recovered", th.len());
+        for (k, (t, _)) in th.iter().enumerate() {
+            assert!((t - k as f64 * 1e-3).abs() < 1e-9, "gap at {k}");
+        }
+    }
+}
