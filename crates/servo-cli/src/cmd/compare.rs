@@ -844,7 +844,7 @@ fn binned_mean(x: &[f64], y: &[f64], lo: f64, hi: f64, bins: usize) -> (Vec<f64>
     let mut s = vec![0.0; bins];
     let mut n = vec![0usize; bins];
     let w = (hi - lo) / bins as f64;
-    if !(w > 0.0) {
+    if w.is_nan() || w <= 0.0 {
         return (Vec::new(), Vec::new());
     }
     for (a, b) in x.iter().zip(y) {
