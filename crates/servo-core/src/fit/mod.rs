@@ -764,7 +764,13 @@ pub(crate) mod tests {
             ..PlantParams::TABLE2
         })
         .unwrap();
-        let r = fit_model(std::slice::from_ref(&log), &start, &[], &FitOptions::default()).unwrap();
+        let r = fit_model(
+            std::slice::from_ref(&log),
+            &start,
+            &[],
+            &FitOptions::default(),
+        )
+        .unwrap();
         let p = &r.plant;
         assert!(
             (p.params.j_eq() / 7.0e-7 - 1.0).abs() < 0.05,
