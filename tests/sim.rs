@@ -729,3 +729,41 @@ fn sensors_quantise_add_seeded_noise() {
     assert_eq!(a, b);
     assert_ne!(a, c);
 }
+
+#[test]
+fn cogging_and_imbalance_torques_have_their_stated_amplitude() {
+    // Quasi-static breakaway from rest: with the resisting cogging torque at its peak
+    // (phase pi/2 at theta_m = 0), the motor torque at breakaway is tau_sf / N + amplitude; with
+    // the imbalance at its peak it is (tau_sf + amplitude) / N.
+    let tau_sf = 0.01;
+    for (spec, extra_m) in [
+        (
+            "cogging:amplitude=3e-4,harmonic=12,phase=1.5707963267948966",
+            3e-4,
+        ),
+        (
+            "imbalance:amplitude=0.005,phase=1.5707963267948966",
+            0.005 / 14.0,
+        ),
+    ] {
+        let p = plant(&[&format!("coulomb:tau_sf={tau_sf}"), spec]);
+        let mut sim = PlantSim::new(&p, DT).unwrap();
+        let k = &p.params;
+        let mut at_break = None;
+        for step in 0..20000 {
+            let u = 1e-4 * step as f64; // 0.1 V/s: quasi-static
+            let i_before = sim.state().i_a_a;
+            if !sim.step(u).stuck {
+                at_break = Some(k.k_t * i_before);
+                break;
+            }
+        }
+        let tau_m = at_break.expect("broke away");
+        let want = tau_sf / k.n + extra_m;
+        println!("{spec}: breakaway motor torque {tau_m:.4e} N m, expected {want:.4e}");
+        assert!(
+            (tau_m / want - 1.0).abs() < 0.01,
+            "{spec}: {tau_m} vs {want}"
+        );
+    }
+}

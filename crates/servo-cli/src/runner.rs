@@ -123,8 +123,6 @@ pub struct RunOutput {
     pub record: Record,
     /// Per sample: the output was clipped at the limit.
     pub saturated: Vec<bool>,
-    /// Per sample: the PID and feedforward terms [V] (P, I, D, FF).
-    pub terms_v: Vec<[f64; 4]>,
     /// The voltage limit in force [V].
     pub u_limit_v: f64,
     pub stop: StopReason,
@@ -214,7 +212,6 @@ pub fn run_loop(
         ..Record::default()
     };
     let mut saturated = Vec::with_capacity(n);
-    let mut terms_v = Vec::with_capacity(n);
     let mut speed = SpeedEstimator::new(cfg.speed_bandwidth_rad_s, ts);
     let mut stop = StopReason::Completed;
     let mut was_open_loop = false;
@@ -268,7 +265,6 @@ pub fn run_loop(
             push(&mut rec.i_a_a, s.i_a_a);
             push(&mut rec.ref_rad, r);
             saturated.push(sat);
-            terms_v.push(terms);
             if let Some(sink) = sink.as_deref_mut() {
                 sink.write_loop(&LoopMsg {
                     time_s: t,
@@ -304,7 +300,6 @@ pub fn run_loop(
     Ok(RunOutput {
         record: rec,
         saturated,
-        terms_v,
         u_limit_v: u_limit,
         stop,
     })

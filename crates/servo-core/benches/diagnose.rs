@@ -14,7 +14,12 @@ fn log(plant: &Plant, seconds: f64) -> Record {
     let mut sensors = Sensors::new(SensorConfig::default());
     let mut rng = SplitMix64(9);
     let n = (seconds / dt) as usize;
-    let (mut t, mut th, mut ia, mut uv) = (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
+    let (mut t, mut th, mut ia, mut uv) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
     let mut u = 0.0;
     for k in 0..n {
         if k % 400 == 0 {
@@ -28,13 +33,27 @@ fn log(plant: &Plant, seconds: f64) -> Record {
         uv.push(u);
         sim.step(u);
     }
-    Record { source: "bench".into(), time_s: t, theta_l_rad: Some(th), i_a_a: Some(ia), u_v: Some(uv), ..Record::default() }
+    Record {
+        source: "bench".into(),
+        time_s: t,
+        theta_l_rad: Some(th),
+        i_a_a: Some(ia),
+        u_v: Some(uv),
+        ..Record::default()
+    }
 }
 
 fn bench(c: &mut Criterion) {
-    let params = PlantParams { j_eq: Some(7.0e-7), b_eq: Some(1.0e-6), tau_sf: Some(0.01), ..PlantParams::TABLE2 };
+    let params = PlantParams {
+        j_eq: Some(7.0e-7),
+        b_eq: Some(1.0e-6),
+        tau_sf: Some(0.01),
+        ..PlantParams::TABLE2
+    };
     let mut truth = Plant::from_params(params).expect("plant");
-    truth.effects.insert(Effect::parse("cogging:amplitude=3e-4,harmonic=12").expect("effect"));
+    truth
+        .effects
+        .insert(Effect::parse("cogging:amplitude=3e-4,harmonic=12").expect("effect"));
     let rec = log(&truth, 600.0);
     let model = Plant::from_params(params).expect("plant");
     let opts = DiagnoseOptions::default();

@@ -440,8 +440,22 @@ impl Backend for SerialBackend {
         let timeout =
             Duration::from_secs_f64(self.cfg.timeout_s.max(2.0 * self.info.sample_period_s));
         let mut deadline = Instant::now() + timeout;
+        // Until the first sample arrives, Start is repeated every 50 ms: a Start lost on the
+        // link (CRC error, dropped byte) would otherwise cost the whole run.
+        let retry = Duration::from_millis(50);
+        let mut next_start = Instant::now() + retry;
         loop {
-            let Some(m) = self.next_message(deadline)? else {
+            let wait_until = if self.last_seq.is_none() {
+                deadline.min(next_start)
+            } else {
+                deadline
+            };
+            let Some(m) = self.next_message(wait_until)? else {
+                if Instant::now() < deadline {
+                    self.send(&Message::Start)?;
+                    next_start = Instant::now() + retry;
+                    continue;
+                }
                 return Err(HwError::Timeout {
                     timeout_ms: timeout.as_millis() as u64,
                 });

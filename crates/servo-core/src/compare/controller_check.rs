@@ -52,7 +52,13 @@ pub fn check_controller(
     }
     let samples = y.len();
     let rms_v = if samples > 0 {
-        crate::math::sqrt(y.iter().zip(&yh).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / samples as f64)
+        crate::math::sqrt(
+            y.iter()
+                .zip(&yh)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f64>()
+                / samples as f64,
+        )
     } else {
         f64::NAN
     };
@@ -82,7 +88,13 @@ pub fn check_controller(
             }
         }
     }
-    ControllerCheck { fit_percent: fit_percent(&y, &yh), rms_v, samples, ls_gains, ls_fit_percent }
+    ControllerCheck {
+        fit_percent: fit_percent(&y, &yh),
+        rms_v,
+        samples,
+        ls_gains,
+        ls_fit_percent,
+    }
 }
 
 #[cfg(test)]
@@ -93,18 +105,39 @@ mod tests {
     #[test]
     fn recovers_the_gains_that_ran() {
         let dt = 1e-3;
-        let gains = PidGains { kp: 17.0, ki: 140.0, kd: 0.5, tl_s: 0.0 };
+        let gains = PidGains {
+            kp: 17.0,
+            ki: 140.0,
+            kd: 0.5,
+            tl_s: 0.0,
+        };
         let mut real = Pid::new(PidConfig::new(gains, dt)).unwrap();
         let n = 3000;
         let r: Vec<f64> = (0..n).map(|k| if k < 1500 { 0.5 } else { 0.0 }).collect();
-        let th: Vec<f64> = (0..n).map(|k| 0.4 * (1.0 - (-(k as f64) * dt / 0.05).exp()) + 0.01 * (k as f64 * 0.1).sin()).collect();
-        let u: Vec<f64> = (0..n).map(|k| Controller::update(&mut real, r[k], th[k])).collect();
+        let th: Vec<f64> = (0..n)
+            .map(|k| 0.4 * (1.0 - (-(k as f64) * dt / 0.05).exp()) + 0.01 * (k as f64 * 0.1).sin())
+            .collect();
+        let u: Vec<f64> = (0..n)
+            .map(|k| Controller::update(&mut real, r[k], th[k]))
+            .collect();
         let mut same = Pid::new(PidConfig::new(gains, dt)).unwrap();
         let c = check_controller(&mut same, &r, &th, &u, None, dt);
         assert!(c.fit_percent > 99.999, "{c:?}");
         let g = c.ls_gains.unwrap();
-        assert!((g[0] - 17.0).abs() < 1e-6 && (g[1] - 140.0).abs() < 1e-4 && (g[2] - 0.5).abs() < 1e-8, "{g:?}");
-        let mut wrong = Pid::new(PidConfig::new(PidGains { kp: 7.5, ki: 94.0, kd: 0.15, tl_s: 0.0 }, dt)).unwrap();
+        assert!(
+            (g[0] - 17.0).abs() < 1e-6 && (g[1] - 140.0).abs() < 1e-4 && (g[2] - 0.5).abs() < 1e-8,
+            "{g:?}"
+        );
+        let mut wrong = Pid::new(PidConfig::new(
+            PidGains {
+                kp: 7.5,
+                ki: 94.0,
+                kd: 0.15,
+                tl_s: 0.0,
+            },
+            dt,
+        ))
+        .unwrap();
         let c = check_controller(&mut wrong, &r, &th, &u, None, dt);
         assert!(c.fit_percent < 80.0, "{c:?}");
     }

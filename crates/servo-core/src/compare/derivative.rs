@@ -99,6 +99,7 @@ mod tests {
     use super::*;
 
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn ramp_and_sine_speed() {
         let dt = 1e-3;
         let ramp: Vec<f64> = (0..1000).map(|i| 2.0 * i as f64 * dt).collect();

@@ -12,6 +12,9 @@
 //! * [`measured`], [`derivative`], [`quantum`]: the measured side (signals, speed from position,
 //!   encoder grid).
 
+// `!(x > 0.0)` is used on purpose: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod chi2;
 pub mod controller_check;
 pub mod derivative;

@@ -29,11 +29,20 @@ pub fn encoder_quantum(theta: &[f64]) -> Option<f64> {
         })
         .count();
     // Only a true grid: a continuous signal has changes that are not multiples of the smallest.
-    if (on_grid as f64) >= 0.98 * d.len() as f64 {
-        Some(q)
-    } else {
-        None
+    if (on_grid as f64) < 0.98 * d.len() as f64 {
+        return None;
     }
+    // Refine: least squares of |delta| = m q over the on-grid changes (m = round(|delta| / q)),
+    // so that rounding in the log's text does not shift the grid over long travels.
+    let (mut num, mut den) = (0.0, 0.0);
+    for v in &d {
+        let m = libm::round(*v / q);
+        if m >= 1.0 && libm::fabs(*v / q - m) < 0.02 {
+            num += m * v;
+            den += m * m;
+        }
+    }
+    Some(if den > 0.0 { num / den } else { q })
 }
 
 /// `x` rounded down to the grid of spacing `q` (as an incremental encoder counts).

@@ -50,7 +50,9 @@ impl Regime {
         match self {
             Regime::Reversal => "Coulomb/Stribeck friction, backlash (gear play)",
             Regime::Standstill => "stiction (Stribeck), Coulomb friction, dead zone, cogging",
-            Regime::VoltageLimit => "saturation of the driver or the board, the driver gain k_drv",
+            Regime::VoltageLimit => {
+                "the top speed at full voltage (k_drv, k_e, R_eq and the friction level), saturation of the driver"
+            }
             Regime::Acceleration => "the inertia J_eq, delay, backlash",
             Regime::ConstantSpeed => {
                 "viscous friction B_eq, k_e/k_drv/R_eq, Coulomb friction level"

@@ -145,6 +145,7 @@ impl Out {
     }
 }
 
+#[allow(clippy::needless_range_loop)]
 /// Replays `m` on `plant` in `mode`. `closed_loop` is required for [`ReplayMode::ClosedLoop`].
 pub fn replay(
     plant: &Plant,

@@ -101,6 +101,7 @@ pub fn whiteness(e: &[f64], max_lag: usize) -> Whiteness {
     }
 }
 
+#[allow(clippy::needless_range_loop)]
 /// Cross-correlation of residual `e` with input `u`, lags -max_lag..=max_lag.
 pub fn cross_correlation(e: &[f64], u: &[f64], max_lag: usize) -> CrossCorrelation {
     let n = e.len().min(u.len());

@@ -141,7 +141,14 @@ fn corr(a: &[f64], b: &[f64]) -> f64 {
 
 /// Magnitude of the correlation of `r` with a signature (root-sum-square over its components).
 fn corr_mag(r: &[f64], sig: &[Vec<f64>]) -> f64 {
-    math::sqrt(sig.iter().map(|s| { let c = corr(r, s); c * c }).sum::<f64>())
+    math::sqrt(
+        sig.iter()
+            .map(|s| {
+                let c = corr(r, s);
+                c * c
+            })
+            .sum::<f64>(),
+    )
 }
 
 fn fmt_params(params: &[ParamEstimate]) -> String {

@@ -356,7 +356,11 @@ fn judge(
     let oe_ok = oe_drop.is_some_and(|d| d >= opts.min_oe_drop);
     // Backlash is judged on the simulation alone, which is less specific than an equation
     // residual (initial contact state, stick-slip transients): ask for a clear drop.
-    let min_drop = if backlash { opts.min_backlash_oe_drop } else { opts.min_eq_drop };
+    let min_drop = if backlash {
+        opts.min_backlash_oe_drop
+    } else {
+        opts.min_eq_drop
+    };
     let significant = bic_gain > opts.min_bic_gain && eq_drop >= min_drop && oe_ok;
     // Detection floor: RMS of what the effect explains versus the sensor-noise torque/voltage.
     let explained: f64 = {
@@ -427,7 +431,7 @@ fn failed(base: &Solved, kind: EffectKind, e: &FitError) -> Candidate {
 pub struct Rung {
     /// The effect added at this rung (`None` for the starting model).
     pub added: Option<EffectKind>,
-    /// The model after this rung (refitted on all the data).
+    /// The model after this rung (base and effects refitted on the fit blocks).
     pub plant: Plant,
     /// RMS residual per equation.
     pub equations: Vec<(Equation, f64)>,
@@ -435,7 +439,7 @@ pub struct Rung {
     pub oe_cost_rad: Option<f64>,
 }
 
-/// The loop: diagnose, add the winner (refitted with the base on all the data), diagnose again,
+/// The loop: diagnose, add the winner (with the base refitted), diagnose again,
 /// until nothing is significant or `max_steps` effects were added.
 pub fn diagnose_loop(
     records: &[Record],
@@ -460,7 +464,7 @@ pub fn diagnose_loop(
         diags.push(d);
         match next {
             Some((kind, cand_plant)) if step < max_steps => {
-                // Keep the candidate's nonlinear parameters; refit everything linear on all data.
+                // Keep the candidate's nonlinear parameters; the next diagnosis refits the linear ones.
                 plant = cand_plant;
                 let _ = kind;
                 added = Some(kind);

@@ -58,13 +58,24 @@ impl RecData {
     /// transformed input, delayed by `delay_s`, held, then passed through the first-order lag
     /// `lag_s` (driver and armature) exactly for a zero-order-hold input: with no delay and a lag
     /// much shorter than the sample period, row k sees u[k-1].
-    pub fn input_point(&self, transform: impl Fn(f64) -> f64, delay_s: f64, lag_s: f64) -> Vec<f64> {
+    pub fn input_point(
+        &self,
+        transform: impl Fn(f64) -> f64,
+        delay_s: f64,
+        lag_s: f64,
+    ) -> Vec<f64> {
         let u_in: Vec<f64> = self.u_v.iter().map(|&u| transform(u)).collect();
         let n = u_in.len();
         let m = (delay_s / self.dt_s).max(0.0);
         let n0 = math::floor(m) as usize;
         let frac = m - n0 as f64;
-        let decay = |t: f64| if lag_s > 0.0 { math::exp(-t / lag_s) } else { 0.0 };
+        let decay = |t: f64| {
+            if lag_s > 0.0 {
+                math::exp(-t / lag_s)
+            } else {
+                0.0
+            }
+        };
         let (a1, a2) = (decay(frac * self.dt_s), decay((1.0 - frac) * self.dt_s));
         let at = |j: isize| u_in[j.clamp(0, n as isize - 1) as usize];
         // Over [t_{k-1}, t_k) the delayed input is u[k-2-n0] for frac dt, then u[k-1-n0]; the
@@ -181,7 +192,10 @@ impl Dataset {
         };
         let n = params.n;
         ds.coulomb_col = ds.column(&ds.mech_rows, |r: &RecData| {
-            r.omega_raw.iter().map(|&w| super::shapes::coulomb_dir(w) / n).collect()
+            r.omega_raw
+                .iter()
+                .map(|&w| super::shapes::coulomb_dir(w) / n)
+                .collect()
         });
         Ok(ds)
     }
@@ -314,7 +328,7 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
     // Stuck samples, dilated by the margin.
     let mut near_stuck = alloc::vec![false; n];
     let mut last_stuck: Option<usize> = None;
-    for k in 0..n {
+    for (k, flag) in near_stuck.iter_mut().enumerate() {
         if r.omega_f[k].abs() < opts.min_speed_rad_s
             || r.omega_raw[k].abs() < 0.5 * opts.min_speed_rad_s
         {
@@ -322,7 +336,7 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
         }
         if let Some(s) = last_stuck {
             if k - s <= margin {
-                near_stuck[k] = true;
+                *flag = true;
             }
         }
     }
@@ -351,7 +365,11 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
                 let s = math::sign(w);
                 if let Some((k0, s0)) = last {
                     if s0 != s {
-                        for f in near_rev.iter_mut().take((k + rev_win).min(n)).skip(k0.saturating_sub(rev_win)) {
+                        for f in near_rev
+                            .iter_mut()
+                            .take((k + rev_win).min(n))
+                            .skip(k0.saturating_sub(rev_win))
+                        {
                             *f = true;
                         }
                     }

@@ -398,16 +398,25 @@ impl Dataset {
         }
         // A delay found in the electrical balance is sized to the sample only (the current
         // settles within a period); the motion resolves the fraction: refine on the simulation.
-        if let Some(&(i, _)) = searched.iter().find(|(i, _)| cfg.slots[*i].kind == EffectKind::Delay) {
+        if let Some(&(i, _)) = searched
+            .iter()
+            .find(|(i, _)| cfg.slots[*i].kind == EffectKind::Delay)
+        {
             let d0 = cfg.slots[i].get("delay");
-            let dt = self.recs.iter().map(|r| r.dt_s).fold(f64::INFINITY, f64::min);
+            let dt = self
+                .recs
+                .iter()
+                .map(|r| r.dt_s)
+                .fold(f64::INFINITY, f64::min);
             if self.has_current && d0 > 0.0 && dt.is_finite() {
                 let base = self.solve_config(&cfg)?;
                 let mut f = |d: f64| {
                     let mut c = base.cfg.clone();
                     c.slots[i].set("delay", d);
                     match to_plant(&c, &base.mech, base.elec.as_ref()) {
-                        Ok(p) => oe::prediction_cost(self, &p, oe::Part::Fit).unwrap_or(f64::INFINITY),
+                        Ok(p) => {
+                            oe::prediction_cost(self, &p, oe::Part::Fit).unwrap_or(f64::INFINITY)
+                        }
                         Err(_) => f64::INFINITY,
                     }
                 };
@@ -755,7 +764,13 @@ pub(crate) mod tests {
             ..PlantParams::TABLE2
         })
         .unwrap();
-        let r = fit_model(&[log.clone()], &start, &[], &FitOptions::default()).unwrap();
+        let r = fit_model(
+            std::slice::from_ref(&log),
+            &start,
+            &[],
+            &FitOptions::default(),
+        )
+        .unwrap();
         let p = &r.plant;
         assert!(
             (p.params.j_eq() / 7.0e-7 - 1.0).abs() < 0.05,

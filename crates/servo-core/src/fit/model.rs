@@ -209,16 +209,14 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
     }
     for (si, s) in cfg.slots.iter().enumerate() {
         match s.kind {
-            EffectKind::Coulomb => {
-                if asym.is_none() {
-                    let fixed = if s.fit[0] { None } else { Some(s.values[0]) };
-                    terms.push(Term {
-                        col: coulomb_col(),
-                        coef: Coef::TauSf,
-                        sign: Sign::NonNegative,
-                        fixed,
-                    });
-                }
+            EffectKind::Coulomb if asym.is_none() => {
+                let fixed = if s.fit[0] { None } else { Some(s.values[0]) };
+                terms.push(Term {
+                    col: coulomb_col(),
+                    coef: Coef::TauSf,
+                    sign: Sign::NonNegative,
+                    fixed,
+                });
             }
             EffectKind::Stribeck => {
                 let ws = s.get("omega_s");
@@ -287,7 +285,11 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
                 // the fit sees, while the measured response holds none of it: taper them out.
                 let fc = ds.opts.filter_hz;
                 let taper = move |r: &RecData, k: usize| {
-                    let w = if cog { r.omega_raw[k] } else { r.omega_raw[k] / n };
+                    let w = if cog {
+                        r.omega_raw[k]
+                    } else {
+                        r.omega_raw[k] / n
+                    };
                     let f = h * w.abs() / math::TAU;
                     ((4.0 * fc - f) / (2.0 * fc)).clamp(0.0, 1.0)
                 };

@@ -5,8 +5,8 @@
 //! and works the same on open-loop and closed-loop logs (the logged u drives the model).
 
 use super::dataset::Dataset;
-use crate::math;
 use crate::effects::EffectKind;
+use crate::math;
 use crate::plant::Plant;
 use crate::sim::{PlantSim, PlantState};
 use alloc::vec::Vec;
@@ -84,9 +84,21 @@ pub fn prediction_cost_on(ds: &Dataset, plant: &Plant, segs: &[(usize, usize)]) 
         };
         let th = r.theta_m_rad[k0];
         // With backlash and the load angle measured, start in contact on the driving flank.
-        let half_gap = plant.effects.value(EffectKind::Backlash, "gap").unwrap_or(0.0) * 0.5;
-        let dir = if w.abs() > ds.opts.min_speed_rad_s { math::sign(w) } else { math::sign(u_prev) };
-        let (th_m, th_l) = if r.angle_is_load { (th + p.n * half_gap * dir, th / p.n) } else { (th, th / p.n - half_gap * dir) };
+        let half_gap = plant
+            .effects
+            .value(EffectKind::Backlash, "gap")
+            .unwrap_or(0.0)
+            * 0.5;
+        let dir = if w.abs() > ds.opts.min_speed_rad_s {
+            math::sign(w)
+        } else {
+            math::sign(u_prev)
+        };
+        let (th_m, th_l) = if r.angle_is_load {
+            (th + p.n * half_gap * dir, th / p.n)
+        } else {
+            (th, th / p.n - half_gap * dir)
+        };
         sim.reset(PlantState {
             time_s: r.time_s[k0],
             u_in_v: u_prev,
@@ -100,7 +112,11 @@ pub fn prediction_cost_on(ds: &Dataset, plant: &Plant, segs: &[(usize, usize)]) 
         });
         for j in 0..h {
             let s = sim.step(r.u_v[k0 + j]);
-            let out = if r.angle_is_load { s.theta_l_rad * p.n } else { s.theta_m_rad };
+            let out = if r.angle_is_load {
+                s.theta_l_rad * p.n
+            } else {
+                s.theta_m_rad
+            };
             let e = out - r.theta_m_rad[k0 + j + 1];
             if !e.is_finite() {
                 return None;

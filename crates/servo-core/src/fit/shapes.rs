@@ -40,5 +40,8 @@ pub fn cogging_pair(theta_m: f64, harmonic: f64) -> (f64, f64) {
 /// Imbalance torque at the load [N m] per unit amplitude: the (sin, cos) pair of theta_l.
 #[inline]
 pub fn imbalance_pair(theta_l: f64) -> (f64, f64) {
-    (torque::imbalance_torque_l(1.0, 0.0, theta_l), torque::imbalance_torque_l(1.0, core::f64::consts::FRAC_PI_2, theta_l))
+    (
+        torque::imbalance_torque_l(1.0, 0.0, theta_l),
+        torque::imbalance_torque_l(1.0, core::f64::consts::FRAC_PI_2, theta_l),
+    )
 }

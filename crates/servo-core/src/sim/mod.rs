@@ -9,9 +9,9 @@
 //! ```
 //!
 //! with u_in = delay(saturation(deadzone(u))) and the resisting torques of
-//! [`crate::effects::torque`]: tau_m = cogging + dry friction / N (motor side), tau_l = imbalance
+//! [`crate::effects::torque`]: tau_m = cogging (motor side), tau_l = dry friction + imbalance
 //! (load side). With `backlash` the mechanics splits into two bodies: the motor side
-//! J_eq (1 - f) (rotor, gears, friction) and the load J_eq f (seen at motor side, f =
+//! J_eq (1 - f) (rotor and gears) and the load J_eq f (seen at motor side, f =
 //! `load_inertia_fraction`, imbalance acts on it), joined through the play `gap` at the load by a
 //! spring-damper contact (`stiffness`, `damping`, load side). Viscous friction B_eq is split
 //! between the bodies in the same ratio as the inertia, so that a rigid contact gives back eq. 20.
@@ -36,7 +36,11 @@
 //! it (motor torque minus cogging and imbalance, or the contact torque with backlash) exceeds the
 //! breakaway torque of [`Friction::breakaway_l`] (tau_s with Stribeck, else the Coulomb level of
 //! that direction). Below breakaway the shaft does not creep and there is no chattering around
-//! zero speed. Events (sticking, breakaway, contact) are resolved at sub-step resolution.
+//! zero speed. Events (sticking, breakaway, contact) are resolved at sub-step resolution. Against
+//! RK4 at 1 us (tests/sim.rs) the load angle agrees within ~1e-4 rad with dry friction, ~1e-6 rad
+//! with cogging or imbalance, and ~2-4e-3 rad with backlash (impacts at 100 us resolution; the
+//! motor side is put back on the flank when a free sub-step ends in penetration). While a rigid
+//! drivetrain is stuck and stays below breakaway, a whole period is one exact step.
 //!
 //! The transport `delay` is a fixed-size delay line (no heap) of [`DELAY_CAPACITY`] samples;
 //! fractional delays are exact: the period is split at the instant the delayed input switches.
