@@ -705,3 +705,38 @@ fn display_dir(p: &Path) -> String {
         .display()
         .to_string()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn truth_hides_exactly_the_given_effect() {
+        let t = demo_truth(HIDDEN_EFFECT).unwrap();
+        let h = hidden_effect(&t).unwrap();
+        let want = Effect::parse(HIDDEN_EFFECT).unwrap();
+        assert_eq!(h.kind, want.kind);
+        let key = main_param(h.kind).unwrap();
+        assert_eq!(h.get(key), want.get(key));
+        assert!((t.tau_sf() - DEMO_TAU_SF).abs() < 1e-12);
+        let t = demo_truth("deadzone:width=0.4").unwrap();
+        assert_eq!(hidden_effect(&t).unwrap().kind, EffectKind::Deadzone);
+    }
+
+    #[test]
+    fn truth_rejects_base_effects_and_bad_specs() {
+        let e = demo_truth("coulomb:tau_sf=0.01").unwrap_err().to_string();
+        assert!(e.contains("--hidden") && e.contains("base model"), "{e}");
+        let e = demo_truth("nonsense").unwrap_err().to_string();
+        assert!(e.contains("--hidden `nonsense`"), "{e}");
+    }
+
+    #[test]
+    fn every_effect_has_a_main_parameter_of_the_catalogue() {
+        for k in EffectKind::ALL {
+            let key = main_param(k).unwrap();
+            let e = Effect::parse(k.name()).unwrap();
+            assert!(e.get(key).is_some(), "{} has no `{key}`", k.name());
+        }
+    }
+}
