@@ -679,6 +679,7 @@ impl Demo {
         let all = stages();
         let t0 = std::time::Instant::now();
         let mut files = Vec::new();
+        let mut story = Vec::new();
         for (i, st) in all.iter().enumerate() {
             println!("== [{}/{}] {}: {}", i + 1, all.len(), st.name, st.what);
             let (headline, written) =
@@ -688,6 +689,11 @@ impl Demo {
                 println!("      wrote {}", f.display());
             }
             files.extend(written);
+            story.push((st.name, headline));
+        }
+        println!("== the story");
+        for (name, headline) in &story {
+            println!("  {name:<12} {headline}");
         }
         println!(
             "demo done in {:.1} s; {} files in {}",
