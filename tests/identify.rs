@@ -294,8 +294,8 @@ fn simulate(seed: u64) -> (Record, Record) {
 }
 
 /// Known simulator discrepancy (reported to the lead): the PlantSim states satisfy eq. 20 with an
-/// apparent J_eq about 0.9 % below the configured one at moderate accelerations (k_t i_a - B_eq w
-/// - tau_sf/N = 6.94e-7 dw/dt for J_eq = 7e-7), while an exact synthetic torque balance is
+/// apparent J_eq about 0.9 % below the configured one at moderate accelerations
+/// (k_t i_a - B_eq w - tau_sf/N = 6.94e-7 dw/dt for J_eq = 7e-7), while an exact synthetic torque balance is
 /// recovered inside the intervals (`synthetic_truth_is_inside_the_reported_intervals`). Until the
 /// simulator is fixed, J_eq from the simulator is checked against its interval widened to 1.5 %.
 fn sim_j_ok(what: &str, e: &servo_core::ident::Estimate) {
@@ -538,8 +538,10 @@ fn unidentifiable_data_is_refused_with_an_explanation() {
 
 /// Writes a params file with the course constants the published numbers used.
 fn course_params_file(dir: &Path) -> std::path::PathBuf {
-    let mut m = servo_cli::model_file::ModelFile::default();
-    m.params = course_params();
+    let m = servo_cli::model_file::ModelFile {
+        params: course_params(),
+        ..Default::default()
+    };
     let path = dir.join("course.toml");
     m.save(&path).unwrap();
     path
@@ -675,8 +677,10 @@ fn cli_identify_refuses_bad_input_clearly() {
 fn cli_identify_ramp_runs_the_experiments_on_the_simulator() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    let mut truth = servo_cli::model_file::ModelFile::default();
-    truth.params = truth_params_for_cli();
+    let truth = servo_cli::model_file::ModelFile {
+        params: truth_params_for_cli(),
+        ..Default::default()
+    };
     let plant = d.join("truth.toml");
     truth.save(&plant).unwrap();
     let fr = d.join("fr.toml");
