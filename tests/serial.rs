@@ -102,7 +102,6 @@ fn proxied(
     let board = BoardThread::spawn(a_master, cfg);
     let stop = Arc::new(AtomicBool::new(false));
     let t0 = Instant::now();
-    let count = Arc::new(AtomicU64::new(0));
     let mut threads = Vec::new();
     // to_host: from the board (a_slave) to the host (b_master); to_board the other way.
     let ends = [
@@ -115,7 +114,9 @@ fn proxied(
     ];
     for (mut from, mut to, to_host) in ends {
         let stop = stop.clone();
-        let count = count.clone();
+        // One byte counter per direction, so that each direction sees the same mischief rate
+        // whatever the traffic in the other one.
+        let count = Arc::new(AtomicU64::new(0));
         threads.push(std::thread::spawn(move || {
             from.set_timeout(Duration::from_millis(20)).unwrap();
             let mut buf = [0u8; 256];
