@@ -97,6 +97,11 @@ pub struct Identify {
     /// the 95th percentile of |dw_m/dt|.
     #[arg(long = "min-accel", value_name = "RAD_PER_S2")]
     pub min_accel: Option<f64>,
+    /// Part of each acceleration/deceleration phase averaged for eqs. 67-70, as fractions of the
+    /// phase `FROM,TO` (e.g. `0.7,0.9`: the last part, after the current transient); default:
+    /// the phase minus 10 % at each end.
+    #[arg(long = "phase-window", value_name = "FROM,TO", value_parser = parse_window)]
+    pub phase_window: Option<(f64, f64)>,
 
     /// Print the estimates as JSON (B_eq, tau_sf, J_eq in SI; B_eq and J_eq motor side, tau_sf
     /// load side) instead of the text report.
@@ -291,6 +296,7 @@ impl Identify {
         PhaseConfig {
             cutoff_hz: self.cutoff_hz,
             min_accel_rad_s2: self.min_accel,
+            window_frac: self.phase_window,
             ..PhaseConfig::default()
         }
     }
@@ -737,4 +743,18 @@ fn stack_svgs(parts: &[String]) -> String {
     }
     s.push_str("</svg>\n");
     s
+}
+
+/// Parses `--phase-window FROM,TO` (fractions of a phase, 0 <= FROM < TO <= 1).
+fn parse_window(s: &str) -> Result<(f64, f64), String> {
+    let err =
+        || format!("expected FROM,TO with 0 <= FROM < TO <= 1 (fractions of a phase), got `{s}`");
+    let (a, b) = s.split_once(',').ok_or_else(err)?;
+    let a: f64 = a.trim().parse().map_err(|_| err())?;
+    let b: f64 = b.trim().parse().map_err(|_| err())?;
+    if (0.0..1.0).contains(&a) && a < b && b <= 1.0 {
+        Ok((a, b))
+    } else {
+        Err(err())
+    }
 }

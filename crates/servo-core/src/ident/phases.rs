@@ -25,6 +25,10 @@ pub struct PhaseConfig {
     pub min_duration_s: f64,
     /// Fraction trimmed at each end of a phase [-].
     pub trim_frac: f64,
+    /// Part of each detected phase kept, as fractions of its length `(from, to)`, 0 <= from < to
+    /// <= 1; overrides `trim_frac`. E.g. `(0.7, 0.9)` averages the last part of each phase, after
+    /// the current transient, as the padova2021-savian group did.
+    pub window_frac: Option<(f64, f64)>,
 }
 
 impl Default for PhaseConfig {
@@ -35,6 +39,7 @@ impl Default for PhaseConfig {
             min_accel_rad_s2: None,
             min_duration_s: 0.2,
             trim_frac: 0.1,
+            window_frac: None,
         }
     }
 }
@@ -77,7 +82,11 @@ pub fn find_phases(
 ) -> Result<Vec<AccelPhase>, IdentError> {
     if !(cfg.min_duration_s > 0.0
         && (0.0..0.5).contains(&cfg.trim_frac)
-        && cfg.min_accel_frac > 0.0)
+        && cfg.min_accel_frac > 0.0
+        && match cfg.window_frac {
+            Some((a, b)) => (0.0..1.0).contains(&a) && a < b && b <= 1.0,
+            None => true,
+        })
     {
         return Err(IdentError::BadConfig(format!(
             "phase settings out of range: {cfg:?}"
@@ -114,8 +123,16 @@ pub fn find_phases(
         }
         if s != 0 && t[j - 1] - t[i] >= cfg.min_duration_s {
             let len = j - i;
-            let cut = (cfg.trim_frac * len as f64) as usize;
-            let (ps, pe) = (i + cut, j - cut);
+            let (ps, pe) = match cfg.window_frac {
+                Some((from, to)) => (
+                    i + (from * len as f64) as usize,
+                    i + (to * len as f64) as usize,
+                ),
+                None => {
+                    let cut = (cfg.trim_frac * len as f64) as usize;
+                    (i + cut, j - cut)
+                }
+            };
             if pe > ps + 2 {
                 let slope = line_slope(&t[ps..pe], &omega[ps..pe]);
                 out.push(AccelPhase {
