@@ -523,22 +523,33 @@ fn stage_compare(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)
     ))
 }
 
-fn stage_diagnose(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
-    let model = need(&ctx.ident_model, "the identified model")?.clone();
-    let report = ctx.out.join("diagnose.html");
+/// Runs `servo diagnose` on the story's logs with `model`, writing the HTML `report`, and
+/// returns the diagnosis of the first log set.
+fn run_diagnose(
+    ctx: &DemoContext,
+    model: &Path,
+    report: &Path,
+) -> anyhow::Result<servo_core::diagnose::Diagnosis> {
     let mut args = vec!["diagnose".to_string()];
     args.extend(story_logs(ctx)?);
     args.extend([
         "--model".into(),
-        path_arg(&model),
+        path_arg(model),
         "--report".into(),
-        path_arg(&report),
+        path_arg(report),
     ]);
     let cmd: super::diagnose::Diagnose = command(&args)?;
     let (_, diags) = cmd.run_report()?;
-    let d = diags
-        .first()
-        .ok_or_else(|| anyhow!("diagnose gave no result"))?;
+    diags
+        .into_iter()
+        .next()
+        .ok_or_else(|| anyhow!("diagnose gave no result"))
+}
+
+fn stage_diagnose(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
+    let model = need(&ctx.ident_model, "the identified model")?.clone();
+    let report = ctx.out.join("diagnose.html");
+    let d = &run_diagnose(ctx, &model, &report)?;
     let hidden = hidden_effect(&ctx.truth);
     let truth_words = hidden.map_or(String::from("none"), |e| e.to_string());
     let Some(w) = d.winner() else {
@@ -631,19 +642,7 @@ fn stage_rediagnose(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBu
         return Ok((String::from("skipped: no effect was added"), vec![]));
     };
     let report = ctx.out.join("diagnose_after.html");
-    let mut args = vec!["diagnose".to_string()];
-    args.extend(story_logs(ctx)?);
-    args.extend([
-        "--model".into(),
-        path_arg(&model),
-        "--report".into(),
-        path_arg(&report),
-    ]);
-    let cmd: super::diagnose::Diagnose = command(&args)?;
-    let (_, diags) = cmd.run_report()?;
-    let d = diags
-        .first()
-        .ok_or_else(|| anyhow!("diagnose gave no result"))?;
+    let d = &run_diagnose(ctx, &model, &report)?;
     let headline = match d.winner() {
         None => String::from("nothing significant left: the model explains the data"),
         Some(w) => format!(

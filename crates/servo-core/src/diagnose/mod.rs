@@ -481,6 +481,21 @@ mod tests {
     use crate::fit::tests::{open_loop_log, truth};
     use crate::params::PlantParams;
 
+    fn print_ranking(d: &Diagnosis) {
+        for c in &d.ranking {
+            std::eprintln!(
+                "{} sig={} red={:.1}% oe={:?} bic={:.1}\n   {}",
+                c.effect,
+                c.significant,
+                c.error_reduction_pct,
+                c.oe_reduction_pct,
+                c.bic_gain,
+                c.evidence
+            );
+        }
+        std::eprintln!("{}", d.verdict);
+    }
+
     #[test]
     fn names_missing_coulomb_and_nothing_on_a_complete_model() {
         let truth = truth();
@@ -493,36 +508,14 @@ mod tests {
         })
         .unwrap();
         let d = diagnose(&logs, &lacking, &DiagnoseOptions::default()).unwrap();
-        for c in &d.ranking {
-            std::eprintln!(
-                "{} sig={} red={:.1}% oe={:?} bic={:.1}\n   {}",
-                c.effect,
-                c.significant,
-                c.error_reduction_pct,
-                c.oe_reduction_pct,
-                c.bic_gain,
-                c.evidence
-            );
-        }
-        std::eprintln!("{}", d.verdict);
+        print_ranking(&d);
         let w = d.winner().expect("a significant candidate");
         assert_eq!(w.effect, EffectKind::Coulomb);
         let tau = w.params.iter().find(|p| p.key == "tau_sf").unwrap().value;
         assert!((tau / 0.01 - 1.0).abs() < 0.15, "tau_sf {tau}");
         // The complete model.
         let d = diagnose(&logs, &truth, &DiagnoseOptions::default()).unwrap();
-        for c in &d.ranking {
-            std::eprintln!(
-                "{} sig={} red={:.1}% oe={:?} bic={:.1}\n   {}",
-                c.effect,
-                c.significant,
-                c.error_reduction_pct,
-                c.oe_reduction_pct,
-                c.bic_gain,
-                c.evidence
-            );
-        }
-        std::eprintln!("{}", d.verdict);
+        print_ranking(&d);
         assert!(d.winner().is_none(), "false positive: {}", d.verdict);
     }
 }
