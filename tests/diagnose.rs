@@ -206,71 +206,44 @@ macro_rules! hidden_tests {
     ($($name:ident: $spec:expr, $seeds:expr;)*) => {$(
         #[test]
         fn $name() {
-            for seed in $seeds {
-                check_hidden($spec, seed);
-            }
+            let failures: Vec<String> = $seeds
+                .into_iter()
+                .filter_map(|seed| {
+                    std::panic::catch_unwind(|| check_hidden($spec, seed))
+                        .err()
+                        .map(|e| {
+                            e.downcast_ref::<String>()
+                                .cloned()
+                                .unwrap_or_else(|| format!("seed {seed} failed"))
+                        })
+                })
+                .collect();
+            assert!(failures.is_empty(), "{}", failures.join("\n"));
         }
     )*};
 }
 
+/// Every effect is checked on the same seeds (not chosen per effect): three independent noise
+/// and excitation draws per strength.
+const SEEDS: [u64; 3] = [1, 2, 3];
+
 hidden_tests! {
-    hidden_stribeck: "stribeck:tau_s=0.02,omega_s=0.5", [1];
-    hidden_stribeck_weak: "stribeck:tau_s=0.015,omega_s=0.5", [3];
-    hidden_asymmetry: "asymmetry:tau_sf_pos=0.013,tau_sf_neg=0.008", [2];
-    hidden_asymmetry_weak: "asymmetry:tau_sf_pos=0.0115,tau_sf_neg=0.009", [3];
-    hidden_cogging: "cogging:amplitude=3e-4,harmonic=12,phase=0.3", [1];
-    hidden_cogging_weak: "cogging:amplitude=1.5e-4,harmonic=18,phase=1.0", [3];
-    hidden_imbalance: "imbalance:amplitude=0.01,phase=0.5", [2];
-    hidden_imbalance_weak: "imbalance:amplitude=0.004,phase=-1.0", [3];
-    hidden_saturation: "saturation:limit=4.0", [1];
-    hidden_saturation_weak: "saturation:limit=6.5", [3];
-    hidden_deadzone: "deadzone:width=0.4", [2];
-    hidden_deadzone_weak: "deadzone:width=0.15", [3];
-    hidden_delay: "delay:delay=0.003", [1];
-    hidden_delay_weak: "delay:delay=0.0012", [3];
-}
-
-/// Backlash seen through the load encoder also looks like an input delay (the load lags the
-/// motor across the gap): servo detects it as significant but does not always rank it above
-/// `delay`, and sizes the gap within about 20 %. This checks what holds today; the strict
-/// "named first, gap within 15 %" check is `hidden_backlash_strict` (ignored, known limitation).
-#[test]
-#[ignore = "known limitation: the backlash gap is mis-sized on seed 1 (0.047 rad for 0.03) since the simulator's latest contact model; backlash ranking and sizing need work (issue 6)"]
-fn hidden_backlash_is_detected() {
-    for (spec, seed) in [("backlash:gap=0.03", 1), ("backlash:gap=0.015", 2)] {
-        let hidden = Effect::parse(spec).unwrap();
-        let plant = truth(&[hidden]);
-        let logs = logs(&plant, seed);
-        let model = identified(&logs);
-        let d = diagnose::diagnose(&logs, &model, &DiagnoseOptions::default()).unwrap();
-        let c = d
-            .ranking
-            .iter()
-            .position(|c| c.effect == EffectKind::Backlash)
-            .unwrap();
-        assert!(
-            d.ranking[c].significant && c <= 1,
-            "[{spec}] backlash at rank {c}: {}",
-            d.verdict
-        );
-        let gap = d.ranking[c]
-            .params
-            .iter()
-            .find(|p| p.key == "gap")
-            .unwrap()
-            .value;
-        assert!(
-            (gap / hidden.get("gap").unwrap() - 1.0).abs() < 0.3,
-            "[{spec}] gap {gap}"
-        );
-    }
-}
-
-#[test]
-#[ignore = "known limitation: backlash seen through the load encoder is sometimes ranked after delay"]
-fn hidden_backlash_strict() {
-    check_hidden("backlash:gap=0.03", 1);
-    check_hidden("backlash:gap=0.015", 2);
+    hidden_stribeck: "stribeck:tau_s=0.02,omega_s=0.5", SEEDS;
+    hidden_stribeck_weak: "stribeck:tau_s=0.015,omega_s=0.5", SEEDS;
+    hidden_asymmetry: "asymmetry:tau_sf_pos=0.013,tau_sf_neg=0.008", SEEDS;
+    hidden_asymmetry_weak: "asymmetry:tau_sf_pos=0.0115,tau_sf_neg=0.009", SEEDS;
+    hidden_backlash: "backlash:gap=0.03", SEEDS;
+    hidden_backlash_weak: "backlash:gap=0.015", SEEDS;
+    hidden_cogging: "cogging:amplitude=3e-4,harmonic=12,phase=0.3", SEEDS;
+    hidden_cogging_weak: "cogging:amplitude=1.5e-4,harmonic=18,phase=1.0", SEEDS;
+    hidden_imbalance: "imbalance:amplitude=0.01,phase=0.5", SEEDS;
+    hidden_imbalance_weak: "imbalance:amplitude=0.004,phase=-1.0", SEEDS;
+    hidden_saturation: "saturation:limit=4.0", SEEDS;
+    hidden_saturation_weak: "saturation:limit=6.5", SEEDS;
+    hidden_deadzone: "deadzone:width=0.4", SEEDS;
+    hidden_deadzone_weak: "deadzone:width=0.15", SEEDS;
+    hidden_delay: "delay:delay=0.003", SEEDS;
+    hidden_delay_weak: "delay:delay=0.0012", SEEDS;
 }
 
 #[test]

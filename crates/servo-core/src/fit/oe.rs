@@ -24,11 +24,23 @@ pub enum Part {
 
 /// Segment starts (record, row) of `part`, at most `opts.oe_max_segments`, spread evenly.
 pub fn segments(ds: &Dataset, part: Part) -> Vec<(usize, usize)> {
+    segments_with(ds, part, ds.opts.oe_horizon_s, 1, ds.opts.oe_max_segments)
+}
+
+/// As [`segments`] with a given horizon [s], segments starting every `horizon_s / overlap`
+/// (`overlap` = 1: back to back), at most `max_segments`.
+pub fn segments_with(
+    ds: &Dataset,
+    part: Part,
+    horizon_s: f64,
+    overlap: usize,
+    max_segments: usize,
+) -> Vec<(usize, usize)> {
     let o = &ds.opts;
     let mut all = Vec::new();
     for (ri, r) in ds.recs.iter().enumerate() {
         let fs = 1.0 / r.dt_s;
-        let h = ((o.oe_horizon_s * fs) as usize).max(2);
+        let h = ((horizon_s * fs) as usize).max(2);
         let edge = libm::ceil((2.0 / o.filter_hz) * fs) as usize + 2;
         let block = ((o.holdout_block_s * fs) as usize).max(1);
         let n = r.u_v.len();
@@ -48,10 +60,10 @@ pub fn segments(ds: &Dataset, part: Part) -> Vec<(usize, usize)> {
             if keep && moving {
                 all.push((ri, k));
             }
-            k += h;
+            k += (h / overlap.max(1)).max(1);
         }
     }
-    let m = o.oe_max_segments.max(1);
+    let m = max_segments.max(1);
     if all.len() <= m {
         return all;
     }
@@ -67,6 +79,16 @@ pub fn prediction_cost(ds: &Dataset, plant: &Plant, part: Part) -> Option<f64> {
 
 /// As [`prediction_cost`] on given segment starts.
 pub fn prediction_cost_on(ds: &Dataset, plant: &Plant, segs: &[(usize, usize)]) -> Option<f64> {
+    prediction_cost_over(ds, plant, segs, ds.opts.oe_horizon_s)
+}
+
+/// As [`prediction_cost_on`] with a given horizon [s].
+pub fn prediction_cost_over(
+    ds: &Dataset,
+    plant: &Plant,
+    segs: &[(usize, usize)],
+    horizon_s: f64,
+) -> Option<f64> {
     if segs.is_empty() {
         return None;
     }
@@ -74,7 +96,7 @@ pub fn prediction_cost_on(ds: &Dataset, plant: &Plant, segs: &[(usize, usize)]) 
     let (mut sum, mut count) = (0.0, 0usize);
     for &(ri, k0) in segs {
         let r = &ds.recs[ri];
-        let h = ((ds.opts.oe_horizon_s / r.dt_s) as usize).max(2);
+        let h = ((horizon_s / r.dt_s) as usize).max(2);
         let mut sim = PlantSim::new(plant, r.dt_s).ok()?;
         let w = r.omega_f[k0];
         let u_prev = r.u_v[k0.saturating_sub(1)];
@@ -89,15 +111,22 @@ pub fn prediction_cost_on(ds: &Dataset, plant: &Plant, segs: &[(usize, usize)]) 
             .value(EffectKind::Backlash, "gap")
             .unwrap_or(0.0)
             * 0.5;
-        let dir = if w.abs() > ds.opts.min_speed_rad_s {
-            math::sign(w)
+        // With backlash, the motor side is put on the flank it presses on, the contact spring
+        // compressed by the torque the load needs (load side [rad]).
+        let offset_l = if half_gap > 0.0 {
+            let tau_c = contact_torque_l(plant, w, r.accel_f[k0], u_prev, ds.opts.min_speed_rad_s);
+            let k_c = plant
+                .effects
+                .value(EffectKind::Backlash, "stiffness")
+                .unwrap_or(f64::INFINITY);
+            half_gap * math::sign(tau_c) + tau_c / k_c
         } else {
-            math::sign(u_prev)
+            0.0
         };
         let (th_m, th_l) = if r.angle_is_load {
-            (th + p.n * half_gap * dir, th / p.n)
+            (th + p.n * offset_l, th / p.n)
         } else {
-            (th, th / p.n - half_gap * dir)
+            (th, th / p.n - offset_l)
         };
         sim.reset(PlantState {
             time_s: r.time_s[k0],
@@ -126,4 +155,23 @@ pub fn prediction_cost_on(ds: &Dataset, plant: &Plant, segs: &[(usize, usize)]) 
         }
     }
     Some(math::sqrt(sum / count.max(1) as f64))
+}
+
+/// The torque the contact transmits to the load [N m, load side] at a segment start, from the
+/// load body's balance: what it needs to accelerate at `accel` [rad/s^2, motor side] against its
+/// share of the viscous friction and the dry friction at speed `omega` [rad/s, motor side]. Its
+/// sign is the flank the motor presses on: moving at constant speed the motor drives the load;
+/// braking harder than friction alone would, it holds the load back (the other flank). At rest
+/// the sign of the last input `u_prev` [V] decides (torque 0).
+fn contact_torque_l(plant: &Plant, omega: f64, accel: f64, u_prev: f64, min_speed: f64) -> f64 {
+    let p = &plant.params;
+    let f = plant
+        .effects
+        .value(EffectKind::Backlash, "load_inertia_fraction")
+        .unwrap_or(0.3);
+    if omega.abs() <= min_speed {
+        return math::sign(u_prev) * f64::MIN_POSITIVE;
+    }
+    let tau_m = f * p.j_eq() * accel + f * plant.b_eq() * omega;
+    tau_m * p.n + plant.tau_sf() * math::sign(omega)
 }
