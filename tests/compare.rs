@@ -1,5 +1,7 @@
 //! End-to-end tests of `servo compare`: simulated logs with a hidden effect, a model equal to the
-//! truth, and the real closed-loop steps of padova2021-jacopisky.
+//! truth, `servo run` logs replayed with the controller they ran (Tustin, derivative on the
+//! measurement, back-calculation, feedforward), and the real closed-loop steps of
+//! padova2021-jacopisky.
 
 use serde_json::Value;
 use servo_cli::gains_file::{GainsFile, PidSection};
@@ -297,4 +299,272 @@ fn real_closed_loop_steps_show_friction() {
     assert!(fr["rmse"].as_f64().unwrap() < 0.5 * nom["rmse"].as_f64().unwrap());
     let rev = regime(&nom, "reversal");
     assert!(rev["concentration"].as_f64().unwrap() > 3.0, "{rev}");
+}
+
+/// The gains of [`gains_file`] designed for Tustin (`[design] discretization = "tustin"`), with
+/// back-calculation anti-windup K_w = 30 1/s.
+fn tustin_gains_file(path: &Path) {
+    let text = format!(
+        "[pid]\nkp = {KP}\nki = {KI}\nkd = {KD}\ntl_s = {TL}\nts_s = {DT}\nkw = 30.0\n\n[design]\ndiscretization = \"tustin\"\n"
+    );
+    assert!(GainsFile::parse(&text).is_ok());
+    std::fs::write(path, text).unwrap();
+}
+
+/// `servo run` on the simulator (the plant of `model`, 4096-count encoder) with `gains` and
+/// `extra` options, logged to `log`.
+fn sim_run(gains: &Path, model: &Path, log: &Path, extra: &[&str]) {
+    let mut a = vec![
+        "run",
+        "--gains",
+        gains.to_str().unwrap(),
+        "--plant",
+        model.to_str().unwrap(),
+        "--log",
+        log.to_str().unwrap(),
+    ];
+    a.extend_from_slice(extra);
+    let (ok, out, err) = servo(&a);
+    assert!(ok, "servo {a:?} failed: {err}\n{out}");
+}
+
+fn compare_json(log: &Path, model: &Path, extra: &[&str]) -> Value {
+    let mut a = vec![
+        "compare",
+        log.to_str().unwrap(),
+        "--model",
+        model.to_str().unwrap(),
+        "--json",
+    ];
+    a.extend_from_slice(extra);
+    run_json(&a)
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+/// Square steps of +-1.5 rad (the output saturates at 10 V and the anti-windup acts).
+const SQUARE: [&str; 4] = ["--ref", "square:amp=1.5,period=1", "--duration", "4"];
+
+#[test]
+fn closed_loop_replay_uses_the_controller_the_run_used() {
+    let dir = tempfile::tempdir().unwrap();
+    let (gains, model, log) = (
+        dir.path().join("gains.toml"),
+        dir.path().join("model.toml"),
+        dir.path().join("run.mcap"),
+    );
+    tustin_gains_file(&gains);
+    ModelFile::from_plant(&plant(Some(0.01)))
+        .save(&model)
+        .unwrap();
+    let mut run_args = SQUARE.to_vec();
+    run_args.extend_from_slice(&["--derivative-on", "measurement"]);
+    sim_run(&gains, &model, &log, &run_args);
+
+    // The model is the truth: replayed with the controller of the log's metadata.
+    let v = compare_json(&log, &model, &[]);
+    let c = &v["controller"];
+    println!("controller: {}", c["description"]);
+    assert_eq!(v["mode"], "closed-loop");
+    assert_eq!(c["discretization"], "tustin", "{c}");
+    assert_eq!(c["derivative_on"], "measurement", "{c}");
+    assert_eq!(c["anti_windup"], "back-calc", "{c}");
+    assert_eq!(f(&c["kw"]), 30.0);
+    assert_eq!(f(&c["u_limit_v"]), 10.0);
+    assert_eq!(c["feedforward"], "none");
+    for part in [
+        "discretization",
+        "derivative_on",
+        "anti_windup",
+        "u_limit_v",
+    ] {
+        assert_eq!(
+            c["parts"][part]["source"], "from the log's metadata",
+            "{part}: {c}"
+        );
+    }
+    let (check, rms) = (f(&c["check_fit_percent"]), f(&c["check_rms_v"]));
+    let (fit, rmse) = (f(&v["fit_percent"]), f(&v["rmse"]));
+    println!(
+        "same controller: check fit {check:.10} % (RMS {rms:.3e} V over {} samples), position fit {fit:.3} % (RMSE {rmse:.3e} rad)",
+        c["check_samples"]
+    );
+    // The controller check runs the controller on the logged reference and angle: it reproduces
+    // the logged u to rounding (measured RMS ~4e-13 V).
+    assert!(rms < 1e-9 && check > 99.9999, "{c}");
+    assert!(fit > 99.5, "fit {fit}");
+    // The text says where the configuration came from.
+    let (ok, text, err) = servo(&[
+        "compare",
+        log.to_str().unwrap(),
+        "--model",
+        model.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    for part in [
+        "Tustin (from the log's metadata)",
+        "derivative on the measurement (from the log's metadata)",
+        "back-calculation anti-windup, K_w = 30 1/s (from the log's metadata)",
+    ] {
+        assert!(text.contains(part), "missing `{part}` in:\n{text}");
+    }
+
+    // The wrong discretisation, forced: the check and the replay get measurably worse.
+    let w = compare_json(&log, &model, &["--discretization", "backward-euler"]);
+    let cw = &w["controller"];
+    assert_eq!(cw["discretization"], "backward-euler");
+    assert_eq!(
+        cw["parts"]["discretization"]["source"],
+        "given with --discretization"
+    );
+    assert_eq!(
+        cw["derivative_on"], "measurement",
+        "the rest still from the log"
+    );
+    let (check_w, rms_w) = (f(&cw["check_fit_percent"]), f(&cw["check_rms_v"]));
+    let (fit_w, rmse_w) = (f(&w["fit_percent"]), f(&w["rmse"]));
+    println!(
+        "backward Euler forced: check fit {check_w:.3} % (RMS {rms_w:.3e} V), position fit {fit_w:.3} % (RMSE {rmse_w:.3e} rad)"
+    );
+    assert!(rms_w > 1e-2 && check_w < check - 1.0, "{cw}");
+    assert!(rmse_w > 3.0 * rmse, "RMSE {rmse} -> {rmse_w}");
+}
+
+#[test]
+fn logs_without_a_controller_record_replay_through_gains_and_options() {
+    use servo_cli::io::{mcap_read::read_mcap, meta_keys, McapLog, McapLogOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let (gains, model, log) = (
+        dir.path().join("gains.toml"),
+        dir.path().join("model.toml"),
+        dir.path().join("run.mcap"),
+    );
+    tustin_gains_file(&gains);
+    ModelFile::from_plant(&plant(Some(0.01)))
+        .save(&model)
+        .unwrap();
+    let mut run_args = SQUARE.to_vec();
+    run_args.extend_from_slice(&["--derivative-on", "measurement"]);
+    sim_run(&gains, &model, &log, &run_args);
+    let g = gains.to_str().unwrap();
+
+    // A CSV has no metadata: --gains gives gains, K_w and the [design]'s Tustin; the derivative
+    // input is not recorded anywhere, so the default (error) does not reproduce the logged u
+    // until --derivative-on says what ran.
+    let csv = dir.path().join("run.csv");
+    let (ok, _, err) = servo(&["export", log.to_str().unwrap(), "-o", csv.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let d = compare_json(&csv, &model, &["--gains", g]);
+    let cd = &d["controller"];
+    assert_eq!(cd["discretization"], "tustin");
+    assert!(
+        cd["parts"]["discretization"]["source"]
+            .as_str()
+            .unwrap()
+            .contains("[design] of"),
+        "{cd}"
+    );
+    assert_eq!(cd["parts"]["derivative_on"]["source"], "default");
+    let e = compare_json(
+        &csv,
+        &model,
+        &["--gains", g, "--derivative-on", "measurement"],
+    );
+    let ce = &e["controller"];
+    println!(
+        "CSV + --gains: check fit {:.3} % with the default derivative on the error, {:.8} % (RMS {:.3e} V) with --derivative-on measurement; position fit {:.3} %",
+        f(&cd["check_fit_percent"]),
+        f(&ce["check_fit_percent"]),
+        f(&ce["check_rms_v"]),
+        f(&e["fit_percent"])
+    );
+    assert!(f(&cd["check_rms_v"]) > 0.1, "{cd}");
+    assert!(f(&ce["check_rms_v"]) < 1e-9, "{ce}");
+    assert_eq!(
+        ce["parts"]["derivative_on"]["source"],
+        "given with --derivative-on"
+    );
+    assert!(f(&e["fit_percent"]) > 99.5);
+
+    // An MCAP of an older servo: the same log without the controller record. The gains and their
+    // [design] come from the log's gains; compare says what is missing.
+    let run = read_mcap(&log).unwrap();
+    let mut meta = run.metadata.clone();
+    assert!(meta.remove(meta_keys::CONTROLLER_TOML).is_some());
+    let old = dir.path().join("old.mcap");
+    let mut w = McapLog::create(&old, &meta, McapLogOptions::default()).unwrap();
+    for m in &run.loop_msgs {
+        w.write_loop(m).unwrap();
+    }
+    w.finish().unwrap();
+    let o = compare_json(&old, &model, &["--derivative-on", "measurement"]);
+    let co = &o["controller"];
+    println!("old log: {}; notes {}", co["description"], co["notes"]);
+    assert!(co["notes"][0]
+        .as_str()
+        .unwrap()
+        .contains("no record of its controller"));
+    assert_eq!(co["discretization"], "tustin");
+    assert_eq!(co["anti_windup"], "back-calc");
+    assert!(f(&co["check_rms_v"]) < 1e-9, "{co}");
+}
+
+#[test]
+fn the_logged_feedforward_is_replayed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (gains, model, log) = (
+        dir.path().join("gains.toml"),
+        dir.path().join("model.toml"),
+        dir.path().join("ff.mcap"),
+    );
+    tustin_gains_file(&gains);
+    ModelFile::from_plant(&plant(Some(0.01)))
+        .save(&model)
+        .unwrap();
+    sim_run(
+        &gains,
+        &model,
+        &log,
+        &[
+            "--ref",
+            "trap:distance=3,vmax=10,amax=100",
+            "--duration",
+            "2",
+            "--ff",
+            "inertia,friction",
+            "--model",
+            model.to_str().unwrap(),
+        ],
+    );
+    let v = compare_json(&log, &model, &[]);
+    let c = &v["controller"];
+    println!(
+        "feedforward run: {}; check RMS {:.3e} V, position fit {:.3} %",
+        c["parts"]["feedforward"]["text"],
+        f(&c["check_rms_v"]),
+        f(&v["fit_percent"])
+    );
+    assert!(
+        c["feedforward"].as_str().unwrap().contains("inertia"),
+        "{c}"
+    );
+    assert!(f(&c["check_rms_v"]) < 1e-9, "{c}");
+    assert!(f(&v["fit_percent"]) > 99.5);
+    // The same samples without the logged feedforward (a CSV) and the same controller: the PID
+    // alone does not make the logged u.
+    let csv = dir.path().join("ff.csv");
+    let (ok, _, err) = servo(&["export", log.to_str().unwrap(), "-o", csv.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let n = compare_json(
+        &csv,
+        &model,
+        &["--gains", gains.to_str().unwrap(), "--u-limit-v", "10"],
+    );
+    println!(
+        "without it: check RMS {:.3e} V",
+        f(&n["controller"]["check_rms_v"])
+    );
+    assert!(f(&n["controller"]["check_rms_v"]) > 0.1);
 }

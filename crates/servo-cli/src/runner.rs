@@ -160,6 +160,19 @@ pub fn interrupted() -> bool {
     INTERRUPTED.load(Ordering::SeqCst)
 }
 
+/// The PID configuration that actually runs on a loop at period `ts_s` [s] with the voltage
+/// limit `u_limit_v` [V] (the tighter of the run's and the board's): `pid` with its output limits
+/// narrowed to +-`u_limit_v` and its period set to the loop's.
+pub fn effective_pid_config(pid: &PidConfig, u_limit_v: f64, ts_s: f64) -> PidConfig {
+    let mut c = *pid;
+    c.u_min_v = c.u_min_v.max(-u_limit_v);
+    c.u_max_v = c.u_max_v.min(u_limit_v);
+    if (c.ts_s - ts_s).abs() > 1e-9 * ts_s {
+        c.ts_s = ts_s;
+    }
+    c
+}
+
 /// Runs the loop on `backend`, streaming samples to `sink`.
 pub fn run_loop(
     backend: &mut dyn Backend,
@@ -180,17 +193,13 @@ pub fn run_loop(
     let u_limit = cfg.u_limit_v.min(info.voltage_limit_v);
     let mut pid = match (&cfg.pid, cfg.program.needs_controller()) {
         (Some(p), _) => {
-            let mut c = *p;
-            c.u_min_v = c.u_min_v.max(-u_limit);
-            c.u_max_v = c.u_max_v.min(u_limit);
-            if (c.ts_s - ts).abs() > 1e-9 * ts {
+            if (p.ts_s - ts).abs() > 1e-9 * ts {
                 eprintln!(
                     "warning: the gains were designed for T_s = {} s but the loop runs at {} s; using the loop's period",
-                    c.ts_s, ts
+                    p.ts_s, ts
                 );
-                c.ts_s = ts;
             }
-            Some(Pid::new(c).context("controller")?)
+            Some(Pid::new(effective_pid_config(p, u_limit, ts)).context("controller")?)
         }
         (None, true) => bail!(
             "the program has closed-loop (position) parts but no controller was given (--gains)"

@@ -2,19 +2,24 @@
 //! how well it fits and where it fails, and add catalogue effects to watch the error fall.
 
 use crate::gains_file::{GainsFile, PidSection};
+use crate::io::{meta_keys, LogMeta};
 use crate::model_file::ModelFile;
 use crate::plot::{line_chart_svg, Chart, Series};
+use crate::runner::controller::{
+    pid_config, ControllerPart, LoggedController, PidOptions, PidSources, ResolvedPid,
+};
 use anyhow::{anyhow, bail, Context};
 use serde_json::{json, Value};
 use servo_core::compare::controller_check::{check_controller, ControllerCheck};
 use servo_core::compare::quantum::encoder_quantum;
 use servo_core::compare::regimes::{detect_u_limit, Regime};
 use servo_core::compare::report::{describe_window, regime_phrase, with_unit};
+use servo_core::compare::Controller;
 use servo_core::compare::{
     compare, replay, ClosedLoop, CompareOptions, CompareReport, Figures, Measured, ReplayMode,
     SignalKind,
 };
-use servo_core::control::pid::{AntiWindup, Pid, PidConfig, PidGains};
+use servo_core::control::pid::{AntiWindup, Pid, PidConfig};
 use servo_core::fit::{fit_model, EffectToFit, FitOptions};
 use servo_core::record::Record;
 use servo_core::Plant;
@@ -22,9 +27,17 @@ use std::path::{Path, PathBuf};
 
 /// Compare a model with measurements; add effects and watch the error fall.
 ///
-/// The replay mode is chosen and stated: closed-loop replay when the controller (`--gains`) and
-/// the reference are known, otherwise open-loop speed simulation (position of an integrating
-/// plant drifts open loop). `--mode` forces one.
+/// The replay mode is chosen and stated: closed-loop replay when the controller (`--gains`, or
+/// the log's metadata of a `servo run`) and the reference are known, otherwise open-loop speed
+/// simulation (position of an integrating plant drifts open loop). `--mode` forces one.
+///
+/// The closed-loop replay runs the controller the run used, built as `servo run` builds it. Each
+/// part takes the first of: the options here (`--discretization`, `--derivative-on`,
+/// `--anti-windup`, `--kw`, `--u-limit-v`), the log's record of the controller, the gains file
+/// (`[pid] kw`, `u_limit_v`, `[design] discretization`), the defaults (backward Euler, derivative on
+/// the error, no anti-windup). The gains come from `--gains`, else from the log. A feedforward the
+/// run added is replayed from the log (`ff_v`). The output says which configuration was used and
+/// where each part came from.
 #[derive(Debug, clap::Parser)]
 pub struct Compare {
     /// Logs (servo MCAP or CSV; foreign CSV through --columns).
@@ -36,13 +49,19 @@ pub struct Compare {
     /// Column map for foreign CSVs, e.g. `time=t_s,theta_l=thl_meas_deg:deg,u=u_V,ref=thl_ref_deg:deg`.
     #[arg(long, value_name = "MAP")]
     pub columns: Option<String>,
-    /// Controller that ran during the log (gains file of `servo design`): enables closed-loop replay.
+    /// Gains of the controller that ran during the log (gains file of `servo design`): enables
+    /// closed-loop replay; overrides the gains recorded in a `servo run` log.
     #[arg(long, value_name = "gains.toml")]
     pub gains: Option<PathBuf>,
     /// Closed-loop replay with the PID gains that best reproduce the logged u (least squares on
-    /// the logged reference, position and u), instead of --gains or the log's metadata.
+    /// the logged reference, position and u minus the logged feedforward; backward Euler,
+    /// derivative on the error, no anti-windup unless the options say otherwise), instead of
+    /// --gains or the log's metadata.
     #[arg(long)]
     pub gains_from_log: bool,
+    /// The controller's options beyond its gains, as for `servo run` (they override the log).
+    #[command(flatten)]
+    pub pid: PidOptions,
     /// Replay mode: closed-loop, speed, k-step or segments (default: closed-loop when gains and
     /// reference are known, else speed).
     #[arg(long, value_parser = ["closed-loop", "speed", "k-step", "segments"])]
@@ -53,8 +72,9 @@ pub struct Compare {
     /// Segment length of the segments mode [s].
     #[arg(long, default_value_t = 0.5, value_name = "S")]
     pub segment_s: f64,
-    /// Output limit of the board in closed-loop replay [V] (default: the gains file's u_limit_v,
-    /// else the plateau of the logged u, e.g. the +/-10 V of the DAC).
+    /// Output limit of the controller and the board in closed-loop replay [V] (default: the
+    /// log's metadata, else the gains file's u_limit_v, else the plateau of the logged u, e.g. the
+    /// +/-10 V of the DAC).
     #[arg(long, value_name = "V")]
     pub u_limit_v: Option<f64>,
     /// Add a catalogue effect: `name[:key=value,...]`; given values are kept, the others fitted
@@ -77,9 +97,18 @@ pub struct LogData {
     pub path: PathBuf,
     pub record: Record,
     pub measured: Measured,
-    /// The controller of the log (--gains, the log's metadata or --gains-from-log) and where it
-    /// came from.
-    pub gains: Option<(PidSection, String)>,
+    /// The controller of the log (--gains, the log's metadata or --gains-from-log, with the
+    /// options) and where each part of it came from; `None` when unknown.
+    pub controller: Option<ResolvedPid>,
+    /// The output limit of the replay [V] and where it came from.
+    pub u_limit: Option<(f64, String)>,
+    /// The feedforward part of the logged u [V] per sample, added to the replayed controller's
+    /// output (`None`: no feedforward, or none the replay can add).
+    pub feedforward_v: Option<Vec<f64>>,
+    /// The feedforward of the run as a part of the controller description.
+    pub feedforward: ControllerPart,
+    /// What the log lacks to rebuild its controller, for the user.
+    pub notes: Vec<String>,
     /// How well that controller reproduces the logged u.
     pub check: Option<ControllerCheck>,
 }
@@ -98,26 +127,45 @@ pub struct ModeChoice {
     pub reason: String,
 }
 
-/// servo's discrete PID ([`servo_core::control::Pid`], backward Euler, derivative on the error)
-/// configured from a gains file for a replay at sample period `dt_s` [s], with the board's output
-/// limit and the file's back-calculation anti-windup, if any.
-pub fn replay_pid(pid: &PidSection, dt_s: f64, limit_v: Option<f64>) -> anyhow::Result<Pid> {
-    let mut cfg = PidConfig::new(
-        PidGains {
-            kp: pid.kp,
-            ki: pid.ki,
-            kd: pid.kd,
-            tl_s: pid.tl_s,
-        },
-        dt_s,
-    );
-    if let Some(l) = limit_v {
-        cfg = cfg.with_symmetric_limit(l);
+/// The controller of a closed-loop replay and of the controller check: servo's PID configured as
+/// it ran ([`pid_config`]) plus the feedforward the run logged, sample by sample (it depends on
+/// the reference only, so the model gets what the motor got).
+pub struct ReplayController<'a> {
+    pid: Pid,
+    feedforward_v: Option<&'a [f64]>,
+    k: usize,
+}
+
+impl<'a> ReplayController<'a> {
+    /// A controller at rest, at the start of the log.
+    pub fn new(config: &PidConfig, feedforward_v: Option<&'a [f64]>) -> anyhow::Result<Self> {
+        Ok(ReplayController {
+            pid: Pid::new(*config).map_err(|e| anyhow!("controller: {e}"))?,
+            feedforward_v,
+            k: 0,
+        })
     }
-    if let Some(kw) = pid.kw {
-        cfg.anti_windup = AntiWindup::BackCalculation { kw };
+
+    /// The controller of `log` (None when the log's controller is unknown).
+    pub fn of(log: &'a LogData) -> anyhow::Result<Option<Self>> {
+        log.controller
+            .as_ref()
+            .map(|c| ReplayController::new(&c.config, log.feedforward_v.as_deref()))
+            .transpose()
     }
-    Pid::new(cfg).map_err(|e| anyhow!("gains: {e}"))
+}
+
+impl Controller for ReplayController<'_> {
+    fn update(&mut self, reference_rad: f64, measured_rad: f64) -> f64 {
+        let ff = self
+            .feedforward_v
+            .and_then(|f| f.get(self.k))
+            .copied()
+            .filter(|v| v.is_finite())
+            .unwrap_or(0.0);
+        self.k += 1;
+        self.pid.update(reference_rad, measured_rad, ff).u_v
+    }
 }
 
 fn parse_mode(s: &str, k: usize, seg: usize) -> ReplayMode {
@@ -131,7 +179,7 @@ fn parse_mode(s: &str, k: usize, seg: usize) -> ReplayMode {
 
 impl Compare {
     fn mode_for(&self, log: &LogData) -> anyhow::Result<ModeChoice> {
-        let gains = log.gains.as_ref();
+        let gains = log.controller.as_ref();
         let m = &log.measured;
         let seg = ((self.segment_s / m.dt_s).round() as usize).max(1);
         let has_ref = m.ref_rad.is_some();
@@ -164,8 +212,11 @@ impl Compare {
             (true, true) => ModeChoice {
                 mode: ReplayMode::ClosedLoop,
                 reason: format!(
-                    "controller ({}) and reference are known: the model runs in the logged loop, as the motor did",
-                    gains.map(|g| g.1.as_str()).unwrap_or_default()
+                    "controller (gains {}) and reference are known: the model runs in the logged loop, as the motor did",
+                    gains
+                        .and_then(|g| g.part("gains"))
+                        .map(|p| p.source.as_str())
+                        .unwrap_or_default()
                 ),
             },
             (true, false) => ModeChoice {
@@ -190,12 +241,8 @@ impl Compare {
         for (log, mc) in logs.iter().zip(modes) {
             let m = &log.measured;
             let rp = if mc.mode == ReplayMode::ClosedLoop {
-                let (g, _) = log
-                    .gains
-                    .as_ref()
-                    .ok_or_else(|| anyhow!("closed-loop replay without gains"))?;
-                let limit = self.u_limit(g, m);
-                let mut pid = replay_pid(g, m.dt_s, limit)?;
+                let mut pid = ReplayController::of(log)?
+                    .ok_or_else(|| anyhow!("closed-loop replay without a controller"))?;
                 let q = m.theta_l_rad.as_deref().and_then(encoder_quantum);
                 replay(
                     plant,
@@ -203,7 +250,7 @@ impl Compare {
                     mc.mode,
                     Some(ClosedLoop {
                         controller: &mut pid,
-                        u_limit_v: limit,
+                        u_limit_v: log.u_limit.as_ref().map(|l| l.0),
                         encoder_quantum_rad: q,
                     }),
                 )
@@ -219,12 +266,142 @@ impl Compare {
         })
     }
 
-    /// The board's output limit for a replay: --u-limit-v, the gains file's limit, or the plateau
-    /// of the logged u.
-    fn u_limit(&self, g: &PidSection, m: &Measured) -> Option<f64> {
-        self.u_limit_v
-            .or(g.u_limit_v)
-            .or_else(|| detect_u_limit(&m.u_v))
+    /// The output limit for a replay and where it came from: --u-limit-v, the log's metadata,
+    /// the gains file's limit, or the plateau of the logged u.
+    fn u_limit(
+        &self,
+        m: &Measured,
+        meta: &LogMeta,
+        logged: Option<&LoggedController>,
+        file: Option<(&GainsFile, &str)>,
+    ) -> Option<(f64, String)> {
+        if let Some(l) = self.u_limit_v {
+            return Some((l, "given with --u-limit-v".into()));
+        }
+        let meta_limit = logged.and_then(|l| l.u_limit_v).or_else(|| {
+            meta.get(meta_keys::U_LIMIT_V)
+                .and_then(|v| v.trim().parse::<f64>().ok())
+                .filter(|v| v.is_finite() && *v > 0.0)
+        });
+        if let Some(l) = meta_limit {
+            return Some((l, "from the log's metadata".into()));
+        }
+        if let Some((l, name)) = file.and_then(|(g, name)| g.pid.u_limit_v.map(|l| (l, name))) {
+            return Some((l, format!("from {name}")));
+        }
+        detect_u_limit(&m.u_v).map(|l| (l, "the plateau of the logged u".into()))
+    }
+
+    /// The controller of one log: the gains of --gains or of the log's metadata, the options,
+    /// the log's record and the gains file put together by [`pid_config`]; the output limit; the
+    /// logged feedforward. Notes what an older log lacks.
+    fn log_controller(
+        &self,
+        log: &mut LogData,
+        meta: &LogMeta,
+        given: Option<&GainsFile>,
+    ) -> anyhow::Result<()> {
+        let logged = meta.controller()?;
+        let log_gains = meta.gains()?;
+        let given_name = self
+            .gains
+            .as_deref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_default();
+        let file = match (given, &log_gains) {
+            (Some(g), _) => Some((g, given_name.as_str())),
+            (None, Some(g)) => Some((g, "the gains in the log's metadata")),
+            (None, None) => None,
+        };
+        let m = &log.measured;
+        log.u_limit = self.u_limit(m, meta, logged.as_ref(), file);
+        let name = log.path.display();
+        match &logged {
+            None if log_gains.is_some() => log.notes.push(format!(
+                "{name} has no record of its controller's configuration (a log written before servo \
+                 recorded it): discretisation from the [design] of the gains, derivative input, \
+                 anti-windup and limit from the options, the gains file or the defaults; see the \
+                 controller check"
+            )),
+            Some(l) if !l.missing().is_empty() => log.notes.push(format!(
+                "{name}: the log's controller record lacks {}; those parts come from the options, \
+                 the gains file or the defaults",
+                l.missing().join(", ")
+            )),
+            _ => {}
+        }
+        // Feedforward: the run's selection, and the logged voltage if it has one.
+        let ff_name = logged
+            .as_ref()
+            .and_then(|l| l.feedforward.clone())
+            .or_else(|| meta.get(meta_keys::FEEDFORWARD).map(str::to_string));
+        let ff_on = ff_name.as_deref().is_some_and(|n| n != "none");
+        let ff_logged = meta
+            .feedforward_v
+            .as_ref()
+            .filter(|f| f.len() == m.u_v.len() && f.iter().any(|v| v.is_finite() && *v != 0.0));
+        log.feedforward = match (ff_logged, &ff_name) {
+            (Some(_), n) => ControllerPart {
+                part: "feedforward",
+                value: n.clone().unwrap_or_else(|| "logged".into()),
+                words: format!(
+                    "feedforward {} added as logged (ff_v)",
+                    n.as_deref().unwrap_or("of unknown terms")
+                ),
+                source: "from the log's samples".into(),
+            },
+            (None, Some(n)) if ff_on && meta.feedforward_v.is_none() => {
+                log.notes.push(format!(
+                    "{name}: the run added feedforward `{n}` but the log has no ff_v samples: the \
+                     replay and the controller check run WITHOUT it and cannot reproduce the logged u"
+                ));
+                ControllerPart {
+                    part: "feedforward",
+                    value: format!("{n} (not replayed)"),
+                    words: format!("feedforward {n} NOT replayed (no ff_v in the log)"),
+                    source: "from the log's metadata".into(),
+                }
+            }
+            (None, n) => ControllerPart {
+                part: "feedforward",
+                value: "none".into(),
+                words: if ff_on {
+                    format!(
+                        "feedforward {} (zero throughout this log)",
+                        n.as_deref().unwrap_or_default()
+                    )
+                } else {
+                    "no feedforward".into()
+                },
+                source: if n.is_some() {
+                    "from the log's metadata".into()
+                } else {
+                    "none known".into()
+                },
+            },
+        };
+        if ff_logged.is_some() {
+            log.feedforward_v = meta.feedforward_v.clone();
+        }
+        if file.is_none() && logged.is_none() {
+            return Ok(());
+        }
+        let src = PidSources {
+            opts: &self.pid,
+            logged: logged.as_ref(),
+            gains_file: file,
+        };
+        // The period the loop ran at, as recorded (the log's time stamps give it to rounding).
+        let ts_s = logged
+            .as_ref()
+            .and_then(|l| l.ts_s)
+            .filter(|t| (t - m.dt_s).abs() <= 1e-6 * m.dt_s)
+            .unwrap_or(m.dt_s);
+        let mut r = pid_config(&src, ts_s, log.u_limit.clone())
+            .with_context(|| format!("the controller of {name}"))?;
+        r.parts.push(log.feedforward.clone());
+        log.controller = Some(r);
+        Ok(())
     }
 
     /// Checks the log's controller against the logged u; with --gains-from-log replaces it by the
@@ -240,19 +417,13 @@ impl Compare {
             }
             return Ok(());
         };
-        let probe = PidSection {
-            kp: 1.0,
-            ki: 0.0,
-            kd: 0.0,
-            tl_s: 0.0,
-            ts_s: m.dt_s,
-            kw: None,
-            u_limit_v: None,
+        let limit = log.u_limit.as_ref().map(|l| l.0);
+        let ff = log.feedforward_v.as_deref();
+        let check = match ReplayController::of(log)? {
+            Some(mut c) => check_controller(&mut c, r, th, &m.u_v, ff, limit, m.dt_s),
+            // No controller: only the least-squares PID is wanted.
+            None => check_controller(&mut |_: f64, _: f64| 0.0, r, th, &m.u_v, ff, limit, m.dt_s),
         };
-        let limit = self.u_limit(log.gains.as_ref().map_or(&probe, |g| &g.0), m);
-        let given = log.gains.as_ref().map(|g| g.0).unwrap_or(probe);
-        let mut pid = replay_pid(&given, m.dt_s, None)?;
-        let check = check_controller(&mut pid, r, th, &m.u_v, limit, m.dt_s);
         if self.gains_from_log {
             let [kp, ki, kd] = check.ls_gains.ok_or_else(|| {
                 anyhow!("--gains-from-log: the logged u of {} does not determine PID gains (singular least squares)", log.path.display())
@@ -263,25 +434,34 @@ impl Compare {
                     log.path.display()
                 );
             }
-            let pid = PidSection {
-                kp,
-                ki,
-                kd,
-                tl_s: 0.0,
-                ts_s: m.dt_s,
-                kw: None,
-                u_limit_v: limit,
+            let fitted = GainsFile {
+                pid: PidSection {
+                    kp,
+                    ki,
+                    kd,
+                    tl_s: 0.0,
+                    ts_s: m.dt_s,
+                    kw: None,
+                    u_limit_v: None,
+                },
+                design: None,
             };
-            log.gains = Some((
-                pid,
-                format!(
-                    "PID fitted to the logged u: kp = {kp:.4} V/rad, ki = {ki:.4} V/(rad s), kd = {kd:.4} V s/rad, fit {:.1} %",
-                    check.ls_fit_percent
-                ),
-            ));
-            let mut fitted = replay_pid(&pid, m.dt_s, None)?;
-            log.check = Some(check_controller(&mut fitted, r, th, &m.u_v, limit, m.dt_s));
-        } else if log.gains.is_some() {
+            let label = format!(
+                "the least-squares fit to the logged u (fit {:.1} %)",
+                check.ls_fit_percent
+            );
+            let src = PidSources {
+                opts: &self.pid,
+                logged: None,
+                gains_file: Some((&fitted, &label)),
+            };
+            let mut resolved = pid_config(&src, m.dt_s, log.u_limit.clone())?;
+            resolved.parts.push(log.feedforward.clone());
+            let mut c = ReplayController::new(&resolved.config, ff)?;
+            let fitted_check = check_controller(&mut c, r, th, &m.u_v, ff, limit, m.dt_s);
+            log.controller = Some(resolved);
+            log.check = Some(fitted_check);
+        } else if log.controller.is_some() {
             log.check = Some(check);
         }
         Ok(())
@@ -333,23 +513,24 @@ impl Compare {
                 path: path.clone(),
                 record,
                 measured,
-                gains: None,
+                controller: None,
+                u_limit: None,
+                feedforward_v: None,
+                feedforward: ControllerPart {
+                    part: "feedforward",
+                    value: "none".into(),
+                    words: "no feedforward".into(),
+                    source: "none known".into(),
+                },
+                notes: Vec::new(),
                 check: None,
             };
-            log.gains = match (&gains, meta.gains()?) {
-                (Some(g), _) => Some((
-                    g.pid,
-                    format!(
-                        "gains from {}",
-                        self.gains
-                            .as_deref()
-                            .map(|p| p.display().to_string())
-                            .unwrap_or_default()
-                    ),
-                )),
-                (None, Some(g)) => Some((g.pid, String::from("gains from the log's metadata"))),
-                (None, None) => None,
-            };
+            self.log_controller(&mut log, &meta, gains.as_ref())?;
+            if !self.json {
+                for n in &log.notes {
+                    eprintln!("note: {n}");
+                }
+            }
             self.check_gains(&mut log)?;
             logs.push(log);
         }
@@ -688,7 +869,7 @@ fn to_json(
 pub fn controller_words(log: &LogData) -> Option<String> {
     let c = log.check.as_ref()?;
     let mut s = format!(
-        "controller check: the controller reproduces the logged u with fit {:.1} % (RMS {:.3} V over {} samples inside the output limit)",
+        "controller check: this controller reproduces the logged u with fit {:.2} % (RMS {:.3e} V over {} samples inside the output limit)",
         c.fit_percent, c.rms_v, c.samples
     );
     // The logged u carries the encoder's quantisation through K_D, which no PID reproduces: judge
@@ -704,15 +885,45 @@ pub fn controller_words(log: &LogData) -> Option<String> {
     Some(s)
 }
 
+/// The controller of the replay in words: every part with where it came from.
+pub fn controller_description(log: &LogData) -> Option<String> {
+    log.controller
+        .as_ref()
+        .map(|c| format!("controller: {}", c.describe()))
+}
+
 fn controller_json(log: &LogData) -> Value {
-    let Some((g, source)) = &log.gains else {
+    let Some(r) = &log.controller else {
         return Value::Null;
     };
+    let g = &r.config;
     let c = log.check.as_ref();
+    let value = |part: &str| r.part(part).map(|p| p.value.clone());
+    let parts: serde_json::Map<String, Value> = r
+        .parts
+        .iter()
+        .map(|p| {
+            (
+                p.part.to_string(),
+                json!({ "value": p.value, "text": p.words, "source": p.source }),
+            )
+        })
+        .collect();
     json!({
-        "source": source, "kp": g.kp, "ki": g.ki, "kd": g.kd, "tl_s": g.tl_s,
+        "source": r.part("gains").map(|p| p.source.clone()),
+        "kp": g.kp, "ki": g.ki, "kd": g.kd, "tl_s": g.tl_s, "ts_s": g.ts_s,
+        "discretization": value("discretization"),
+        "derivative_on": value("derivative_on"),
+        "anti_windup": value("anti_windup"),
+        "kw": match g.anti_windup { AntiWindup::BackCalculation { kw } => json!(kw), _ => Value::Null },
+        "u_limit_v": log.u_limit.as_ref().map(|l| l.0),
+        "feedforward": value("feedforward"),
+        "parts": parts,
+        "description": r.describe(),
+        "notes": log.notes,
         "check_fit_percent": c.map(|c| finite(c.fit_percent)),
         "check_rms_v": c.map(|c| finite(c.rms_v)),
+        "check_samples": c.map(|c| c.samples),
         "ls_gains": c.and_then(|c| c.ls_gains).map(|[kp, ki, kd]| json!({"kp": kp, "ki": ki, "kd": kd})),
         "ls_fit_percent": c.map(|c| finite(c.ls_fit_percent)),
     })
@@ -746,6 +957,9 @@ fn print_text(
             r.dt_s
         );
         println!("mode: {} -- {}", r.mode.name(), mc.reason);
+        if let Some(line) = controller_description(log) {
+            println!("{line}");
+        }
         if let Some(line) = controller_words(log) {
             println!("{line}");
         }
@@ -1023,23 +1237,25 @@ mod tests {
     use super::*;
 
     #[test]
-    fn replay_pid_matches_hand_values() {
-        use servo_core::compare::Controller;
-        let pid = PidSection {
-            kp: 2.0,
-            ki: 10.0,
-            kd: 0.1,
-            tl_s: 0.0,
-            ts_s: 1e-3,
-            kw: None,
-            u_limit_v: None,
-        };
-        let mut c = replay_pid(&pid, 1e-3, Some(100.0)).unwrap();
+    fn replay_controller_adds_the_logged_feedforward() {
+        use servo_core::control::PidGains;
+        let cfg = PidConfig::new(
+            PidGains {
+                kp: 2.0,
+                ki: 10.0,
+                kd: 0.1,
+                tl_s: 0.0,
+            },
+            1e-3,
+        )
+        .with_symmetric_limit(100.0);
+        let ff = [0.5, -0.25];
+        let mut c = ReplayController::new(&cfg, Some(&ff)).unwrap();
         // Backward Euler: I_0 = 10 * 1e-3 * 1 = 0.01; no derivative kick at the first sample.
-        assert!((Controller::update(&mut c, 1.0, 0.0) - 2.01).abs() < 1e-12);
+        assert!((Controller::update(&mut c, 1.0, 0.0) - (2.01 + 0.5)).abs() < 1e-12);
         // e = 0.5: P = 1, I = 0.015, D = 0.1 * (-0.5) / 1e-3 = -50
-        assert!((Controller::update(&mut c, 0.5, 0.0) - (1.015 - 50.0)).abs() < 1e-9);
-        // The limit holds.
+        assert!((Controller::update(&mut c, 0.5, 0.0) - (1.015 - 50.0 - 0.25)).abs() < 1e-9);
+        // Past the logged samples: no feedforward; the limit holds.
         assert_eq!(Controller::update(&mut c, 1e3, 0.0), 100.0);
     }
 

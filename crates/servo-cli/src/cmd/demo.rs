@@ -13,7 +13,7 @@
 use crate::gains_file::{GainsFile, PidSection};
 use crate::io::{meta_keys, write_csv, McapLog, McapLogOptions};
 use crate::model_file::ModelFile;
-use crate::runner::controller::{pid_config, PidOptions};
+use crate::runner::controller::{pid_config, LoggedController, PidOptions, PidSources};
 use crate::runner::{self, Program, RunConfig, RunOutput};
 use anyhow::{anyhow, Context};
 use servo_core::control::sequence::{PlacedSegment, Segment};
@@ -291,7 +291,12 @@ pub fn handout_gains() -> GainsFile {
 
 fn stage_run(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
     let gains = ctx.gains.clone().unwrap_or_else(handout_gains);
-    let pid = pid_config(&gains, &PidOptions::default(), 1e-3, 10.0)?;
+    let src = PidSources {
+        opts: &PidOptions::default(),
+        logged: None,
+        gains_file: Some((&gains, "the demo's gains")),
+    };
+    let pid = pid_config(&src, 1e-3, Some((10.0, String::new())))?.config;
     let program = demo_program()?;
     let duration_s = program.duration_s().unwrap_or(6.0);
     let mut backend = SimBackend::new(&ctx.truth, ctx.sensors, 1e-3).context("simulator")?;
@@ -299,6 +304,7 @@ fn stage_run(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
     let mut mf = ModelFile::from_plant(&ctx.truth);
     mf.sensors = Some(ctx.sensors);
     mf.save(&truth_path)?;
+    let cfg = RunConfig::closed_loop(program, pid, duration_s);
     let mut meta = BTreeMap::new();
     meta.insert(
         meta_keys::SERVO_VERSION.into(),
@@ -324,9 +330,20 @@ fn stage_run(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
     );
     meta.insert(meta_keys::SEED.into(), ctx.sensors.seed.to_string());
     meta.insert(meta_keys::FEEDFORWARD.into(), "none".into());
+    meta.insert(
+        meta_keys::CONTROLLER_TOML.into(),
+        LoggedController::of(
+            &runner::effective_pid_config(
+                &pid,
+                cfg.u_limit_v.min(backend.info().voltage_limit_v),
+                backend.info().sample_period_s,
+            ),
+            None,
+        )
+        .to_toml()?,
+    );
     let log_path = ctx.out.join("run.mcap");
     let mut log = McapLog::create(&log_path, &meta, McapLogOptions::default())?;
-    let cfg = RunConfig::closed_loop(program, pid, duration_s);
     let out = runner::run_loop(&mut backend, &cfg, Some(&mut log))?;
     let summary = out.summary();
     log.write_summary(&summary.to_map())?;

@@ -14,7 +14,7 @@ use crate::model_file::ModelFile;
 use crate::plant_args::PlantArgs;
 use crate::reference_file::load_experiment;
 use crate::runner::controller::{
-    ff_name, parse_ff, pid_config, AntiWindupArg, DerivativeOnArg, DiscretizationArg, PidOptions,
+    ff_name, parse_ff, pid_config, LoggedController, PidOptions, PidSources,
 };
 use crate::runner::{self, Program, RunConfig, RunOutput, StopReason};
 use anyhow::{anyhow, bail, Context};
@@ -111,21 +111,8 @@ pub struct Run {
     #[arg(long, value_name = "FILE")]
     pub model: Option<PathBuf>,
 
-    /// Anti-windup scheme.
-    #[arg(long = "anti-windup", value_enum, default_value = "auto")]
-    pub anti_windup: AntiWindupArg,
-
-    /// Back-calculation anti-windup gain K_w [1/s] (overrides the gains file's kw).
-    #[arg(long, value_name = "PER_SECOND")]
-    pub kw: Option<f64>,
-
-    /// What the derivative acts on.
-    #[arg(long = "derivative-on", value_enum, default_value = "error")]
-    pub derivative_on: DerivativeOnArg,
-
-    /// Discretisation of the integral and derivative.
-    #[arg(long, value_enum, default_value = "auto")]
-    pub discretization: DiscretizationArg,
+    #[command(flatten)]
+    pub pid: PidOptions,
 
     /// Bandwidth of the speed estimate [Hz] (tracking-loop estimator on the encoder angle).
     #[arg(long = "speed-bandwidth-hz", value_name = "HZ", default_value_t = 50.0)]
@@ -223,15 +210,21 @@ impl Run {
         if !(ts_s.is_finite() && ts_s > 0.0 && ts_s <= 0.1) {
             bail!("--ts must be a sample period in (0, 0.1] s, got {ts_s}");
         }
-        let opts = PidOptions {
-            anti_windup: self.anti_windup,
-            kw: self.kw,
-            derivative_on: self.derivative_on,
-            discretization: self.discretization,
-        };
+        let gains_name = self
+            .gains
+            .as_ref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_default();
         let pid = gains
             .as_ref()
-            .map(|g| pid_config(g, &opts, ts_s, u_limit_v))
+            .map(|g| {
+                let src = PidSources {
+                    opts: &self.pid,
+                    logged: None,
+                    gains_file: Some((g, &gains_name)),
+                };
+                pid_config(&src, ts_s, Some((u_limit_v, String::new()))).map(|r| r.config)
+            })
             .transpose()?;
         let model = match &self.model {
             Some(p) => Some(ModelFile::load(p).context("--model")?),
@@ -327,14 +320,21 @@ impl Run {
         if let Some(g) = &gains {
             meta.insert(meta_keys::GAINS_TOML.into(), g.to_toml_commented());
         }
+        let ff_config = feedforward.as_ref().map(|f| *f.config());
         if let Some(pid) = &pid {
-            meta.insert("pid_config".into(), format!("{pid:?}"));
+            let runs = runner::effective_pid_config(
+                pid,
+                u_limit_v.min(info.voltage_limit_v),
+                info.sample_period_s,
+            );
+            meta.insert(
+                meta_keys::CONTROLLER_TOML.into(),
+                LoggedController::of(&runs, ff_config.as_ref()).to_toml()?,
+            );
         }
         meta.insert(
             meta_keys::FEEDFORWARD.into(),
-            feedforward
-                .as_ref()
-                .map_or("none".into(), |f| ff_name(f.config())),
+            ff_config.as_ref().map_or("none".into(), ff_name),
         );
         if feedforward.is_some() {
             meta.insert(

@@ -66,6 +66,9 @@ pub struct LogMeta {
     pub summary: BTreeMap<String, String>,
     /// Notes for the user: guessed column map, data lost at a truncated end, missing values.
     pub notes: Vec<String>,
+    /// The feedforward part of u per sample [V] (`ff_v` of an MCAP run; None when no sample
+    /// has a value, e.g. a CSV).
+    pub feedforward_v: Option<Vec<f64>>,
 }
 
 /// Metadata keys of a servo MCAP run (values are strings; TOML documents for files).
@@ -84,6 +87,9 @@ pub mod meta_keys {
     pub const REFERENCE: &str = "reference";
     /// The controller, as a gains file (TOML, `[pid]`).
     pub const GAINS_TOML: &str = "gains_toml";
+    /// The controller exactly as it ran (TOML, [`crate::runner::controller::LoggedController`]):
+    /// gains, period, discretisation, derivative input, anti-windup, limit, feedforward.
+    pub const CONTROLLER_TOML: &str = "controller_toml";
     /// The simulated plant (truth), as a model file (TOML); simulator runs only.
     pub const PLANT_TOML: &str = "plant_toml";
     /// Effects of the simulated plant, `name:key=value` list; simulator runs only.
@@ -111,6 +117,18 @@ impl LogMeta {
     pub fn gains(&self) -> anyhow::Result<Option<crate::gains_file::GainsFile>> {
         self.get(meta_keys::GAINS_TOML)
             .map(|t| crate::gains_file::GainsFile::parse(t).context("in the log's gains metadata"))
+            .transpose()
+    }
+    /// The record of the controller as it ran (`None` for logs without one: CSV, open loop, or
+    /// written before servo recorded it).
+    pub fn controller(
+        &self,
+    ) -> anyhow::Result<Option<crate::runner::controller::LoggedController>> {
+        self.get(meta_keys::CONTROLLER_TOML)
+            .map(|t| {
+                crate::runner::controller::LoggedController::parse(t)
+                    .context("in the log's controller metadata")
+            })
             .transpose()
     }
     /// The simulated plant (truth) of a simulator run.
@@ -167,11 +185,13 @@ pub fn read_log_with_meta(path: &Path, columns: Option<&str>) -> anyhow::Result<
                 );
             }
             let run = mcap_read::read_mcap(path)?;
+            let ff: Vec<f64> = run.loop_msgs.iter().map(|m| m.ff_v).collect();
             let meta = LogMeta {
                 columns: None,
                 entries: run.metadata,
                 summary: run.summary,
                 notes: run.notes,
+                feedforward_v: ff.iter().any(|v| v.is_finite()).then_some(ff),
             };
             Ok((run.record, meta))
         }

@@ -2,11 +2,13 @@
 //!
 //! A closed-loop replay is only as good as its controller: when the gains in a gains file or in
 //! a log's metadata are not the ones that ran, the replay diverges from the measurement for reasons
-//! that have nothing to do with the plant. The check runs the controller on the *measured*
+//! that have nothing to do with the plant. The check runs the controller, configured as for the
+//! replay (discretisation, derivative input, anti-windup, limit, feedforward), on the *measured*
 //! reference and position (no plant involved) and compares its output with the logged u on the
 //! samples where the logged u is inside the output limit. The least-squares gains of a PID
-//! (u = K_P e + K_I sum(e) T_s + K_D (e_k - e_{k-1}) / T_s, backward Euler, ideal derivative,
-//! integral running free as without anti-windup) are estimated from the same samples.
+//! (u - u_ff = K_P e + K_I sum(e) T_s + K_D (e_k - e_{k-1}) / T_s, backward Euler, ideal
+//! derivative, integral running free as without anti-windup, u_ff the logged feedforward if any)
+//! are estimated from the same samples.
 
 use super::figures::fit_percent;
 use super::replay::Controller;
@@ -30,12 +32,15 @@ pub struct ControllerCheck {
 }
 
 /// Runs `controller` on the measured `reference` and `theta` [rad], compares with `u` [V] on the
-/// samples where |u| < 0.999 `u_limit_v` (all samples without a limit).
+/// samples where |u| < 0.999 `u_limit_v` (all samples without a limit). `feedforward_v` [V] is the
+/// feedforward part of the logged u, if any: `controller` adds it itself; the least-squares PID is
+/// fitted to u minus it.
 pub fn check_controller(
     controller: &mut dyn Controller,
     reference: &[f64],
     theta: &[f64],
     u: &[f64],
+    feedforward_v: Option<&[f64]>,
     u_limit_v: Option<f64>,
     dt_s: f64,
 ) -> ControllerCheck {
@@ -78,11 +83,23 @@ pub fn check_controller(
     let (mut ls_gains, mut ls_fit_percent) = (None, f64::NAN);
     if rows.len() >= 10 {
         let a = DMatrix::from_fn(rows.len(), 3, |i, j| rows[i][j]);
-        let b = DVector::from_vec(y.clone());
+        let ff = |k: usize| {
+            feedforward_v
+                .and_then(|f| f.get(k))
+                .copied()
+                .filter(|v| v.is_finite())
+                .unwrap_or(0.0)
+        };
+        let b =
+            DVector::from_iterator(y.len(), (0..n).filter(|k| inside(*k)).map(|k| u[k] - ff(k)));
         if let Ok(x) = a.clone().svd(true, true).solve(&b, 1e-12) {
             let g = [x[0], x[1], x[2]];
             if g.iter().all(|v| v.is_finite()) {
-                let pred: Vec<f64> = (&a * &x).iter().copied().collect();
+                let pred: Vec<f64> = (&a * &x)
+                    .iter()
+                    .zip((0..n).filter(|k| inside(*k)))
+                    .map(|(p, k)| p + ff(k))
+                    .collect();
                 ls_fit_percent = fit_percent(&y, &pred);
                 ls_gains = Some(g);
             }
@@ -121,7 +138,7 @@ mod tests {
             .map(|k| Controller::update(&mut real, r[k], th[k]))
             .collect();
         let mut same = Pid::new(PidConfig::new(gains, dt)).unwrap();
-        let c = check_controller(&mut same, &r, &th, &u, None, dt);
+        let c = check_controller(&mut same, &r, &th, &u, None, None, dt);
         assert!(c.fit_percent > 99.999, "{c:?}");
         let g = c.ls_gains.unwrap();
         assert!(
@@ -138,7 +155,23 @@ mod tests {
             dt,
         ))
         .unwrap();
-        let c = check_controller(&mut wrong, &r, &th, &u, None, dt);
+        let c = check_controller(&mut wrong, &r, &th, &u, None, None, dt);
         assert!(c.fit_percent < 80.0, "{c:?}");
+        // With a feedforward in the logged u: the least squares fits the PID part.
+        let ff: Vec<f64> = (0..n).map(|k| 2.0 * (k as f64 * 0.01).sin()).collect();
+        let u_ff: Vec<f64> = u.iter().zip(&ff).map(|(a, b)| a + b).collect();
+        let mut pid = Pid::new(PidConfig::new(gains, dt)).unwrap();
+        let mut k = 0;
+        let mut with_ff = |r: f64, y: f64| {
+            k += 1;
+            Pid::update(&mut pid, r, y, ff[k - 1]).u_v
+        };
+        let c = check_controller(&mut with_ff, &r, &th, &u_ff, Some(&ff), None, dt);
+        assert!(c.fit_percent > 99.999, "{c:?}");
+        let g = c.ls_gains.unwrap();
+        assert!(
+            (g[0] - 17.0).abs() < 1e-6 && c.ls_fit_percent > 99.999,
+            "{c:?}"
+        );
     }
 }
