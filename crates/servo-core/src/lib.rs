@@ -28,6 +28,7 @@ pub mod effects;
 pub mod fit;
 #[cfg(feature = "alloc")]
 pub mod ident;
+pub mod linalg;
 pub mod math;
 pub mod params;
 pub mod plant;
@@ -35,6 +36,8 @@ pub mod protocol;
 #[cfg(feature = "alloc")]
 pub mod record;
 pub mod safety;
+#[cfg(feature = "alloc")]
+pub mod signal;
 pub mod sim;
 
 pub use design::DesignError;

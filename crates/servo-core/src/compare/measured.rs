@@ -1,8 +1,8 @@
 //! The measured side of a comparison: the signals of a [`Record`] in load-side SI units, checked.
 
-use super::derivative::speed_from_position;
 use super::CompareError;
 use crate::record::Record;
+use crate::signal::ZeroPhase;
 use alloc::vec::Vec;
 
 /// Measured signals on a uniform time base (load side: theta_l, omega_l).
@@ -41,6 +41,14 @@ fn check(name: &'static str, v: &[f64], n: usize) -> Result<(), CompareError> {
         });
     }
     Ok(())
+}
+
+/// Speed from position: zero-phase low-pass at `fc_hz`, then central differences (a non-positive
+/// `fc_hz` differentiates unfiltered; a cut-off above 0.45 / `dt_s` is lowered to it). The model's
+/// position goes through the same when the measured speed is derived, so both sides see the same
+/// filtering.
+pub fn speed_from_position(theta: &[f64], dt_s: f64, fc_hz: f64) -> Vec<f64> {
+    ZeroPhase::clamped(fc_hz, dt_s).derivative(theta)
 }
 
 impl Measured {

@@ -9,15 +9,14 @@
 //! * [`regimes`], [`periodic`], [`windows`]: where the error sits (operating regimes, position-
 //!   periodic components, worst time windows).
 //! * [`report`]: all of the above for one log, with plain-language findings.
-//! * [`measured`], [`derivative`], [`quantum`]: the measured side (signals, speed from position,
-//!   encoder grid).
+//! * [`measured`], [`quantum`]: the measured side (signals, speed from position through
+//!   [`crate::signal::ZeroPhase`], encoder grid).
 
 // `!(x > 0.0)` is used on purpose: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod chi2;
 pub mod controller_check;
-pub mod derivative;
 pub mod figures;
 pub mod measured;
 pub mod periodic;

@@ -7,7 +7,7 @@
 //! error during acceleration, a viscous error at constant speed. The figure that matters is the
 //! share of squared error of a regime against its share of time.
 
-use super::derivative::{derivative, lowpass_zero_phase};
+use crate::signal::ZeroPhase;
 use alloc::vec::Vec;
 
 /// An operating regime.
@@ -170,7 +170,7 @@ pub fn classify(
     let n = omega_l.len();
     let w_scale = abs_percentile(omega_l, 0.99);
     let w_still = (opts.standstill_fraction * w_scale).max(opts.standstill_min_rad_s);
-    let alpha = derivative(&lowpass_zero_phase(omega_l, dt_s, opts.filter_hz), dt_s);
+    let alpha = ZeroPhase::clamped(opts.filter_hz, dt_s).derivative(omega_l);
     let a_thr = opts.acceleration_fraction * abs_percentile(&alpha, 0.99);
     // Reversals: opposite signs of consecutive moving samples, with a short stop in between.
     let max_gap = (opts.reversal_max_stop_s / dt_s) as usize + 1;

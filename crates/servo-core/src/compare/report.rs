@@ -1,9 +1,8 @@
 //! One comparison of a model with one log: figures per signal, residual analysis, where the error
 //! sits, and findings in plain language.
 
-use super::derivative::speed_from_position;
 use super::figures::Figures;
-use super::measured::Measured;
+use super::measured::{speed_from_position, Measured};
 use super::periodic::{best_harmonic, effective_samples, AngleSource, PeriodicFinding};
 use super::regimes::{
     classify, detect_u_limit, regime_stats, Classification, Regime, RegimeOptions, RegimeStats,

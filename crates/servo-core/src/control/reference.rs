@@ -49,6 +49,17 @@ pub struct RefSample {
     pub acc_rad_s2: f64,
 }
 
+impl RefSample {
+    /// Standing still at `pos_rad` [rad].
+    pub const fn at_rest(pos_rad: f64) -> RefSample {
+        RefSample {
+            pos_rad,
+            vel_rad_s: 0.0,
+            acc_rad_s2: 0.0,
+        }
+    }
+}
+
 /// Frequency law of a chirp.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -205,7 +216,7 @@ impl Shape {
             acc_rad_s2,
         };
         match *self {
-            Shape::Step { amplitude_rad } => s(amplitude_rad, 0.0, 0.0),
+            Shape::Step { amplitude_rad } => RefSample::at_rest(amplitude_rad),
             Shape::Ramp { speed_rad_s } => s(speed_rad_s * tau_s, speed_rad_s, 0.0),
             Shape::Trapezoid {
                 distance_rad,
@@ -264,15 +275,11 @@ impl Shape {
                 duty,
             } => {
                 let frac = math::rem_euclid(tau_s, period_s) / period_s;
-                s(
-                    if frac < duty {
-                        amplitude_rad
-                    } else {
-                        -amplitude_rad
-                    },
-                    0.0,
-                    0.0,
-                )
+                RefSample::at_rest(if frac < duty {
+                    amplitude_rad
+                } else {
+                    -amplitude_rad
+                })
             }
             Shape::Prbs {
                 amplitude_rad,
@@ -282,16 +289,11 @@ impl Shape {
             } => {
                 let k = math::floor(tau_s / bit_s);
                 let k = if k > 0.0 { k as u64 } else { 0 };
-                let bit = prbs_bit(order, seed, k);
-                s(
-                    if bit == 1 {
-                        amplitude_rad
-                    } else {
-                        -amplitude_rad
-                    },
-                    0.0,
-                    0.0,
-                )
+                RefSample::at_rest(if prbs_bit(order, seed, k) == 1 {
+                    amplitude_rad
+                } else {
+                    -amplitude_rad
+                })
             }
         }
     }
@@ -367,11 +369,7 @@ impl Reference {
     pub fn at(&self, t_s: f64) -> RefSample {
         let tau = t_s - self.t0_s;
         if tau < -TIME_EPS_S {
-            return RefSample {
-                pos_rad: self.offset_rad,
-                vel_rad_s: 0.0,
-                acc_rad_s2: 0.0,
-            };
+            return RefSample::at_rest(self.offset_rad);
         }
         let mut r = self.shape.at(tau.max(0.0));
         r.pos_rad += self.offset_rad;
@@ -380,26 +378,15 @@ impl Reference {
 
     /// Checks every parameter (finite, positive where needed). Names the bad key.
     pub fn validate(&self) -> Result<(), RefParseError> {
-        let finite = |key: &'static str, v: f64| {
-            if v.is_finite() {
+        let require = |ok: bool, key: &'static str, reason: &'static str| {
+            if ok {
                 Ok(())
             } else {
-                Err(RefParseError::Invalid {
-                    key,
-                    reason: "must be a finite number",
-                })
+                Err(RefParseError::Invalid { key, reason })
             }
         };
-        let positive = |key: &'static str, v: f64| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(RefParseError::Invalid {
-                    key,
-                    reason: "must be > 0",
-                })
-            }
-        };
+        let finite = |key, v: f64| require(v.is_finite(), key, "must be a finite number");
+        let positive = |key, v: f64| require(v.is_finite() && v > 0.0, key, "must be > 0");
         finite("t0", self.t0_s)?;
         finite("offset", self.offset_rad)?;
         match self.shape {
@@ -434,12 +421,7 @@ impl Reference {
                 positive("duration", duration_s)?;
                 match mode {
                     ChirpMode::Linear => {
-                        if !(f0_hz.is_finite() && f0_hz >= 0.0) {
-                            return Err(RefParseError::Invalid {
-                                key: "f0",
-                                reason: "must be >= 0",
-                            });
-                        }
+                        require(f0_hz.is_finite() && f0_hz >= 0.0, "f0", "must be >= 0")?;
                         positive("f1", f1_hz)
                     }
                     ChirpMode::Log => {
@@ -455,14 +437,11 @@ impl Reference {
             } => {
                 finite("amp", amplitude_rad)?;
                 positive("period", period_s)?;
-                if duty.is_finite() && duty > 0.0 && duty < 1.0 {
-                    Ok(())
-                } else {
-                    Err(RefParseError::Invalid {
-                        key: "duty",
-                        reason: "must be between 0 and 1 (exclusive)",
-                    })
-                }
+                require(
+                    duty.is_finite() && duty > 0.0 && duty < 1.0,
+                    "duty",
+                    "must be between 0 and 1 (exclusive)",
+                )
             }
             Shape::Prbs {
                 amplitude_rad,
@@ -472,14 +451,11 @@ impl Reference {
             } => {
                 finite("amp", amplitude_rad)?;
                 positive("bit", bit_s)?;
-                if (2..=16).contains(&order) {
-                    Ok(())
-                } else {
-                    Err(RefParseError::Invalid {
-                        key: "order",
-                        reason: "must be an integer in 2..=16",
-                    })
-                }
+                require(
+                    (2..=16).contains(&order),
+                    "order",
+                    "must be an integer in 2..=16",
+                )
             }
         }
     }
@@ -670,14 +646,7 @@ mod tests {
         let r = Reference::step(1.5, 0.5);
         assert_eq!(r.at(0.49).pos_rad, 0.0);
         assert_eq!(r.at(0.5).pos_rad, 1.5);
-        assert_eq!(
-            r.at(10.0),
-            RefSample {
-                pos_rad: 1.5,
-                vel_rad_s: 0.0,
-                acc_rad_s2: 0.0
-            }
-        );
+        assert_eq!(r.at(10.0), RefSample::at_rest(1.5));
         let r = Reference {
             shape: Shape::Ramp { speed_rad_s: 2.0 },
             t0_s: 1.0,
@@ -707,14 +676,7 @@ mod tests {
         assert!(close(r.at(1.75).pos_rad, 3.0 - 0.5 * 4.0 * 0.0625, 1e-15));
         assert!(close(r.at(1.75).vel_rad_s, 1.0, 1e-15));
         assert_eq!(r.at(1.75).acc_rad_s2, -4.0);
-        assert_eq!(
-            r.at(2.5),
-            RefSample {
-                pos_rad: 3.0,
-                vel_rad_s: 0.0,
-                acc_rad_s2: 0.0
-            }
-        );
+        assert_eq!(r.at(2.5), RefSample::at_rest(3.0));
         for t in [0.1, 0.3, 0.7, 1.2, 1.6, 1.9] {
             check_derivatives(&r, t, 1e-5, 1e-6);
         }

@@ -192,22 +192,14 @@ pub fn setpoint_at(slots: &[PlacedSegment], t_s: f64) -> Setpoint {
     };
     if t_s >= last.end_s() - TIME_EPS_S {
         return match last.segment.target {
-            Target::Position => Setpoint::Position(RefSample {
-                pos_rad: last.final_value(),
-                vel_rad_s: 0.0,
-                acc_rad_s2: 0.0,
-            }),
+            Target::Position => Setpoint::Position(RefSample::at_rest(last.final_value())),
             Target::Voltage => Setpoint::Voltage { u_v: 0.0 },
         };
     }
     let first = &slots[0];
     if t_s < first.start_s - TIME_EPS_S {
         return match first.setpoint(first.start_s) {
-            Setpoint::Position(r) => Setpoint::Position(RefSample {
-                pos_rad: r.pos_rad,
-                vel_rad_s: 0.0,
-                acc_rad_s2: 0.0,
-            }),
+            Setpoint::Position(r) => Setpoint::Position(RefSample::at_rest(r.pos_rad)),
             v => v,
         };
     }

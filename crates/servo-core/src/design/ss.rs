@@ -2,6 +2,7 @@
 //! and its exact zero-order-hold discretisation.
 
 use super::Complex;
+use crate::linalg::expm;
 use alloc::vec::Vec;
 use nalgebra::{DMatrix, DVector};
 
@@ -75,38 +76,6 @@ impl DiscreteStateSpace {
     }
 }
 
-/// Matrix exponential by scaling and squaring with a Taylor series (no std needed): the matrix
-/// is scaled by 2^-s so that its 1-norm is <= 1/2, the series is summed until the terms fall
-/// below machine precision, then squared s times.
-pub fn expm(m: &DMatrix<f64>) -> DMatrix<f64> {
-    let n = m.nrows();
-    let norm = (0..n)
-        .map(|j| m.column(j).iter().map(|v| v.abs()).sum::<f64>())
-        .fold(0.0, f64::max);
-    let mut s = 0i32;
-    let mut scale = 1.0;
-    while norm * scale > 0.5 && s < 1000 {
-        scale *= 0.5;
-        s += 1;
-    }
-    let a = m * scale;
-    let mut result = DMatrix::<f64>::identity(n, n);
-    let mut term = DMatrix::<f64>::identity(n, n);
-    for k in 1..=30 {
-        term = &term * &a / k as f64;
-        result += &term;
-        if term.iter().map(|v| v.abs()).fold(0.0, f64::max)
-            < 1e-18 * result.iter().map(|v| v.abs()).fold(0.0, f64::max)
-        {
-            break;
-        }
-    }
-    for _ in 0..s {
-        result = &result * &result;
-    }
-    result
-}
-
 /// C (sI - A)^-1 B + D by Gaussian elimination with partial pivoting on the complex system.
 fn resolvent_gain(
     a: &DMatrix<f64>,
@@ -178,21 +147,6 @@ mod tests {
         let e = (-0.1f64).exp();
         assert!((d.phi[(0, 0)] - e).abs() < 1e-14);
         assert!((d.gamma[0] - (1.0 - e)).abs() < 1e-14);
-    }
-
-    #[test]
-    fn expm_matches_nalgebra_on_the_stiff_full_model() {
-        use crate::design::PlantModel;
-        let ss = PlantModel::full(&crate::PlantParams::TABLE2).state_space();
-        for ts in [1e-4, 1e-3, 1e-2] {
-            let m = &ss.a * ts;
-            let (mine, reference) = (expm(&m), m.exp());
-            let err = (&mine - &reference).abs().max();
-            assert!(
-                err < 1e-12 * reference.abs().max().max(1.0),
-                "ts {ts}: {err}"
-            );
-        }
     }
 
     #[test]

@@ -2,11 +2,11 @@
 //! of each equation (moving samples with a margin around stuck phases for the torque balance, every
 //! sample for the electrical balance), decimation and the fit / held-out split.
 
-use super::filter::{derivative, ZeroPhase};
 use super::{FitError, FitOptions};
 use crate::math;
 use crate::params::PlantParams;
 use crate::record::Record;
+use crate::signal::{derivative, ZeroPhase};
 use alloc::string::String;
 use alloc::vec::Vec;
 
@@ -282,13 +282,12 @@ fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecDat
             )));
         }
     }
-    let fs = 1.0 / dt;
-    let filter = ZeroPhase::new(opts.filter_hz, fs);
-    let light = ZeroPhase::new(opts.filter_hz * 3.0, fs);
-    let th_f = filter.apply(&theta_m);
-    let omega_f = derivative(&th_f, dt);
+    // A cut-off beyond the filter's range (the light one is 3x the user's) is clamped into it.
+    let filter = ZeroPhase::clamped(opts.filter_hz, dt);
+    let light = ZeroPhase::clamped(opts.filter_hz * 3.0, dt);
+    let omega_f = filter.derivative(&theta_m);
     let accel_f = derivative(&omega_f, dt);
-    let omega_raw = derivative(&light.apply(&theta_m), dt);
+    let omega_raw = light.derivative(&theta_m);
     let (i_raw, i_f, di_f) = match &r.i_a_a {
         Some(i) => {
             if let Some(k) = i.iter().position(|v| !v.is_finite()) {

@@ -15,7 +15,6 @@
 //! [`Dataset`] once and call [`Dataset::fit`].
 
 pub mod dataset;
-pub mod filter;
 pub mod lsq;
 pub mod model;
 pub mod oe;

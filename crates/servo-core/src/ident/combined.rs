@@ -12,10 +12,10 @@ use alloc::format;
 use alloc::string::String;
 use alloc::vec::Vec;
 
-use super::filter::lowpass_zero_phase;
 use super::ls::{self, Covariance};
-use super::{derivative, Estimate, Experiment, IdentError};
+use super::{Estimate, Experiment, IdentError};
 use crate::math;
+use crate::signal::{derivative_at, lowpass_zero_phase};
 
 /// Settings of the combined estimator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -73,7 +73,7 @@ pub fn identify_combined(
         let sgn: Vec<f64> = wf.iter().map(|w| math::sign(*w) / n).collect();
         let sf = lowpass_zero_phase(&sgn, dt, cfg.cutoff_hz)?;
         let tf = lowpass_zero_phase(tau, dt, cfg.cutoff_hz)?;
-        let a = derivative(&e.time_s, &wf);
+        let a = derivative_at(&e.time_s, &wf);
         let wmax = wf.iter().fold(0.0_f64, |m, w| m.max(w.abs()));
         let (t0, t1) = (
             e.time_s[0] + cfg.edge_s,

@@ -12,13 +12,13 @@ use alloc::format;
 use alloc::string::String;
 use alloc::vec::Vec;
 
-use super::filter::lowpass_zero_phase;
 use super::friction::FrictionFit;
 use super::ls::{self, Covariance};
 use super::phases::{accel_threshold, find_phases, PhaseConfig};
 use super::student_t::t95;
-use super::{derivative, mean, Estimate, Experiment, IdentError};
+use super::{mean, Estimate, Experiment, IdentError};
 use crate::math;
+use crate::signal::{derivative_at, lowpass_zero_phase};
 
 /// One acceleration or deceleration phase used by the estimate.
 #[derive(Debug, Clone, PartialEq)]
@@ -189,7 +189,7 @@ pub fn identify_inertia_ls(
         let dt = e.sample_period_s();
         let wf = lowpass_zero_phase(&e.omega_m_rad_s, dt, cfg.cutoff_hz)?;
         let tf = lowpass_zero_phase(tau, dt, cfg.cutoff_hz)?;
-        let a = derivative(&e.time_s, &wf);
+        let a = derivative_at(&e.time_s, &wf);
         let thr = accel_threshold(&a, cfg);
         let wmax = wf.iter().fold(0.0_f64, |m, w| m.max(w.abs()));
         for k in 0..a.len() {

@@ -5,7 +5,7 @@
 //! * [`inertia`] (4.2): constant acceleration/deceleration phases ([`phases`]), eqs. 67-70
 //!   averaged over phase pairs; or LS on the samples with |dw_m/dt| above a threshold.
 //! * [`combined`] (4.3): one LS over the whole record (eqs. 71-76) with zero-phase filtered
-//!   differentiation ([`filter`]), the same filter on every regressor.
+//!   differentiation ([`crate::signal`]), the same filter on every regressor.
 //! * [`electrical`]: u = (R_eq / k_drv) i_a + (k_e / k_drv) w_m at steady state gives k_drv, R_eq.
 //!
 //! All fits go through [`ls::fit`] (QR, standard errors, 95 % intervals with the Student t
@@ -20,7 +20,6 @@
 
 pub mod combined;
 pub mod electrical;
-pub mod filter;
 pub mod friction;
 pub mod inertia;
 pub mod ls;
@@ -33,6 +32,7 @@ use alloc::vec::Vec;
 
 use crate::params::PlantParams;
 use crate::record::Record;
+use crate::signal::{derivative_at, FilterError};
 
 /// Why an identification was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -67,6 +67,9 @@ pub enum IdentError {
     /// A bad configuration value.
     #[error("invalid setting: {0}")]
     BadConfig(String),
+    /// The low-pass filter cannot be built with the configured cut-off.
+    #[error("invalid setting: {0}")]
+    Filter(#[from] FilterError),
     /// An internal inconsistency (a bug).
     #[error("internal error: {0}")]
     Internal(&'static str),
@@ -165,10 +168,10 @@ impl Experiment {
             w.iter().map(|w| w * n).collect()
         } else if let Some(th) = &rec.theta_m_rad {
             check_finite(&source, "theta_m", th, t)?;
-            derivative(t, th)
+            derivative_at(t, th)
         } else if let Some(th) = &rec.theta_l_rad {
             check_finite(&source, "theta_l", th, t)?;
-            derivative(t, th).into_iter().map(|w| w * n).collect()
+            derivative_at(t, th).into_iter().map(|w| w * n).collect()
         } else {
             return Err(IdentError::MissingSignal {
                 log: source,
@@ -244,21 +247,6 @@ pub(crate) fn median_dt(t: &[f64]) -> f64 {
     let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
     d.sort_by(|a, b| a.total_cmp(b));
     d[d.len() / 2]
-}
-
-/// Central-difference derivative (one-sided at the ends) on a possibly non-uniform time base.
-pub fn derivative(t: &[f64], x: &[f64]) -> Vec<f64> {
-    let n = x.len();
-    let mut d = alloc::vec![0.0; n];
-    if n < 2 {
-        return d;
-    }
-    d[0] = (x[1] - x[0]) / (t[1] - t[0]);
-    d[n - 1] = (x[n - 1] - x[n - 2]) / (t[n - 1] - t[n - 2]);
-    for k in 1..n - 1 {
-        d[k] = (x[k + 1] - x[k - 1]) / (t[k + 1] - t[k - 1]);
-    }
-    d
 }
 
 /// Mean of a slice (NaN when empty).

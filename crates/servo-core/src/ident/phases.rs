@@ -9,8 +9,8 @@
 use alloc::format;
 use alloc::vec::Vec;
 
-use super::filter::lowpass_zero_phase;
-use super::{derivative, median_dt, IdentError};
+use super::{median_dt, IdentError};
+use crate::signal::{derivative_at, lowpass_zero_phase};
 
 /// Settings of the phase detector.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -57,7 +57,7 @@ pub struct AccelPhase {
 /// differences).
 pub fn filtered_accel(t: &[f64], omega: &[f64], cutoff_hz: f64) -> Result<Vec<f64>, IdentError> {
     let wf = lowpass_zero_phase(omega, median_dt(t), cutoff_hz)?;
-    Ok(derivative(t, &wf))
+    Ok(derivative_at(t, &wf))
 }
 
 /// The acceleration threshold [rad/s^2] used for `accel`.

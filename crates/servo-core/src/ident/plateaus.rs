@@ -9,8 +9,8 @@
 
 use alloc::vec::Vec;
 
-use super::filter::moving_average;
 use super::{median_dt, IdentError};
+use crate::signal::moving_average;
 
 /// Settings of the plateau detector.
 #[derive(Debug, Clone, Copy, PartialEq)]

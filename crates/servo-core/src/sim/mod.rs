@@ -53,13 +53,14 @@
 // Small dense matrix code reads best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
-pub mod expm;
 pub mod sensors;
 
 use crate::effects::torque::{self, Friction, InputNonlinearity};
 use crate::effects::EffectKind;
+use crate::linalg::expm;
 use crate::math;
 use crate::plant::Plant;
+use nalgebra::SMatrix;
 
 pub use sensors::{Measurement, SensorConfig, Sensors};
 
@@ -858,28 +859,28 @@ fn discretise(plant: &Plant, frac: f64, backlash: Option<&Backlash>, mode: usize
     }
     // Augmented matrix (Van Loan): exp([[A h, B h, 0], [0, 0, E], [0, 0, 0]]) with E feeding the
     // ramp generators of the torque inputs.
-    let mut m = [[0.0; NA]; NA];
+    let mut m = SMatrix::<f64, NA, NA>::zeros();
     for i in 0..NS {
         for j in 0..NS {
-            m[i][j] = a[i][j] * h;
+            m[(i, j)] = a[i][j] * h;
         }
         for j in 0..NI {
-            m[i][NS + j] = b[i][j] * h;
+            m[(i, NS + j)] = b[i][j] * h;
         }
     }
-    m[NS + 1][NS + NI] = 1.0;
-    m[NS + 2][NS + NI + 1] = 1.0;
-    let e = expm::expm(&m);
+    m[(NS + 1, NS + NI)] = 1.0;
+    m[(NS + 2, NS + NI + 1)] = 1.0;
+    let e = expm(&m);
     let mut d = ZERO_DISC;
     for i in 0..NS {
         for j in 0..NS {
-            d.phi[i][j] = e[i][j];
+            d.phi[i][j] = e[(i, j)];
         }
         for j in 0..NI {
-            d.g0[i][j] = e[i][NS + j];
+            d.g0[i][j] = e[(i, NS + j)];
         }
         for j in 0..NR {
-            d.g1[i][j] = e[i][NS + NI + j];
+            d.g1[i][j] = e[(i, NS + NI + j)];
         }
     }
     d
