@@ -216,17 +216,20 @@ fn run_candidates(
             .map_or(2, |n| n.get())
             .clamp(1, 4);
         let mut out: Vec<Option<Result<Solved, FitError>>> = kinds.iter().map(|_| None).collect();
+        // A shared queue, not a fixed split: candidates differ tenfold in cost.
+        let next = core::sync::atomic::AtomicUsize::new(0);
         std::thread::scope(|s| {
             let handles: Vec<_> = (0..threads)
-                .map(|t| {
-                    let one = &one;
+                .map(|_| {
+                    let (one, next) = (&one, &next);
                     s.spawn(move || {
-                        kinds
-                            .iter()
-                            .enumerate()
-                            .filter(|(i, _)| i % threads == t)
-                            .map(|(i, &k)| (i, one(k)))
-                            .collect::<Vec<_>>()
+                        let mut done = Vec::new();
+                        loop {
+                            let i = next.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+                            let Some(&k) = kinds.get(i) else { break };
+                            done.push((i, one(k)));
+                        }
+                        done
                     })
                 })
                 .collect();

@@ -394,7 +394,7 @@ impl Dataset {
                 } else {
                     grid.clone()
                 };
-                let (x, fx) = search::grid_then_golden(&g, &mut f, if integer { 0 } else { 30 })
+                let (x, fx) = search::grid_then_golden(&g, &mut f, if integer { 0 } else { 20 })
                     .ok_or_else(|| {
                         FitError::Singular(alloc::format!(
                             "{kind}: no finite cost over the search grid"
