@@ -113,3 +113,22 @@ fn demo_rejects_an_unusable_out_folder() {
     assert!(!ok, "demo into a file should fail");
     assert!(stderr.contains("--out"), "{stderr}");
 }
+
+/// `servo ... | head`: a reader that leaves early must not make servo panic (plain `println!`
+/// does on a closed stdout); the command finishes its work and exits normally.
+#[test]
+fn closed_stdout_is_not_a_panic() {
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(servo_e2e::servo_bin())
+        .args(["params"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Close the read end before servo writes.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(out.status.success(), "status {:?}: {err}", out.status);
+}

@@ -1,6 +1,27 @@
 //! The `servo` command-line tool. One file per subcommand in [`cmd`], each a `clap::Parser`
 //! struct with `run(self) -> anyhow::Result<()>`.
 
+/// `println!` that never panics: when stdout is closed (`servo ... | head`), the line is dropped
+/// and the command goes on (a run still finishes its log). Plain `println!` would panic.
+macro_rules! outln {
+    () => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout());
+    }};
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($arg)*);
+    }};
+}
+
+/// `print!` that never panics (see `outln!`).
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = write!(std::io::stdout(), $($arg)*);
+    }};
+}
+
 pub mod cmd;
 pub mod gains_file;
 pub mod io;

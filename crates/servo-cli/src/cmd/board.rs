@@ -97,8 +97,8 @@ impl Board {
                 std::fs::write(f, format!("{path}\n"))
                     .with_context(|| format!("--path-file {}", f.display()))?;
             }
-            println!("board ready on {path}");
-            println!(
+            outln!("board ready on {path}");
+            outln!(
                 "  {} | period {} ms | watchdog {} ms | limits ±{} V, [{}, {}] rad, {} A | Ctrl-C to quit",
                 servo_hw::board::FIRMWARE,
                 self.period_ms,
@@ -122,7 +122,7 @@ impl Board {
             let mut p = serialport::new(port, self.baud)
                 .open()
                 .with_context(|| format!("opening --port {port}"))?;
-            println!("board ready on {port}");
+            outln!("board ready on {port}");
             let _ = std::io::stdout().flush();
             board
                 .serve(&mut *p, &stop)
@@ -134,7 +134,7 @@ impl Board {
 }
 
 fn print_report(r: &BoardReport) {
-    println!(
+    outln!(
         "board stopped: {} run(s), {} samples sent, {} missed deadlines, {} late ticks (max {:.1} ms late), {} CRC errors, {} framing errors",
         r.runs,
         r.samples,
@@ -145,6 +145,6 @@ fn print_report(r: &BoardReport) {
         r.framing_errors
     );
     for (code, text) in &r.faults {
-        println!("  fault {code:?}: {text}");
+        outln!("  fault {code:?}: {text}");
     }
 }

@@ -627,7 +627,7 @@ impl Compare {
         }
         if self.json {
             let v = to_json(&logs, &modes, &current, &ladder, &opts);
-            println!("{}", serde_json::to_string_pretty(&v)?);
+            outln!("{}", serde_json::to_string_pretty(&v)?);
         } else {
             print_text(
                 &logs,
@@ -949,19 +949,19 @@ fn print_text(
     plot: Option<&Path>,
 ) {
     for ((log, r), mc) in logs.iter().zip(&c.reports).zip(modes) {
-        println!(
+        outln!(
             "== {} ({} samples, {:.3} s, dt = {:.4} s)",
             log.path.display(),
             r.time_s.len(),
             r.time_s.len() as f64 * r.dt_s,
             r.dt_s
         );
-        println!("mode: {} -- {}", r.mode.name(), mc.reason);
+        outln!("mode: {} -- {}", r.mode.name(), mc.reason);
         if let Some(line) = controller_description(log) {
-            println!("{line}");
+            outln!("{line}");
         }
         if let Some(line) = controller_words(log) {
-            println!("{line}");
+            outln!("{line}");
         }
         if log.measured.speed_derived {
             let model_side = if matches!(r.mode, ReplayMode::ClosedLoop | ReplayMode::Speed) {
@@ -969,18 +969,22 @@ fn print_text(
             } else {
                 "the model's speed is its state at the end of each prediction"
             };
-            println!(
+            outln!(
                 "speed: derived from position (zero-phase {:.0} Hz low-pass + central differences); {model_side}",
                 opts.speed_filter_hz
             );
         }
-        println!(
+        outln!(
             "{:<10} {:>9} {:>14} {:>14} {:>14}",
-            "signal", "fit [%]", "RMSE", "max error", "mean error"
+            "signal",
+            "fit [%]",
+            "RMSE",
+            "max error",
+            "mean error"
         );
         for s in &r.signals {
             let f = &s.figures;
-            println!(
+            outln!(
                 "{:<10} {:>9.2} {:>14} {:>14} {:>14}",
                 format!("{} [{}]", s.kind.name(), s.kind.unit()),
                 f.fit_percent,
@@ -989,13 +993,16 @@ fn print_text(
                 format!("{:.3e}", f.mean_error)
             );
         }
-        println!("where the {} error sits:", r.headline_signal().kind.words());
-        println!(
+        outln!("where the {} error sits:", r.headline_signal().kind.words());
+        outln!(
             "  {:<16} {:>8} {:>9} {:>12}",
-            "regime", "time %", "error %", "rms"
+            "regime",
+            "time %",
+            "error %",
+            "rms"
         );
         for s in r.regimes.iter().filter(|s| s.samples > 0) {
-            println!(
+            outln!(
                 "  {:<16} {:>8.1} {:>9.1} {:>12.4e}",
                 s.regime.name(),
                 s.time_share_pct,
@@ -1003,28 +1010,28 @@ fn print_text(
                 s.rms
             );
         }
-        println!("findings:");
+        outln!("findings:");
         for f in &r.findings {
-            println!("  - {f}");
+            outln!("  - {f}");
         }
         if !r.worst_windows.is_empty() {
-            println!("worst windows:");
+            outln!("worst windows:");
             for (i, w) in r.worst_windows.iter().enumerate() {
-                println!("  {}. {}", i + 1, describe_window(w, r, opts));
+                outln!("  {}. {}", i + 1, describe_window(w, r, opts));
             }
         }
-        println!();
+        outln!();
     }
     if ladder.len() > 1 || logs.len() > 1 {
         let k = ladder[0].cmp_fit[0].0;
-        println!("error ladder ({} over all logs):", k.words());
+        outln!("error ladder ({} over all logs):", k.words());
         let mut prev: Option<f64> = None;
         for s in ladder {
             let f = s.cmp_fit[0].1;
             let change = prev
                 .map(|p| format!(" ({:+.1} % RMSE)", 100.0 * (f.rmse - p) / p))
                 .unwrap_or_default();
-            println!(
+            outln!(
                 "  {:<24} fit {:>7.2} %   RMSE {}{}",
                 s.label,
                 f.fit_percent,
@@ -1035,15 +1042,15 @@ fn print_text(
         }
     }
     if ladder.len() > 1 {
-        println!("model after the added effects:");
+        outln!("model after the added effects:");
         for e in c.plant.effects.iter() {
             let kv: Vec<String> = e
                 .iter()
                 .map(|(p, v)| format!("{} = {:.4e} {}", p.key, v, p.unit))
                 .collect();
-            println!("  {:<11} {}", e.kind.name(), kv.join(", "));
+            outln!("  {:<11} {}", e.kind.name(), kv.join(", "));
         }
-        println!(
+        outln!(
             "  base        J_eq = {:.4e} kg m^2, R_eq = {:.4} ohm, k_drv = {:.4}",
             c.plant.params.j_eq(),
             c.plant.params.r_eq(),
@@ -1051,10 +1058,10 @@ fn print_text(
         );
     }
     if let Some(p) = save {
-        println!("model written to {}", p.display());
+        outln!("model written to {}", p.display());
     }
     if let Some(p) = plot {
-        println!("figures written to {}", p.display());
+        outln!("figures written to {}", p.display());
     }
 }
 

@@ -192,7 +192,7 @@ fn main_unit(kind: EffectKind) -> &'static str {
 /// Prints the command line a user would type for a stage, and parses it with the command's own
 /// parser.
 fn command<T: clap::Parser>(args: &[String]) -> anyhow::Result<T> {
-    println!("   $ servo {}", args.join(" "));
+    outln!("   $ servo {}", args.join(" "));
     T::try_parse_from(args).map_err(|e| anyhow!("demo command `servo {}`: {e}", args.join(" ")))
 }
 
@@ -360,7 +360,7 @@ fn stage_run(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
         summary.err_rms_rad.unwrap_or(0.0).to_degrees(),
         summary.saturation_time_s
     );
-    println!("{summary}");
+    outln!("{summary}");
     ctx.run = Some(out);
     ctx.run_log = Some(log_path.clone());
     ctx.run_csv = Some(csv_path.clone());
@@ -697,21 +697,21 @@ impl Demo {
         let mut files = Vec::new();
         let mut story = Vec::new();
         for (i, st) in all.iter().enumerate() {
-            println!("== [{}/{}] {}: {}", i + 1, all.len(), st.name, st.what);
+            outln!("== [{}/{}] {}: {}", i + 1, all.len(), st.name, st.what);
             let (headline, written) =
                 (st.run)(&mut ctx).with_context(|| format!("demo stage `{}`", st.name))?;
-            println!("   -> {headline}");
+            outln!("   -> {headline}");
             for f in &written {
-                println!("      wrote {}", f.display());
+                outln!("      wrote {}", f.display());
             }
             files.extend(written);
             story.push((st.name, headline));
         }
-        println!("== the story");
+        outln!("== the story");
         for (name, headline) in &story {
-            println!("  {name:<12} {headline}");
+            outln!("  {name:<12} {headline}");
         }
-        println!(
+        outln!(
             "demo done in {:.1} s; {} files in {}",
             t0.elapsed().as_secs_f64(),
             files.len(),

@@ -102,16 +102,16 @@ impl Diagnose {
                 v["first_ranking"] =
                     Value::Array(first.ranking.iter().map(candidate_json).collect());
             }
-            println!("{}", serde_json::to_string_pretty(&v)?);
+            outln!("{}", serde_json::to_string_pretty(&v)?);
         } else {
-            print!("{}", text_report(first, &ladder, &diags, self.auto));
+            out!("{}", text_report(first, &ladder, &diags, self.auto));
         }
         if let Some(path) = &self.report {
             let html = html_report(&records, &model, first, &ladder, &diags, &opts, &self.logs)?;
             std::fs::write(path, html)
                 .with_context(|| format!("writing report {}", path.display()))?;
             if !self.json {
-                println!("report written to {}", path.display());
+                outln!("report written to {}", path.display());
             }
         }
         if let Some(path) = &self.save {
@@ -121,7 +121,7 @@ impl Diagnose {
             mf.provenance = model_file.provenance.clone();
             mf.save(path)?;
             if !self.json {
-                println!("model saved to {}", path.display());
+                outln!("model saved to {}", path.display());
             }
         }
         Ok((ladder, diags))

@@ -72,7 +72,7 @@ impl Export {
                 log.finish()?;
             }
         }
-        println!(
+        outln!(
             "{} -> {}: {} samples, {:.3} s, signals {}",
             self.input.display(),
             output.display(),

@@ -234,7 +234,7 @@ impl Identify {
                 let rec = crate::io::read_log(&path, None)
                     .with_context(|| format!("reading log {}", path.display()))?;
                 if !self.json {
-                    println!("logged {}", path.display());
+                    outln!("logged {}", path.display());
                 }
                 records.push(rec);
                 logs.push(path);
@@ -248,12 +248,12 @@ impl Identify {
         }
         let report = self.estimate(&exps, &params.params)?;
         if self.json {
-            println!(
+            outln!(
                 "{}",
                 serde_json::to_string_pretty(&self.json_report(&report, &logs))?
             );
         } else {
-            print!("{}", self.text_report(&report, &logs, &params.params));
+            out!("{}", self.text_report(&report, &logs, &params.params));
         }
         if let Some(path) = &self.plot {
             std::fs::write(path, plot_svg(&report, &exps)?)
@@ -280,7 +280,7 @@ impl Identify {
             file.provenance = Some(provenance(&report, &logs));
             file.save(out)?;
             if !self.json {
-                println!("wrote {}", out.display());
+                outln!("wrote {}", out.display());
             }
         }
         Ok(())

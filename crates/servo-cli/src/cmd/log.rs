@@ -91,7 +91,7 @@ impl Recover {
         let r = recover(&self.input, &self.output)?;
         let first = r.first_log_time_ns.map_or(0.0, |t| t as f64 * 1e-9);
         let last = r.last_log_time_ns.map_or(0.0, |t| t as f64 * 1e-9);
-        println!(
+        outln!(
             "recovered {} messages on {} topic(s) [{}] spanning {:.3} s (log time {:.3} s .. {:.3} s)",
             r.messages,
             r.topics.len(),
@@ -100,16 +100,19 @@ impl Recover {
             first,
             last
         );
-        println!(
+        outln!(
             "read {} of {} bytes; {} metadata record(s), {} attachment(s) copied",
-            r.good_bytes, r.total_bytes, r.metadata, r.attachments
+            r.good_bytes,
+            r.total_bytes,
+            r.metadata,
+            r.attachments
         );
         match (&r.stopped_because, r.was_complete) {
-            (_, true) => println!("the input was already a finished MCAP file; rewritten as is"),
-            (Some(why), _) => println!("stopped at byte {}: {why}", r.good_bytes),
-            (None, _) => println!("the input ended cleanly between records but had no footer"),
+            (_, true) => outln!("the input was already a finished MCAP file; rewritten as is"),
+            (Some(why), _) => outln!("stopped at byte {}: {why}", r.good_bytes),
+            (None, _) => outln!("the input ended cleanly between records but had no footer"),
         }
-        println!("wrote {}", self.output.display());
+        outln!("wrote {}", self.output.display());
         Ok(())
     }
 }

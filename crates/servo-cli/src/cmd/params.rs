@@ -7,7 +7,7 @@ pub struct Params {}
 
 impl Params {
     pub fn run(self) -> anyhow::Result<()> {
-        print!("{}", ModelFile::default().to_toml_commented());
+        out!("{}", ModelFile::default().to_toml_commented());
         Ok(())
     }
 }

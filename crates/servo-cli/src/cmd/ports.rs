@@ -60,14 +60,14 @@ impl Ports {
     pub fn run(self) -> anyhow::Result<()> {
         let c = candidates(self.all);
         if c.is_empty() {
-            println!(
+            outln!(
                 "no serial ports found{}; plug a board in, or start a virtual one with `servo board --pty`",
                 if self.all { "" } else { " (--all also lists pseudo-terminals)" }
             );
             return Ok(());
         }
         for (path, what) in c {
-            println!("{path}\t{what}");
+            outln!("{path}\t{what}");
         }
         Ok(())
     }

@@ -387,9 +387,9 @@ impl Run {
             }
         };
         let summary = out.summary();
-        println!("{summary}");
+        outln!("{summary}");
         if let Some(ls) = &link {
-            println!("{ls}");
+            outln!("{ls}");
         }
         if let Some(l) = log.as_mut() {
             let mut map = summary.to_map();
@@ -398,7 +398,7 @@ impl Run {
             }
             l.write_summary(&map)?;
             l.finish()?;
-            println!(
+            outln!(
                 "log: {} ({} samples, MCAP: open in Foxglove/PlotJuggler, or `servo export`)",
                 l.path().display(),
                 l.messages()
@@ -406,11 +406,11 @@ impl Run {
         }
         if let Some(p) = &self.csv {
             write_csv(p, &out.record)?;
-            println!("csv: {}", p.display());
+            outln!("csv: {}", p.display());
         }
         if let Some(p) = &self.plot {
             plot_run(p, &out)?;
-            println!("plot: {}", p.display());
+            outln!("plot: {}", p.display());
         }
         Ok(RunReport {
             output: out,

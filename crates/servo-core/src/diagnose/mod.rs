@@ -155,7 +155,12 @@ pub fn diagnose_dataset(
     let base = ds.fit_config(model, &[])?;
     let base_oe = oe::prediction_cost(ds, &base.plant, Part::Holdout);
     let noise = current_noise(ds);
-    let kinds = candidate_kinds(model, opts);
+    let mut kinds = candidate_kinds(model, opts);
+    if !ds.has_input {
+        // Without a logged input the data say nothing of the drive (saturation, dead zone,
+        // delay), and nothing can be simulated (backlash is judged on the simulation).
+        kinds.retain(|k| k.is_mechanical() && *k != EffectKind::Backlash);
+    }
     let results = run_candidates(ds, model, &kinds, opts.parallel);
     let mut ranking = Vec::new();
     for (kind, res) in kinds.iter().zip(results) {
@@ -195,7 +200,10 @@ pub fn diagnose_dataset(
         oe_cost_rad: base_oe,
         current_noise_a: noise,
     };
-    let verdict = evidence::verdict(&ranking);
+    let mut verdict = evidence::verdict(&ranking);
+    if !ds.has_input {
+        verdict.push_str(" No log records the input voltage u: judged on the torque balance alone (information criterion and held-out residual), without a simulation check; saturation, dead zone, delay and backlash were not tried.");
+    }
     Ok(Diagnosis {
         ranking,
         verdict,
@@ -356,7 +364,11 @@ fn judge(
         1.0 - rss1 / rss0.max(1e-300)
     };
     let error_reduction_pct = 100.0 * (1.0 - math::sqrt((1.0 - eq_drop).max(0.0)));
-    let oe_ok = oe_drop.is_some_and(|d| d >= opts.min_oe_drop);
+    // Without a logged input nothing can be simulated: the two other guards decide.
+    let oe_ok = match oe_drop {
+        Some(d) => d >= opts.min_oe_drop,
+        None => !ds.has_input,
+    };
     // Backlash is judged on the simulation alone, which is less specific than an equation
     // residual (initial contact state, stick-slip transients): ask for a clear drop.
     let min_drop = if backlash {
@@ -497,6 +509,44 @@ mod tests {
             );
         }
         std::eprintln!("{}", d.verdict);
+    }
+
+    /// A log without the input voltage (current and motion only): the torque balance alone
+    /// names the missing Coulomb friction; drive-side effects and backlash are not tried.
+    #[test]
+    fn logs_without_voltage_are_judged_on_the_torque_balance() {
+        let truth = truth();
+        let mut log = open_loop_log(&truth, 12.0, 5, true);
+        log.u_v = None;
+        let lacking = Plant::from_params(PlantParams {
+            j_eq: Some(7.0e-7),
+            b_eq: Some(1.0e-6),
+            ..PlantParams::TABLE2
+        })
+        .unwrap();
+        let d = diagnose(&[log.clone()], &lacking, &DiagnoseOptions::default()).unwrap();
+        print_ranking(&d);
+        let w = d.winner().expect("a significant candidate");
+        assert_eq!(w.effect, EffectKind::Coulomb);
+        assert!(w.oe_reduction_pct.is_none());
+        let tau = w.params.iter().find(|p| p.key == "tau_sf").unwrap().value;
+        assert!((tau / 0.01 - 1.0).abs() < 0.15, "tau_sf {tau}");
+        assert!(d
+            .ranking
+            .iter()
+            .all(|c| c.effect.is_mechanical() && c.effect != EffectKind::Backlash));
+        assert!(d.verdict.contains("No log records the input voltage u"));
+        // Nothing left on the complete model.
+        let d = diagnose(&[log.clone()], &truth, &DiagnoseOptions::default()).unwrap();
+        assert!(d.winner().is_none(), "false positive: {}", d.verdict);
+        // Without u and without the current there is nothing to fit.
+        log.i_a_a = None;
+        let e = diagnose(&[log], &lacking, &DiagnoseOptions::default()).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("neither the input voltage u nor the armature current"),
+            "{e}"
+        );
     }
 
     #[test]

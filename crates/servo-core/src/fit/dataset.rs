@@ -19,8 +19,12 @@ pub struct RecData {
     pub dt_s: f64,
     /// Time of each row [s].
     pub time_s: Vec<f64>,
-    /// Logged driver input u [V], raw (row k applied from k to k+1).
+    /// Logged driver input u [V], raw (row k applied from k to k+1); zeros when the record has no
+    /// input (see `has_u`).
     pub u_v: Vec<f64>,
+    /// Whether u was logged. A record without u (current and motion only, e.g. a speed-controlled
+    /// friction staircase) serves the torque balance only: no electrical balance, no simulation.
+    pub has_u: bool,
     /// Motor angle [rad], raw (measured, or N times the load angle).
     pub theta_m_rad: Vec<f64>,
     /// True when the angle measured is the load's (theta_m_rad = N theta_l).
@@ -139,8 +143,10 @@ pub struct Dataset {
     pub mech_rows: Rows,
     /// Rows of the electrical equation: every sample away from the ends.
     pub elec_rows: Rows,
-    /// Largest |u| in the logs [V].
+    /// Largest |u| in the logs [V] (0 when no record logs u).
     pub u_max_v: f64,
+    /// At least one record logs the input u (input-side effects and the simulation need it).
+    pub has_input: bool,
     /// Gear ratio N used to convert load and motor sides.
     pub gear_ratio: f64,
     /// The Coulomb regressor sign(omega)/N, filtered, at the torque-balance rows (cached).
@@ -163,8 +169,22 @@ impl Dataset {
             recs.push(prepare(r, params, opts)?);
         }
         let has_current = recs.iter().all(|r| r.i_raw.is_some());
+        if !has_current {
+            // The u-driven balance (used when a record lacks the current) needs u everywhere.
+            if let (Some(a), Some(b)) = (
+                recs.iter().find(|r| !r.has_u),
+                recs.iter().find(|r| r.i_raw.is_none()),
+            ) {
+                return Err(FitError::BadRecord(alloc::format!(
+                    "{} logs no input voltage u and {} logs no current i_a: with the current missing somewhere the fit uses the u-driven balance, which needs u in every log",
+                    a.source, b.source
+                )));
+            }
+        }
+        let has_input = recs.iter().any(|r| r.has_u);
         let u_max_v = recs
             .iter()
+            .filter(|r| r.has_u)
             .flat_map(|r| r.u_v.iter())
             .fold(0.0f64, |m, u| m.max(u.abs()));
         let mut mech_rows = Rows::default();
@@ -186,6 +206,7 @@ impl Dataset {
             mech_rows,
             elec_rows,
             u_max_v,
+            has_input,
             gear_ratio: params.n,
             coulomb_col: Vec::new(),
             opts: opts.clone(),
@@ -248,9 +269,13 @@ fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecDat
             "{src}: time_s is not increasing"
         )));
     }
-    let u = r.u_v.clone().ok_or_else(|| {
-        FitError::BadRecord(alloc::format!("{src}: the input voltage u is not logged"))
-    })?;
+    let has_u = r.u_v.is_some();
+    if !has_u && r.i_a_a.is_none() {
+        return Err(FitError::BadRecord(alloc::format!(
+            "{src}: neither the input voltage u nor the armature current i_a is logged; the fit needs one of them"
+        )));
+    }
+    let u = r.u_v.clone().unwrap_or_else(|| alloc::vec![0.0; n]);
     let angle_is_load = r.theta_m_rad.is_none() && r.theta_l_rad.is_some();
     let theta_m: Vec<f64> = if let Some(t) = &r.theta_m_rad {
         t.clone()
@@ -306,6 +331,7 @@ fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecDat
         dt_s: dt,
         time_s: r.time_s.clone(),
         u_v: u,
+        has_u,
         theta_m_rad: theta_m,
         angle_is_load,
         omega_raw,
@@ -389,7 +415,7 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
             mech.k.push(k);
             mech.fit.push(fit);
         }
-        if !near_rev[k] {
+        if r.has_u && !near_rev[k] {
             elec.rec.push(ri);
             elec.k.push(k);
             elec.fit.push(fit);

@@ -320,7 +320,7 @@ impl Dataset {
                 "the torque-balance regressors are collinear or too few",
             ))
         })?;
-        let elec = if self.has_current {
+        let elec = if self.has_current && !self.elec_rows.is_empty() {
             Some(model::solve_elec(self, cfg).ok_or_else(|| {
                 FitError::Singular(String::from(
                     "the electrical-balance regressors are collinear",

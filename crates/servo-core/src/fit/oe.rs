@@ -38,7 +38,8 @@ pub fn segments_with(
 ) -> Vec<(usize, usize)> {
     let o = &ds.opts;
     let mut all = Vec::new();
-    for (ri, r) in ds.recs.iter().enumerate() {
+    // Records without a logged input cannot drive the model.
+    for (ri, r) in ds.recs.iter().enumerate().filter(|(_, r)| r.has_u) {
         let fs = 1.0 / r.dt_s;
         let h = ((horizon_s * fs) as usize).max(2);
         let edge = libm::ceil((2.0 / o.filter_hz) * fs) as usize + 2;
