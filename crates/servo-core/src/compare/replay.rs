@@ -154,10 +154,10 @@ pub fn initial_state(plant: &Plant, m: &Measured) -> PlantState {
     let mut cost = |omega_l: f64| -> f64 {
         sim.reset(with(omega_l));
         let mut e2 = 0.0;
-        for k in 0..w {
-            let e = sim.state().theta_l_rad - theta[k];
+        for (th, u) in theta.iter().zip(&m.u_v).take(w) {
+            let e = sim.state().theta_l_rad - th;
             e2 += e * e;
-            sim.step(m.u_v[k]);
+            sim.step(*u);
         }
         if e2.is_finite() {
             e2
