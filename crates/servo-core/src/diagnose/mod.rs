@@ -171,11 +171,16 @@ pub fn diagnose_dataset(
     }
     ranking.sort_by(|a, b| {
         // Significant first; then by the held-out simulation error reduction, the one figure
-        // comparable across equations; then by the equation residual reduction.
-        let oe = |c: &Candidate| c.oe_reduction_pct.unwrap_or(f64::NEG_INFINITY);
+        // comparable across equations, plus a tenth of the equation residual reduction: a
+        // near tie in simulation (Coulomb friction and an input dead zone both brake a
+        // voltage-driven log, 74.2 % vs 74.4 % on the real jacopisky steps at 250 Hz) goes to
+        // the effect that also explains its equation better (56.9 % vs 48.0 %).
+        let score = |c: &Candidate| {
+            c.oe_reduction_pct.unwrap_or(f64::NEG_INFINITY) + 0.1 * c.error_reduction_pct
+        };
         b.significant
             .cmp(&a.significant)
-            .then(oe(b).total_cmp(&oe(a)))
+            .then(score(b).total_cmp(&score(a)))
             .then(b.error_reduction_pct.total_cmp(&a.error_reduction_pct))
     });
     let mut equations = Vec::new();
