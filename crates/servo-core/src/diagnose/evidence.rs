@@ -57,7 +57,7 @@ fn signature(
         })
     };
     Some(match kind {
-        EffectKind::Coulomb | EffectKind::Backlash => (
+        EffectKind::Coulomb => (
             String::from("sign(omega)"),
             alloc::vec![col(&|r, k| shapes::coulomb_dir(r.omega_raw[k]))],
         ),
@@ -118,7 +118,9 @@ fn signature(
                 0.0
             })],
         ),
-        EffectKind::Viscous => return None,
+        // Backlash has no regressor of its own (it is judged on the simulation): no signal to
+        // correlate with; its evidence is the simulation drop and the regimes where it acts.
+        EffectKind::Viscous | EffectKind::Backlash => return None,
     })
 }
 
