@@ -8,7 +8,10 @@
 //!    of independent rows (lag-1 autocorrelation of the residual) and charged for the parameters
 //!    added plus the search over each nonlinear parameter;
 //! 2. a minimum relative drop of its own equation's residual on the held-out blocks;
-//! 3. a minimum drop of the output-error (simulation) cost on the held-out blocks.
+//! 3. a minimum drop of the output-error (simulation) cost on the held-out blocks, against the
+//!    model without the effect with its J_eq and tau_sf tuned on the simulation (the same
+//!    reference for every candidate, so that drops compare and a candidate that tunes base
+//!    parameters on the simulation, as backlash does, is not credited for the tuning).
 //!
 //! Candidates are ranked significant first, then by error reduction. One effect is accepted at a
 //! time ([`diagnose_loop`]): accepting several at once produces false effects. A candidate whose
@@ -98,7 +101,8 @@ pub struct BaseSummary {
     pub plant: Plant,
     /// Per equation: (equation, rms of the residual [unit], share of squared residual per regime).
     pub equations: Vec<(Equation, f64, [f64; 5], [f64; 5])>,
-    /// Held-out output-error cost (RMS motor-angle prediction error [rad]).
+    /// Held-out output-error cost (RMS motor-angle prediction error [rad]) of the simulation
+    /// reference: this model with J_eq and tau_sf tuned on the simulation (fit blocks).
     pub oe_cost_rad: Option<f64>,
     /// Current-noise floor [A] estimated from the logs (current logged).
     pub current_noise_a: Option<f64>,
@@ -153,7 +157,16 @@ pub fn diagnose_dataset(
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, FitError> {
     let base = ds.fit_config(model, &[])?;
-    let base_oe = oe::prediction_cost(ds, &base.plant, Part::Holdout);
+    // The simulation reference every candidate is judged against: the model without it, its
+    // inertia and Coulomb level tuned on the simulation (fit blocks). Candidates that refine
+    // parameters on the simulation (backlash with J_eq and tau_sf) would otherwise win on the
+    // tuning alone, and the ranking would compare drops from different references.
+    let rigid = ds.refine_rigid_on_simulation(&base.plant);
+    let reference = Reference {
+        oe_holdout: oe::prediction_cost(ds, &rigid, Part::Holdout),
+        plant: rigid,
+    };
+    let base_oe = reference.oe_holdout;
     let noise = current_noise(ds);
     let mut kinds = candidate_kinds(model, opts);
     if !ds.has_input {
@@ -165,7 +178,7 @@ pub fn diagnose_dataset(
     let mut ranking = Vec::new();
     for (kind, res) in kinds.iter().zip(results) {
         match res {
-            Ok(solved) => ranking.push(judge(ds, &base, base_oe, noise, *kind, &solved, opts)),
+            Ok(solved) => ranking.push(judge(ds, &base, &reference, noise, *kind, &solved, opts)),
             Err(e) => ranking.push(failed(&base, *kind, &e)),
         }
     }
@@ -309,10 +322,18 @@ fn nonlinear_searched(kind: EffectKind) -> usize {
         .count()
 }
 
+/// The simulation reference of a diagnosis (see [`diagnose_dataset`]).
+struct Reference {
+    /// The model without the candidates, J_eq and tau_sf tuned on the simulation.
+    plant: Plant,
+    /// Its held-out output-error cost [rad].
+    oe_holdout: Option<f64>,
+}
+
 fn judge(
     ds: &Dataset,
     base: &Solved,
-    base_oe: Option<f64>,
+    reference: &Reference,
     noise_a: Option<f64>,
     kind: EffectKind,
     cand: &Solved,
@@ -324,6 +345,8 @@ fn judge(
         .into_iter()
         .filter(|p| p.effect == Some(kind) || (kind == EffectKind::Coulomb && p.key == "tau_sf"))
         .collect();
+    let backlash = kind == EffectKind::Backlash;
+    let base_oe = reference.oe_holdout;
     let cand_oe = oe::prediction_cost(ds, &cand.plant, Part::Holdout);
     let oe_drop = match (base_oe, cand_oe) {
         (Some(b), Some(c)) if b > 0.0 => Some(1.0 - c / b),
@@ -339,7 +362,6 @@ fn judge(
             )
         }
     };
-    let backlash = kind == EffectKind::Backlash;
     // Information criterion on the fit rows.
     let rho = lag1(&b.resid);
     let n_eff = (b.n_fit as f64 * (1.0 - rho) / (1.0 + rho)).max(1.0);
@@ -347,7 +369,7 @@ fn judge(
     let q_nl = nonlinear_searched(kind) as f64;
     let bic_gain = if backlash {
         // Backlash lives outside the equation-error regressors: judged on the simulation cost.
-        let fit_b = oe::prediction_cost(ds, &base.plant, Part::Fit);
+        let fit_b = oe::prediction_cost(ds, &reference.plant, Part::Fit);
         let fit_c = oe::prediction_cost(ds, &cand.plant, Part::Fit);
         match (fit_b, fit_c) {
             (Some(x), Some(y)) if y > 0.0 => {

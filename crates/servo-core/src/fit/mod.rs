@@ -554,34 +554,56 @@ impl Dataset {
         let short = oe::segments(self, oe::Part::Fit);
         let long_h = BACKLASH_HORIZON_S.max(self.opts.oe_horizon_s);
         let long = oe::segments_with(self, oe::Part::Fit, long_h, 3, 90);
-        let cost = |segs: &[(usize, usize)], h: f64, gap: f64, j_eq: f64| -> f64 {
+        let tau0 = base.tau_sf();
+        let plant_with = |gap: f64, j_eq: f64, tau_sf: f64| -> Option<Plant> {
             let mut c = solved.cfg.clone();
             c.slots[i].set("gap", gap);
-            match to_plant(&c, &solved.mech, solved.elec.as_ref()) {
-                Ok(mut p) => {
-                    p.params.j_eq = Some(j_eq);
-                    oe::prediction_cost_over(self, &p, segs, h).unwrap_or(f64::INFINITY)
-                }
-                Err(_) => f64::INFINITY,
+            let mut p = to_plant(&c, &solved.mech, solved.elec.as_ref()).ok()?;
+            p.params.j_eq = Some(j_eq);
+            if tau_sf != tau0 {
+                p.params.tau_sf = Some(tau_sf);
+                set(&mut p, EffectKind::Coulomb, &[tau_sf]).ok()?;
             }
+            Some(p)
+        };
+        let tau_cell = core::cell::Cell::new(tau0);
+        let cost = |segs: &[(usize, usize)], h: f64, gap: f64, j_eq: f64| -> f64 {
+            plant_with(gap, j_eq, tau_cell.get())
+                .and_then(|p| oe::prediction_cost_over(self, &p, segs, h))
+                .unwrap_or(f64::INFINITY)
         };
         let h0 = self.opts.oe_horizon_s;
-        let mut gap = if fit_gap {
+        // J_eq that best goes with a gap on the short segments (+-15 % of its equation-error
+        // value): gap and inertia trade off along a ridge (a heavier motor side crosses the gap
+        // later, which looks like a wider gap), so each gap of the grid gets its own J_eq.
+        let best_j = |gap: f64| -> (f64, f64) {
+            if !fit_j {
+                return (j0, cost(&short, h0, gap, j0));
+            }
             search::grid_then_golden(
-                &search::linspace(0.0, hi, 16),
-                |g| cost(&short, h0, g, j0),
-                8,
+                &search::linspace(0.85, 1.15, 4),
+                |s| cost(&short, h0, gap, j0 * s),
+                5,
             )
-            .ok_or_else(|| {
-                FitError::Singular(String::from(
-                    "backlash: the simulation failed for every gap",
-                ))
-            })?
-            .0
-        } else {
-            solved.cfg.slots[i].get("gap")
+            .map_or((j0, f64::INFINITY), |(s, c)| (j0 * s, c))
         };
-        let mut j_eq = j0;
+        let (mut gap, mut j_eq) = if fit_gap {
+            let mut best = (f64::NAN, j0, f64::INFINITY);
+            for g in search::linspace(0.0, hi, 16) {
+                let (j, c) = best_j(g);
+                if c < best.2 {
+                    best = (g, j, c);
+                }
+            }
+            if !best.2.is_finite() {
+                return Err(FitError::Singular(String::from(
+                    "backlash: the simulation failed for every gap",
+                )));
+            }
+            (best.0, best.1)
+        } else {
+            (solved.cfg.slots[i].get("gap"), j0)
+        };
         let step = hi / 15.0;
         for (segs, h, j_span, iters) in [(&short, h0, 0.15, 8), (&long, long_h, 0.05, 8)] {
             if segs.is_empty() {
@@ -596,6 +618,20 @@ impl Dataset {
                     j_eq = jc * s;
                 }
             }
+            if fit_j && base.effects.contains(EffectKind::Coulomb) {
+                // The Coulomb level decides how far the load coasts once the motor leaves it.
+                let tc = tau_cell.get();
+                let grid = search::linspace(0.9, 1.1, 5);
+                let f = |s: f64| {
+                    tau_cell.set(tc * s);
+                    let c = cost(segs, h, gap, j_eq);
+                    tau_cell.set(tc);
+                    c
+                };
+                if let Some((s, _)) = search::grid_then_golden(&grid, f, iters) {
+                    tau_cell.set(tc * s);
+                }
+            }
             if fit_gap {
                 let grid = search::linspace((gap - step).max(0.0), gap + step, 5);
                 if let Some((g, _)) =
@@ -605,10 +641,61 @@ impl Dataset {
                 }
             }
         }
+        let refined = plant_with(gap, j_eq, tau_cell.get()).ok_or_else(|| {
+            FitError::BadModel(String::from("backlash: the refined model is not valid"))
+        })?;
         solved.cfg.slots[i].set("gap", gap);
-        solved.plant = to_plant(&solved.cfg, &solved.mech, solved.elec.as_ref())?;
-        solved.plant.params.j_eq = Some(j_eq);
+        solved.plant = refined;
         Ok(())
+    }
+
+    /// `plant` with J_eq (+-15 %) and the Coulomb level (+-10 %) refined on the simulation cost
+    /// of the fit blocks (short segments), each by a grid and a golden-section search, in turn.
+    ///
+    /// The reference a backlash candidate is judged against: its own J_eq and tau_sf are refined
+    /// on the simulation together with the gap ([`Dataset::fit_config`]), so the model without
+    /// backlash must get the same refinement, or the candidate wins on the refinement alone.
+    pub fn refine_rigid_on_simulation(&self, plant: &Plant) -> Plant {
+        let segs = oe::segments(self, oe::Part::Fit);
+        let h = self.opts.oe_horizon_s;
+        let cost = |p: &Plant| oe::prediction_cost_over(self, p, &segs, h).unwrap_or(f64::INFINITY);
+        let mut best = *plant;
+        let j0 = plant.params.j_eq();
+        let with_j = |p: &Plant, j: f64| {
+            let mut q = *p;
+            q.params.j_eq = Some(j);
+            q
+        };
+        if let Some((s, _)) = search::grid_then_golden(
+            &search::linspace(0.85, 1.15, 5),
+            |s| cost(&with_j(&best, j0 * s)),
+            8,
+        ) {
+            best = with_j(&best, j0 * s);
+        }
+        if best.effects.contains(EffectKind::Coulomb) {
+            let t0 = best.tau_sf();
+            let with_tau = |p: &Plant, t: f64| -> Option<Plant> {
+                let mut q = *p;
+                q.params.tau_sf = Some(t);
+                set(&mut q, EffectKind::Coulomb, &[t]).ok()?;
+                Some(q)
+            };
+            if let Some((s, _)) = search::grid_then_golden(
+                &search::linspace(0.9, 1.1, 5),
+                |s| with_tau(&best, t0 * s).map_or(f64::INFINITY, |p| cost(&p)),
+                8,
+            ) {
+                if let Some(p) = with_tau(&best, t0 * s) {
+                    best = p;
+                }
+            }
+        }
+        if cost(&best) <= cost(plant) {
+            best
+        } else {
+            *plant
+        }
     }
 
     /// Largest load-side speed in the torque-balance rows [rad/s].

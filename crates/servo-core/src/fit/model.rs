@@ -175,6 +175,43 @@ impl Config {
     }
 }
 
+/// The current of the torque balance at `rows` [A]: the mean over the sample centred on each
+/// row ([`super::dataset::centred_current`]). An input delay d moves the current's transitions
+/// to d mod T_s after each update; the mean then sees a lag of tau + (d mod T_s).
+fn torque_current(ds: &Dataset, cfg: &Config, rows: &super::dataset::Rows) -> Vec<f64> {
+    let d = cfg.delay_s();
+    if d <= 0.0 {
+        return ds.sample(rows, |r| r.i_torque_f.as_deref().unwrap_or(&[]));
+    }
+    let p = &cfg.base.params;
+    let tau = p.t_drv() + p.l_a / p.r_eq();
+    let ke_r = p.k_e / p.r_eq();
+    let mut out = Vec::with_capacity(rows.len());
+    let mut cur: Option<(usize, Vec<f64>)> = None;
+    for (&ri, &k) in rows.rec.iter().zip(&rows.k) {
+        if cur.as_ref().map(|(c, _)| *c) != Some(ri) {
+            let r = &ds.recs[ri];
+            let s = d - math::floor(d / r.dt_s) * r.dt_s;
+            let col = match &r.i_raw {
+                Some(i) => super::dataset::torque_current_f(
+                    &r.filter,
+                    i,
+                    &r.accel_f,
+                    r.dt_s,
+                    tau + s,
+                    ke_r,
+                ),
+                None => Vec::new(),
+            };
+            cur = Some((ri, col));
+        }
+        if let Some((_, c)) = &cur {
+            out.push(c.get(k).copied().unwrap_or(0.0));
+        }
+    }
+    out
+}
+
 /// Solves the mechanical (torque or combined) equation of `cfg`.
 pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
     let rows = &ds.mech_rows;
@@ -332,7 +369,7 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
     let (equation, y) = if ds.has_current {
         (
             Equation::Torque,
-            ds.sample(rows, |r| r.i_f.as_deref().unwrap_or(&[]))
+            torque_current(ds, cfg, rows)
                 .into_iter()
                 .map(|i| p.k_t * i)
                 .collect(),
@@ -386,6 +423,18 @@ pub fn solve_elec(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
             fixed: fixed(p.k_e / p.k_drv),
         },
     ];
+    let (mut y, mut terms) = (y, terms);
+    if cfg.slots.iter().any(|s| s.kind == EffectKind::Backlash) {
+        // The motor speed is not the measured one while it crosses the gap: no weight there.
+        for (i, &u) in rows.torque_reversal.iter().enumerate() {
+            if u {
+                y[i] = 0.0;
+                for t in terms.iter_mut() {
+                    t.col[i] = 0.0;
+                }
+            }
+        }
+    }
     solve_terms(Equation::Electrical, rows, y, terms)
 }
 
