@@ -84,24 +84,24 @@ fn open_loop(plant: &Plant, seconds: f64, seed: u64) -> Record {
     record(t, th, ia, uv, None, "open-loop")
 }
 
-/// Closed-loop PID (Bode gains of the handout's lab) following position steps of random size.
-fn closed_loop(plant: &Plant, seconds: f64, seed: u64) -> Record {
+/// Closed-loop PID (Bode gains of the handout's lab) following position steps of random size
+/// (drawn from `rng`), on any plant: `measure(rng)` gives the (load angle [rad], current [A]) the
+/// controller sees, `step(u)` advances the plant one period with input u [V].
+fn pid_log(
+    n: usize,
+    rng: &mut SplitMix64,
+    mut measure: impl FnMut(&mut SplitMix64) -> (f64, f64),
+    mut step: impl FnMut(f64),
+    src: &str,
+) -> Record {
     let (kp, ki, kd, tl) = (7.5244, 94.0379, 0.1505, 0.003);
-    let mut sim = PlantSim::new(plant, DT).unwrap();
-    let mut sensors = Sensors::new(SensorConfig {
-        seed: seed + 7,
-        ..SensorConfig::default()
-    });
-    let mut rng = SplitMix64(seed ^ 0xC105ED);
-    let n = (seconds / DT) as usize;
     let (mut t, mut th, mut ia, mut uv, mut rv) = (vec![], vec![], vec![], vec![], vec![]);
     let (mut integ, mut d_state, mut prev_y, mut r) = (0.0, 0.0, 0.0, 0.0);
     for k in 0..n {
         if k % 800 == 0 {
             r += (if rng.uniform() < 0.5 { -1.0 } else { 1.0 }) * (0.2 + 1.4 * rng.uniform());
         }
-        let m = sensors.measure(sim.state());
-        let y = m.theta_l_rad;
+        let (y, i) = measure(rng);
         let e = r - y;
         // Derivative on the measurement, first-order filtered (time constant tl).
         let dy = (y - prev_y) / DT;
@@ -114,12 +114,34 @@ fn closed_loop(plant: &Plant, seconds: f64, seed: u64) -> Record {
         }
         t.push(k as f64 * DT);
         th.push(y);
-        ia.push(m.i_a_a);
+        ia.push(i);
         uv.push(u);
         rv.push(r);
-        sim.step(u);
+        step(u);
     }
-    record(t, th, ia, uv, Some(rv), "closed-loop")
+    record(t, th, ia, uv, Some(rv), src)
+}
+
+/// [`pid_log`] on servo's simulator with its sensors.
+fn closed_loop(plant: &Plant, seconds: f64, seed: u64) -> Record {
+    let sim = core::cell::RefCell::new(PlantSim::new(plant, DT).unwrap());
+    let mut sensors = Sensors::new(SensorConfig {
+        seed: seed + 7,
+        ..SensorConfig::default()
+    });
+    let mut rng = SplitMix64(seed ^ 0xC105ED);
+    pid_log(
+        (seconds / DT) as usize,
+        &mut rng,
+        |_| {
+            let m = sensors.measure(sim.borrow().state());
+            (m.theta_l_rad, m.i_a_a)
+        },
+        |u| {
+            sim.borrow_mut().step(u);
+        },
+        "closed-loop",
+    )
 }
 
 fn logs(plant: &Plant, seed: u64) -> Vec<Record> {
@@ -576,34 +598,17 @@ fn other_simulator_logs(imbalance: Option<(f64, f64)>, seed: u64) -> Vec<Record>
         out.push(record(t, th, ia, uv, None, "other-sim open-loop"));
     }
     // Closed loop: the same PID as `closed_loop`.
-    {
-        let (kp, ki, kd, tl) = (7.5244, 94.0379, 0.1505, 0.003);
-        let mut x = [0.0; 4];
-        let (mut t, mut th, mut ia, mut uv, mut rv) = (vec![], vec![], vec![], vec![], vec![]);
-        let (mut integ, mut d_state, mut prev_y, mut rf) = (0.0, 0.0, 0.0, 0.0);
-        for k in 0..12_000 {
-            if k % 800 == 0 {
-                rf += (if rng.uniform() < 0.5 { -1.0 } else { 1.0 }) * (0.2 + 1.4 * rng.uniform());
-            }
-            let y = quant(x[3] / n);
-            let e = rf - y;
-            let dy = (y - prev_y) / DT;
-            d_state += DT / (tl + DT) * (dy - d_state);
-            prev_y = y;
-            let raw = kp * e + ki * integ - kd * d_state;
-            let u = raw.clamp(-10.0, 10.0);
-            if raw == u {
-                integ += e * DT;
-            }
-            t.push(k as f64 * DT);
-            th.push(y);
-            ia.push(x[1] + 2e-3 * rng.normal());
-            uv.push(u);
-            rv.push(rf);
-            step(&mut x, u);
-        }
-        out.push(record(t, th, ia, uv, Some(rv), "other-sim closed-loop"));
-    }
+    let x = core::cell::RefCell::new([0.0; 4]);
+    out.push(pid_log(
+        12_000,
+        &mut rng,
+        |rng| {
+            let x = x.borrow();
+            (quant(x[3] / n), x[1] + 2e-3 * rng.normal())
+        },
+        |u| step(&mut x.borrow_mut(), u),
+        "other-sim closed-loop",
+    ));
     out
 }
 
