@@ -173,15 +173,11 @@ fn main_param(kind: EffectKind) -> &'static [&'static str] {
     }
 }
 
-fn check_hidden(spec: &str, seed: u64) {
-    let hidden = Effect::parse(spec).unwrap();
-    let plant = truth(&[hidden]);
-    let logs = logs(&plant, seed);
-    let model = identified(&logs);
-    let d = diagnose::diagnose(&logs, &model, &DiagnoseOptions::default()).unwrap();
-    for c in &d.ranking {
+/// Prints the first `take` candidates of a diagnosis, tagged (shown when a test fails).
+fn print_ranking(tag: &str, d: &diagnose::Diagnosis, take: usize) {
+    for c in d.ranking.iter().take(take) {
         eprintln!(
-            "[{spec} seed {seed}] {:<10} sig={} red={:.1}% oe={:?} bic={:.1}",
+            "[{tag}] {:<10} sig={} red={:.1}% oe={:?} bic={:.1}",
             c.effect.name(),
             c.significant,
             c.error_reduction_pct,
@@ -189,6 +185,15 @@ fn check_hidden(spec: &str, seed: u64) {
             c.bic_gain
         );
     }
+}
+
+fn check_hidden(spec: &str, seed: u64) {
+    let hidden = Effect::parse(spec).unwrap();
+    let plant = truth(&[hidden]);
+    let logs = logs(&plant, seed);
+    let model = identified(&logs);
+    let d = diagnose::diagnose(&logs, &model, &DiagnoseOptions::default()).unwrap();
+    print_ranking(&format!("{spec} seed {seed}"), &d, usize::MAX);
     let w = d
         .winner()
         .unwrap_or_else(|| panic!("[{spec} seed {seed}] nothing significant: {}", d.verdict));
@@ -286,16 +291,7 @@ fn complete_model_has_nothing_significant() {
         let logs = logs(&plant, seed);
         let model = identified(&logs);
         let d = diagnose::diagnose(&logs, &model, &DiagnoseOptions::default()).unwrap();
-        for c in &d.ranking {
-            eprintln!(
-                "[none seed {seed}] {:<10} sig={} red={:.1}% oe={:?} bic={:.1}",
-                c.effect.name(),
-                c.significant,
-                c.error_reduction_pct,
-                c.oe_reduction_pct,
-                c.bic_gain
-            );
-        }
+        print_ranking(&format!("none seed {seed}"), &d, usize::MAX);
         assert!(
             d.winner().is_none(),
             "[seed {seed}] false positive: {}",
@@ -315,16 +311,7 @@ fn check_two_hidden(specs: [&str; 2], seed: u64) {
     let added: Vec<EffectKind> = ladder.iter().filter_map(|r| r.added).collect();
     for d in &diags {
         eprintln!("[{specs:?} seed {seed}] {}", d.verdict);
-        for c in d.ranking.iter().take(3) {
-            eprintln!(
-                "    {:<10} sig={} red={:.1}% oe={:?} bic={:.1}",
-                c.effect.name(),
-                c.significant,
-                c.error_reduction_pct,
-                c.oe_reduction_pct.map(|v| (v * 10.0).round() / 10.0),
-                c.bic_gain
-            );
-        }
+        print_ranking(&format!("{specs:?} seed {seed}"), d, 3);
     }
     assert_eq!(added.len(), 2, "[{specs:?} seed {seed}] added {added:?}");
     assert!(
@@ -621,16 +608,7 @@ fn another_simulators_data_are_diagnosed_on_the_physics() {
         let logs = other_simulator_logs(None, seed);
         let model = identified(&logs);
         let d = diagnose::diagnose(&logs, &model, &DiagnoseOptions::default()).unwrap();
-        for c in d.ranking.iter().take(3) {
-            eprintln!(
-                "[other none {seed}] {:<10} sig={} red={:.1}% oe={:?} bic={:.1}",
-                c.effect.name(),
-                c.significant,
-                c.error_reduction_pct,
-                c.oe_reduction_pct,
-                c.bic_gain
-            );
-        }
+        print_ranking(&format!("other none {seed}"), &d, 3);
         assert!(
             d.winner().is_none(),
             "[seed {seed}] false positive: {}",

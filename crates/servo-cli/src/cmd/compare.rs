@@ -1067,6 +1067,27 @@ fn print_text(
 
 /// Mean of `y` in `bins` equal bins of `x` over [lo, hi]; bins with fewer than 3 samples are
 /// skipped. Returns (bin centres, means).
+/// One titled chart of a single series: (title, SVG).
+fn one_series_chart(
+    title: String,
+    x_label: &str,
+    y_label: &str,
+    label: &str,
+    x: &[f64],
+    y: &[f64],
+) -> anyhow::Result<(String, String)> {
+    let svg = line_chart_svg(
+        &Chart {
+            title: &title,
+            x_label,
+            y_label,
+            ..Default::default()
+        },
+        &[Series { label, x, y }],
+    )?;
+    Ok((title, svg))
+}
+
 fn binned_mean(x: &[f64], y: &[f64], lo: f64, hi: f64, bins: usize) -> (Vec<f64>, Vec<f64>) {
     let mut s = vec![0.0; bins];
     let mut n = vec![0usize; bins];
@@ -1132,42 +1153,26 @@ pub fn compare_figures_svg(r: &CompareReport, name: &str) -> anyhow::Result<Vec<
         h.figures.rmse
     );
     let rl = format!("residual [{unit}]");
-    out.push((
-        t2.clone(),
-        line_chart_svg(
-            &Chart {
-                title: &t2,
-                x_label: "t [s]",
-                y_label: &rl,
-                ..Default::default()
-            },
-            &[Series {
-                label: "residual",
-                x: &r.time_s,
-                y: &r.residual,
-            }],
-        )?,
-    ));
+    out.push(one_series_chart(
+        t2,
+        "t [s]",
+        &rl,
+        "residual",
+        &r.time_s,
+        &r.residual,
+    )?);
     let w = &r.omega_l_rad_s;
     let lim = servo_core::compare::regimes::abs_percentile(w, 0.995).max(1e-9);
     let (bx, by) = binned_mean(w, &r.residual, -lim, lim, 60);
     let t3 = format!("{name}: residual vs measured load speed (mean per speed bin)");
-    out.push((
-        t3.clone(),
-        line_chart_svg(
-            &Chart {
-                title: &t3,
-                x_label: "omega_l [rad/s]",
-                y_label: &rl,
-                ..Default::default()
-            },
-            &[Series {
-                label: "mean residual",
-                x: &bx,
-                y: &by,
-            }],
-        )?,
-    ));
+    out.push(one_series_chart(
+        t3,
+        "omega_l [rad/s]",
+        &rl,
+        "mean residual",
+        &bx,
+        &by,
+    )?);
     if let Some(th) = &r.theta_l_rad {
         let (lo, hi) = th
             .iter()
@@ -1187,22 +1192,7 @@ pub fn compare_figures_svg(r: &CompareReport, name: &str) -> anyhow::Result<Vec<
         };
         let (bx, by) = binned_mean(&xs, &r.residual, lo, hi, 90);
         let t4 = format!("{name}: residual vs measured load position (mean per position bin)");
-        out.push((
-            t4.clone(),
-            line_chart_svg(
-                &Chart {
-                    title: &t4,
-                    x_label: xl,
-                    y_label: &rl,
-                    ..Default::default()
-                },
-                &[Series {
-                    label: "mean residual",
-                    x: &bx,
-                    y: &by,
-                }],
-            )?,
-        ));
+        out.push(one_series_chart(t4, xl, &rl, "mean residual", &bx, &by)?);
     }
     Ok(out)
 }

@@ -367,8 +367,9 @@ fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecDat
     })
 }
 
-/// [`centred_current`] filtered with `filter`, the acceleration `accel_f` [rad/s^2] being
-/// already filtered (the filter is linear: adding it after filtering the current is the same as
+/// The mean armature current over the sample centred on each row [A], filtered with `filter`:
+/// [`centred_current`] plus the back-EMF drift w (k_e/R_eq) alpha_m dt, with `k_e_over_r`
+/// [A s/rad] and the motor acceleration `accel_f` [rad/s^2] already filtered (the filter is linear: adding it after filtering the current is the same as
 /// filtering the sum).
 pub fn torque_current_f(
     filter: &ZeroPhase,
@@ -378,7 +379,7 @@ pub fn torque_current_f(
     tau_s: f64,
     k_e_over_r: f64,
 ) -> Vec<f64> {
-    let c = filter.apply(&centred_current(i, &[], dt_s, tau_s, 0.0));
+    let c = filter.apply(&centred_current(i, dt_s, tau_s));
     let w = centring_weight(dt_s, tau_s) * k_e_over_r * dt_s;
     c.iter().zip(accel_f).map(|(c, a)| c + w * a).collect()
 }
@@ -396,33 +397,24 @@ pub fn centring_weight(dt_s: f64, tau_s: f64) -> f64 {
     }
 }
 
-/// The mean armature current over the sample centred on each row [A], from point samples `i`
-/// taken at the end of each hold period (the log convention), with the motor acceleration
-/// `accel_m` [rad/s^2] at each row, back-EMF constant over resistance `k_e_over_r` [A s/rad],
-/// period `dt_s` [s] and electrical time constant `tau_s` [s].
+/// The step part of the mean armature current over the sample centred on each row [A], from
+/// point samples `i` taken at the end of each hold period (the log convention), period `dt_s` [s]
+/// and electrical time constant `tau_s` [s]: i[k] + w (i[k+1] - i[k]) ([`centring_weight`]).
 ///
 /// After an input update at t_k the current moves from i[k] towards its new level with time
-/// constant tau, while the back-EMF makes that level drift by -(k_e/R_eq) alpha_m per second.
-/// The mean over [t_k - dt/2, t_k + dt/2] is i[k] + w (i[k+1] - i[k]) + w (k_e/R_eq) alpha_m dt
-/// ([`centring_weight`]). The motion (speed, acceleration by central differences) is centred on
-/// t_k, so the torque balance must use this mean, not the point sample: with the point sample
-/// the current lags the motion and, on exact simulated states, J_eq comes out 0.85 % low and
-/// B_eq 1.7 % high; with the step part alone B_eq is right and J_eq still 0.85 % low (the
-/// drift term).
-pub fn centred_current(
-    i: &[f64],
-    accel_m: &[f64],
-    dt_s: f64,
-    tau_s: f64,
-    k_e_over_r: f64,
-) -> Vec<f64> {
+/// constant tau, while the back-EMF makes that level drift by -(k_e/R_eq) alpha_m per second;
+/// the full mean adds w (k_e/R_eq) alpha_m dt ([`torque_current_f`]). The motion (speed,
+/// acceleration by central differences) is centred on t_k, so the torque balance must use this
+/// mean, not the point sample: with the point sample the current lags the motion and, on exact
+/// simulated states, J_eq comes out 0.85 % low and B_eq 1.7 % high; with the step part alone
+/// B_eq is right and J_eq still 0.85 % low (the drift term).
+pub fn centred_current(i: &[f64], dt_s: f64, tau_s: f64) -> Vec<f64> {
     let w = centring_weight(dt_s, tau_s);
     let n = i.len();
     (0..n)
         .map(|k| {
             let next = i[(k + 1).min(n.saturating_sub(1))];
-            let a = accel_m.get(k).copied().unwrap_or(0.0);
-            i[k] + w * (next - i[k]) + w * k_e_over_r * a * dt_s
+            i[k] + w * (next - i[k])
         })
         .collect()
 }
