@@ -32,7 +32,7 @@ impl Export {
         let output = match &self.output {
             Some(o) => o.clone(),
             None => self.input.with_extension(match in_fmt {
-                LogFormat::Mcap => "csv",
+                LogFormat::Mcap | LogFormat::Mat => "csv",
                 LogFormat::Csv => "mcap",
             }),
         };
@@ -49,6 +49,10 @@ impl Export {
         }
         match out_fmt {
             LogFormat::Csv => write_csv(&output, &rec)?,
+            LogFormat::Mat => bail!(
+                "{}: servo does not write MAT-files; export to .csv or .mcap",
+                output.display()
+            ),
             LogFormat::Mcap => {
                 let mut entries = meta.entries.clone();
                 entries

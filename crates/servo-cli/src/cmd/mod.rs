@@ -8,6 +8,7 @@ pub mod diagnose;
 pub mod export;
 pub mod identify;
 pub mod identify_ramp;
+pub mod inspect;
 pub mod log;
 pub mod params;
 pub mod ports;
@@ -26,6 +27,8 @@ pub enum Command {
     Demo(demo::Demo),
     /// Convert a log (MCAP) to servo's CSV.
     Export(export::Export),
+    /// List what a log holds: MAT variables, fields, shapes and labels; CSV columns; MCAP channels.
+    Inspect(inspect::Inspect),
     /// Identify friction, inertia and electrical constants from experiments or logs.
     Identify(identify::Identify),
     /// Compare a model with measurements; add effects and watch the error fall.
@@ -48,6 +51,7 @@ impl Command {
             Command::Run(c) => c.run(),
             Command::Demo(c) => c.run(),
             Command::Export(c) => c.run(),
+            Command::Inspect(c) => c.run(),
             Command::Identify(c) => c.run(),
             Command::Compare(c) => c.run(),
             Command::Diagnose(c) => c.run(),

@@ -45,7 +45,11 @@ impl ColumnMap {
     /// Parses a `--columns` value.
     pub fn parse(text: &str) -> anyhow::Result<ColumnMap> {
         let mut entries: Vec<ColumnSpec> = Vec::new();
-        for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        for item in split_top(text, ',')
+            .into_iter()
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+        {
             let (sig, rest) = item.split_once('=').ok_or_else(|| {
                 anyhow!("--columns: `{item}` is not `signal=column[:unit]` (example: --columns {EXAMPLE})")
             })?;
@@ -56,9 +60,11 @@ impl ColumnMap {
                     Signal::name_list()
                 )
             })?;
-            let (column, unit_text) = match rest.split_once(':') {
-                Some((c, u)) => (c.trim(), Some(u.trim())),
-                None => (rest.trim(), None),
+            // A MATLAB path may hold `:` and `,` inside brackets (`values(:,1)`).
+            let (column, unit_text) = match split_top(rest, ':').as_slice() {
+                [c] => (c.trim(), None),
+                [c, ..] => (c.trim(), Some(rest[c.len() + 1..].trim())),
+                [] => ("", None),
             };
             if column.is_empty() {
                 bail!("--columns: `{item}` names no column (example: --columns {EXAMPLE})");
@@ -148,6 +154,24 @@ impl ColumnMap {
     }
 }
 
+/// Splits `text` at `sep` outside `(...)` and `{...}`.
+fn split_top(text: &str, sep: char) -> Vec<&str> {
+    let (mut depth, mut start, mut out) = (0i32, 0, Vec::new());
+    for (i, c) in text.char_indices() {
+        match c {
+            '(' | '{' => depth += 1,
+            ')' | '}' => depth -= 1,
+            _ if c == sep && depth <= 0 => {
+                out.push(&text[start..i]);
+                start = i + c.len_utf8();
+            }
+            _ => {}
+        }
+    }
+    out.push(&text[start..]);
+    out
+}
+
 /// Unit suffixes recognised at the end of a header name (case-sensitive for V/A to avoid
 /// matching words; longest first). `None`: a derivative we do not import (acceleration).
 const SUFFIXES: [(&str, Option<&str>); 26] = [
@@ -194,7 +218,7 @@ fn signal_from_word(word: &str) -> Option<Signal> {
 }
 
 /// Guesses (signal, unit) of one header name, or `None`.
-fn guess_column(name: &str) -> Option<(Signal, Unit)> {
+pub(crate) fn guess_column(name: &str) -> Option<(Signal, Unit)> {
     let (base, unit) = SUFFIXES.iter().find_map(|(suf, unit)| {
         let base = name.strip_suffix(suf)?;
         (!base.is_empty()).then_some((base, *unit))

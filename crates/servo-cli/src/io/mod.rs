@@ -8,11 +8,16 @@
 //! * [`csv_read`], [`csv_write`]: CSV logs.
 //! * [`loop_msg`]: the `/servo/loop` JSON message and its JSON schema.
 //! * [`mcap_write`], [`mcap_read`]: MCAP logs (Foxglove/PlotJuggler compatible).
+//! * [`mat_read`], [`mat_path`], [`mat_log`]: MATLAB MAT-files (Level 5, -v6/-v7), MATLAB paths
+//!   in `--columns`, Simulink Scope structures.
 
 pub mod columns;
 pub mod csv_read;
 pub mod csv_write;
 pub mod loop_msg;
+pub mod mat_log;
+pub mod mat_path;
+pub mod mat_read;
 pub mod mcap_read;
 pub mod mcap_write;
 pub mod units;
@@ -34,10 +39,11 @@ use std::path::Path;
 pub enum LogFormat {
     Mcap,
     Csv,
+    Mat,
 }
 
 impl LogFormat {
-    /// The format of `path` from its extension (`.mcap`, `.csv`, `.txt`, `.tsv`).
+    /// The format of `path` from its extension (`.mcap`, `.csv`, `.txt`, `.tsv`, `.mat`).
     pub fn of(path: &Path) -> anyhow::Result<LogFormat> {
         let ext = path
             .extension()
@@ -47,8 +53,9 @@ impl LogFormat {
         match ext.as_str() {
             "mcap" => Ok(LogFormat::Mcap),
             "csv" | "txt" | "tsv" => Ok(LogFormat::Csv),
+            "mat" => Ok(LogFormat::Mat),
             _ => bail!(
-                "{}: unknown log format `.{ext}`; expected a .mcap or .csv file",
+                "{}: unknown log format `.{ext}`; expected a .mcap, .csv or .mat file",
                 path.display()
             ),
         }
@@ -149,12 +156,14 @@ impl LogMeta {
     }
 }
 
-/// Reads a log (MCAP or CSV, by extension) into a [`Record`] in SI units, printing notes (a
+/// Reads a log (MCAP, CSV or MAT, by extension) into a [`Record`] in SI units, printing notes (a
 /// guessed column map, data lost from a truncated MCAP) to stderr.
 ///
 /// `columns` is the `--columns` map for foreign CSVs, e.g.
 /// `time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A`; `None` means servo's own columns
-/// (`time_s,u_V,theta_l_rad,i_a_A[,ref_rad]`) or a guess from the header's unit suffixes.
+/// (`time_s,u_V,theta_l_rad,i_a_A[,ref_rad]`) or a guess from the header's unit suffixes. For a
+/// MAT-file the columns are MATLAB paths (`time=scope.time,theta_l=scope.signals(1).values:deg`),
+/// guessed from Simulink Scope labels when `None`.
 pub fn read_log(path: &Path, columns: Option<&str>) -> anyhow::Result<Record> {
     let (rec, meta) = read_log_with_meta(path, columns)?;
     for n in &meta.notes {
@@ -168,6 +177,17 @@ pub fn read_log_with_meta(path: &Path, columns: Option<&str>) -> anyhow::Result<
     match LogFormat::of(path)? {
         LogFormat::Csv => {
             let imp = csv_read::read_csv(path, columns)?;
+            Ok((
+                imp.record,
+                LogMeta {
+                    columns: Some(imp.map.to_string()),
+                    notes: imp.notes,
+                    ..LogMeta::default()
+                },
+            ))
+        }
+        LogFormat::Mat => {
+            let imp = mat_log::read_mat_log(path, columns)?;
             Ok((
                 imp.record,
                 LogMeta {
