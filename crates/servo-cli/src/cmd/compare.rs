@@ -467,6 +467,54 @@ impl Compare {
         Ok(())
     }
 
+    /// For a log without u: the u the controller commanded, rebuilt from the logged reference
+    /// and position (the controller ran on exactly these), limited as the replay limits it. The
+    /// closed-loop replay then runs from the reference; the u compared is this rebuilt one.
+    fn reconstruct_u(&self, log: &mut LogData) -> anyhow::Result<()> {
+        let name = log.path.display().to_string();
+        if self.gains_from_log {
+            bail!("--gains-from-log: {name} has no u to fit the gains to; give --gains gains.toml");
+        }
+        if log.controller.is_none() {
+            bail!(
+                "{name} has no u (driver voltage): servo replays such a log in closed loop from the reference, which needs the controller that ran: give --gains gains.toml (the PID of `servo design` or the lab's gains)"
+            );
+        }
+        let Some((limit, _)) = log.u_limit.clone() else {
+            bail!(
+                "{name} has no u, so the controller's output limit cannot be read off it: give --u-limit-v (e.g. 10 for a +/-10 V DAC) or `u_limit_v` in the gains file"
+            );
+        };
+        let m = &log.measured;
+        let (Some(r), Some(th)) = (&m.ref_rad, &m.theta_l_rad) else {
+            return Ok(());
+        };
+        let mut c = ReplayController::of(log)?
+            .ok_or_else(|| anyhow!("{name}: no controller to rebuild u"))?;
+        let u: Vec<f64> = r
+            .iter()
+            .zip(th)
+            .map(|(&rk, &tk)| c.update(rk, tk).clamp(-limit, limit))
+            .collect();
+        log.notes.push(format!(
+            "{name} has no u: the closed loop is replayed from the reference with the controller (gains {}); the u shown is the controller's output on the logged position (rebuilt, not measured), limited to +/-{limit} V",
+            log.controller
+                .as_ref()
+                .and_then(|g| g.part("gains"))
+                .map(|p| p.source.as_str())
+                .unwrap_or_default()
+        ));
+        if !self.json {
+            if let Some(n) = log.notes.last() {
+                eprintln!("note: {n}");
+            }
+        }
+        log.record.u_v = Some(u.clone());
+        log.measured.u_v = u;
+        log.check = None;
+        Ok(())
+    }
+
     pub fn run(self) -> anyhow::Result<()> {
         self.run_report().map(|_| ())
     }
@@ -500,8 +548,16 @@ impl Compare {
         let opts = CompareOptions::default();
         let mut logs = Vec::new();
         for path in &self.logs {
-            let (record, meta) = crate::io::read_log_with_meta(path, self.columns.as_deref())
+            let (mut record, meta) = crate::io::read_log_with_meta(path, self.columns.as_deref())
                 .with_context(|| format!("reading log {}", path.display()))?;
+            // A lab log without u (angle, reference, current): the closed loop is replayed from
+            // the controller and the reference; u is what that controller commanded.
+            let no_u = record.u_v.is_none()
+                && record.ref_rad.is_some()
+                && (record.theta_l_rad.is_some() || record.theta_m_rad.is_some());
+            if no_u {
+                record.u_v = Some(vec![0.0; record.len()]);
+            }
             if !self.json {
                 for n in &meta.notes {
                     eprintln!("note: {n}");
@@ -531,7 +587,11 @@ impl Compare {
                     eprintln!("note: {n}");
                 }
             }
-            self.check_gains(&mut log)?;
+            if no_u {
+                self.reconstruct_u(&mut log)?;
+            } else {
+                self.check_gains(&mut log)?;
+            }
             logs.push(log);
         }
         let modes: Vec<ModeChoice> = logs

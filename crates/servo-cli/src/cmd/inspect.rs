@@ -45,7 +45,8 @@ impl Inspect {
                 );
             }
             LogFormat::Mcap => {
-                let bytes = std::fs::read(&self.file).with_context(|| format!("reading {source}"))?;
+                let bytes =
+                    std::fs::read(&self.file).with_context(|| format!("reading {source}"))?;
                 outln!("{source}: MCAP");
                 match mcap::read::Summary::read(&bytes) {
                     Ok(Some(s)) => {

@@ -10,42 +10,43 @@ pub const LOOP_SCHEMA_NAME: &str = "servo.Loop";
 
 /// One control sample. Row convention: measurements taken at `time_s`, `u_v` applied from then
 /// until the next sample. Fields that do not apply (no reference in an open-loop run) or were not
-/// measured are null (NaN in memory).
+/// measured are null (NaN in memory); a foreign writer may also leave them out (read as null).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct LoopMsg {
     /// Run time of the sample [s].
     pub time_s: f64,
     /// Position reference at the load [rad] (null in open loop).
-    #[serde(with = "nullable")]
+    #[serde(with = "nullable", default = "nullable::absent")]
     pub ref_rad: f64,
     /// Measured load angle theta_l [rad].
-    #[serde(with = "nullable")]
+    #[serde(with = "nullable", default = "nullable::absent")]
     pub theta_l_rad: f64,
     /// Load speed estimate omega_l [rad/s].
-    #[serde(with = "nullable")]
+    #[serde(with = "nullable", default = "nullable::absent")]
     pub omega_l_rad_s: f64,
     /// Tracking error ref - theta_l [rad] (null in open loop).
-    #[serde(with = "nullable")]
+    #[serde(with = "nullable", default = "nullable::absent")]
     pub err_rad: f64,
     /// Driver input u applied until the next sample [V], after the output limit.
-    #[serde(with = "nullable")]
+    #[serde(with = "nullable", default = "nullable::absent")]
     pub u_v: f64,
     /// Feedforward part of u [V].
-    #[serde(with = "nullable")]
+    #[serde(with = "nullable", default = "nullable::absent")]
     pub ff_v: f64,
     /// Proportional term [V].
-    #[serde(with = "nullable")]
+    #[serde(with = "nullable", default = "nullable::absent")]
     pub p_v: f64,
     /// Integral term [V].
-    #[serde(with = "nullable")]
+    #[serde(with = "nullable", default = "nullable::absent")]
     pub i_v: f64,
     /// Derivative term [V].
-    #[serde(with = "nullable")]
+    #[serde(with = "nullable", default = "nullable::absent")]
     pub d_v: f64,
     /// Measured armature current i_a [A].
-    #[serde(with = "nullable")]
+    #[serde(with = "nullable", default = "nullable::absent")]
     pub i_a_a: f64,
-    /// True when the controller output was clipped at the voltage limit.
+    /// True when the controller output was clipped at the voltage limit (false when absent).
+    #[serde(default)]
     pub saturated: bool,
 }
 
@@ -90,6 +91,10 @@ mod nullable {
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
         Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
     }
+    /// A field left out: null.
+    pub fn absent() -> f64 {
+        f64::NAN
+    }
 }
 
 #[cfg(test)]
@@ -130,5 +135,18 @@ mod tests {
         {
             assert!(props.contains_key(k), "schema lacks {k}");
         }
+    }
+
+    #[test]
+    fn nullable_fields_may_be_absent() {
+        // A foreign writer that logs only what it measured.
+        let m: LoopMsg =
+            serde_json::from_str(r#"{"time_s":0.5,"theta_l_rad":1.25,"u_v":null}"#).unwrap();
+        assert_eq!((m.time_s, m.theta_l_rad, m.saturated), (0.5, 1.25, false));
+        assert!(
+            m.omega_l_rad_s.is_nan() && m.u_v.is_nan() && m.i_a_a.is_nan() && m.ref_rad.is_nan()
+        );
+        let e = serde_json::from_str::<LoopMsg>(r#"{"theta_l_rad":1.0}"#).unwrap_err();
+        assert!(e.to_string().contains("time_s"), "{e}");
     }
 }

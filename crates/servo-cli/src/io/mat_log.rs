@@ -184,7 +184,9 @@ fn candidates(file: &MatFile) -> Vec<Candidate> {
         match &var.value {
             MatValue::Struct(s) if s.len() == 1 => {
                 let time = match s.field(0, "time") {
-                    Some(MatValue::Numeric(t)) if t.real.len() > 1 => Some(format!("{}.time", var.name)),
+                    Some(MatValue::Numeric(t)) if t.real.len() > 1 => {
+                        Some(format!("{}.time", var.name))
+                    }
                     _ => None,
                 };
                 let Some(MatValue::Struct(sig)) = s.field(0, "signals") else {
@@ -219,7 +221,9 @@ fn candidates(file: &MatFile) -> Vec<Candidate> {
                     }
                 }
             }
-            MatValue::Numeric(a) if a.real.len() > 1 && a.dims.iter().filter(|&&d| d > 1).count() == 1 => {
+            MatValue::Numeric(a)
+                if a.real.len() > 1 && a.dims.iter().filter(|&&d| d > 1).count() == 1 =>
+            {
                 out.push(Candidate {
                     path: var.name.clone(),
                     label: var.name.clone(),
@@ -277,7 +281,18 @@ pub fn guess(file: &MatFile) -> anyhow::Result<ColumnMap> {
     let listing = || {
         cands
             .iter()
-            .map(|c| format!("{} ({} samples{})", c.path, c.len, if c.label.is_empty() || c.label == c.path { String::new() } else { format!(", label '{}'", c.label) }))
+            .map(|c| {
+                format!(
+                    "{} ({} samples{})",
+                    c.path,
+                    c.len,
+                    if c.label.is_empty() || c.label == c.path {
+                        String::new()
+                    } else {
+                        format!(", label '{}'", c.label)
+                    }
+                )
+            })
             .collect::<Vec<_>>()
             .join("; ")
     };
@@ -351,7 +366,9 @@ fn walk(path: &str, v: &MatValue, label: Option<&str>, depth: usize, out: &mut V
                     .real
                     .iter()
                     .filter(|x| x.is_finite())
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+                        (l.min(x), h.max(x))
+                    });
                 if lo <= hi {
                     line.push_str(&format!("  range {lo}..{hi}"));
                 }
@@ -366,7 +383,10 @@ fn walk(path: &str, v: &MatValue, label: Option<&str>, depth: usize, out: &mut V
             if t.chars().count() <= 72 {
                 out.push(format!("{head} '{t}'"));
             } else {
-                out.push(format!("{head} '{}...'", t.chars().take(72).collect::<String>()));
+                out.push(format!(
+                    "{head} '{}...'",
+                    t.chars().take(72).collect::<String>()
+                ));
             }
         }
         MatValue::Cell { items, .. } => {
@@ -375,19 +395,32 @@ fn walk(path: &str, v: &MatValue, label: Option<&str>, depth: usize, out: &mut V
                 walk(&format!("{path}{{{}}}", k + 1), it, None, depth + 1, out);
             }
             if items.len() > LIST_ELEMENTS {
-                out.push(format!("{path}{{...}}  {} more cells", items.len() - LIST_ELEMENTS));
+                out.push(format!(
+                    "{path}{{...}}  {} more cells",
+                    items.len() - LIST_ELEMENTS
+                ));
             }
         }
         MatValue::Struct(s) => {
-            let scope = s.len() == 1 && s.fields.iter().any(|f| f == "time") && s.fields.iter().any(|f| f == "signals");
+            let scope = s.len() == 1
+                && s.fields.iter().any(|f| f == "time")
+                && s.fields.iter().any(|f| f == "signals");
             out.push(format!(
                 "{head}  fields {}{}",
                 s.fields.join(", "),
-                if scope { "  (Simulink Scope structure with time)" } else { "" }
+                if scope {
+                    "  (Simulink Scope structure with time)"
+                } else {
+                    ""
+                }
             ));
             let n = s.len();
             for e in 0..n.min(LIST_ELEMENTS) {
-                let ep = if n == 1 { path.to_string() } else { format!("{path}({})", e + 1) };
+                let ep = if n == 1 {
+                    path.to_string()
+                } else {
+                    format!("{path}({})", e + 1)
+                };
                 let lab = s.field(e, "label").and_then(MatValue::as_text);
                 for f in &s.fields {
                     if let Some(fv) = s.field(e, f) {
@@ -400,6 +433,8 @@ fn walk(path: &str, v: &MatValue, label: Option<&str>, depth: usize, out: &mut V
                 out.push(format!("{path}(...)  {} more elements", n - LIST_ELEMENTS));
             }
         }
-        MatValue::Skipped { .. } => out.push(format!("{head}  (skipped: servo does not read this class)")),
+        MatValue::Skipped { .. } => {
+            out.push(format!("{head}  (skipped: servo does not read this class)"))
+        }
     }
 }

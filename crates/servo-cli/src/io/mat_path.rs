@@ -137,9 +137,7 @@ fn linear(ix: &[Index], dims: &[usize], path: &str) -> Result<usize, String> {
             Index::At(k) => Err(format!("`{path}`: index {k} exceeds the size {len}")),
             Index::End if len > 0 => Ok(len - 1),
             Index::All if len == 1 => Ok(0),
-            _ => Err(format!(
-                "`{path}`: pick one element with a number, not `:`"
-            )),
+            _ => Err(format!("`{path}`: pick one element with a number, not `:`")),
         }
     };
     match ix {
@@ -237,7 +235,9 @@ pub fn resolve(file: &MatFile, path: &MatPath) -> Result<Series, String> {
             }
             (Step::Index(ix), MatValue::Numeric(a)) => {
                 if steps.peek().is_some() {
-                    return Err(format!("`{text}`: nothing can follow an index into numbers"));
+                    return Err(format!(
+                        "`{text}`: nothing can follow an index into numbers"
+                    ));
                 }
                 let rows = a.dims.first().copied().unwrap_or(0);
                 let cols = numel(&a.dims).checked_div(rows).unwrap_or(0);

@@ -88,7 +88,8 @@ impl StructArray {
     /// Field `name` of element `e` (0-based).
     pub fn field(&self, e: usize, name: &str) -> Option<&MatValue> {
         let f = self.fields.iter().position(|x| x == name)?;
-        self.values.get(e.checked_mul(self.fields.len())?.checked_add(f)?)
+        self.values
+            .get(e.checked_mul(self.fields.len())?.checked_add(f)?)
     }
 }
 
@@ -107,7 +108,10 @@ pub enum MatValue {
     },
     Struct(StructArray),
     /// A value servo does not read (sparse, function handle, opaque object), with its class.
-    Skipped { class: String, dims: Vec<usize> },
+    Skipped {
+        class: String,
+        dims: Vec<usize>,
+    },
 }
 
 impl MatValue {
@@ -357,7 +361,9 @@ impl Parser {
             // Small data element: type and length in one word, data in the next 4 bytes.
             let (ty, n) = (w0 & 0xffff, (w0 >> 16) as usize);
             if n > 4 {
-                return Err(self.corrupt(at, format!("a small element claims {n} bytes (at most 4)")));
+                return Err(
+                    self.corrupt(at, format!("a small element claims {n} bytes (at most 4)"))
+                );
             }
             cur.pos = at + 8;
             return Ok((ty, &head[4..4 + n]));
@@ -482,16 +488,20 @@ impl Parser {
                 };
                 MatValue::Numeric(NumericArray {
                     dims,
-                    class: if logical { "logical" } else { class_name(class) },
+                    class: if logical {
+                        "logical"
+                    } else {
+                        class_name(class)
+                    },
                     real,
                     imag,
                 })
             }
             4 => {
                 let (ty, raw) = self.tag(&mut cur, false)?;
-                let chars = self.chars(ty, raw).ok_or_else(|| {
-                    self.corrupt(base, format!("char data of unknown type {ty}"))
-                })?;
+                let chars = self
+                    .chars(ty, raw)
+                    .ok_or_else(|| self.corrupt(base, format!("char data of unknown type {ty}")))?;
                 let r = dims.first().copied().unwrap_or(0);
                 let rows = if r <= 1 {
                     vec![chars.into_iter().collect()]
@@ -564,7 +574,10 @@ impl Parser {
         let at = base + cur.pos;
         let (ty, body) = self.tag(cur, false)?;
         if ty != MI_MATRIX {
-            return Err(self.corrupt(at, format!("expected a matrix element (type 14), found type {ty}")));
+            return Err(self.corrupt(
+                at,
+                format!("expected a matrix element (type 14), found type {ty}"),
+            ));
         }
         Ok(self.matrix(body, at + 8, depth + 1)?.1)
     }
