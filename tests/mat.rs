@@ -760,7 +760,7 @@ fn mat_reader_survives_mutations() {
         let name = f.file_name().unwrap().to_string_lossy().into_owned();
         let inf = inflated(&bytes);
         parse_mat(&inf).unwrap_or_else(|e| panic!("{name} inflated: {e}"));
-        let iters = if bytes.len() > 200_000 { 40 } else { 400 };
+        let iters = if bytes.len() > 200_000 { 100 } else { 1000 };
         let (a, n) = fuzz(&name, &bytes, iters, 100 + i as u64);
         let (b, m) = fuzz(&name, &inf, iters, 200 + i as u64);
         println!("{name}: {a}/{n} compressed and {b}/{m} inflated mutations still parse");

@@ -40,13 +40,16 @@ use std::path::{Path, PathBuf};
 /// where each part came from.
 #[derive(Debug, clap::Parser)]
 pub struct Compare {
-    /// Logs (servo MCAP or CSV; foreign CSV through --columns).
+    /// Logs (servo MCAP, CSV or MATLAB .mat; foreign CSV and .mat through --columns). A log
+    /// without u (angle, reference, current) is replayed in closed loop from --gains and the
+    /// reference.
     #[arg(required = true, value_name = "LOG")]
     pub logs: Vec<PathBuf>,
     /// Model file (TOML: [params], [effects.*]).
     #[arg(long, value_name = "model.toml")]
     pub model: PathBuf,
-    /// Column map for foreign CSVs, e.g. `time=t_s,theta_l=thl_meas_deg:deg,u=u_V,ref=thl_ref_deg:deg`.
+    /// Column map for foreign CSVs, e.g. `time=t_s,theta_l=thl_meas_deg:deg,u=u_V,ref=thl_ref_deg:deg`,
+    /// or MATLAB paths for .mat files (`theta_l=scope.signals(1).values(:,1):deg`).
     #[arg(long, value_name = "MAP")]
     pub columns: Option<String>,
     /// Gains of the controller that ran during the log (gains file of `servo design`): enables

@@ -19,13 +19,14 @@ use std::path::PathBuf;
 
 #[derive(Debug, clap::Parser)]
 pub struct Diagnose {
-    /// Logs (MCAP or CSV) of the same plant; open-loop and closed-loop runs are used together.
+    /// Logs (MCAP, CSV or MATLAB .mat) of the same plant; open-loop and closed-loop runs are used together.
     #[arg(required = true)]
     pub logs: Vec<PathBuf>,
     /// The model to diagnose (TOML model file, e.g. from `servo identify`).
     #[arg(long)]
     pub model: PathBuf,
-    /// Column map for foreign CSVs, e.g. `time=t_s,theta_l=thl_meas_deg:deg,u=u_V`.
+    /// Column map for foreign CSVs, e.g. `time=t_s,theta_l=thl_meas_deg:deg,u=u_V`, or MATLAB
+    /// paths for .mat files (`theta_l=scope.signals(1).values(:,1):deg`).
     #[arg(long)]
     pub columns: Option<String>,
     /// Print one JSON object `{ "ranking": [...], "verdict": ... }` instead of text.

@@ -15,13 +15,14 @@ use std::path::PathBuf;
 /// Convert a log: MCAP -> CSV, or CSV (servo's or foreign with --columns) -> MCAP/CSV.
 #[derive(Debug, clap::Parser)]
 pub struct Export {
-    /// Input log (.mcap or .csv).
+    /// Input log (.mcap, .csv or MATLAB .mat).
     pub input: PathBuf,
     /// Output file; the format follows the extension (.csv or .mcap). Default: the input with
     /// .csv (or .mcap for a CSV input).
     #[arg(short = 'o', long = "output", value_name = "FILE")]
     pub output: Option<PathBuf>,
-    /// Column map of a foreign CSV input, e.g. `time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A`.
+    /// Column map of a foreign CSV input, e.g. `time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A`,
+    /// or MATLAB paths for a .mat input (`time=scope.time,theta_l=scope.signals(1).values:deg`).
     #[arg(long, value_name = "MAP")]
     pub columns: Option<String>,
 }

@@ -51,12 +51,13 @@ pub enum InertiaMethod {
 /// Identify friction, inertia and electrical constants from logs or experiments.
 #[derive(Debug, clap::Parser)]
 pub struct Identify {
-    /// Logs to estimate from (MCAP or CSV). Several logs give one joint estimate (e.g. the
+    /// Logs to estimate from (MCAP, CSV or MATLAB .mat). Several logs give one joint estimate (e.g. the
     /// positive and negative friction runs and the inertia run).
     #[arg(value_name = "LOG")]
     pub logs: Vec<PathBuf>,
 
-    /// Column map for CSV logs, e.g. `time=t_s,omega_m=wm_rpm:rpm,i_a=ia_A`. Given once it
+    /// Column map for CSV and .mat logs, e.g. `time=t_s,omega_m=wm_rpm:rpm,i_a=ia_A` (MATLAB paths
+    /// for .mat: `time=scope.time,omega_m=scope.signals(1).values:rpm`; `servo inspect` lists them). Given once it
     /// applies to every log; given once per log it applies to the logs in order.
     #[arg(long = "columns", value_name = "MAP")]
     pub columns: Vec<String>,
@@ -207,7 +208,7 @@ impl Identify {
             }
         }
         if self.logs.is_empty() && !self.ramp {
-            bail!("no logs given: pass LOG files (MCAP or CSV with --columns) or --ramp to run the experiments");
+            bail!("no logs given: pass LOG files (MCAP, or CSV/.mat with --columns) or --ramp to run the experiments");
         }
         if !(self.columns.len() <= 1 || self.columns.len() == self.logs.len()) {
             bail!(

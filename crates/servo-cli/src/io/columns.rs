@@ -271,6 +271,20 @@ mod tests {
     }
 
     #[test]
+    fn matlab_paths_keep_their_brackets() {
+        let t = "time=s.time,theta_l=s.signals(1).values(:,1):deg,theta_m=s.signals(2).values(:,end):counts:2000,u=c{2}";
+        let m = ColumnMap::parse(t).unwrap();
+        assert_eq!(
+            m.get(Signal::ThetaL).unwrap().column,
+            "s.signals(1).values(:,1)"
+        );
+        assert_eq!(m.get(Signal::ThetaL).unwrap().unit, Unit::Deg);
+        assert_eq!(m.get(Signal::ThetaM).unwrap().unit, Unit::Counts(2000.0));
+        assert_eq!(m.get(Signal::U).unwrap().column, "c{2}");
+        assert_eq!(m.to_string(), t);
+    }
+
+    #[test]
     fn parse_errors() {
         for (bad, needle) in [
             ("time=t,speed=w", "unknown signal `speed`"),

@@ -690,3 +690,75 @@ fn class_name(class: u32) -> &'static str {
         _ => "uint64",
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A header with `mark` (`IM` little-endian, `MI` big-endian).
+    fn header(mark: &[u8; 2]) -> Vec<u8> {
+        let mut h = b"MATLAB 5.0 MAT-file, test".to_vec();
+        h.resize(124, b' ');
+        h.extend_from_slice(&[1, 0]);
+        h.extend_from_slice(mark);
+        h
+    }
+
+    #[test]
+    fn big_endian_uncompressed_matrix() {
+        // x = [1.5 -2], big-endian, its name in a small data element.
+        let mut f = header(b"MI");
+        let mut body = Vec::new();
+        for w in [6u32, 8, 6, 0, 5, 8, 1, 2] {
+            body.extend_from_slice(&w.to_be_bytes());
+        }
+        body.extend_from_slice(&((1u32 << 16) | 1).to_be_bytes()); // small element: 1 byte
+        body.extend_from_slice(b"x\0\0\0");
+        body.extend_from_slice(&9u32.to_be_bytes());
+        body.extend_from_slice(&16u32.to_be_bytes());
+        body.extend_from_slice(&1.5f64.to_be_bytes());
+        body.extend_from_slice(&(-2.0f64).to_be_bytes());
+        f.extend_from_slice(&14u32.to_be_bytes());
+        f.extend_from_slice(&(body.len() as u32).to_be_bytes());
+        f.extend(body);
+        let m = parse_mat(&f).unwrap();
+        match m.get("x") {
+            Some(MatValue::Numeric(a)) => {
+                assert_eq!(
+                    (a.dims.as_slice(), a.real.as_slice()),
+                    (&[1, 2][..], &[1.5, -2.0][..])
+                )
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn clear_errors_for_other_files() {
+        let e = parse_mat(b"\x89HDF\r\n\x1a\n").unwrap_err().to_string();
+        assert!(e.contains("v7.3 (HDF5)") && e.contains("-v7"), "{e}");
+        let e = parse_mat(b"time_s,u_V\n0,1\n").unwrap_err().to_string();
+        assert!(e.contains("128-byte"), "{e}");
+        let mut h = header(b"XX");
+        h.extend_from_slice(&[0; 8]);
+        assert!(parse_mat(&h).unwrap_err().to_string().contains("endian"));
+        // A tag claiming more bytes than the file has.
+        let mut h = header(b"IM");
+        h.extend_from_slice(&14u32.to_le_bytes());
+        h.extend_from_slice(&1000u32.to_le_bytes());
+        let e = parse_mat(&h).unwrap_err().to_string();
+        assert!(
+            e.contains("at byte 128") && e.contains("claims 1000 bytes"),
+            "{e}"
+        );
+        // A compressed element that is not zlib.
+        let mut h = header(b"IM");
+        h.extend_from_slice(&15u32.to_le_bytes());
+        h.extend_from_slice(&4u32.to_le_bytes());
+        h.extend_from_slice(b"junk");
+        let e = parse_mat(&h).unwrap_err().to_string();
+        assert!(e.contains("do not inflate"), "{e}");
+        // An empty file body is an empty MAT-file.
+        assert!(parse_mat(&header(b"IM")).unwrap().variables.is_empty());
+    }
+}
