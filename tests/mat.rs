@@ -739,7 +739,7 @@ fn fuzz(name: &str, base: &[u8], iterations: u64, seed: u64) -> (u64, u64) {
 fn mat_reader_survives_mutations() {
     // Synthetic files, compressed and not, and hand-made hostile headers.
     for (k, compressed) in [true, false].into_iter().enumerate() {
-        let (ok, n) = fuzz("synthetic", &synthetic(compressed), 3000, 11 + k as u64);
+        let (ok, n) = fuzz("synthetic", &synthetic(compressed), 6000, 11 + k as u64);
         println!("synthetic (compressed {compressed}): {ok}/{n} mutations still parse");
     }
     let mut bomb = synthetic(false)[..128].to_vec();
