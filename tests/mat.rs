@@ -669,7 +669,7 @@ fn mutate(base: &[u8], rng: &mut SplitMix64, focus: usize) -> Vec<u8> {
     let mut b = base.to_vec();
     // Mostly near the structure (the first `focus` bytes), sometimes anywhere.
     let at = |rng: &mut SplitMix64, len: usize| {
-        let span = if rng.next_u64() % 4 == 0 {
+        let span = if rng.next_u64() & 3 == 0 {
             len
         } else {
             focus.min(len)
@@ -688,7 +688,7 @@ fn mutate(base: &[u8], rng: &mut SplitMix64, focus: usize) -> Vec<u8> {
             }
             1 => {
                 let i = at(rng, len);
-                b[i] = if rng.next_u64() % 2 == 0 { 0 } else { 0xff };
+                b[i] = if rng.next_u64() & 1 == 0 { 0 } else { 0xff };
             }
             2 => {
                 let i = at(rng, len - 4) & !3;

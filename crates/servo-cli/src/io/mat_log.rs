@@ -55,13 +55,19 @@ pub fn import(file: &MatFile, source: &str, columns: Option<&str>) -> anyhow::Re
     if time.is_empty() {
         bail!("{source}: the time `{}` is empty", time_spec.column);
     }
-    if let Some(k) = (1..time.len()).find(|&k| !(time[k] > time[k - 1]) || !time[k].is_finite()) {
+    if let Some(k) =
+        (0..time.len()).find(|&k| !time[k].is_finite() || (k > 0 && time[k] <= time[k - 1]))
+    {
         bail!(
-            "{source}: the time `{}` must increase strictly; sample {} is {} s after {} s",
+            "{source}: the time `{}` must be finite and increase strictly; sample {} is {} s{}",
             time_spec.column,
             k + 1,
             time[k],
-            time[k - 1]
+            if k > 0 {
+                format!(" after {} s", time[k - 1])
+            } else {
+                String::new()
+            }
         );
     }
     let mut rec = Record {

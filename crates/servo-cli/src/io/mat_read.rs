@@ -234,7 +234,7 @@ pub fn parse_mat(bytes: &[u8]) -> Result<MatFile, MatError> {
         b"IM" => false,
         b"MI" => true,
         _ => {
-            let hint = if bytes[..4].iter().any(|&b| b == 0) {
+            let hint = if bytes[..4].contains(&0) {
                 " (a Level 4 MAT-file? save it again with `save(file, '-v7')`)"
             } else {
                 ""
