@@ -5,6 +5,7 @@
 //! mustacchi's step without u from its gains and reference; a foreign MCAP with nullable fields
 //! left out is read; the reader never panics on mutated real and synthetic files.
 
+use servo_cli::io::mat_log;
 use servo_cli::io::mat_read::{parse_mat, MatValue};
 use servo_cli::io::read_log_with_meta;
 use servo_core::sim::sensors::SplitMix64;
@@ -163,6 +164,9 @@ fn synthetic(compressed: bool) -> Vec<u8> {
     )
 }
 
+/// The column map of the synthetic file.
+const SYNTHETIC_MAP: &str = "time=thl_u.time,theta_l=thl_u.signals(1).values(:,1):deg,ref=thl_u.signals(1).values(:,end):deg,u=thl_u.signals(2).values,i_a=ia_scope.signals.values";
+
 fn write_tmp(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, bytes).unwrap();
@@ -183,8 +187,7 @@ fn synthetic_mat_paths_resampling_and_guess() {
             f.get("obj")
         );
         let path = write_tmp(tmp.path(), &format!("syn{compressed}.mat"), &bytes);
-        let map = "time=thl_u.time,theta_l=thl_u.signals(1).values(:,1):deg,ref=thl_u.signals(1).values(:,end):deg,u=thl_u.signals(2).values,i_a=ia_scope.signals.values";
-        let (rec, meta) = read_log_with_meta(&path, Some(map)).unwrap();
+        let (rec, meta) = read_log_with_meta(&path, Some(SYNTHETIC_MAP)).unwrap();
         assert_eq!(rec.len(), 400);
         let th = rec.theta_l_rad.as_ref().unwrap();
         assert!((th[100] - (90.0 * 0.1f64).to_radians()).abs() < 1e-12);
@@ -719,13 +722,24 @@ fn mutate(base: &[u8], rng: &mut SplitMix64, focus: usize) -> Vec<u8> {
     b
 }
 
-fn fuzz(name: &str, base: &[u8], iterations: u64, seed: u64) -> (u64, u64) {
+/// Mutates `base` `iterations` times; whatever still parses is also listed (`servo inspect`),
+/// guessed and imported with `map`: none of it may panic.
+fn fuzz(name: &str, base: &[u8], map: Option<&str>, iterations: u64, seed: u64) -> (u64, u64) {
     let mut rng = SplitMix64(seed);
     let focus = base.len().min(4096);
     let mut ok = 0;
     for i in 0..iterations {
         let m = mutate(base, &mut rng, focus);
-        let r = std::panic::catch_unwind(|| parse_mat(&m).map(|f| f.variables.len()));
+        let r = std::panic::catch_unwind(|| {
+            parse_mat(&m).map(|f| {
+                let _ = mat_log::describe(&f);
+                let _ = mat_log::guess(&f);
+                if let Some(map) = map {
+                    let _ = mat_log::import(&f, name, Some(map));
+                }
+                f.variables.len()
+            })
+        });
         match r {
             Ok(Ok(_)) => ok += 1,
             Ok(Err(e)) => assert!(!e.to_string().is_empty()),
@@ -739,7 +753,13 @@ fn fuzz(name: &str, base: &[u8], iterations: u64, seed: u64) -> (u64, u64) {
 fn mat_reader_survives_mutations() {
     // Synthetic files, compressed and not, and hand-made hostile headers.
     for (k, compressed) in [true, false].into_iter().enumerate() {
-        let (ok, n) = fuzz("synthetic", &synthetic(compressed), 6000, 11 + k as u64);
+        let (ok, n) = fuzz(
+            "synthetic",
+            &synthetic(compressed),
+            Some(SYNTHETIC_MAP),
+            6000,
+            11 + k as u64,
+        );
         println!("synthetic (compressed {compressed}): {ok}/{n} mutations still parse");
     }
     let mut bomb = synthetic(false)[..128].to_vec();
@@ -761,8 +781,8 @@ fn mat_reader_survives_mutations() {
         let inf = inflated(&bytes);
         parse_mat(&inf).unwrap_or_else(|e| panic!("{name} inflated: {e}"));
         let iters = if bytes.len() > 200_000 { 100 } else { 1000 };
-        let (a, n) = fuzz(&name, &bytes, iters, 100 + i as u64);
-        let (b, m) = fuzz(&name, &inf, iters, 200 + i as u64);
+        let (a, n) = fuzz(&name, &bytes, log_map(&name), iters, 100 + i as u64);
+        let (b, m) = fuzz(&name, &inf, log_map(&name), iters, 200 + i as u64);
         println!("{name}: {a}/{n} compressed and {b}/{m} inflated mutations still parse");
     }
 }

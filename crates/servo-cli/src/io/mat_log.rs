@@ -79,6 +79,16 @@ pub fn import(file: &MatFile, source: &str, columns: Option<&str>) -> anyhow::Re
         let s = get(e)?;
         let raw = match &s.own_time {
             Some((tpath, t)) if t.len() == s.values.len() && !same_time(t, &time) => {
+                if let Some(k) =
+                    (0..t.len()).find(|&k| !t[k].is_finite() || (k > 0 && t[k] <= t[k - 1]))
+                {
+                    bail!(
+                        "{source}: `{}` (signal `{}`) has its own time `{tpath}`, which is not finite and strictly increasing at sample {}",
+                        e.column,
+                        e.signal,
+                        k + 1
+                    );
+                }
                 let (v, outside) = resample(t, &s.values, &time);
                 let mut note = format!(
                     "{source}: `{}` ({}) has its own time `{tpath}` ({} samples, {:.4}..{:.4} s); resampled linearly onto `{}`",

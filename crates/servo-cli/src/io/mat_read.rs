@@ -505,10 +505,21 @@ impl Parser {
                 let r = dims.first().copied().unwrap_or(0);
                 let rows = if r <= 1 {
                     vec![chars.into_iter().collect()]
-                } else {
+                } else if chars.len() == n {
+                    // Column-major: row i is chars[i], chars[i + r], ...
+                    let cols = n / r;
                     (0..r)
-                        .map(|i| chars.iter().skip(i).step_by(r).collect())
+                        .map(|i| (0..cols).filter_map(|j| chars.get(j * r + i)).collect())
                         .collect()
+                } else {
+                    return Err(self.corrupt(
+                        base,
+                        format!(
+                            "a {} char array holds {} characters",
+                            dims_text(&dims),
+                            chars.len()
+                        ),
+                    ));
                 };
                 MatValue::Char { dims, rows }
             }

@@ -55,7 +55,7 @@ impl LogFormat {
             "csv" | "txt" | "tsv" => Ok(LogFormat::Csv),
             "mat" => Ok(LogFormat::Mat),
             _ => bail!(
-                "{}: unknown log format `.{ext}`; expected a .mcap, .csv or .mat file",
+                "{}: unknown log format `.{ext}`; expected a .mat, .mcap or .csv file",
                 path.display()
             ),
         }
