@@ -283,6 +283,18 @@ fn cli_inspect_lists_mat_csv_and_guess() {
     }
     let (ok, out, _) = servo_e2e::servo(&["export", p.to_str().unwrap()]);
     assert!(ok && out.contains("400 samples"), "{out}");
+    // A CSV: its columns and the map servo would guess.
+    let csv = write_tmp(
+        tmp.path(),
+        "lab.csv",
+        b"t_s,thl_meas_deg,ia_A\n0,0,0\n0.001,1,0.1\n",
+    );
+    let (ok, out, _) = servo_e2e::servo(&["inspect", csv.to_str().unwrap()]);
+    assert!(
+        ok && out.contains("2 data rows")
+            && out.contains("guessed map: --columns time=t_s,theta_l=thl_meas_deg:deg,i_a=ia_A"),
+        "{out}"
+    );
 }
 
 // ---------------------------------------------------------------- the real lab files
