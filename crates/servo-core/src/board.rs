@@ -498,5 +498,8 @@ impl core::fmt::Write for TextBuf {
     }
 }
 
+pub mod sim_drive;
+pub use sim_drive::SimDrive;
+
 #[cfg(test)]
 mod tests;
