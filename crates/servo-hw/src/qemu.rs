@@ -161,6 +161,15 @@ impl QemuBoard {
                 BOOT_CONFIG_ADDR + 4 * i as u32
             ));
         }
+        // QEMU dies with the thread that started it, even when servo is killed with SIGKILL.
+        // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
+        unsafe {
+            use std::os::unix::process::CommandExt;
+            cmd.pre_exec(|| {
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
+                Ok(())
+            });
+        }
         cmd.stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(Stdio::piped());

@@ -82,6 +82,7 @@ impl Uart {
     const DATA: usize = 0x00;
     const STATE: usize = 0x04;
     const CTRL: usize = 0x08;
+    const INTCLEAR: usize = 0x0C;
     const BAUDDIV: usize = 0x10;
     const TX_FULL: u32 = 1;
     const RX_FULL: u32 = 2;
@@ -93,12 +94,15 @@ impl Uart {
         // SAFETY: memory-mapped registers of the UART at a fixed address of the machine.
         unsafe {
             write_volatile(self.reg(Self::BAUDDIV), 16);
-            write_volatile(self.reg(Self::CTRL), 0b11); // TX and RX enabled, no interrupts
+            // TX and RX enabled, RX interrupt enabled (it only wakes the core from WFI: PRIMASK
+            // stays set and the pending bit is cleared by hand).
+            write_volatile(self.reg(Self::CTRL), 0b1011);
         }
     }
     fn read(&self) -> Option<u8> {
         // SAFETY: as in `init`.
         unsafe {
+            write_volatile(self.reg(Self::INTCLEAR), 0b10);
             if read_volatile(self.reg(Self::STATE)) & Self::RX_FULL != 0 {
                 Some(read_volatile(self.reg(Self::DATA)) as u8)
             } else {
@@ -122,6 +126,57 @@ impl Write for Uart {
         Uart::write(self, s.as_bytes());
         Ok(())
     }
+}
+
+/// An interrupt line of the AN386 image (NVIC numbering).
+#[derive(Clone, Copy)]
+enum Irq {
+    Uart0Rx = 0,
+    Timer0 = 8,
+}
+
+// SAFETY: the values are the AN386 interrupt numbers.
+unsafe impl cortex_m::interrupt::InterruptNumber for Irq {
+    fn number(self) -> u16 {
+        self as u16
+    }
+}
+
+/// CMSDK APB timer 0 (0x4000_0000) as the wake-up tick of WFI: an interrupt every physics
+/// sub-step, so the emulated core sleeps between events and QEMU does not spin a host core.
+struct WakeTimer;
+
+impl WakeTimer {
+    const BASE: usize = 0x4000_0000;
+    fn start(period_cycles: u32) {
+        // SAFETY: memory-mapped registers of TIMER0 (CTRL, VALUE, RELOAD, INTCLEAR).
+        unsafe {
+            write_volatile((Self::BASE + 0x8) as *mut u32, period_cycles);
+            write_volatile((Self::BASE + 0x4) as *mut u32, period_cycles);
+            write_volatile(Self::BASE as *mut u32, 0b1001); // enable, interrupt enable
+        }
+    }
+    /// Starts the current period over (the next interrupt one period from now).
+    fn realign() {
+        // SAFETY: as in `start`.
+        unsafe {
+            let reload = read_volatile((Self::BASE + 0x8) as *const u32);
+            write_volatile((Self::BASE + 0x4) as *mut u32, reload);
+        }
+    }
+    fn clear() {
+        // SAFETY: as in `start`.
+        unsafe { write_volatile((Self::BASE + 0xC) as *mut u32, 1) };
+    }
+}
+
+/// Sleeps until the UART or the wake timer raises its interrupt (interrupts stay masked by
+/// PRIMASK: WFI wakes on a pending one without taking it).
+fn sleep_until_event() {
+    cortex_m::asm::wfi();
+    WakeTimer::clear();
+    cortex_m::peripheral::NVIC::unpend(Irq::Timer0);
+    cortex_m::peripheral::NVIC::unpend(Irq::Uart0Rx);
 }
 
 /// SysTick counting down over 24 bits, extended to 64 bits by polling (at least every 0.67 s).
@@ -234,6 +289,13 @@ fn main() -> ! {
         #[allow(clippy::empty_loop)]
         loop {}
     };
+    cortex_m::interrupt::disable();
+    WakeTimer::start((SYSCLK_HZ * period_us / subs / 1_000_000) as u32);
+    // SAFETY: PRIMASK is set, so enabling the lines only lets them wake WFI.
+    unsafe {
+        cortex_m::peripheral::NVIC::unmask(Irq::Uart0Rx);
+        cortex_m::peripheral::NVIC::unmask(Irq::Timer0);
+    }
     let mut hal = QemuHal {
         clock: Clock::start(&mut cp.SYST),
         uart,
@@ -262,15 +324,18 @@ fn main() -> ! {
             core.receive(&mut hal, &[b]);
             if hal.restart {
                 hal.restart = false;
+                WakeTimer::realign();
                 t0 = hal.clock.now_us();
                 n = 0;
                 busy_this_period = 0;
             }
         }
         let now = hal.clock.now_us();
+        let mut worked = false;
         if core.is_running() {
             let due = t0 + (n + 1) * period_us / subs;
             if now >= due {
+                worked = true;
                 hal.drive.step();
                 n += 1;
                 if n % subs == 0 {
@@ -318,6 +383,9 @@ fn main() -> ! {
                 d.framing_errors,
             );
             timing = Timing::default();
+        }
+        if !worked {
+            sleep_until_event();
         }
     }
 }
