@@ -368,8 +368,9 @@ fn main() -> ! {
             let d = core.decoder_stats();
             let _ = writeln!(
                 stats_uart,
-                "t {} s | runs {} samples {} missed {} faults {} last {:?} | late ticks {} max late {} us | busy/period max {} us mean {} us | crc {} framing {}",
+                "t {} s | u {:.3} V | runs {} samples {} missed {} faults {} last {:?} | late ticks {} max late {} us | busy/period max {} us mean {} us | crc {} framing {}",
                 now / 1_000_000,
+                hal.drive.voltage_v(),
                 s.runs,
                 s.samples,
                 s.missed_deadlines,
