@@ -1107,7 +1107,10 @@ mod qemu_cli {
         ] {
             let got = v[key]["value"].as_f64().unwrap_or(f64::NAN);
             let rel = (got - want) / want;
-            eprintln!("{key}: {got:.5e} vs truth {want:.5e} ({:+.2} %)", rel * 100.0);
+            eprintln!(
+                "{key}: {got:.5e} vs truth {want:.5e} ({:+.2} %)",
+                rel * 100.0
+            );
             assert!(rel.abs() < 0.05, "{key} = {got} vs {want}");
         }
     }

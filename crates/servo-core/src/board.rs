@@ -267,11 +267,7 @@ impl BoardCore {
             } else {
                 0
             }
-            | if r.clipped {
-                flags::VOLTAGE_CLIPPED
-            } else {
-                0
-            };
+            | if r.clipped { flags::VOLTAGE_CLIPPED } else { 0 };
         self.send_sample(hal, u_applied, rtt_us, flags);
     }
 

@@ -18,10 +18,10 @@
 #[cfg(feature = "alloc")]
 extern crate alloc;
 
+pub mod board;
 #[cfg(feature = "alloc")]
 pub mod compare;
 pub mod control;
-pub mod board;
 pub mod design;
 #[cfg(feature = "alloc")]
 pub mod diagnose;

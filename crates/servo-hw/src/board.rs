@@ -300,7 +300,9 @@ impl VirtualBoard {
             hal.drive.step();
             n += 1;
             if n % subs == 0 {
-                let late = Instant::now().saturating_duration_since(deadline).as_secs_f64();
+                let late = Instant::now()
+                    .saturating_duration_since(deadline)
+                    .as_secs_f64();
                 if late > self.cfg.sample_period_s {
                     late_ticks += 1;
                 }
@@ -358,9 +360,7 @@ fn receive(
             Ok(n) => return Ok(Received::Bytes(n)),
             Err(e) if e.kind() == ErrorKind::TimedOut => return Ok(Received::Nothing),
             Err(e) if e.kind() == ErrorKind::Interrupted => {}
-            Err(e)
-                if matches!(e.kind(), ErrorKind::BrokenPipe) || e.raw_os_error() == Some(5) =>
-            {
+            Err(e) if matches!(e.kind(), ErrorKind::BrokenPipe) || e.raw_os_error() == Some(5) => {
                 return Ok(Received::Closed)
             }
             Err(e) => {

@@ -33,7 +33,9 @@ use stm32f4xx_hal::{
 };
 
 #[cfg(all(feature = "dac", feature = "hbridge"))]
-compile_error!("choose one output stage: feature `dac` (default) or `hbridge` (with --no-default-features)");
+compile_error!(
+    "choose one output stage: feature `dac` (default) or `hbridge` (with --no-default-features)"
+);
 
 /// Core clock [Hz].
 const SYSCLK_HZ: u32 = 180_000_000;
@@ -147,8 +149,7 @@ impl BoardHal for NucleoHal {
 
 #[entry]
 fn main() -> ! {
-    let (Some(dp), Some(mut cp)) = (pac::Peripherals::take(), cortex_m::Peripherals::take())
-    else {
+    let (Some(dp), Some(mut cp)) = (pac::Peripherals::take(), cortex_m::Peripherals::take()) else {
         #[allow(clippy::empty_loop)]
         loop {}
     };

@@ -30,7 +30,12 @@ pub struct Board {
     #[arg(long, value_name = "FILE", requires = "qemu")]
     pub elf: Option<PathBuf>,
     /// The qemu-system-arm executable.
-    #[arg(long = "qemu-bin", value_name = "PATH", default_value = "qemu-system-arm", requires = "qemu")]
+    #[arg(
+        long = "qemu-bin",
+        value_name = "PATH",
+        default_value = "qemu-system-arm",
+        requires = "qemu"
+    )]
     pub qemu_bin: PathBuf,
     /// The plant simulated inside the QEMU image: lab (friction as measured on real SRV-02s)
     /// or table2 (no friction).
@@ -167,7 +172,11 @@ impl Board {
                 "no QEMU board image: build it (cd firmware && cargo build --release) or give --elf FILE",
             )?,
         };
-        let theta_limit_rad = cfg.limits.theta_min_rad.abs().max(cfg.limits.theta_max_rad.abs());
+        let theta_limit_rad = cfg
+            .limits
+            .theta_min_rad
+            .abs()
+            .max(cfg.limits.theta_max_rad.abs());
         let qcfg = servo_hw::qemu::QemuConfig {
             qemu: self.qemu_bin.clone(),
             elf: elf.clone(),

@@ -148,7 +148,8 @@ pub struct Identify {
     #[arg(long = "log-dir", value_name = "DIR", default_value = ".")]
     pub log_dir: PathBuf,
 
-    /// Simulated plant for `--ramp` on the simulator.
+    /// Simulated plant for `--ramp` on the simulator; default: the lab plant of
+    /// `servo params --lab` (friction as measured on real SRV-02s).
     #[command(flatten)]
     pub plant: crate::plant_args::PlantArgs,
 }

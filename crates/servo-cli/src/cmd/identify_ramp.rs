@@ -288,6 +288,22 @@ pub fn run_speed_loop_logged(
     Ok((rec, msgs))
 }
 
+/// The simulated plant of `--ramp`: `--plant`/`--plant-effect` when given, else the realistic
+/// lab plant (`servo params --lab`: friction as measured on real SRV-02s), so that a fresh
+/// install identifies meaningful friction rather than Table 2's zero.
+fn sim_plant(
+    args: &Identify,
+) -> anyhow::Result<(servo_core::Plant, servo_core::sim::SensorConfig)> {
+    let (mut plant, sensors) = args.plant.load()?;
+    if args.plant.plant.is_none() {
+        plant = servo_core::Plant::lab();
+        for e in &args.plant.plant_effect {
+            plant.effects.insert(*e);
+        }
+    }
+    Ok((plant, sensors))
+}
+
 /// Live progress of a real-time run on stderr, every 5 s of run time: elapsed and remaining.
 fn progress(name: &str, t: f64, total_s: f64, realtime: bool, next_s: &mut f64) {
     if realtime && t >= *next_s && t < total_s {
@@ -333,7 +349,7 @@ pub fn run_experiments(args: &Identify, p: &PlantParams) -> anyhow::Result<Vec<P
                     .with_context(|| format!("--backend serial --port {}", args.port))?,
             )
         } else {
-            let (plant, sensors) = args.plant.load()?;
+            let (plant, sensors) = sim_plant(args)?;
             Box::new(servo_hw::sim::SimBackend::new(&plant, sensors, 1e-3)?)
         };
         let source = format!("servo identify --ramp: {name} ({backend_name})");

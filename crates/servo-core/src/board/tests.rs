@@ -78,9 +78,21 @@ fn handshake_and_version_mismatch() {
     let mut hal = MockHal::default();
     let mut core = BoardCore::new(cfg()).unwrap();
     hal.out.push(0);
-    send(&mut core, &mut hal, Message::Hello { protocol_version: 1 });
+    send(
+        &mut core,
+        &mut hal,
+        Message::Hello {
+            protocol_version: 1,
+        },
+    );
     assert_eq!(hal.sent(), [Message::HelloAck(cfg().hello_ack())]);
-    send(&mut core, &mut hal, Message::Hello { protocol_version: 2 });
+    send(
+        &mut core,
+        &mut hal,
+        Message::Hello {
+            protocol_version: 2,
+        },
+    );
     assert!(matches!(hal.sent()[..], [Message::Fault(f)] if f.code == FaultCode::Version));
 }
 
@@ -96,8 +108,15 @@ fn host_driven_run_samples_applies_clips_and_stops() {
     let s = samples(&hal.sent());
     assert_eq!((s.len(), s[0].seq, s[0].encoder_count), (1, 0, 0));
     hal.now_us = 300;
-    send(&mut core, &mut hal, Message::SetVoltage { seq: 0, u_v: 12.0 });
-    assert_eq!(hal.u_v, 10.0, "clipped to the voltage limit, applied at once");
+    send(
+        &mut core,
+        &mut hal,
+        Message::SetVoltage { seq: 0, u_v: 12.0 },
+    );
+    assert_eq!(
+        hal.u_v, 10.0,
+        "clipped to the voltage limit, applied at once"
+    );
     hal.now_us = 1000;
     hal.count = 141;
     core.tick(&mut hal);
@@ -114,8 +133,16 @@ fn host_driven_run_samples_applies_clips_and_stops() {
     assert_eq!(s.rtt_us, 0xFFFF);
     assert_eq!(hal.u_v, 10.0);
     // An old command is ignored.
-    send(&mut core, &mut hal, Message::SetVoltage { seq: 2, u_v: 1.0 });
-    send(&mut core, &mut hal, Message::SetVoltage { seq: 1, u_v: 5.0 });
+    send(
+        &mut core,
+        &mut hal,
+        Message::SetVoltage { seq: 2, u_v: 1.0 },
+    );
+    send(
+        &mut core,
+        &mut hal,
+        Message::SetVoltage { seq: 1, u_v: 5.0 },
+    );
     assert_eq!(hal.u_v, 1.0);
     send(&mut core, &mut hal, Message::Stop);
     assert_eq!(hal.u_v, 0.0);
@@ -130,19 +157,28 @@ fn watchdog_trips_to_zero_volts() {
     let mut hal = MockHal::default();
     let mut core = BoardCore::new(cfg()).unwrap();
     send(&mut core, &mut hal, Message::Start);
-    send(&mut core, &mut hal, Message::SetVoltage { seq: 0, u_v: 3.0 });
+    send(
+        &mut core,
+        &mut hal,
+        Message::SetVoltage { seq: 0, u_v: 3.0 },
+    );
     for k in 1..=50 {
         hal.now_us = k * 1000;
         core.tick(&mut hal);
     }
-    assert!(core.is_running(), "50 ms without command is still within the watchdog");
+    assert!(
+        core.is_running(),
+        "50 ms without command is still within the watchdog"
+    );
     hal.now_us = 51_000;
     core.tick(&mut hal);
     assert!(!core.is_running());
     assert_eq!(hal.u_v, 0.0);
     assert_eq!(hal.faults, [FaultCode::Watchdog]);
     let v = hal.sent();
-    assert!(matches!(v.last(), Some(Message::Fault(f)) if f.text_str() == "watchdog: no command in 50 ms"));
+    assert!(
+        matches!(v.last(), Some(Message::Fault(f)) if f.text_str() == "watchdog: no command in 50 ms")
+    );
     // The next Start begins cleanly.
     send(&mut core, &mut hal, Message::Start);
     assert!(core.is_running());
@@ -154,7 +190,11 @@ fn over_current_and_position_limits_trip() {
     let mut hal = MockHal::default();
     let mut core = BoardCore::new(cfg()).unwrap();
     send(&mut core, &mut hal, Message::Start);
-    send(&mut core, &mut hal, Message::SetVoltage { seq: 0, u_v: 3.0 });
+    send(
+        &mut core,
+        &mut hal,
+        Message::SetVoltage { seq: 0, u_v: 3.0 },
+    );
     hal.current_raw = 2600; // 2.6 A > 2.5 A
     hal.now_us = 1000;
     core.tick(&mut hal);
@@ -165,9 +205,16 @@ fn over_current_and_position_limits_trip() {
     send(&mut core, &mut hal, Message::Start);
     hal.count = 1000 + 3 * 4096; // 3 rev from Start > 2 rev
     hal.now_us = 2000;
-    send(&mut core, &mut hal, Message::SetVoltage { seq: 0, u_v: 3.0 });
+    send(
+        &mut core,
+        &mut hal,
+        Message::SetVoltage { seq: 0, u_v: 3.0 },
+    );
     core.tick(&mut hal);
-    assert_eq!(hal.faults, [FaultCode::OverCurrent, FaultCode::PositionLimit]);
+    assert_eq!(
+        hal.faults,
+        [FaultCode::OverCurrent, FaultCode::PositionLimit]
+    );
     assert_eq!(hal.u_v, 0.0);
 }
 
@@ -175,12 +222,31 @@ fn over_current_and_position_limits_trip() {
 fn bad_commands_are_faults() {
     let mut hal = MockHal::default();
     let mut core = BoardCore::new(cfg()).unwrap();
-    send(&mut core, &mut hal, Message::SetVoltage { seq: 0, u_v: 1.0 });
-    send(&mut core, &mut hal, Message::SetVoltage { seq: 1, u_v: 1.0 });
-    assert_eq!(hal.faults, [FaultCode::BadCommand], "reported once while idle");
+    send(
+        &mut core,
+        &mut hal,
+        Message::SetVoltage { seq: 0, u_v: 1.0 },
+    );
+    send(
+        &mut core,
+        &mut hal,
+        Message::SetVoltage { seq: 1, u_v: 1.0 },
+    );
+    assert_eq!(
+        hal.faults,
+        [FaultCode::BadCommand],
+        "reported once while idle"
+    );
     assert_eq!(hal.u_v, 0.0);
     send(&mut core, &mut hal, Message::Start);
-    send(&mut core, &mut hal, Message::SetVoltage { seq: 0, u_v: f32::NAN });
+    send(
+        &mut core,
+        &mut hal,
+        Message::SetVoltage {
+            seq: 0,
+            u_v: f32::NAN,
+        },
+    );
     assert!(!core.is_running());
     assert_eq!(hal.faults.len(), 2);
     send(
@@ -215,7 +281,11 @@ fn onboard_loop_runs_the_pid_each_tick() {
         },
     );
     assert!(core.is_running());
-    assert!((hal.u_v - 2.0).abs() < 1e-6, "u = kp e at once: {}", hal.u_v);
+    assert!(
+        (hal.u_v - 2.0).abs() < 1e-6,
+        "u = kp e at once: {}",
+        hal.u_v
+    );
     assert_eq!(samples(&hal.sent())[0].seq, 0);
     hal.count = 2048; // pi rad: e = 1 - pi
     hal.now_us = 1000;
@@ -226,7 +296,11 @@ fn onboard_loop_runs_the_pid_each_tick() {
     let want = 2.0 * (1.0 - core::f32::consts::PI);
     assert!((hal.u_v - want).abs() < 1e-4, "{} vs {want}", hal.u_v);
     // A SetVoltage ends on-board mode.
-    send(&mut core, &mut hal, Message::SetVoltage { seq: 1, u_v: 0.5 });
+    send(
+        &mut core,
+        &mut hal,
+        Message::SetVoltage { seq: 1, u_v: 0.5 },
+    );
     hal.now_us = 2000;
     core.tick(&mut hal);
     assert_eq!(samples(&hal.sent())[0].flags & flags::ONBOARD_LOOP, 0);
