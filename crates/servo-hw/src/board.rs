@@ -299,7 +299,7 @@ impl VirtualBoard {
             // The sub-step is over: physics, and at the end of a period the core's tick.
             hal.drive.step();
             n += 1;
-            if n % subs == 0 {
+            if n.is_multiple_of(subs) {
                 let late = Instant::now()
                     .saturating_duration_since(deadline)
                     .as_secs_f64();

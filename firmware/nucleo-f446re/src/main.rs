@@ -122,7 +122,7 @@ impl BoardHal for NucleoHal {
         self.now_us64() as u32
     }
     fn encoder_count(&mut self) -> i32 {
-        let c = self.qei.count() as u16;
+        let c = self.qei.count();
         self.enc_count = self
             .enc_count
             .wrapping_add(c.wrapping_sub(self.enc_last) as i16 as i32);
@@ -196,14 +196,16 @@ fn main() -> ! {
             SerialConfig::default().baudrate(921_600.bps()),
             &clocks,
         )
-        .unwrap_or_else(|_| loop {});
+        .unwrap_or_else(|_| loop {
+            cortex_m::asm::wfi()
+        });
     let (tx, mut rx): (Tx<pac::USART2>, Rx<pac::USART2>) = serial.split();
 
     let qei = Qei::new(dp.TIM3, (gpioa.pa6, gpioa.pa7));
     let adc = Adc::adc1(dp.ADC1, true, AdcConfig::default());
     let mut hal = NucleoHal {
         tx,
-        enc_last: qei.count() as u16,
+        enc_last: qei.count(),
         qei,
         enc_count: 0,
         adc,

@@ -249,7 +249,9 @@ struct Timing {
 #[entry]
 fn main() -> ! {
     let boot = BootConfig::read();
-    let mut cp = cortex_m::Peripherals::take().unwrap_or_else(|| loop {});
+    let mut cp = cortex_m::Peripherals::take().unwrap_or_else(|| loop {
+        cortex_m::asm::wfi()
+    });
     let uart = Uart(0x4000_4000);
     uart.init();
     let mut stats_uart = Uart(0x4000_5000);
@@ -338,7 +340,7 @@ fn main() -> ! {
                 worked = true;
                 hal.drive.step();
                 n += 1;
-                if n % subs == 0 {
+                if n.is_multiple_of(subs) {
                     let late = now - due;
                     if late > period_us {
                         timing.late_ticks += 1;
@@ -347,7 +349,7 @@ fn main() -> ! {
                     core.tick(&mut hal);
                 }
                 busy_this_period += hal.clock.now_us() - now;
-                if n % subs == 0 {
+                if n.is_multiple_of(subs) {
                     timing.busy_max_us = timing.busy_max_us.max(busy_this_period);
                     timing.busy_sum_us += busy_this_period;
                     timing.periods += 1;
