@@ -63,3 +63,38 @@ pub fn servo(args: &[&str]) -> (bool, String, String) {
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
 }
+
+/// The QEMU board image and qemu-system-arm for the tests that run servo's firmware under
+/// QEMU, if both are here. Without them the test skips with a clear message, unless
+/// `SERVO_REQUIRE_QEMU` is set (CI installs qemu and builds the image): then it fails.
+pub fn qemu_image() -> Option<PathBuf> {
+    let qemu_ok = std::process::Command::new("qemu-system-arm")
+        .arg("--version")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    let image = std::env::var_os("SERVO_QEMU_ELF")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+                .join("firmware/target/thumbv7em-none-eabihf/release")
+                .join("servo-board-qemu")
+        });
+    let why = if !qemu_ok {
+        "qemu-system-arm not found (apt-get install qemu-system-arm)".to_string()
+    } else if !image.is_file() {
+        format!(
+            "QEMU board image {} not built (cd firmware && cargo build --release)",
+            image.display()
+        )
+    } else {
+        return Some(image);
+    };
+    assert!(
+        std::env::var_os("SERVO_REQUIRE_QEMU").is_none(),
+        "SERVO_REQUIRE_QEMU is set but {why}"
+    );
+    eprintln!("SKIP: {why}");
+    None
+}

@@ -6,6 +6,7 @@
 //!   simulator, the model fit and the diagnosis use.
 //! * [`plant`]: a parameter set together with its active effects: the model of one gearmotor.
 //! * [`control`]: discrete PID, feedforward compensation, reference generators and sequences.
+//! * [`board`]: the servo board firmware core (protocol state machine over a small HAL trait).
 //! * [`sim`]: integration of the plant with its effects (truth for the simulator, model for
 //!   `compare`).
 //!
@@ -17,6 +18,7 @@
 #[cfg(feature = "alloc")]
 extern crate alloc;
 
+pub mod board;
 #[cfg(feature = "alloc")]
 pub mod compare;
 pub mod control;

@@ -107,6 +107,18 @@ impl PlantParams {
         tau_sf: None,
     };
 
+    /// A realistic SRV-02 as the Padova lab groups measured it (`/work/shared/realdata/*/SOURCE.txt`
+    /// of the development machine): Table 2 with the identified J_eq = 7.0e-7 kg m^2 (published
+    /// 7.35e-7, 8.0e-7, 5.6e-7), B_eq = 1.0e-6 N m s/rad (7.2e-7, 1.07e-6, 1.27e-6) and load-side
+    /// Coulomb friction tau_sf = 9.0e-3 N m (9.7e-3, 7.1e-3, 10.6e-3). The default plant of the
+    /// simulator, `servo params` and the QEMU board.
+    pub const LAB: PlantParams = PlantParams {
+        j_eq: Some(7.0e-7),
+        b_eq: Some(1.0e-6),
+        tau_sf: Some(9.0e-3),
+        ..PlantParams::TABLE2
+    };
+
     /// Equivalent armature-circuit resistance R_eq = R_a + R_s [ohm] (eq. 22).
     pub fn r_eq(&self) -> f64 {
         self.r_a + self.r_s

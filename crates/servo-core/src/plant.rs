@@ -42,6 +42,13 @@ impl Plant {
         }
     }
 
+    /// The realistic lab plant of [`PlantParams::LAB`]: viscous and Coulomb friction at the
+    /// levels measured on real SRV-02s.
+    pub fn lab() -> Plant {
+        // LAB is a valid constant (unit test `lab_plant_has_its_friction`); Table 2 otherwise.
+        Plant::from_params(PlantParams::LAB).unwrap_or_else(|_| Plant::nominal())
+    }
+
     /// Viscous friction at motor side B_eq [N m s/rad] from the `viscous` effect (0 if absent).
     pub fn b_eq(&self) -> f64 {
         self.effects
@@ -64,5 +71,19 @@ impl Plant {
             tau_sf: Some(self.tau_sf()),
             ..self.params
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lab_plant_has_its_friction() {
+        let p = Plant::lab();
+        assert_eq!(p.b_eq(), 1.0e-6);
+        assert_eq!(p.tau_sf(), 9.0e-3);
+        assert_eq!(p.params.j_eq(), 7.0e-7);
+        assert_ne!(p, Plant::nominal());
     }
 }

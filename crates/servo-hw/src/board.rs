@@ -1,35 +1,21 @@
-//! The virtual board: what the firmware of a servo board does, with the simulated gearmotor
-//! behind it, speaking the protocol of [`servo_core::protocol`] over a serial port in real time.
+//! The virtual board: servo's board firmware core ([`servo_core::board::BoardCore`]) with the
+//! simulated gearmotor ([`servo_core::board::SimDrive`]) behind its HAL, speaking the protocol
+//! over a serial port (a pseudo-terminal) in real time on the host. The QEMU image and the real
+//! firmware of `firmware/` run the same core; only the HAL differs.
 //!
-//! Firmware behaviour (the reference for a real board, see `docs/protocol.md`):
-//! * Hello → HelloAck with firmware name, encoder counts/rev, current-sense scale, voltage limit,
-//!   sample period and watchdog time.
-//! * Start → encoder and board clock zeroed, Sample 0 sent at once, then one Sample every period,
-//!   paced by the board's clock. SetVoltage(seq, u) is applied from the next physics sub-step after
-//!   it arrives (sub-steps of period/`physics_substeps`), clipped by the voltage limit; a command
-//!   older than the last applied one is ignored.
-//! * Watchdog: no SetVoltage (or LoopReference in on-board mode) for `watchdog_s` → 0 V, Fault
-//!   (Watchdog), sampling stops until the next Start.
-//! * Safety ([`SafetyLimits`], the same checks the host runs): every sample is checked for
-//!   over-current and soft position limits; a trip means 0 V, a Fault and sampling stops.
-//! * Stop → 0 V, Stopped, sampling stops.
-//! * On-board loop: LoopGains then LoopReference(seq, ref) runs a PID on the board every period
-//!   towards ref; Samples stream as in host-driven mode with the ONBOARD_LOOP flag.
-//!
-//! The plant is integrated in simulated time, one sub-step per wall-clock sub-step: a late
+//! Firmware behaviour: see [`servo_core::board`] and `docs/protocol.md`. This adapter adds the
+//! host-side clock: the plant is integrated in sub-steps of period/`physics_substeps`, one per
+//! wall-clock sub-step, with a command applied from the sub-step after it arrives; a late
 //! wake-up (the host machine is busy) is caught up at once and counted, never skipped. While
 //! idle the plant keeps coasting at 0 V so that a second run starts from where the load is.
 
 use crate::backend::HwError;
 use serialport::SerialPort;
-use servo_core::control::{AntiWindup, Pid, PidConfig, PidGains};
+use servo_core::board::{self as core_board, BoardCore, BoardHal, SimDrive};
 use servo_core::math;
-use servo_core::protocol::{
-    fixed_text, flags, Decoder, Fault, FaultCode, Frame, HelloAck, LoopGains, Message, Sample,
-    PROTOCOL_VERSION,
-};
+use servo_core::protocol::{fixed_text, FaultCode, HelloAck};
 use servo_core::safety::SafetyLimits;
-use servo_core::sim::{PlantSim, SensorConfig, Sensors};
+use servo_core::sim::{PlantSim, SensorConfig};
 use servo_core::Plant;
 use std::io::ErrorKind;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -66,6 +52,18 @@ impl Default for BoardConfig {
 }
 
 impl BoardConfig {
+    /// The board core's configuration for an encoder of `counts_per_rev`.
+    pub fn core_config(&self, counts_per_rev: u32) -> core_board::BoardConfig {
+        core_board::BoardConfig {
+            firmware: fixed_text(FIRMWARE),
+            sample_period_us: math::round(self.sample_period_s * 1e6) as u32,
+            watchdog_ms: math::round(self.watchdog_s * 1e3).min(65_535.0) as u16,
+            limits: self.limits,
+            counts_per_rev,
+            current_scale_a_per_lsb: self.current_scale_a_per_lsb as f32,
+        }
+    }
+
     fn validate(&self) -> Result<(), HwError> {
         let us = math::round(self.sample_period_s * 1e6);
         if !(us.is_finite() && (50.0..=1e6).contains(&us)) {
@@ -126,40 +124,60 @@ pub struct BoardReport {
     pub output_at_exit_v: f64,
 }
 
-/// State of one run (between Start and Stop/fault).
-#[derive(Debug)]
-struct Run {
-    t0: Instant,
-    /// Index of the last sample sent.
-    k: u32,
-    sample_sent_at: Instant,
-    cmd_for_k: Option<Instant>,
-    last_cmd_at: Instant,
-    last_seq_applied: Option<u32>,
-    u_v: f64,
-    clipped: bool,
-    count0: i64,
-    onboard: Option<(Pid, f64)>,
-}
-
 /// The virtual board.
 #[derive(Debug)]
 pub struct VirtualBoard {
     cfg: BoardConfig,
-    sim: PlantSim,
-    sensors: Sensors,
-    dec: Decoder,
-    gains: Option<LoopGains>,
+    core: BoardCore,
+    drive: SimDrive,
     report: BoardReport,
-    idle_since: Instant,
-    bad_cmd_reported: bool,
-    /// Driver input being applied now [V] (0 when idle).
-    output_v: f64,
+    /// Wall-clock origin of the board's microsecond clock.
+    epoch: Instant,
 }
 
-enum Link {
-    Open,
-    Closed,
+/// The HAL of the virtual board: the simulated drive, the host clock and the serial port.
+struct HostHal<'a> {
+    drive: &'a mut SimDrive,
+    port: &'a mut dyn SerialPort,
+    epoch: Instant,
+    /// The core asked for a new tick schedule (Start).
+    restart: bool,
+    faults: &'a mut Vec<(FaultCode, String)>,
+    /// A write error other than a full or closed link.
+    io_error: Option<std::io::Error>,
+}
+
+impl BoardHal for HostHal<'_> {
+    fn now_us(&mut self) -> u32 {
+        self.epoch.elapsed().as_micros() as u32
+    }
+    fn encoder_count(&mut self) -> i32 {
+        self.drive.encoder_count()
+    }
+    fn current_raw(&mut self) -> i16 {
+        self.drive.current_raw()
+    }
+    fn set_voltage(&mut self, u_v: f32) {
+        self.drive.set_voltage(u_v);
+    }
+    fn restart_tick(&mut self) {
+        self.restart = true;
+    }
+    /// A write that times out (nobody reading a full pty) or hits a closed peer drops the frame.
+    fn write(&mut self, bytes: &[u8]) {
+        match self.port.write_all(bytes) {
+            Ok(()) => {}
+            Err(e) if matches!(e.kind(), ErrorKind::TimedOut | ErrorKind::BrokenPipe) => {}
+            Err(e) => {
+                if self.io_error.is_none() {
+                    self.io_error = Some(e);
+                }
+            }
+        }
+    }
+    fn on_fault(&mut self, code: FaultCode, text: &str) {
+        self.faults.push((code, text.to_string()));
+    }
 }
 
 impl VirtualBoard {
@@ -170,49 +188,43 @@ impl VirtualBoard {
         cfg: BoardConfig,
     ) -> Result<VirtualBoard, HwError> {
         cfg.validate()?;
+        let core_cfg = cfg.core_config(sensors.counts_per_rev);
+        let core = BoardCore::new(core_cfg).map_err(|e| HwError::Protocol(e.to_string()))?;
         let h = cfg.sample_period_s / cfg.physics_substeps as f64;
         Ok(VirtualBoard {
             cfg,
-            sim: PlantSim::new(plant, h)?,
-            sensors: Sensors::new(sensors),
-            dec: Decoder::new(),
-            gains: None,
+            core,
+            drive: SimDrive::new(plant, sensors, h, cfg.current_scale_a_per_lsb as f32)?,
             report: BoardReport::default(),
-            idle_since: Instant::now(),
-            bad_cmd_reported: false,
-            output_v: 0.0,
+            epoch: Instant::now(),
         })
     }
 
     /// The handshake answer of this board.
     pub fn hello_ack(&self) -> HelloAck {
-        HelloAck {
-            protocol_version: PROTOCOL_VERSION,
-            firmware: fixed_text(FIRMWARE),
-            counts_per_rev: self.sensors.config().counts_per_rev,
-            current_scale_a_per_lsb: self.cfg.current_scale_a_per_lsb as f32,
-            voltage_limit_v: self.cfg.limits.voltage_limit_v as f32,
-            sample_period_us: math::round(self.cfg.sample_period_s * 1e6) as u32,
-            watchdog_ms: math::round(self.cfg.watchdog_s * 1e3).min(65_535.0) as u16,
-        }
+        self.core.config().hello_ack()
     }
 
     /// The true plant simulator behind the board.
     pub fn plant_sim(&self) -> &PlantSim {
-        &self.sim
+        self.drive.plant_sim()
     }
 
     /// The driver input the board applies right now [V]: 0 V whenever no run is active.
     pub fn output_v(&self) -> f64 {
-        self.output_v
+        self.drive.voltage_v() as f64
     }
 
     /// What happened so far.
     pub fn report(&self) -> BoardReport {
         let mut r = self.report.clone();
-        let s = self.dec.stats();
-        r.crc_errors = s.crc_errors;
-        r.framing_errors = s.framing_errors;
+        let s = self.core.stats();
+        r.runs = s.runs;
+        r.samples = s.samples;
+        r.missed_deadlines = s.missed_deadlines;
+        let d = self.core.decoder_stats();
+        r.crc_errors = d.crc_errors;
+        r.framing_errors = d.framing_errors;
         r
     }
 
@@ -223,421 +235,140 @@ impl VirtualBoard {
         port: &mut dyn SerialPort,
         stop: &AtomicBool,
     ) -> Result<BoardReport, HwError> {
-        let mut run: Option<Run> = None;
-        let mut msgs = Vec::new();
-        self.idle_since = Instant::now();
+        let subs = self.cfg.physics_substeps as u64;
+        let h = Duration::from_secs_f64(self.cfg.sample_period_s / subs as f64);
+        let mut hal = HostHal {
+            drive: &mut self.drive,
+            port,
+            epoch: self.epoch,
+            restart: false,
+            faults: &mut self.report.faults,
+            io_error: None,
+        };
+        let core = &mut self.core;
+        let mut buf = [0u8; 256];
+        // Tick schedule of the run: sub-step n ends at t0 + n h.
+        let mut t0 = Instant::now();
+        let mut n: u64 = 0;
+        let mut idle_since = Instant::now();
+        let mut late_ticks = 0u64;
+        let mut max_lateness_s = 0.0f64;
+        let mut disconnected = false;
         while !stop.load(Ordering::Relaxed) {
-            match run.take() {
-                None => {
-                    let link =
-                        self.receive(port, Instant::now() + Duration::from_millis(50), &mut msgs)?;
-                    self.coast_idle();
-                    for (at, m) in msgs.drain(..) {
-                        if run.is_none() {
-                            run = self.handle_idle(port, m, at)?;
-                        } else if let Some(r) = run.as_mut() {
-                            if !self.handle_running(port, r, m, at)? {
-                                run = None;
-                            }
-                        }
-                    }
-                    if let Link::Closed = link {
-                        self.report.disconnected = true;
-                        break;
-                    }
-                }
-                Some(mut r) => {
-                    let (keep, link) = self.tick(port, &mut r, &mut msgs)?;
-                    if keep {
-                        run = Some(r);
-                    } else {
-                        self.output_v = 0.0;
-                        self.idle_since = Instant::now();
-                    }
-                    if let Link::Closed = link {
-                        self.output_v = 0.0;
-                        self.report.disconnected = true;
-                        let text = "host side of the port closed during a run";
-                        self.report
-                            .faults
-                            .push((FaultCode::Other, text.to_string()));
-                        break;
-                    }
-                }
+            if let Some(e) = hal.io_error.take() {
+                return Err(HwError::Io(e));
             }
-        }
-        // Whatever ended serving (Ctrl-C, a closed port), the driver goes to 0 V.
-        self.report.driving_at_exit = run.is_some();
-        self.report.output_at_exit_v = self.output_v;
-        self.output_v = 0.0;
-        Ok(self.report())
-    }
-
-    /// One control period: sub-steps of physics with commands applied as they arrive, then the
-    /// safety check and the next sample. Returns whether the run goes on.
-    fn tick(
-        &mut self,
-        port: &mut dyn SerialPort,
-        r: &mut Run,
-        msgs: &mut Vec<(Instant, Message)>,
-    ) -> Result<(bool, Link), HwError> {
-        let s = self.cfg.physics_substeps;
-        let h = Duration::from_secs_f64(self.cfg.sample_period_s / s as f64);
-        let watchdog = Duration::from_secs_f64(self.cfg.watchdog_s);
-        for j in 1..=s {
-            let deadline = r.t0 + h * (r.k.wrapping_mul(s).wrapping_add(j));
-            loop {
-                let link = self.receive(port, deadline, msgs)?;
-                for (at, m) in msgs.drain(..) {
-                    if !self.handle_running(port, r, m, at)? {
-                        return Ok((false, link));
-                    }
-                }
-                if let Link::Closed = link {
-                    return Ok((false, link));
-                }
-                if Instant::now() >= deadline {
+            let running = core.is_running();
+            let deadline = if running {
+                t0 + h * (n as u32 + 1)
+            } else {
+                Instant::now() + Duration::from_millis(50)
+            };
+            let link = receive(hal.port, deadline, &mut buf)?;
+            let got = match link {
+                Received::Bytes(k) => k,
+                Received::Nothing => 0,
+                Received::Closed => {
+                    disconnected = true;
                     break;
                 }
-            }
-            if r.last_cmd_at.elapsed() > watchdog {
-                r.u_v = 0.0;
-                let what = if r.onboard.is_some() {
-                    "reference"
-                } else {
-                    "command"
-                };
-                // Fits the 32-byte fault text: "watchdog: no reference in 50 ms".
-                let text = format!("watchdog: no {what} in {} ms", watchdog.as_millis());
-                self.fault(port, FaultCode::Watchdog, &text)?;
-                return Ok((false, Link::Open));
-            }
-            self.output_v = r.u_v;
-            self.sim.step(r.u_v);
-        }
-        // The period is over: sample k+1.
-        let due = r.t0 + h * (r.k.wrapping_add(1).wrapping_mul(s));
-        let late = Instant::now().saturating_duration_since(due).as_secs_f64();
-        if late > self.cfg.sample_period_s {
-            self.report.late_ticks += 1;
-        }
-        self.report.max_lateness_s = self.report.max_lateness_s.max(late);
-        let missed = r.onboard.is_none() && r.cmd_for_k.is_none();
-        if missed {
-            self.report.missed_deadlines += 1;
-        }
-        let rtt_us = match r.cmd_for_k {
-            Some(at) => at
-                .saturating_duration_since(r.sample_sent_at)
-                .as_micros()
-                .min(0xFFFE) as u16,
-            None => 0xFFFF,
-        };
-        r.k = r.k.wrapping_add(1);
-        let u_applied = r.u_v;
-        let was_clipped = r.clipped;
-        let flags = if missed { flags::MISSED_DEADLINE } else { 0 }
-            | if r.onboard.is_some() {
-                flags::ONBOARD_LOOP
-            } else {
-                0
-            }
-            | if was_clipped {
-                flags::VOLTAGE_CLIPPED
-            } else {
-                0
             };
-        let keep = self.send_sample(port, r, u_applied, rtt_us, flags)?;
-        Ok((keep, Link::Open))
-    }
-
-    /// Measures, checks the limits, runs the on-board PID if active, and sends the sample.
-    fn send_sample(
-        &mut self,
-        port: &mut dyn SerialPort,
-        r: &mut Run,
-        u_applied_v: f64,
-        rtt_us: u16,
-        flags: u8,
-    ) -> Result<bool, HwError> {
-        let m = self.sensors.measure(self.sim.state());
-        let count = m.encoder_count - r.count0;
-        let cpr = self.sensors.config().counts_per_rev;
-        let theta = if cpr > 0 {
-            count as f64 * math::TAU / cpr as f64
-        } else {
-            m.theta_l_rad
-        };
-        if let Err(trip) = self.cfg.limits.check(self.sim.state().theta_l_rad, m.i_a_a) {
-            r.u_v = 0.0;
-            self.fault(port, trip.into(), &trip.to_string())?;
-            return Ok(false);
-        }
-        if let Some((pid, ref_rad)) = r.onboard.as_mut() {
-            r.u_v = pid.update(*ref_rad, theta, 0.0).u_v;
-        }
-        let sample = Sample {
-            seq: r.k,
-            time_us: (r.k as u64 * math::round(self.cfg.sample_period_s * 1e6) as u64) as u32,
-            encoder_count: count.clamp(i32::MIN as i64, i32::MAX as i64) as i32,
-            current_raw: math::round(m.i_a_a / self.cfg.current_scale_a_per_lsb)
-                .clamp(-32768.0, 32767.0) as i16,
-            u_applied_v: u_applied_v as f32,
-            rtt_us,
-            flags,
-        };
-        self.send(port, &Message::Sample(sample))?;
-        r.sample_sent_at = Instant::now();
-        r.cmd_for_k = None;
-        self.report.samples += 1;
-        Ok(true)
-    }
-
-    fn start_run(
-        &mut self,
-        port: &mut dyn SerialPort,
-        at: Instant,
-        onboard: Option<(Pid, f64)>,
-    ) -> Result<Option<Run>, HwError> {
-        self.coast_idle();
-        self.report.runs += 1;
-        self.bad_cmd_reported = false;
-        let count0 = self.sensors.measure(self.sim.state()).encoder_count;
-        let now = Instant::now();
-        let mut r = Run {
-            t0: now,
-            k: 0,
-            sample_sent_at: now,
-            cmd_for_k: None,
-            last_cmd_at: now,
-            last_seq_applied: None,
-            u_v: 0.0,
-            clipped: false,
-            count0,
-            onboard,
-        };
-        let _ = at;
-        let keep = self.send_sample(port, &mut r, 0.0, 0xFFFF, 0)?;
-        Ok(keep.then_some(r))
-    }
-
-    fn handle_idle(
-        &mut self,
-        port: &mut dyn SerialPort,
-        m: Message,
-        at: Instant,
-    ) -> Result<Option<Run>, HwError> {
-        match m {
-            Message::Hello { protocol_version } => self.hello(port, protocol_version)?,
-            Message::Start => return self.start_run(port, at, None),
-            Message::Stop => self.send(port, &Message::Stopped)?,
-            Message::LoopGains(g) => self.set_gains(port, g)?,
-            Message::LoopReference { ref_rad, .. } => match self.gains {
-                Some(g) if ref_rad.is_finite() => match self.onboard_pid(g) {
-                    Some(pid) => return self.start_run(port, at, Some((pid, ref_rad as f64))),
-                    None => self.bad_command(port, "invalid loop gains")?,
-                },
-                _ => self.bad_command(port, "LoopReference without valid gains")?,
-            },
-            Message::SetVoltage { .. } => self.bad_command(port, "SetVoltage while not started")?,
-            // Board-to-host messages echoed back (e.g. a loopback): ignore.
-            _ => {}
-        }
-        Ok(None)
-    }
-
-    /// Handles a message during a run; returns whether the run goes on.
-    fn handle_running(
-        &mut self,
-        port: &mut dyn SerialPort,
-        r: &mut Run,
-        m: Message,
-        at: Instant,
-    ) -> Result<bool, HwError> {
-        match m {
-            Message::SetVoltage { seq, u_v } => {
-                let newer = r
-                    .last_seq_applied
-                    .is_none_or(|l| (seq.wrapping_sub(l) as i32) > 0);
-                if !newer {
-                    return Ok(true);
+            if !running {
+                // Coast at 0 V over the wall time spent idle (at most 1 s per call).
+                let idle = idle_since.elapsed().min(Duration::from_secs(1));
+                for _ in 0..(idle.as_nanos() / h.as_nanos().max(1)) {
+                    hal.drive.step();
                 }
-                if !u_v.is_finite() {
-                    r.u_v = 0.0;
-                    self.fault(port, FaultCode::BadCommand, "non-finite voltage command")?;
-                    return Ok(false);
+                idle_since = Instant::now();
+            }
+            if got > 0 {
+                core.receive(&mut hal, &buf[..got]);
+                if hal.restart {
+                    hal.restart = false;
+                    t0 = Instant::now();
+                    n = 0;
                 }
-                let (u, clipped) = self.cfg.limits.clamp_voltage(u_v as f64);
-                r.u_v = u;
-                r.clipped = clipped;
-                r.onboard = None;
-                r.last_seq_applied = Some(seq);
-                r.last_cmd_at = at;
-                if seq == r.k && r.cmd_for_k.is_none() {
-                    r.cmd_for_k = Some(at);
+                if !core.is_running() {
+                    idle_since = Instant::now();
+                }
+                continue;
+            }
+            if !running || Instant::now() < deadline {
+                continue;
+            }
+            // The sub-step is over: physics, and at the end of a period the core's tick.
+            hal.drive.step();
+            n += 1;
+            if n.is_multiple_of(subs) {
+                let late = Instant::now()
+                    .saturating_duration_since(deadline)
+                    .as_secs_f64();
+                if late > self.cfg.sample_period_s {
+                    late_ticks += 1;
+                }
+                max_lateness_s = max_lateness_s.max(late);
+                core.tick(&mut hal);
+                if !core.is_running() {
+                    idle_since = Instant::now();
                 }
             }
-            Message::LoopReference { ref_rad, .. } => {
-                let Some(g) = self.gains else {
-                    r.u_v = 0.0;
-                    self.fault(port, FaultCode::BadCommand, "LoopReference without gains")?;
-                    return Ok(false);
-                };
-                if !ref_rad.is_finite() {
-                    r.u_v = 0.0;
-                    self.fault(port, FaultCode::BadCommand, "non-finite reference")?;
-                    return Ok(false);
-                }
-                match (r.onboard.as_mut(), self.onboard_pid(g)) {
-                    (Some((_, rf)), _) => *rf = ref_rad as f64,
-                    (None, Some(pid)) => r.onboard = Some((pid, ref_rad as f64)),
-                    (None, None) => {
-                        r.u_v = 0.0;
-                        self.fault(port, FaultCode::BadCommand, "invalid loop gains")?;
-                        return Ok(false);
-                    }
-                }
-                r.last_cmd_at = at;
-            }
-            Message::Stop => {
-                r.u_v = 0.0;
-                self.send(port, &Message::Stopped)?;
-                return Ok(false);
-            }
-            Message::Start => {
-                // Restart: clock and encoder zeroed, the load stays where it is.
-                if let Some(nr) = self.start_run(port, at, None)? {
-                    *r = nr;
-                } else {
-                    return Ok(false);
-                }
-            }
-            Message::Hello { protocol_version } => self.hello(port, protocol_version)?,
-            Message::LoopGains(g) => self.set_gains(port, g)?,
-            _ => {}
         }
-        Ok(true)
-    }
-
-    fn hello(&mut self, port: &mut dyn SerialPort, version: u16) -> Result<(), HwError> {
-        if version != PROTOCOL_VERSION {
-            let text = format!("host speaks v{version}, board v{PROTOCOL_VERSION}");
-            return self.fault(port, FaultCode::Version, &text);
+        let driving = core.is_running();
+        if disconnected && driving {
+            let text = "host side of the port closed during a run";
+            hal.faults.push((FaultCode::Other, text.to_string()));
         }
-        self.send(port, &Message::HelloAck(self.hello_ack()))
+        // Whatever ended serving (Ctrl-C, a closed port), the driver goes to 0 V.
+        let output_at_exit_v = hal.drive.voltage_v() as f64;
+        hal.drive.set_voltage(0.0);
+        self.report.disconnected = disconnected;
+        self.report.late_ticks += late_ticks;
+        self.report.max_lateness_s = self.report.max_lateness_s.max(max_lateness_s);
+        self.report.driving_at_exit = driving && !disconnected;
+        self.report.output_at_exit_v = if disconnected { 0.0 } else { output_at_exit_v };
+        // A new core: the board restarts idle if served again.
+        if driving {
+            self.core = BoardCore::new(*self.core.config())
+                .map_err(|e| HwError::Protocol(e.to_string()))?;
+        }
+        Ok(self.report())
     }
+}
 
-    /// The firmware's PID for the on-board loop: servo's discrete PID (backward Euler, real
-    /// derivative with T_L = tau_f_s, clamping anti-windup, limited to the voltage limit).
-    fn onboard_pid(&self, g: LoopGains) -> Option<Pid> {
-        let gains = PidGains {
-            kp: g.kp as f64,
-            ki: g.ki as f64,
-            kd: g.kd as f64,
-            tl_s: g.tau_f_s as f64,
+enum Received {
+    Bytes(usize),
+    Nothing,
+    Closed,
+}
+
+/// Reads what arrives before `deadline` into `buf` (returns at the first bytes).
+fn receive(
+    port: &mut dyn SerialPort,
+    deadline: Instant,
+    buf: &mut [u8],
+) -> Result<Received, HwError> {
+    loop {
+        let Some(wait) = deadline
+            .checked_duration_since(Instant::now())
+            .filter(|d| !d.is_zero())
+        else {
+            return Ok(Received::Nothing);
         };
-        let cfg = PidConfig {
-            anti_windup: AntiWindup::Clamping,
-            ..PidConfig::new(gains, self.cfg.sample_period_s)
-                .with_symmetric_limit(self.cfg.limits.voltage_limit_v)
-        };
-        Pid::new(cfg).ok()
-    }
-
-    fn set_gains(&mut self, port: &mut dyn SerialPort, g: LoopGains) -> Result<(), HwError> {
-        if self.onboard_pid(g).is_none() {
-            return self.bad_command(port, "invalid loop gains");
-        }
-        self.gains = Some(g);
-        self.send(port, &Message::GainsAck)
-    }
-
-    fn bad_command(&mut self, port: &mut dyn SerialPort, text: &str) -> Result<(), HwError> {
-        if self.bad_cmd_reported {
-            return Ok(());
-        }
-        self.bad_cmd_reported = true;
-        self.fault(port, FaultCode::BadCommand, text)
-    }
-
-    fn fault(
-        &mut self,
-        port: &mut dyn SerialPort,
-        code: FaultCode,
-        text: &str,
-    ) -> Result<(), HwError> {
-        self.report.faults.push((code, text.to_string()));
-        self.bad_cmd_reported = true;
-        self.send(port, &Message::Fault(Fault::new(code, text)))
-    }
-
-    /// Advances the plant at 0 V over the wall time spent idle (at most 1 s per call).
-    fn coast_idle(&mut self) {
-        let h = self.sim.dt_s();
-        let idle = self.idle_since.elapsed().as_secs_f64().min(1.0);
-        let steps = (idle / h) as u64;
-        for _ in 0..steps {
-            self.sim.step(0.0);
-        }
-        self.idle_since = Instant::now();
-    }
-
-    /// Sends one frame. A write that times out (nobody reading a full pty) drops the frame.
-    fn send(&mut self, port: &mut dyn SerialPort, m: &Message) -> Result<(), HwError> {
-        let f = Frame::new(m);
-        match port.write_all(f.as_bytes()) {
-            Ok(()) => Ok(()),
-            Err(e) if e.kind() == ErrorKind::TimedOut => Ok(()),
-            Err(e) if matches!(e.kind(), ErrorKind::BrokenPipe) => Ok(()),
-            Err(e) => Err(HwError::Io(e)),
-        }
-    }
-
-    /// Reads and decodes until `deadline`, appending (arrival, message) to `out`.
-    fn receive(
-        &mut self,
-        port: &mut dyn SerialPort,
-        deadline: Instant,
-        out: &mut Vec<(Instant, Message)>,
-    ) -> Result<Link, HwError> {
-        let mut buf = [0u8; 256];
-        loop {
-            let now = Instant::now();
-            let Some(wait) = deadline
-                .checked_duration_since(now)
-                .filter(|d| !d.is_zero())
-            else {
-                return Ok(Link::Open);
-            };
-            port.set_timeout(wait)?;
-            match port.read(&mut buf) {
-                Ok(0) => return Ok(Link::Closed),
-                Ok(n) => {
-                    let at = Instant::now();
-                    self.dec.feed(&buf[..n], |r| {
-                        if let Ok(m) = r {
-                            out.push((at, m));
-                        }
-                    });
-                    if !out.is_empty() {
-                        // Handle what arrived now; the caller comes back for the rest.
-                        return Ok(Link::Open);
-                    }
+        port.set_timeout(wait)?;
+        match port.read(buf) {
+            Ok(0) => return Ok(Received::Closed),
+            Ok(n) => return Ok(Received::Bytes(n)),
+            Err(e) if e.kind() == ErrorKind::TimedOut => return Ok(Received::Nothing),
+            Err(e) if e.kind() == ErrorKind::Interrupted => {}
+            Err(e) if matches!(e.kind(), ErrorKind::BrokenPipe) || e.raw_os_error() == Some(5) => {
+                return Ok(Received::Closed)
+            }
+            Err(e) => {
+                // EIO and friends from a pty whose other side went away.
+                if e.to_string().contains("Input/output") {
+                    return Ok(Received::Closed);
                 }
-                Err(e) if e.kind() == ErrorKind::TimedOut => return Ok(Link::Open),
-                Err(e) if e.kind() == ErrorKind::Interrupted => {}
-                Err(e)
-                    if matches!(e.kind(), ErrorKind::BrokenPipe) || e.raw_os_error() == Some(5) =>
-                {
-                    return Ok(Link::Closed)
-                }
-                Err(e) => {
-                    // EIO and friends from a pty whose other side went away.
-                    if e.to_string().contains("Input/output") {
-                        return Ok(Link::Closed);
-                    }
-                    return Err(HwError::Io(e));
-                }
+                return Err(HwError::Io(e));
             }
         }
     }

@@ -3,10 +3,11 @@
 //! * [`Backend`]: the small trait every backend implements (sample the sensors, apply a voltage).
 //! * [`sim::SimBackend`]: the simulated gearmotor with a simulated clock (deterministic, faster
 //!   than real time by default).
-//! * The serial board backend and the virtual board live beside it.
+//! * The serial board backend, the virtual board and the QEMU board launcher live beside it.
 
 pub mod backend;
 pub mod board;
+pub mod qemu;
 pub mod serial;
 pub mod sim;
 

@@ -1,5 +1,7 @@
-//! `servo board --pty`: a virtual board (firmware behaviour + simulated gearmotor in real time)
+//! `servo board --pty`: a virtual board (servo's board core + simulated gearmotor in real time)
 //! on a pseudo-terminal, for running `servo run --backend serial` without hardware.
+//! `servo board --qemu`: the same board core as Cortex-M firmware under qemu-system-arm, its UART
+//! on a pseudo-terminal.
 
 use crate::plant_args::PlantArgs;
 use anyhow::{bail, Context};
@@ -15,8 +17,33 @@ use std::sync::Arc;
 #[derive(Debug, clap::Parser)]
 pub struct Board {
     /// Create a pseudo-terminal and serve on it; its path is printed ("board ready on PATH").
-    #[arg(long, required_unless_present = "port")]
+    #[arg(long, required_unless_present_any = ["port", "qemu"])]
     pub pty: bool,
+    /// Run the board firmware image under qemu-system-arm (mps2-an386) and put its UART on a
+    /// pseudo-terminal; its path is printed like --pty's. The image's plant is fixed
+    /// (--qemu-plant); --period-ms, --watchdog-ms and ±max(|--theta-min-rad|, |--theta-max-rad|)
+    /// are passed to it.
+    #[arg(long, conflicts_with_all = ["pty", "port"])]
+    pub qemu: bool,
+    /// The QEMU firmware image (default: $SERVO_QEMU_ELF, else
+    /// firmware/target/thumbv7em-none-eabihf/release/servo-board-qemu of the checkout).
+    #[arg(long, value_name = "FILE", requires = "qemu")]
+    pub elf: Option<PathBuf>,
+    /// The qemu-system-arm executable.
+    #[arg(
+        long = "qemu-bin",
+        value_name = "PATH",
+        default_value = "qemu-system-arm",
+        requires = "qemu"
+    )]
+    pub qemu_bin: PathBuf,
+    /// The plant simulated inside the QEMU image: lab (friction as measured on real SRV-02s)
+    /// or table2 (no friction).
+    #[arg(long = "qemu-plant", value_name = "PLANT", default_value = "lab", value_parser = ["lab", "table2"], requires = "qemu")]
+    pub qemu_plant: String,
+    /// Write the QEMU firmware's loop statistics (one line a second) to this file.
+    #[arg(long = "stats-file", value_name = "FILE", requires = "qemu")]
+    pub stats_file: Option<PathBuf>,
     /// Serve on an existing serial port instead of a pty.
     #[arg(long, value_name = "PATH", conflicts_with = "pty")]
     pub port: Option<String>,
@@ -79,6 +106,9 @@ impl Board {
     }
 
     pub fn run(self) -> anyhow::Result<()> {
+        if self.qemu {
+            return self.run_qemu();
+        }
         let (plant, sensors) = self.plant.load()?;
         let cfg = self.config()?;
         let mut board = VirtualBoard::new(&plant, sensors, cfg)
@@ -129,6 +159,68 @@ impl Board {
                 .with_context(|| format!("serving on {port}"))?
         };
         print_report(&report);
+        Ok(())
+    }
+}
+
+impl Board {
+    fn run_qemu(&self) -> anyhow::Result<()> {
+        let cfg = self.config()?;
+        let elf = match &self.elf {
+            Some(e) => e.clone(),
+            None => servo_hw::qemu::default_image().context(
+                "no QEMU board image: build it (cd firmware && cargo build --release) or give --elf FILE",
+            )?,
+        };
+        let theta_limit_rad = cfg
+            .limits
+            .theta_min_rad
+            .abs()
+            .max(cfg.limits.theta_max_rad.abs());
+        let qcfg = servo_hw::qemu::QemuConfig {
+            qemu: self.qemu_bin.clone(),
+            elf: elf.clone(),
+            period_us: (self.period_ms * 1e3).round() as u32,
+            watchdog_ms: self.watchdog_ms.round() as u32,
+            substeps: 5,
+            theta_limit_mrad: (theta_limit_rad * 1e3).round().min(u32::MAX as f64) as u32,
+            plant: if self.qemu_plant == "table2" {
+                servo_hw::qemu::QemuPlant::Table2
+            } else {
+                servo_hw::qemu::QemuPlant::Lab
+            },
+            stats_file: self.stats_file.clone(),
+        };
+        let stop = Arc::new(AtomicBool::new(false));
+        {
+            let stop = stop.clone();
+            ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
+                .context("installing the Ctrl-C handler")?;
+        }
+        let mut board = servo_hw::qemu::QemuBoard::start(&qcfg)
+            .with_context(|| format!("starting the QEMU board ({})", elf.display()))?;
+        let path = board.path().to_string();
+        if let Some(f) = &self.path_file {
+            std::fs::write(f, format!("{path}\n"))
+                .with_context(|| format!("--path-file {}", f.display()))?;
+        }
+        outln!("board ready on {path}");
+        outln!(
+            "  QEMU mps2-an386 running {} | plant {} | period {} ms | watchdog {} ms | Ctrl-C to quit",
+            elf.display(),
+            self.qemu_plant,
+            self.period_ms,
+            self.watchdog_ms
+        );
+        let _ = std::io::stdout().flush();
+        while !stop.load(Ordering::Relaxed) {
+            if !board.is_running() {
+                bail!("qemu-system-arm exited");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        board.shutdown();
+        outln!("board stopped (QEMU)");
         Ok(())
     }
 }

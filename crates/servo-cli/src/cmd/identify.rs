@@ -122,25 +122,35 @@ pub struct Identify {
     #[arg(long = "ramp")]
     pub ramp: bool,
 
-    /// Recipes of the `--ramp` experiments.
-    #[arg(
-        long = "friction-recipe",
-        value_name = "TOML",
-        default_value = "experiments/identify_friction.toml"
-    )]
-    pub friction_recipe: PathBuf,
-    #[arg(
-        long = "inertia-recipe",
-        value_name = "TOML",
-        default_value = "experiments/identify_inertia.toml"
-    )]
-    pub inertia_recipe: PathBuf,
+    /// Recipes of the `--ramp` experiments (TOML); default: the recipes built into servo (the
+    /// same as experiments/identify_friction.toml and experiments/identify_inertia.toml).
+    #[arg(long = "friction-recipe", value_name = "TOML")]
+    pub friction_recipe: Option<PathBuf>,
+    #[arg(long = "inertia-recipe", value_name = "TOML")]
+    pub inertia_recipe: Option<PathBuf>,
+
+    /// Backend of the `--ramp` experiments: the simulator (`--plant`) or a board on `--port`
+    /// (`servo board --pty`/`--qemu` or real firmware). The staircase turns the load for many
+    /// revolutions: start the board with wide position limits (e.g. `--theta-min-rad -1e6
+    /// --theta-max-rad 1e6`); the host's own position limits are off for these runs.
+    #[arg(long, value_enum, default_value = "sim")]
+    pub backend: crate::cmd::run::BackendKind,
+    /// Serial port of the board (`--backend serial`).
+    #[arg(long, value_name = "PATH", default_value = "/dev/ttyACM0")]
+    pub port: String,
+    /// Baud rate of the serial port [bit/s] (ignored by USB CDC and pseudo-terminals).
+    #[arg(long, value_name = "BAUD", default_value_t = 115_200)]
+    pub baud: u32,
+    /// A board silent for this long during a run is lost: 0 V, error [ms].
+    #[arg(long = "board-timeout-ms", value_name = "MS", default_value_t = 250.0)]
+    pub board_timeout_ms: f64,
 
     /// Directory for the `--ramp` logs.
     #[arg(long = "log-dir", value_name = "DIR", default_value = ".")]
     pub log_dir: PathBuf,
 
-    /// Simulated plant for `--ramp` on the simulator.
+    /// Simulated plant for `--ramp` on the simulator; default: the lab plant of
+    /// `servo params --lab` (friction as measured on real SRV-02s).
     #[command(flatten)]
     pub plant: crate::plant_args::PlantArgs,
 }

@@ -1,7 +1,11 @@
 //! `servo identify --ramp`: the identification experiments of the handout run on a backend.
 //!
-//! * friction (4.1): a closed-loop speed staircase (recipe `experiments/identify_friction.toml`);
-//! * inertia (4.2): constant acceleration/deceleration ramps (`experiments/identify_inertia.toml`).
+//! * friction (4.1): a closed-loop speed staircase (recipe `experiments/identify_friction.toml`,
+//!   built into the binary; `--friction-recipe FILE` overrides it);
+//! * inertia (4.2): constant acceleration/deceleration ramps (`experiments/identify_inertia.toml`,
+//!   likewise).
+//!
+//! Both run on any backend: the simulator or a board over serial.
 //!
 //! The speed loop is a PI on the motor speed (differentiated encoder angle, first-order filtered)
 //! with a back-EMF and inertia feedforward from the nominal parameters, designed for a 50 rad/s
@@ -61,9 +65,23 @@ fn half() -> f64 {
     0.5
 }
 
+/// The built-in friction recipe (experiments/identify_friction.toml at build time).
+pub const FRICTION_RECIPE: &str = include_str!("../../../../experiments/identify_friction.toml");
+/// The built-in inertia recipe (experiments/identify_inertia.toml at build time).
+pub const INERTIA_RECIPE: &str = include_str!("../../../../experiments/identify_inertia.toml");
+/// How the built-in recipes are named in messages and log metadata.
+const BUILT_IN: &str = "built-in";
+
 fn load_toml<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> anyhow::Result<T> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading {what} recipe {}", path.display()))?;
+    let text = if path == Path::new(BUILT_IN) {
+        match what {
+            "friction" => FRICTION_RECIPE.to_string(),
+            _ => INERTIA_RECIPE.to_string(),
+        }
+    } else {
+        std::fs::read_to_string(path)
+            .with_context(|| format!("reading {what} recipe {}", path.display()))?
+    };
     toml::from_str(&text).with_context(|| format!("in {what} recipe {}", path.display()))
 }
 
@@ -92,6 +110,11 @@ impl FrictionRecipe {
             );
         }
         Ok(r)
+    }
+    /// Length of the staircase [s].
+    pub fn duration_s(&self) -> f64 {
+        let one_dir = self.rest_s + self.step_duration_s * self.speeds_rad_s.len() as f64;
+        one_dir * if self.both_directions { 2.0 } else { 1.0 }
     }
     /// Speed reference [rad/s] at time `t` [s]; None after the end.
     pub fn reference(&self, t: f64) -> Option<f64> {
@@ -133,6 +156,11 @@ impl InertiaRecipe {
             bail!("{}: cycles must be >= 2 (eq. 69 averages over pairs; one pair gives no uncertainty)", path.display());
         }
         Ok(r)
+    }
+    /// Length of the ramps [s] (rest, run-up to the base speed, cycles).
+    pub fn duration_s(&self) -> f64 {
+        let half = (self.peak_speed_rad_s - self.base_speed_rad_s) / self.accel_rad_s2;
+        self.rest_s + self.base_speed_rad_s / self.accel_rad_s2 + 2.0 * half * self.cycles as f64
     }
     /// (speed [rad/s], acceleration [rad/s^2]) reference at `t`; None after the end.
     pub fn reference(&self, t: f64) -> Option<(f64, f64)> {
@@ -217,10 +245,16 @@ pub fn run_speed_loop_logged(
             w_f += (w_meas - w_f) * dt / (tau_f + dt);
             let err = w_ref - w_f;
             let ff = (p.k_e * w_ref + p.r_eq() * p.j_eq() * a_ref / p.k_t) / p.k_drv;
-            let u_unsat = ff + kp * err + integ;
+            // A zero reference is a rest: 0 V and the motor coasts (braking from full speed
+            // against the back-EMF would draw more than the board's over-current trip).
+            let rest = w_ref == 0.0 && a_ref == 0.0;
+            if rest {
+                integ = 0.0;
+            }
+            let u_unsat = if rest { 0.0 } else { ff + kp * err + integ };
             let u = u_unsat.clamp(-u_max, u_max);
             // Conditional integration (anti-windup).
-            if u == u_unsat || err.signum() != u_unsat.signum() {
+            if !rest && (u == u_unsat || err.signum() != u_unsat.signum()) {
                 integ += ki * err * dt;
             }
             backend.apply(u)?;
@@ -231,8 +265,8 @@ pub fn run_speed_loop_logged(
                 omega_l_rad_s: w_meas / p.n,
                 err_rad: f64::NAN,
                 u_v: u,
-                ff_v: ff,
-                p_v: kp * err,
+                ff_v: if rest { 0.0 } else { ff },
+                p_v: if rest { 0.0 } else { kp * err },
                 i_v: integ,
                 d_v: 0.0,
                 i_a_a: s.i_a_a,
@@ -254,32 +288,98 @@ pub fn run_speed_loop_logged(
     Ok((rec, msgs))
 }
 
+/// The simulated plant of `--ramp`: `--plant`/`--plant-effect` when given, else the realistic
+/// lab plant (`servo params --lab`: friction as measured on real SRV-02s), so that a fresh
+/// install identifies meaningful friction rather than Table 2's zero.
+fn sim_plant(
+    args: &Identify,
+) -> anyhow::Result<(servo_core::Plant, servo_core::sim::SensorConfig)> {
+    let (mut plant, sensors) = args.plant.load()?;
+    if args.plant.plant.is_none() {
+        plant = servo_core::Plant::lab();
+        for e in &args.plant.plant_effect {
+            plant.effects.insert(*e);
+        }
+    }
+    Ok((plant, sensors))
+}
+
+/// Live progress of a real-time run on stderr, every 5 s of run time: elapsed and remaining.
+fn progress(name: &str, t: f64, total_s: f64, realtime: bool, next_s: &mut f64) {
+    if realtime && t >= *next_s && t < total_s {
+        eprintln!(
+            "  {name}: {t:.0} s of {total_s:.0} s, {:.0} s left",
+            total_s - t
+        );
+        *next_s += 5.0;
+    }
+}
+
 /// Runs both experiments on the simulator described by the command's plant options, logs each
 /// to MCAP in `--log-dir` (identify_friction.mcap, identify_inertia.mcap) and returns the paths.
 pub fn run_experiments(args: &Identify, p: &PlantParams) -> anyhow::Result<Vec<PathBuf>> {
-    let fr = FrictionRecipe::load(&args.friction_recipe).context("--friction-recipe")?;
-    let ir = InertiaRecipe::load(&args.inertia_recipe).context("--inertia-recipe")?;
-    let (plant, sensors) = args.plant.load()?;
-    let dt = 1e-3;
+    let built_in = PathBuf::from(BUILT_IN);
+    let friction_recipe = args.friction_recipe.clone().unwrap_or(built_in.clone());
+    let inertia_recipe = args.inertia_recipe.clone().unwrap_or(built_in);
+    let fr = FrictionRecipe::load(&friction_recipe).context("--friction-recipe")?;
+    let ir = InertiaRecipe::load(&inertia_recipe).context("--inertia-recipe")?;
     std::fs::create_dir_all(&args.log_dir)
         .with_context(|| format!("--log-dir {}", args.log_dir.display()))?;
+    let serial = args.backend == crate::cmd::run::BackendKind::Serial;
+    let backend_name = if serial { "serial" } else { "sim" };
     let mut out = Vec::new();
     for (name, recipe) in [
-        ("identify_friction", &args.friction_recipe),
-        ("identify_inertia", &args.inertia_recipe),
+        ("identify_friction", &friction_recipe),
+        ("identify_inertia", &inertia_recipe),
     ] {
-        let mut b = servo_hw::sim::SimBackend::new(&plant, sensors, dt)?;
-        let source = format!("servo identify --ramp: {name} (sim)");
-        let (_, msgs) = if name == "identify_friction" {
-            run_speed_loop_logged(&mut b, p, &source, |t| fr.reference(t).map(|w| (w, 0.0)))?
+        let mut b: Box<dyn Backend> = if serial {
+            let cfg = servo_hw::SerialConfig {
+                port: args.port.clone(),
+                baud: args.baud,
+                timeout_s: args.board_timeout_ms * 1e-3,
+                limits: servo_core::safety::SafetyLimits {
+                    theta_min_rad: -1e12,
+                    theta_max_rad: 1e12,
+                    ..Default::default()
+                },
+                ..Default::default()
+            };
+            Box::new(
+                servo_hw::SerialBackend::open(cfg)
+                    .with_context(|| format!("--backend serial --port {}", args.port))?,
+            )
         } else {
-            run_speed_loop_logged(&mut b, p, &source, |t| ir.reference(t))?
+            let (plant, sensors) = sim_plant(args)?;
+            Box::new(servo_hw::sim::SimBackend::new(&plant, sensors, 1e-3)?)
         };
+        let source = format!("servo identify --ramp: {name} ({backend_name})");
+        let (_, msgs) = if name == "identify_friction" {
+            let (total_s, mut next_s) = (fr.duration_s(), 0.0);
+            run_speed_loop_logged(&mut *b, p, &source, |t| {
+                progress(name, t, total_s, serial, &mut next_s);
+                fr.reference(t).map(|w| (w, 0.0))
+            })?
+        } else {
+            let (total_s, mut next_s) = (ir.duration_s(), 0.0);
+            run_speed_loop_logged(&mut *b, p, &source, |t| {
+                progress(name, t, total_s, serial, &mut next_s);
+                ir.reference(t)
+            })?
+        };
+        if let Some(ls) = b.link_stats() {
+            eprintln!(
+                "  {name}: {} samples, {} missed deadlines, {} lost frames",
+                ls.samples, ls.missed_deadlines, ls.lost_frames
+            );
+        }
         let path = args.log_dir.join(format!("{name}.mcap"));
         let mut meta = BTreeMap::new();
         meta.insert("experiment".to_string(), name.to_string());
         meta.insert("recipe".to_string(), recipe.display().to_string());
-        meta.insert("backend".to_string(), "sim".to_string());
+        meta.insert("backend".to_string(), backend_name.to_string());
+        if serial {
+            meta.insert("serial_port".to_string(), args.port.clone());
+        }
         let mut log = McapLog::create(&path, &meta, McapLogOptions::default())
             .with_context(|| format!("creating log {}", path.display()))?;
         for m in &msgs {

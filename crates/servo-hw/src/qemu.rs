@@ -1,0 +1,308 @@
+//! The QEMU board: servo's board firmware (`firmware/qemu-mps2`, the board core of
+//! [`servo_core::board`] with the simulated plant behind its HAL) running on qemu-system-arm's
+//! `mps2-an386` Cortex-M4F, its UART0 bridged to a pseudo-terminal.
+//!
+//! QEMU serves UART0 on a Unix socket (`-chardev socket,server=on`); [`QemuBoard`] connects to it
+//! and copies bytes both ways between the socket and the master of a pty pair whose slave it
+//! keeps open, so hosts (`servo run --backend serial --port PATH`) can come and go as with the
+//! virtual board. UART1 carries the firmware's one-line-a-second loop statistics into a file.
+//! The board's constants travel in a boot block that QEMU's `loader` device writes at
+//! [`BOOT_CONFIG_ADDR`] (see the firmware's `BootConfig`).
+
+use crate::backend::HwError;
+use serialport::{SerialPort, TTYPort};
+use std::io::{Read, Write};
+use std::os::unix::net::UnixStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// Where the firmware reads its boot configuration.
+pub const BOOT_CONFIG_ADDR: u32 = 0x203F_F000;
+/// "SRVB" little-endian.
+pub const BOOT_MAGIC: u32 = 0x4256_5253;
+/// The image's file name under `firmware/target/thumbv7em-none-eabihf/release/`.
+pub const IMAGE_NAME: &str = "servo-board-qemu";
+
+/// The simulated plant inside the image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum QemuPlant {
+    /// `Plant::lab()`: Table 2 with the friction and inertia measured on real SRV-02s.
+    #[default]
+    Lab,
+    /// `Plant::nominal()`: Table 2 without friction.
+    Table2,
+}
+
+/// How to start the QEMU board.
+#[derive(Debug, Clone, PartialEq)]
+pub struct QemuConfig {
+    /// The qemu-system-arm executable.
+    pub qemu: PathBuf,
+    /// The firmware image (ELF).
+    pub elf: PathBuf,
+    /// Control period [us].
+    pub period_us: u32,
+    /// Watchdog [ms].
+    pub watchdog_ms: u32,
+    /// Physics sub-steps per period.
+    pub substeps: u32,
+    /// Soft position limit ± from Start [mrad]; 0 = the firmware's default (±2 rev).
+    pub theta_limit_mrad: u32,
+    /// The plant inside the image.
+    pub plant: QemuPlant,
+    /// File for the firmware's loop statistics (UART1); none = discarded.
+    pub stats_file: Option<PathBuf>,
+}
+
+impl Default for QemuConfig {
+    fn default() -> Self {
+        QemuConfig {
+            qemu: PathBuf::from("qemu-system-arm"),
+            elf: PathBuf::from(IMAGE_NAME),
+            period_us: 1000,
+            watchdog_ms: 50,
+            substeps: 5,
+            theta_limit_mrad: 0,
+            plant: QemuPlant::Lab,
+            stats_file: None,
+        }
+    }
+}
+
+/// Where the QEMU image is looked for when no path is given: `$SERVO_QEMU_ELF`, then
+/// `firmware/target/thumbv7em-none-eabihf/release/servo-board-qemu` under the current directory
+/// and under the checkout that holds the running executable (`target/<profile>/servo`).
+pub fn default_image() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os("SERVO_QEMU_ELF") {
+        return Some(PathBuf::from(p));
+    }
+    let rel = Path::new("firmware/target/thumbv7em-none-eabihf/release").join(IMAGE_NAME);
+    let mut candidates = vec![rel.clone()];
+    if let Ok(exe) = std::env::current_exe() {
+        for dir in exe.ancestors().skip(1).take(4) {
+            candidates.push(dir.join(&rel));
+        }
+    }
+    candidates.into_iter().find(|p| p.is_file())
+}
+
+/// Whether `qemu` runs (`qemu-system-arm --version`).
+pub fn qemu_available(qemu: &Path) -> bool {
+    Command::new(qemu)
+        .arg("--version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// A running QEMU board bridged to a pseudo-terminal. Dropping it kills QEMU.
+#[derive(Debug)]
+pub struct QemuBoard {
+    child: Child,
+    path: String,
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+    dir: PathBuf,
+    _slave: TTYPort,
+}
+
+impl QemuBoard {
+    /// Starts QEMU with the image and bridges its UART to a new pty (see [`QemuBoard::path`]).
+    pub fn start(cfg: &QemuConfig) -> Result<QemuBoard, HwError> {
+        if !cfg.elf.is_file() {
+            return Err(HwError::Protocol(format!(
+                "QEMU board image {} not found: build it with `cargo build --release` in firmware/",
+                cfg.elf.display()
+            )));
+        }
+        static COUNTER: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let dir = std::env::temp_dir().join(format!(
+            "servo-qemu-{}-{}",
+            std::process::id(),
+            COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
+        std::fs::create_dir_all(&dir)?;
+        let sock = dir.join("uart0.sock");
+        let stats = cfg
+            .stats_file
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("/dev/null"));
+        let mut cmd = Command::new(&cfg.qemu);
+        cmd.args(["-M", "mps2-an386", "-nographic", "-monitor", "none"])
+            .arg("-kernel")
+            .arg(&cfg.elf)
+            .arg("-chardev")
+            .arg(format!(
+                "socket,id=uart0,path={},server=on,wait=off",
+                sock.display()
+            ))
+            .args(["-serial", "chardev:uart0", "-serial"])
+            .arg(format!("file:{}", stats.display()));
+        let plant = match cfg.plant {
+            QemuPlant::Lab => 0,
+            QemuPlant::Table2 => 1,
+        };
+        let words = [
+            BOOT_MAGIC,
+            cfg.period_us,
+            cfg.watchdog_ms,
+            cfg.substeps,
+            plant,
+            cfg.theta_limit_mrad,
+        ];
+        for (i, w) in words.iter().enumerate() {
+            cmd.arg("-device").arg(format!(
+                "loader,addr=0x{:08X},data=0x{w:08X},data-len=4",
+                BOOT_CONFIG_ADDR + 4 * i as u32
+            ));
+        }
+        // QEMU dies with the thread that started it, even when servo is killed with SIGKILL.
+        // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
+        unsafe {
+            use std::os::unix::process::CommandExt;
+            cmd.pre_exec(|| {
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
+                Ok(())
+            });
+        }
+        cmd.stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped());
+        let mut child = cmd.spawn().map_err(|e| {
+            HwError::Protocol(format!(
+                "starting {} (install qemu-system-arm): {e}",
+                cfg.qemu.display()
+            ))
+        })?;
+        // Connect to QEMU's socket as soon as it exists.
+        let t = Instant::now();
+        let stream = loop {
+            match UnixStream::connect(&sock) {
+                Ok(s) => break s,
+                Err(_) if t.elapsed() < Duration::from_secs(10) => {
+                    if let Ok(Some(status)) = child.try_wait() {
+                        let mut err = String::new();
+                        if let Some(mut e) = child.stderr.take() {
+                            let _ = e.read_to_string(&mut err);
+                        }
+                        return Err(HwError::Protocol(format!(
+                            "qemu-system-arm exited ({status}): {}",
+                            err.trim()
+                        )));
+                    }
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                Err(e) => {
+                    let _ = child.kill();
+                    let _ = child.wait();
+                    return Err(HwError::Protocol(format!(
+                        "connecting to QEMU's UART socket {}: {e}",
+                        sock.display()
+                    )));
+                }
+            }
+        };
+        let (master, slave) = TTYPort::pair()?;
+        let path = slave
+            .name()
+            .ok_or_else(|| HwError::Protocol("the pseudo-terminal has no path".into()))?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let threads = bridge(stream, master, &stop)?;
+        Ok(QemuBoard {
+            child,
+            path,
+            stop,
+            threads,
+            dir,
+            _slave: slave,
+        })
+    }
+
+    /// The pty path hosts open.
+    pub fn path(&self) -> &str {
+        &self.path
+    }
+
+    /// Whether QEMU is still running.
+    pub fn is_running(&mut self) -> bool {
+        matches!(self.child.try_wait(), Ok(None))
+    }
+
+    /// Kills QEMU and ends the bridge.
+    pub fn shutdown(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+impl Drop for QemuBoard {
+    fn drop(&mut self) {
+        self.shutdown();
+    }
+}
+
+/// Copies socket → pty master and pty master → socket until `stop` or the socket closes.
+fn bridge(
+    stream: UnixStream,
+    master: TTYPort,
+    stop: &Arc<AtomicBool>,
+) -> Result<Vec<JoinHandle<()>>, HwError> {
+    let mut from_qemu = stream.try_clone()?;
+    from_qemu.set_read_timeout(Some(Duration::from_millis(100)))?;
+    let mut to_qemu = stream;
+    let mut from_host = master;
+    from_host.set_timeout(Duration::from_millis(100))?;
+    let mut to_host = from_host.try_clone_native()?;
+    let (s1, s2) = (stop.clone(), stop.clone());
+    let down = std::thread::spawn(move || {
+        let mut buf = [0u8; 512];
+        while !s1.load(Ordering::Relaxed) {
+            match from_qemu.read(&mut buf) {
+                Ok(0) => break,
+                Ok(n) => {
+                    // A full pty (nobody reading) drops the bytes, like a UART with no listener.
+                    let _ = to_host.write_all(&buf[..n]);
+                }
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock
+                            | std::io::ErrorKind::TimedOut
+                            | std::io::ErrorKind::Interrupted
+                    ) => {}
+                Err(_) => break,
+            }
+        }
+    });
+    let up = std::thread::spawn(move || {
+        let mut buf = [0u8; 512];
+        while !s2.load(Ordering::Relaxed) {
+            match from_host.read(&mut buf) {
+                Ok(0) => std::thread::sleep(Duration::from_millis(5)),
+                Ok(n) => {
+                    if to_qemu.write_all(&buf[..n]).is_err() {
+                        break;
+                    }
+                }
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted
+                    ) => {}
+                // No host has the slave open right now (EIO on some kernels): wait for one.
+                Err(_) => std::thread::sleep(Duration::from_millis(5)),
+            }
+        }
+    });
+    Ok(vec![down, up])
+}
