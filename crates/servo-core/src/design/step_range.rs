@@ -423,7 +423,7 @@ impl RangeCheck {
         };
         match self.worst_speed_s {
             None => Some(f64::INFINITY),
-            Some(w) => (w > t).then(|| w - t),
+            Some(w) => (w > t).then_some(w - t),
         }
     }
 }
