@@ -72,6 +72,7 @@ fn gains_file(path: &Path) {
             ts_s: DT,
             kw: None,
             u_limit_v: Some(10.0),
+            derivative_on: None,
         },
         design: None,
     };
@@ -258,6 +259,7 @@ fn real_closed_loop_steps_show_friction() {
             ts_s: DT,
             kw: None,
             u_limit_v: None,
+            derivative_on: None,
         },
         design: None,
     }

@@ -10,6 +10,7 @@
 //! ts_s = 1e-3      # sample period T_s [s]
 //! # kw = 30.0      # optional back-calculation anti-windup gain K_w [1/s]
 //! # u_limit_v = 10 # optional output limit [V]
+//! # derivative_on = "measurement"  # optional: "error" (default) or "measurement"
 //! [design]         # optional, informational (spec the gains were designed for)
 //! ```
 
@@ -40,6 +41,10 @@ pub struct PidSection {
     /// Controller output limit [V] (symmetric), if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub u_limit_v: Option<f64>,
+    /// What the derivative acts on (`error` or `measurement`); absent: the error (files written
+    /// before this field existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub derivative_on: Option<servo_core::control::DerivativeOn>,
 }
 
 fn default_ts() -> f64 {
@@ -123,6 +128,15 @@ impl GainsFile {
         if let Some(u) = p.u_limit_v {
             s.push_str(&format!("u_limit_v = {u:e}  # output limit [V]\n"));
         }
+        if let Some(d) = p.derivative_on {
+            let name = match d {
+                servo_core::control::DerivativeOn::Error => "error",
+                servo_core::control::DerivativeOn::Measurement => "measurement",
+            };
+            s.push_str(&format!(
+                "derivative_on = \"{name}\"  # derivative of the error or of the measurement\n"
+            ));
+        }
         if let Some(d) = &self.design {
             s.push_str("\n[design]\n");
             s.push_str(&toml::to_string(d).unwrap_or_default());
@@ -145,11 +159,28 @@ mod tests {
                 tl_s: 6.7e-3,
                 ts_s: 1e-3,
                 kw: Some(30.0),
-                u_limit_v: None,
+                u_limit_v: Some(10.0),
+                derivative_on: Some(servo_core::control::DerivativeOn::Measurement),
             },
             design: None,
         };
         assert_eq!(GainsFile::parse(&g.to_toml_commented()).unwrap(), g);
+        // files written before kw, u_limit_v and derivative_on existed still read
+        let old =
+            GainsFile::parse("[pid]\nkp = 7\nki = 86\nkd = 0.14\ntl_s = 0.0067\nts_s = 0.001\n")
+                .unwrap();
+        assert_eq!(
+            (old.pid.kw, old.pid.u_limit_v, old.pid.derivative_on),
+            (None, None, None)
+        );
+        let e = format!(
+            "{:#}",
+            GainsFile::parse("[pid]\nkp = 1\nderivative_on = \"output\"\n").unwrap_err()
+        );
+        assert!(
+            e.contains("derivative_on") || e.contains("measurement"),
+            "{e}"
+        );
         let e = format!("{:#}", GainsFile::parse("[pid]\nkp = -1\n").unwrap_err());
         assert!(e.contains("kp"), "{e}");
         let e = format!(

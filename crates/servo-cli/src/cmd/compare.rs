@@ -446,6 +446,7 @@ impl Compare {
                     ts_s: m.dt_s,
                     kw: None,
                     u_limit_v: None,
+                    derivative_on: None,
                 },
                 design: None,
             };

@@ -257,6 +257,7 @@ fn stage_design(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)>
             ts_s: 1e-3,
             kw: None,
             u_limit_v: None,
+            derivative_on: None,
         },
         design: Some(d),
     };
@@ -284,6 +285,7 @@ pub fn handout_gains() -> GainsFile {
             ts_s: 1e-3,
             kw: None,
             u_limit_v: None,
+            derivative_on: None,
         },
         design: None,
     }

@@ -2,17 +2,27 @@
 //! verified on the reduced model, the full model and the discrete loop at T_s.
 
 mod bode_plot;
+mod spec_plot;
 
 use crate::gains_file::{GainsFile, PidSection};
 use crate::model_file::ModelFile;
+use crate::runner::controller::DerivativeOnArg;
 use anyhow::{anyhow, bail, Context};
 use serde_json::{json, Value};
+use servo_core::control::DerivativeOn;
 use servo_core::design::bode::{required_compensation, DerivativeFilter};
 use servo_core::design::closed_loop::Stability;
-use servo_core::design::controller::Discretization;
-use servo_core::design::spec::{translate, DampingSpec, SpeedSpec, Translation};
+use servo_core::design::controller::{controller_tf_s, controller_tf_z, Discretization};
+use servo_core::design::meet::{meet_specs, MeetRequest, MeetResult};
+use servo_core::design::spec::{
+    damping_from_phase_margin, translate, DampingSpec, SpeedSpec, Translation,
+};
+use servo_core::design::step_range::{
+    check_report, traces, FastPlant, LoopStructure, RangeCheck, SpeedTarget, TimeSpecs,
+};
+use servo_core::design::tf::TransferFunction;
 use servo_core::design::verify::{design, Achieved, DesignReport, DesignRequest};
-use servo_core::design::{c_abs, c_arg, deg, rad, ControllerKind, PlantModel};
+use servo_core::design::{c_abs, c_arg, deg, rad, ControllerKind, PidGains, PlantModel};
 use servo_core::PlantParams;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -101,6 +111,29 @@ pub struct Design {
     /// (real derivative, ZOH, full model when known) equal the spec.
     #[arg(long)]
     pub exact: bool,
+    /// Search w_gc, phase margin, alpha, T_L, the derivative input and the anti-windup gain K_w
+    /// for a PID (or PI) whose step responses on the loop that runs (full model, ZOH at T_s,
+    /// voltage limit, anti-windup) meet --overshoot and --settling-time (or --settling-time-1pct,
+    /// --rise-time) for every step from --step-min to --step-max.
+    #[arg(long, conflicts_with_all = ["exact", "kw"])]
+    pub meet_specs: bool,
+    /// Smallest reference step [rad] the time-domain specs must hold for.
+    #[arg(long, value_name = "RAD", default_value_t = 0.2)]
+    pub step_min: f64,
+    /// Largest reference step [rad] the time-domain specs must hold for.
+    #[arg(long, value_name = "RAD", default_value_t = 1.0)]
+    pub step_max: f64,
+    /// What the derivative acts on in the loop that runs (with --meet-specs: the one preferred;
+    /// the search switches only when needed). Written to the gains file.
+    #[arg(long = "derivative-on", value_enum, default_value = "error")]
+    pub derivative_on: DerivativeOnArg,
+    /// Back-calculation anti-windup gain K_w [1/s] of the loop that runs (default: no
+    /// anti-windup; --meet-specs chooses it). Written to the gains file.
+    #[arg(long, value_name = "PER_SECOND")]
+    pub kw: Option<f64>,
+    /// Driver input limit [V] of the loop that runs (written to the gains file).
+    #[arg(long = "u-limit", value_name = "VOLTS", default_value_t = 10.0)]
+    pub u_limit: f64,
     /// Plant parameter file (TOML, see `servo params`); default Table 2.
     #[arg(long, value_name = "FILE")]
     pub params: Option<PathBuf>,
@@ -113,7 +146,8 @@ pub struct Design {
     /// Print one JSON object instead of the report.
     #[arg(long)]
     pub json: bool,
-    /// Write the loop's Bode plot (SVG) with crossover and margins marked.
+    /// Write the loop's Bode plot (SVG) with crossover and margins marked; with time-domain specs,
+    /// also the achieved step responses of the loop that runs against the spec box.
     #[arg(long, value_name = "SVG")]
     pub plot: Option<PathBuf>,
     /// Write the closed-loop step responses (SVG).
@@ -250,28 +284,87 @@ impl Design {
             design_on_full: self.model == DesignModel::Full,
             exact: self.exact,
         };
-        let report = design(&req)
+        let structure = LoopStructure {
+            derivative_on: self.derivative_on.into(),
+            kw_per_s: self.kw,
+            u_limit_v: self.u_limit,
+            discretization: req.discretization,
+        };
+        structure
+            .validate()
+            .map_err(|e| anyhow!("--u-limit/--kw: {e}"))?;
+        let specs = self.time_specs();
+        if let Some(sp) = &specs {
+            sp.validate()
+                .map_err(|e| anyhow!("time-domain specs: {e}"))?;
+        }
+        let out = if self.meet_specs {
+            let specs = specs
+                .filter(|s| s.overshoot_max.is_some() && s.speed.is_some())
+                .ok_or_else(|| {
+                    anyhow!(
+                        "--meet-specs needs time-domain specs: --overshoot and one of --settling-time,                          --settling-time-1pct, --rise-time (e.g. --overshoot 0.1 --settling-time 0.15)"
+                    )
+                })?;
+            let t0 = std::time::Instant::now();
+            let m = meet_specs(&MeetRequest {
+                base: req,
+                specs,
+                u_limit_v: self.u_limit,
+                derivative_on: structure.derivative_on,
+            })
             .map_err(|e| anyhow!("{e}"))
-            .context("design failed")?;
+            .context("--meet-specs failed")?;
+            let elapsed_ms = t0.elapsed().as_secs_f64() * 1e3;
+            Outcome {
+                report: m.report.clone(),
+                structure: m.structure,
+                check: Some(m.check.clone()),
+                meet: Some((m, elapsed_ms)),
+            }
+        } else {
+            let report = design(&req)
+                .map_err(|e| anyhow!("{e}"))
+                .context("design failed")?;
+            let check = match &specs {
+                Some(sp) => Some(
+                    check_report(&report, &structure, sp)
+                        .map_err(|e| anyhow!("{e}"))
+                        .context("checking the time-domain specs")?,
+                ),
+                None => None,
+            };
+            Outcome {
+                report,
+                structure,
+                check,
+                meet: None,
+            }
+        };
+        let report = &out.report;
 
         if let Some(path) = &self.output {
-            self.gains_file(&report, &tr).save(path)?;
+            self.gains_file(&out, &tr).save(path)?;
         }
         if let Some(path) = &self.plot {
-            bode_plot::write(path, &report)
+            let panel = match &out.check {
+                Some(c) => Some(spec_panel(&out, c)?),
+                None => None,
+            };
+            bode_plot::write(path, report, panel.as_ref())
                 .with_context(|| format!("--plot {}", path.display()))?;
         }
         if let Some(path) = &self.step_plot {
-            write_step_plot(path, &report)
+            write_step_plot(path, report)
                 .with_context(|| format!("--step-plot {}", path.display()))?;
         }
         if self.json {
             emit(&format!(
                 "{}\n",
-                serde_json::to_string_pretty(&self.json_report(&report, &tr, &src))?
+                serde_json::to_string_pretty(&self.json_report(&out, &tr, &src))?
             ))?;
         } else {
-            let mut text = self.text_report(&report, &tr, &translation_lines, &src);
+            let mut text = self.text_report(&out, &tr, &translation_lines, &src);
             if let Some(p) = &self.output {
                 let _ = writeln!(text, "wrote controller to {}", p.display());
             }
@@ -283,6 +376,31 @@ impl Design {
         Ok(())
     }
 
+    /// The time-domain specs given on the command line, if any.
+    fn time_specs(&self) -> Option<TimeSpecs> {
+        let speed = match (self.settling_time, self.settling_time_1pct, self.rise_time) {
+            (Some(t), _, _) => Some(SpeedTarget::Settling {
+                band: 0.05,
+                time_s: t,
+            }),
+            (_, Some(t), _) => Some(SpeedTarget::Settling {
+                band: 0.01,
+                time_s: t,
+            }),
+            (_, _, Some(t)) => Some(SpeedTarget::Rise { time_s: t }),
+            _ => None,
+        };
+        if self.overshoot.is_none() && speed.is_none() {
+            return None;
+        }
+        Some(TimeSpecs {
+            overshoot_max: self.overshoot,
+            speed,
+            step_min_rad: self.step_min,
+            step_max_rad: self.step_max,
+        })
+    }
+
     fn design_model(&self, r: &DesignReport) -> PlantModel {
         match (self.model, r.request.full) {
             (DesignModel::Full, Some(f)) => f,
@@ -290,24 +408,45 @@ impl Design {
         }
     }
 
-    fn gains_file(&self, r: &DesignReport, tr: &Translation) -> GainsFile {
+    fn gains_file(&self, out: &Outcome, tr: &Translation) -> GainsFile {
+        let r = &out.report;
         let g = &r.gains;
         let mut d = toml::Table::new();
         d.insert("method".into(), "Bode (handout eqs. 44-53)".into());
         d.insert("controller".into(), r.request.kind.name().into());
         d.insert("model".into(), self.design_model(r).name().into());
-        d.insert("wgc_rad_s".into(), tr.spec.omega_gc.into());
-        d.insert("pm_deg".into(), deg(tr.spec.phase_margin).into());
-        d.insert("alpha".into(), self.alpha.into());
+        d.insert("wgc_rad_s".into(), r.request.spec.omega_gc.into());
+        d.insert("pm_deg".into(), deg(r.request.spec.phase_margin).into());
+        d.insert("alpha".into(), r.request.alpha.into());
         d.insert(
             "discretization".into(),
             r.request.discretization.name().into(),
         );
         d.insert("exact".into(), self.exact.into());
+        d.insert("meet_specs".into(), self.meet_specs.into());
+        if self.meet_specs {
+            d.insert("translated_wgc_rad_s".into(), tr.spec.omega_gc.into());
+            d.insert("translated_pm_deg".into(), deg(tr.spec.phase_margin).into());
+        }
         let m = &r.discrete.margins;
         if m.phase_margin_deg.is_finite() {
             d.insert("achieved_discrete_pm_deg".into(), m.phase_margin_deg.into());
             d.insert("achieved_discrete_wgc_rad_s".into(), m.omega_gc.into());
+        }
+        if let Some(c) = &out.check {
+            if let Some(o) = c.specs.overshoot_max {
+                d.insert("spec_overshoot_pct".into(), (100.0 * o).into());
+            }
+            d.insert("step_min_rad".into(), c.specs.step_min_rad.into());
+            d.insert("step_max_rad".into(), c.specs.step_max_rad.into());
+            d.insert(
+                "achieved_worst_overshoot_pct".into(),
+                c.worst_overshoot_pct.into(),
+            );
+            if let Some(t) = c.worst_speed_s {
+                d.insert(format!("achieved_worst_{}", speed_key(&c.specs)), t.into());
+            }
+            d.insert("time_specs_met".into(), c.met().into());
         }
         GainsFile {
             pid: PidSection {
@@ -316,18 +455,22 @@ impl Design {
                 kd: g.kd,
                 tl_s: g.tl_s,
                 ts_s: r.request.ts_s,
-                kw: None,
-                u_limit_v: None,
+                kw: out.structure.kw_per_s,
+                u_limit_v: Some(out.structure.u_limit_v),
+                derivative_on: Some(out.structure.derivative_on),
             },
             design: Some(d),
         }
     }
 
-    fn json_report(&self, r: &DesignReport, tr: &Translation, src: &PlantSource) -> Value {
+    fn json_report(&self, out: &Outcome, tr: &Translation, src: &PlantSource) -> Value {
+        let r = &out.report;
         let g = &r.gains;
+        let st = &out.structure;
+        let ls = r.request.spec;
         let model = self.design_model(r);
-        let p_gc = model.response(tr.spec.omega_gc);
-        let (dk, dphi) = required_compensation(&tr.spec, p_gc);
+        let p_gc = model.response(ls.omega_gc);
+        let (dk, dphi) = required_compensation(&ls, p_gc);
         let plant = match r.request.reduced {
             PlantModel::Reduced { k_m, t_m, n } => json!({"k_m": k_m, "t_m_s": t_m, "n": n}),
             PlantModel::Full { .. } => Value::Null,
@@ -336,10 +479,15 @@ impl Design {
             "controller": r.request.kind.name(),
             "kp": g.kp, "ki": g.ki, "kd": g.kd,
             "ti": num(g.ti_s()), "td": num(g.td_s()), "tl": g.tl_s,
-            "wgc": tr.spec.omega_gc, "pm_deg": deg(tr.spec.phase_margin), "pm_rad": tr.spec.phase_margin,
-            "delta": tr.delta, "alpha": self.alpha, "ts": r.request.ts_s,
+            "wgc": ls.omega_gc, "pm_deg": deg(ls.phase_margin), "pm_rad": ls.phase_margin,
+            "delta": tr.delta, "alpha": r.request.alpha, "ts": r.request.ts_s,
+            "translated": {"wgc": tr.spec.omega_gc, "pm_deg": deg(tr.spec.phase_margin)},
             "discretization": r.request.discretization.name(),
+            "derivative_on": derivative_name(st.derivative_on),
+            "kw": st.kw_per_s,
+            "u_limit_v": st.u_limit_v,
             "exact": self.exact,
+            "meet_specs": out.meet.as_ref().map(|(m, ms)| meet_json(m, *ms)),
             "design_model": model.name(),
             "plant_source": src.label,
             "reduced_model": plant,
@@ -351,20 +499,25 @@ impl Design {
                 "full": r.full.as_ref().map(achieved_json).unwrap_or(Value::Null),
                 "discrete": achieved_json(&r.discrete),
             },
+            "time_specs": out.check.as_ref().map(check_json),
+            "transfer_functions": tf_json(r, st),
         })
     }
 
     fn text_report(
         &self,
-        r: &DesignReport,
+        out: &Outcome,
         tr: &Translation,
         translation: &[String],
         src: &PlantSource,
     ) -> String {
         let mut s = String::new();
+        let r = &out.report;
         let g = &r.gains;
         let model = self.design_model(r);
-        let w = tr.spec.omega_gc;
+        // the loop spec of the gains: the translation, or what --meet-specs found
+        let ls = r.request.spec;
+        let w = ls.omega_gc;
         let _ = writeln!(
             s,
             "servo design: {} by Bode's method (handout eqs. 44-53) on the {} model",
@@ -386,7 +539,7 @@ impl Design {
             let _ = writeln!(s, "  {l}");
         }
         let p_gc = model.response(w);
-        let (dk, dphi) = required_compensation(&tr.spec, p_gc);
+        let (dk, dphi) = required_compensation(&ls, p_gc);
         let _ = writeln!(
             s,
             "  P(j w_gc) = {:.6} {:+.6}j (|P| = {:.6}, angle {:.3} deg) -> Delta K = {:.6}, Delta phi = {:.3} deg (eq. 44)",
@@ -397,11 +550,17 @@ impl Design {
             dk,
             deg(dphi)
         );
+        if let Some((m, ms)) = &out.meet {
+            meet_section(&mut s, m, *ms, tr, self);
+        }
         let _ = writeln!(
             s,
             "\ngains{}:",
             if self.exact {
-                " (--exact: achieved figures on the discrete loop match the spec)"
+                " (--exact: w_gc and phase margin on the discrete loop equal the loop spec; the step \
+                 response is checked below)"
+            } else if self.meet_specs {
+                " (--meet-specs)"
             } else {
                 ""
             }
@@ -418,10 +577,14 @@ impl Design {
             g.ki,
             fmt_s(g.td_s())
         );
-        let tl_note = match (self.tl, r.request.kind) {
-            (_, ControllerKind::Pi) => "(no derivative)".to_string(),
-            (Some(_), _) => "(given)".to_string(),
-            (None, _) => format!("(1/T_L = {} w_gc, eq. 53)", self.tl_factor),
+        let tl_note = match (self.tl, r.request.kind, &out.meet) {
+            (_, ControllerKind::Pi, _) => "(no derivative)".to_string(),
+            (_, _, Some((m, _))) => format!(
+                "(1/T_L = {:.3} w_gc, chosen by --meet-specs)",
+                m.params.tl_factor
+            ),
+            (Some(_), _, _) => "(given)".to_string(),
+            (None, _, _) => format!("(1/T_L = {} w_gc, eq. 53)", self.tl_factor),
         };
         let _ = writeln!(
             s,
@@ -458,7 +621,11 @@ impl Design {
             let _ = write!(s, "{:>12}", a.name);
         }
         let _ = writeln!(s);
-        let d = tr.delta;
+        let d = if self.meet_specs {
+            damping_from_phase_margin(ls.phase_margin).unwrap_or(tr.delta)
+        } else {
+            tr.delta
+        };
         let rows: [Row; 8] = [
             (
                 "w_gc [rad/s]",
@@ -467,7 +634,7 @@ impl Design {
             ),
             (
                 "phase margin [deg]",
-                format!("{:.3}", deg(tr.spec.phase_margin)),
+                format!("{:.3}", deg(ls.phase_margin)),
                 Box::new(|a: &Achieved| fmt_f(a.margins.phase_margin_deg, 3)),
             ),
             (
@@ -477,7 +644,10 @@ impl Design {
             ),
             (
                 "overshoot [%]",
-                format!("~{:.2}", 100.0 * tr.overshoot),
+                format!(
+                    "~{:.2}",
+                    100.0 * servo_core::design::spec::overshoot_from_damping(d)
+                ),
                 Box::new(|a: &Achieved| {
                     a.step
                         .map_or("-".into(), |m| format!("{:.2}", m.overshoot_pct))
@@ -529,15 +699,15 @@ impl Design {
                 .collect();
             let _ = writeln!(s, "  {:<9} {unit}: {}", a.name, poles.join(", "));
         }
-        let pm_short = deg(tr.spec.phase_margin) - r.discrete.margins.phase_margin_deg;
-        if !self.exact && pm_short > 0.5 {
+        let pm_short = deg(ls.phase_margin) - r.discrete.margins.phase_margin_deg;
+        if !self.exact && !self.meet_specs && pm_short > 0.5 {
             let _ = writeln!(
                 s,
                 "\nnote: the derivative filter and the ZOH delay cost {pm_short:.2} deg of phase margin on the discrete loop; \
                  use --exact to compensate."
             );
         }
-        if self.alpha < 4.0 && r.request.kind == ControllerKind::Pid {
+        if r.request.alpha < 4.0 && r.request.kind == ControllerKind::Pid {
             let _ = writeln!(
                 s,
                 "note: alpha < 4 gives complex PID zeros (the handout recommends alpha >= 4)."
@@ -553,8 +723,392 @@ impl Design {
                 );
             }
         }
+        if let Some(c) = &out.check {
+            check_section(&mut s, c, r, out.meet.is_some());
+        }
         s
     }
+}
+
+/// A design and what it achieves on the loop that runs.
+struct Outcome {
+    report: DesignReport,
+    /// The controller structure around the gains (given, or chosen by --meet-specs).
+    structure: LoopStructure,
+    /// The check of the time-domain specs, when the design comes from them.
+    check: Option<RangeCheck>,
+    /// The --meet-specs search and its run time [ms].
+    meet: Option<(MeetResult, f64)>,
+}
+
+fn derivative_name(d: DerivativeOn) -> &'static str {
+    match d {
+        DerivativeOn::Error => "error",
+        DerivativeOn::Measurement => "measurement",
+    }
+}
+
+/// The structure in words.
+fn structure_words(st: &LoopStructure) -> String {
+    format!(
+        "derivative on the {}, {}, +-{} V limit, {} PID",
+        derivative_name(st.derivative_on),
+        match st.kw_per_s {
+            Some(kw) => format!("back-calculation anti-windup K_w = {kw:.4} 1/s"),
+            None => "no anti-windup".to_string(),
+        },
+        st.u_limit_v,
+        st.discretization.name()
+    )
+}
+
+/// `settling_time_5pct_s`, `settling_time_1pct_s` or `rise_time_s`.
+fn speed_key(sp: &TimeSpecs) -> String {
+    match sp.speed {
+        Some(SpeedTarget::Rise { .. }) => "rise_time_s".into(),
+        _ => format!("settling_time_{}pct_s", (100.0 * sp.band()).round()),
+    }
+}
+
+/// Name of the speed figure in a table header.
+fn speed_label(sp: &TimeSpecs) -> String {
+    match sp.speed {
+        Some(SpeedTarget::Rise { .. }) => "rise 10-90 % [s]".into(),
+        _ => format!("settling {} % [s]", (100.0 * sp.band()).round()),
+    }
+}
+
+fn speed_spec_s(sp: &TimeSpecs) -> Option<f64> {
+    match sp.speed? {
+        SpeedTarget::Settling { time_s, .. } | SpeedTarget::Rise { time_s } => Some(time_s),
+    }
+}
+
+/// The --meet-specs summary: what was searched, what was found, the margins, the verdict.
+fn meet_section(s: &mut String, m: &MeetResult, ms: f64, tr: &Translation, d: &Design) {
+    let p = &m.params;
+    let c = &m.check;
+    let _ = writeln!(
+        s,
+        "
+--meet-specs: searched w_gc, phase margin, alpha, T_L, the derivative input and K_w on the loop that runs \
+         ({} designs simulated in {ms:.0} ms)",
+        m.evaluations
+    );
+    let _ = writeln!(
+        s,
+        "  handout's design: w_gc = {:.3} rad/s, PM = {:.2} deg, alpha = {}, 1/T_L = {} w_gc, derivative on the {}",
+        tr.spec.omega_gc,
+        deg(tr.spec.phase_margin),
+        d.alpha,
+        d.tl.map_or(format!("{}", d.tl_factor), |t| format!("{:.3}", 1.0 / (t * tr.spec.omega_gc))),
+        derivative_name(d.derivative_on.into())
+    );
+    let _ = writeln!(
+        s,
+        "  found:            w_gc = {:.3} rad/s, PM = {:.2} deg, alpha = {:.3}, 1/T_L = {:.3} w_gc, derivative on the {}, K_w = {:.4} 1/s",
+        p.omega_gc,
+        deg(p.phase_margin),
+        p.alpha,
+        p.tl_factor,
+        derivative_name(p.derivative_on),
+        p.kw_per_s
+    );
+    let dm = &m.report.discrete.margins;
+    let _ = writeln!(
+        s,
+        "  margins it ends with (discrete loop): phase margin {} deg at w_gc = {} rad/s, gain margin {} dB, \
+         sensitivity peak Ms = {:.3} ({:.2} dB)",
+        fmt_f(dm.phase_margin_deg, 2),
+        fmt_f(dm.omega_gc, 3),
+        fmt_gm(dm.gain_margin_db),
+        m.sensitivity_peak,
+        20.0 * m.sensitivity_peak.log10()
+    );
+    let (lo, hi) = (c.specs.step_min_rad, c.specs.step_max_rad);
+    let worst_speed = c
+        .worst_speed_s
+        .map_or("not settled".into(), |t| format!("{t:.4} s"));
+    if m.feasible {
+        let _ = writeln!(
+            s,
+            "  result: the specs are MET for every step from {lo} to {hi} rad: worst overshoot {:.2} %, worst {} {}",
+            c.worst_overshoot_pct,
+            speed_label(&c.specs).trim_end_matches(" [s]"),
+            worst_speed
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "  result: the specs are INFEASIBLE on this loop (plant, T_s, +-{} V) within the search box; \
+             the closest achievable pair is overshoot {:.2} %, {} {} (worst over {lo}..{hi} rad) with the design above",
+            m.structure.u_limit_v,
+            c.worst_overshoot_pct,
+            speed_label(&c.specs).trim_end_matches(" [s]"),
+            worst_speed
+        );
+    }
+}
+
+/// The time-domain check: achieved figures per step size next to the spec, and a warning in words
+/// when missed.
+fn check_section(s: &mut String, c: &RangeCheck, r: &DesignReport, meet: bool) {
+    let sp = &c.specs;
+    let _ = writeln!(
+        s,
+        "
+time-domain specs on the loop that runs ({} model, ZOH at T_s = {} s, {}), steps {}..{} rad:",
+        r.discrete.plant,
+        r.request.ts_s,
+        structure_words(&c.structure),
+        sp.step_min_rad,
+        sp.step_max_rad
+    );
+    let _ = writeln!(
+        s,
+        "  {:<12}{:>16}{:>20}{:>16}",
+        "step [rad]",
+        "overshoot [%]",
+        speed_label(sp),
+        "peak |u| [V]"
+    );
+    let _ = writeln!(
+        s,
+        "  {:<12}{:>16}{:>20}",
+        "spec",
+        sp.overshoot_max
+            .map_or("-".into(), |m| format!("<= {:.2}", 100.0 * m)),
+        speed_spec_s(sp).map_or("-".into(), |t| format!("<= {t:.4}"))
+    );
+    let n = c.outcomes.len();
+    let rows: Vec<usize> = if n <= 5 {
+        (0..n).collect()
+    } else {
+        (0..5).map(|k| k * (n - 1) / 4).collect()
+    };
+    let rise = matches!(sp.speed, Some(SpeedTarget::Rise { .. }));
+    for k in rows {
+        let o = &c.outcomes[k];
+        let speed = if rise {
+            o.rise_time_s
+        } else {
+            o.settling_time_s
+        };
+        let _ = writeln!(
+            s,
+            "  {:<12.4}{:>16.2}{:>20}{:>16}",
+            o.step_rad,
+            o.overshoot_pct,
+            speed.map_or("not settled".into(), |t| format!("{t:.4}")),
+            format!(
+                "{:.2}{}",
+                o.peak_u_v,
+                if o.saturated_fraction > 0.0 {
+                    " (limit)"
+                } else {
+                    ""
+                }
+            )
+        );
+    }
+    let _ = writeln!(
+        s,
+        "  {:<12}{:>16.2}{:>20}   (over {} step sizes)",
+        "worst",
+        c.worst_overshoot_pct,
+        c.worst_speed_s
+            .map_or("not settled".into(), |t| format!("{t:.4}")),
+        n
+    );
+    if let (Some(first), Some(lin)) = (c.outcomes.first(), r.discrete.step) {
+        if first.saturated_fraction > 0.0 {
+            let _ = writeln!(
+                s,
+                "  note: even the {} rad step reaches the voltage limit; smaller steps stay linear and behave as the \
+                 'discrete' column above ({:.2} % overshoot, settling 5 % {} s)",
+                first.step_rad,
+                lin.overshoot_pct,
+                opt(lin.settling_time_5pct_s)
+            );
+        }
+    }
+    if c.met() {
+        let _ = writeln!(
+            s,
+            "  the time-domain specs are met for every step size checked."
+        );
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "WARNING: the design MISSES the time-domain specs on the loop that will run:"
+    );
+    if let (Some(ex), Some(m)) = (c.overshoot_excess_pct(), sp.overshoot_max) {
+        let _ = writeln!(
+            s,
+            "  overshoot {:.2} % exceeds the spec {:.2} % by {ex:.2} percentage points ({:.1} x the spec)",
+            c.worst_overshoot_pct,
+            100.0 * m,
+            c.worst_overshoot_pct / (100.0 * m)
+        );
+    }
+    if let (Some(ex), Some(t)) = (c.speed_excess_s(), speed_spec_s(sp)) {
+        let what = speed_label(sp).trim_end_matches(" [s]").to_string();
+        match c.worst_speed_s {
+            Some(w) => {
+                let _ = writeln!(
+                    s,
+                    "  {what} {w:.4} s exceeds the spec {t} s by {ex:.4} s ({:+.0} %)",
+                    100.0 * ex / t
+                );
+            }
+            None => {
+                let _ = writeln!(
+                    s,
+                    "  {what}: some step does not settle within the simulated {:.2} s (spec {t} s)",
+                    c.outcomes.first().map_or(0.0, |o| o.horizon_s)
+                );
+            }
+        }
+    }
+    if !meet {
+        let _ = writeln!(
+            s,
+            "  (the handout's translation, eqs. 36-41, assumes a second-order loop without PID zeros, derivative \
+             filter, ZOH or voltage limit; --meet-specs searches for a design that meets the specs)"
+        );
+    }
+}
+
+/// The step-response panel of --plot: the smallest, middle and largest steps.
+fn spec_panel(out: &Outcome, c: &RangeCheck) -> anyhow::Result<spec_plot::SpecPanel> {
+    let r = &out.report;
+    let plant = FastPlant::new(&r.discrete_plant).map_err(|e| anyhow!("{e}"))?;
+    let sp = &c.specs;
+    let steps: Vec<f64> = {
+        let mut v = vec![sp.step_min_rad];
+        for x in [0.5 * (sp.step_min_rad + sp.step_max_rad), sp.step_max_rad] {
+            if x > v[v.len() - 1] {
+                v.push(x);
+            }
+        }
+        v
+    };
+    let worst = c.worst_speed_s.unwrap_or(0.0);
+    let t_end = (2.0 * speed_spec_s(sp).unwrap_or(0.0))
+        .max(1.3 * worst)
+        .max(10.0 / r.request.spec.omega_gc);
+    let tr = traces(&plant, &r.gains, &out.structure, sp.band(), &steps, t_end)
+        .map_err(|e| anyhow!("{e}"))?;
+    Ok(spec_plot::SpecPanel {
+        specs: *sp,
+        traces: tr,
+        t_end_s: t_end,
+        caption: format!(
+            "achieved steps on the loop that runs ({} model, ZOH, {})",
+            r.discrete.plant,
+            structure_words(&out.structure)
+        ),
+    })
+}
+
+fn check_json(c: &RangeCheck) -> Value {
+    let sp = &c.specs;
+    json!({
+        "overshoot_max_pct": sp.overshoot_max.map(|m| 100.0 * m),
+        "speed": match sp.speed {
+            Some(SpeedTarget::Settling { band, time_s }) => json!({"kind": "settling", "band": band, "time_s": time_s}),
+            Some(SpeedTarget::Rise { time_s }) => json!({"kind": "rise_10_90", "time_s": time_s}),
+            None => Value::Null,
+        },
+        "step_min_rad": sp.step_min_rad,
+        "step_max_rad": sp.step_max_rad,
+        "loop": {
+            "derivative_on": derivative_name(c.structure.derivative_on),
+            "kw": c.structure.kw_per_s,
+            "u_limit_v": c.structure.u_limit_v,
+            "discretization": c.structure.discretization.name(),
+        },
+        "met": c.met(),
+        "worst_overshoot_pct": c.worst_overshoot_pct,
+        "worst_speed_s": c.worst_speed_s,
+        "worst_ratio": c.worst_ratio,
+        "overshoot_excess_pct": c.overshoot_excess_pct(),
+        "speed_excess_s": c.speed_excess_s().map(num),
+        "steps": c.outcomes.iter().map(|o| json!({
+            "step_rad": o.step_rad,
+            "overshoot_pct": o.overshoot_pct,
+            "settling_time_s": o.settling_time_s,
+            "rise_time_s": o.rise_time_s,
+            "peak_u_v": o.peak_u_v,
+            "saturated_fraction": o.saturated_fraction,
+        })).collect::<Vec<_>>(),
+    })
+}
+
+fn meet_json(m: &MeetResult, ms: f64) -> Value {
+    let p = &m.params;
+    let dm = &m.report.discrete.margins;
+    json!({
+        "feasible": m.feasible,
+        "closest_pair": {
+            "overshoot_pct": m.check.worst_overshoot_pct,
+            "speed_s": m.check.worst_speed_s,
+        },
+        "wgc": p.omega_gc,
+        "pm_deg": deg(p.phase_margin),
+        "alpha": p.alpha,
+        "tl_factor": p.tl_factor,
+        "derivative_on": derivative_name(p.derivative_on),
+        "kw": p.kw_per_s,
+        "margins": {
+            "pm_deg": num(dm.phase_margin_deg),
+            "wgc": num(dm.omega_gc),
+            "gm_db": num(dm.gain_margin_db),
+            "sensitivity_peak": m.sensitivity_peak,
+        },
+        "evaluations": m.evaluations,
+        "elapsed_ms": ms,
+    })
+}
+
+/// Coefficient lists in descending powers (MATLAB `tf(num, den)`, python-control
+/// `control.tf(num, den[, dt])`).
+fn tf_entry(t: &TransferFunction) -> Value {
+    json!({
+        "num": TransferFunction::descending(&t.num),
+        "den": TransferFunction::descending(&t.den),
+    })
+}
+
+fn tf_json(r: &DesignReport, st: &LoopStructure) -> Value {
+    let g = &r.gains;
+    let ts = r.request.ts_s;
+    let method = r.request.discretization;
+    // the reference path: C(s) with the derivative on the error, K_P + K_I/s on the measurement
+    let g_ref = match st.derivative_on {
+        DerivativeOn::Error => *g,
+        DerivativeOn::Measurement => PidGains { kd: 0.0, ..*g },
+    };
+    let plant = r.request.full.unwrap_or(r.request.reduced);
+    let mut cz = tf_entry(&controller_tf_z(g, ts, method));
+    cz["ts_s"] = json!(ts);
+    let mut crz = tf_entry(&controller_tf_z(&g_ref, ts, method));
+    crz["ts_s"] = json!(ts);
+    let mut p = tf_entry(&plant.transfer_function());
+    p["model"] = json!(plant.name());
+    let mut pr = tf_entry(&r.request.reduced.transfer_function());
+    pr["model"] = json!("reduced");
+    json!({
+        "ordering": "coefficients in descending powers of s or z, as MATLAB tf(num, den) and python-control tf(num, den[, dt])",
+        "loop": "u = C_r r - C y: the feedback controller C acts on the measurement y [rad], C_r on the reference r [rad] (C_r = C with the derivative on the error, K_P + K_I/s with it on the measurement)",
+        "plant_s": p,
+        "plant_reduced_s": pr,
+        "controller_s": tf_entry(&controller_tf_s(g)),
+        "controller_z": cz,
+        "controller_ref_s": tf_entry(&controller_tf_s(&g_ref)),
+        "controller_ref_z": crz,
+    })
 }
 
 /// One row of the verification table: name, spec column, value per loop.

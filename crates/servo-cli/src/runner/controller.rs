@@ -270,8 +270,8 @@ impl ResolvedPid {
 }
 
 /// Where a PID configuration is taken from. Each part takes the first of: the command-line
-/// options, the log's record of the controller that ran, the gains file (its `[pid] kw` and
-/// `[design] discretization`), the defaults (backward Euler, derivative on the error, no
+/// options, the log's record of the controller that ran, the gains file (its `[pid] kw`,
+/// `[pid] derivative_on` and `[design] discretization`), the defaults (backward Euler, derivative on the error, no
 /// anti-windup). The gains come from the gains file, else from the log's record.
 #[derive(Debug, Clone, Copy)]
 pub struct PidSources<'a> {
@@ -368,10 +368,19 @@ pub fn pid_config(
     ));
 
     // Derivative input.
-    let (derivative_on, s) = match (opts.derivative_on, logged.and_then(|l| l.derivative_on)) {
-        (Some(d), _) => (d, "given with --derivative-on"),
-        (None, Some(d)) => (d, FROM_LOG),
-        (None, None) => (DerivativeOnArg::Error, DEFAULT),
+    let file_d_src = format!("from {label} [pid] derivative_on");
+    let file_d = file
+        .and_then(|g| g.pid.derivative_on)
+        .map(DerivativeOnArg::from);
+    let (derivative_on, s) = match (
+        opts.derivative_on,
+        logged.and_then(|l| l.derivative_on),
+        file_d,
+    ) {
+        (Some(d), _, _) => (d, "given with --derivative-on"),
+        (None, Some(d), _) => (d, FROM_LOG),
+        (None, None, Some(d)) => (d, file_d_src.as_str()),
+        (None, None, None) => (DerivativeOnArg::Error, DEFAULT),
     };
     parts.push(ControllerPart::new(
         "derivative_on",
@@ -520,6 +529,7 @@ mod tests {
         ts_s: 1e-3,
         kw: Some(30.0),
         u_limit_v: None,
+        derivative_on: None,
     };
 
     fn file(p: PidSection, disc: Option<&str>) -> GainsFile {
@@ -566,6 +576,21 @@ mod tests {
         };
         let c = run_cfg(&file(p2, None), &o).unwrap();
         assert_eq!(c.anti_windup, AntiWindup::BackCalculation { kw: 5.0 });
+        // derivative input from the gains file, unless given
+        let pm = PidSection {
+            derivative_on: Some(DerivativeOn::Measurement),
+            ..P
+        };
+        let c = run_cfg(&file(pm, None), &PidOptions::default()).unwrap();
+        assert_eq!(c.derivative_on, DerivativeOn::Measurement);
+        let o = PidOptions {
+            derivative_on: Some(DerivativeOnArg::Error),
+            ..PidOptions::default()
+        };
+        assert_eq!(
+            run_cfg(&file(pm, None), &o).unwrap().derivative_on,
+            DerivativeOn::Error
+        );
         let c = run_cfg(&file(P, Some("tustin")), &PidOptions::default()).unwrap();
         assert_eq!(c.discretization, Discretization::Tustin);
         assert!(run_cfg(&file(P, Some("zoh")), &PidOptions::default()).is_err());

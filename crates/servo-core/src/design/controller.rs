@@ -111,6 +111,64 @@ impl ControllerRealisation {
     }
 }
 
+#[cfg(feature = "alloc")]
+impl ControllerRealisation {
+    /// The rational transfer function of the realisation in s or z (coefficients ASCENDING):
+    /// D prod(x - a_i) + sum_i c_i b_i prod_{j != i}(x - a_j) over prod(x - a_i).
+    pub fn transfer_function(&self) -> super::tf::TransferFunction {
+        use super::tf::TransferFunction as Tf;
+        let mut den = alloc::vec![1.0];
+        for i in 0..self.order {
+            den = Tf::poly_mul(&den, &[-self.a[i], 1.0]);
+        }
+        let mut num: alloc::vec::Vec<f64> = den.iter().map(|c| c * self.d).collect();
+        for i in 0..self.order {
+            let mut term = alloc::vec![self.c[i] * self.b[i]];
+            for j in 0..self.order {
+                if j != i {
+                    term = Tf::poly_mul(&term, &[-self.a[j], 1.0]);
+                }
+            }
+            num = Tf::poly_add(&num, &term);
+        }
+        Tf::new(num, den)
+    }
+}
+
+/// C(s) = K_P + K_I/s + K_D s/(T_L s + 1) as a rational function of s (ascending coefficients):
+/// ((K_P T_L + K_D) s^2 + (K_P + K_I T_L) s + K_I) / (T_L s^2 + s), reduced when K_I, K_D or
+/// T_L is zero.
+#[cfg(feature = "alloc")]
+pub fn controller_tf_s(g: &PidGains) -> super::tf::TransferFunction {
+    use super::tf::TransferFunction as Tf;
+    let mut num = alloc::vec![g.kp];
+    let mut den = alloc::vec![1.0];
+    let mut add = |n: &[f64], d: &[f64]| {
+        // num/den + n/d
+        let new_num = Tf::poly_add(&Tf::poly_mul(&num, d), &Tf::poly_mul(n, &den));
+        den = Tf::poly_mul(&den, d);
+        num = new_num;
+    };
+    if g.ki != 0.0 {
+        add(&[g.ki], &[0.0, 1.0]);
+    }
+    if g.kd != 0.0 {
+        add(&[0.0, g.kd], &[1.0, g.tl_s]);
+    }
+    Tf::new(num, den)
+}
+
+/// C(z) of the discrete PID at T_s [s] (ascending powers of z), from the realisation that
+/// [`crate::control::pid::Pid`] runs.
+#[cfg(feature = "alloc")]
+pub fn controller_tf_z(
+    g: &PidGains,
+    ts_s: f64,
+    method: Discretization,
+) -> super::tf::TransferFunction {
+    ControllerRealisation::discrete(g, ts_s, method).transfer_function()
+}
+
 /// Discrete controller response C(e^{j w T_s}), w [rad/s].
 pub fn discrete_response(
     g: &PidGains,
@@ -141,6 +199,38 @@ mod tests {
             assert!(c_abs(r.eval(s) - G.eval(s)) < 1e-12 * c_abs(G.eval(s)));
         }
         assert!(ControllerRealisation::continuous(&PidGains { tl_s: 0.0, ..G }).is_none());
+    }
+
+    #[test]
+    fn transfer_functions_match_the_responses() {
+        let ts = 1e-3;
+        for g in [
+            G,
+            PidGains {
+                kd: 0.0,
+                tl_s: 0.0,
+                ..G
+            },
+            PidGains { ki: 0.0, ..G },
+        ] {
+            let cs = controller_tf_s(&g);
+            for method in [Discretization::BackwardEuler, Discretization::Tustin] {
+                let cz = controller_tf_z(&g, ts, method);
+                for w in [0.5, 30.0, 1000.0] {
+                    let s = Complex::new(0.0, w);
+                    assert!(c_abs(cs.eval(s) - g.eval(s)) < 1e-9 * c_abs(g.eval(s)));
+                    let d = discrete_response(&g, ts, method, w);
+                    assert!(
+                        c_abs(cz.eval(c_expj(w * ts)) - d) < 1e-9 * c_abs(d),
+                        "{method:?} {w}"
+                    );
+                }
+            }
+        }
+        // PID: second order over s (T_L s + 1)
+        let cs = controller_tf_s(&G);
+        assert_eq!(cs.den.len(), 3);
+        assert!((cs.num[2] - (G.kp * G.tl_s + G.kd)).abs() < 1e-12);
     }
 
     #[test]

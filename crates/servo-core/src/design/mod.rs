@@ -11,6 +11,9 @@
 //! * `closed_loop`, `step` (alloc): closed-loop poles, stability and step metrics.
 //! * `exact` (alloc): gains whose achieved crossover and phase margin, with derivative filter and
 //!   ZOH, equal the spec.
+//! * `step_range` (alloc): step responses of the loop that runs (discrete PID, ZOH plant, voltage
+//!   limit, anti-windup) over a range of step sizes, against time-domain specs.
+//! * `meet` (alloc): `--meet-specs`, the search for a design whose step responses meet them.
 //! * `verify` (alloc): the whole design + verification pipeline used by `servo design`.
 //!
 //! Angles in the public API are in radians unless the name ends in `_deg`; frequencies in rad/s.
@@ -26,9 +29,13 @@ pub mod closed_loop;
 #[cfg(feature = "alloc")]
 pub mod exact;
 #[cfg(feature = "alloc")]
+pub mod meet;
+#[cfg(feature = "alloc")]
 pub mod ss;
 #[cfg(feature = "alloc")]
 pub mod step;
+#[cfg(feature = "alloc")]
+pub mod step_range;
 #[cfg(feature = "alloc")]
 pub mod tf;
 #[cfg(feature = "alloc")]

@@ -62,6 +62,17 @@ impl TransferFunction {
         )
     }
 
+    /// Coefficients of `p` (ascending) in DESCENDING powers, leading zeros dropped (the order of
+    /// MATLAB's `tf` and python-control's `tf`; `[0.0]` for the zero polynomial).
+    pub fn descending(p: &[f64]) -> Vec<f64> {
+        let top = p.iter().rposition(|&c| c != 0.0).unwrap_or(0);
+        p[..=top.min(p.len().saturating_sub(1))]
+            .iter()
+            .rev()
+            .copied()
+            .collect()
+    }
+
     /// Unity negative feedback T = G / (1 + G) and the characteristic polynomial D + N.
     pub fn feedback_unity(&self) -> TransferFunction {
         TransferFunction::new(self.num.clone(), Self::poly_add(&self.den, &self.num))
@@ -82,6 +93,11 @@ mod tests {
         let g = TransferFunction::new(alloc::vec![2.0], alloc::vec![0.0, 1.0]); // 2/s
         let t = g.feedback_unity(); // 2/(s + 2)
         assert_eq!(t.den, alloc::vec![2.0, 1.0]);
+        assert_eq!(
+            TransferFunction::descending(&[0.0, 1.0, 2.0, 0.0]),
+            alloc::vec![2.0, 1.0, 0.0]
+        );
+        assert_eq!(TransferFunction::descending(&[0.0, 0.0]), alloc::vec![0.0]);
         let v = t.eval(Complex::new(0.0, 2.0)); // 2/(2 + 2j) = 0.5 - 0.5j
         assert!((v.re - 0.5).abs() < 1e-15 && (v.im + 0.5).abs() < 1e-15);
     }

@@ -1,4 +1,5 @@
-//! Bode plot of the loop L = C P (reduced, full, discrete) with crossover and margins marked.
+//! Bode plot of the loop L = C P (reduced, full, discrete) with crossover and margins marked,
+//! and, for a design from time-domain specs, the achieved step responses against the spec box.
 
 use anyhow::anyhow;
 use plotters::prelude::*;
@@ -11,9 +12,13 @@ const COLORS: [RGBColor; 3] = [
     RGBColor(44, 160, 44),
 ];
 
-/// Writes the SVG.
-pub fn write(path: &std::path::Path, r: &DesignReport) -> anyhow::Result<()> {
-    let svg = render(r)?;
+/// Writes the SVG (with the step-response panel below the Bode plot when given).
+pub fn write(
+    path: &std::path::Path,
+    r: &DesignReport,
+    steps: Option<&super::spec_plot::SpecPanel>,
+) -> anyhow::Result<()> {
+    let svg = render(r, steps)?;
     std::fs::write(path, svg).map_err(|e| anyhow!("writing {}: {e}", path.display()))
 }
 
@@ -71,7 +76,7 @@ fn curves(r: &DesignReport) -> Vec<Curve> {
     out
 }
 
-fn render(r: &DesignReport) -> anyhow::Result<String> {
+fn render(r: &DesignReport, steps: Option<&super::spec_plot::SpecPanel>) -> anyhow::Result<String> {
     let cs = curves(r);
     let e = |e: &dyn std::fmt::Display| anyhow!("plot: {e}");
     let (w0, w1) = cs
@@ -93,9 +98,14 @@ fn render(r: &DesignReport) -> anyhow::Result<String> {
     let (p0, p1) = (p0.min(-185.0), p1.max(-175.0));
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (900, 700)).into_drawing_area();
+        let height = if steps.is_some() { 1050 } else { 700 };
+        let root = SVGBackend::with_string(&mut svg, (900, height)).into_drawing_area();
         root.fill(&WHITE).map_err(|x| e(&x))?;
-        let (top, bottom) = root.split_vertically(350);
+        let (bode, step_area) = root.split_vertically(700);
+        if let Some(p) = steps {
+            super::spec_plot::draw(&step_area, p)?;
+        }
+        let (top, bottom) = bode.split_vertically(350);
         let s = &r.request.spec;
         let title = format!(
             "loop L = C P: spec w_gc = {:.3} rad/s, PM = {:.2} deg; K_P = {:.4}, K_I = {:.4}, K_D = {:.5}, T_L = {:.3e} s",
