@@ -5,7 +5,6 @@
 use super::loop_msg::{LoopMsg, LOOP_TOPIC};
 use super::mcap_write::{RUN_METADATA, SUMMARY_METADATA};
 use anyhow::{anyhow, bail, Context};
-use mcap::read::{ChunkFlattener, Options};
 use mcap::records::Record as McapRecord;
 use servo_core::record::Record;
 use std::collections::{BTreeMap, HashMap};
@@ -28,6 +27,153 @@ pub struct McapRun {
     pub notes: Vec<String>,
 }
 
+/// The records of MCAP bytes, chunks flattened, read incrementally by the library's streaming
+/// reader with every buffer bounded by `limit` bytes (the file's size): a corrupted length or
+/// `uncompressed_size` field gives an error instead of a huge allocation. (mcap's own
+/// `ChunkFlattener` sets no limit.) Chunk CRCs are checked after each chunk's records.
+pub struct BoundedRecords<'a> {
+    reader: mcap::sans_io::LinearReader,
+    rest: &'a [u8],
+}
+
+impl<'a> BoundedRecords<'a> {
+    /// `with_magic`: `bytes` starts with the MCAP magic (a whole file) rather than at a record.
+    pub fn new(bytes: &'a [u8], with_magic: bool, limit: usize) -> BoundedRecords<'a> {
+        BoundedRecords {
+            reader: mcap::sans_io::LinearReader::new_with_options(
+                mcap::sans_io::LinearReaderOptions::default()
+                    .with_skip_start_magic(!with_magic)
+                    .with_skip_end_magic(true)
+                    .with_record_length_limit(limit)
+                    .with_validate_chunk_crcs(true),
+            ),
+            rest: bytes,
+        }
+    }
+}
+
+impl Iterator for BoundedRecords<'_> {
+    type Item = mcap::McapResult<McapRecord<'static>>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        use mcap::sans_io::LinearReadEvent;
+        while let Some(event) = self.reader.next_event() {
+            match event {
+                Ok(LinearReadEvent::ReadRequest(need)) => {
+                    let n = need.min(self.rest.len());
+                    self.reader
+                        .insert(n)
+                        .copy_from_slice(&self.rest[..n]);
+                    self.reader.notify_read(n);
+                    self.rest = &self.rest[n..];
+                }
+                Ok(LinearReadEvent::Record { data, opcode }) => {
+                    return Some(parse_record_checked(opcode, data).map(|r| r.into_owned()))
+                }
+                Err(e) => return Some(Err(e)),
+            }
+        }
+        None
+    }
+}
+
+/// One field of a record body, for [`check_lengths`].
+#[derive(Clone, Copy)]
+enum Field {
+    /// Fixed size [bytes].
+    Fixed(usize),
+    /// u32 length + bytes (a string or a byte array of fixed-size items).
+    Str,
+    /// u32 length + string/string pairs.
+    StrMap,
+    /// u64 length + bytes.
+    Bytes64,
+}
+
+/// Checks every length prefix of an MCAP record body against the bytes that remain, so that
+/// `mcap::parse_record` (binrw reserves each string's declared length up front, up to 4 GiB)
+/// allocates nothing beyond the record's own size.
+pub fn check_lengths(opcode: u8, body: &[u8]) -> Result<(), String> {
+    use Field::*;
+    let fields: &[Field] = match opcode {
+        0x01 => &[Str, Str],                                            // header
+        0x03 => &[Fixed(2), Str, Str, Str],                             // schema
+        0x04 => &[Fixed(4), Str, Str, StrMap],                          // channel
+        0x06 => &[Fixed(28), Str, Bytes64],                             // chunk
+        0x07 => &[Fixed(2), Str],                                       // message index
+        0x08 => &[Fixed(32), Str, Fixed(8), Str, Fixed(16)],            // chunk index
+        0x09 => &[Fixed(16), Str, Str, Bytes64],                        // attachment
+        0x0A => &[Fixed(40), Str, Str],                                 // attachment index
+        0x0B => &[Fixed(42), Str],                                      // statistics
+        0x0C => &[Str, StrMap],                                         // metadata
+        0x0D => &[Fixed(16), Str],                                      // metadata index
+        _ => return Ok(()), // fixed-size or opaque records (message, footer, ...)
+    };
+    let mut at = 0usize;
+    let left = |at: usize| body.len().saturating_sub(at);
+    let take = |at: &mut usize, n: usize| -> Result<usize, String> {
+        if n > left(*at) {
+            return Err(format!(
+                "record 0x{opcode:02X}: a field declares {n} bytes but only {} remain",
+                left(*at)
+            ));
+        }
+        let start = *at;
+        *at += n;
+        Ok(start)
+    };
+    let u32_at = |b: &[u8], at: usize| -> usize {
+        let mut x = [0u8; 4];
+        x.copy_from_slice(&b[at..at + 4]);
+        u32::from_le_bytes(x) as usize
+    };
+    for f in fields {
+        match *f {
+            Fixed(n) => {
+                take(&mut at, n)?;
+            }
+            Str => {
+                let p = take(&mut at, 4)?;
+                take(&mut at, u32_at(body, p))?;
+            }
+            Bytes64 => {
+                let p = take(&mut at, 8)?;
+                let mut x = [0u8; 8];
+                x.copy_from_slice(&body[p..p + 8]);
+                take(&mut at, usize::try_from(u64::from_le_bytes(x)).unwrap_or(usize::MAX))?;
+            }
+            StrMap => {
+                let p = take(&mut at, 4)?;
+                let start = take(&mut at, u32_at(body, p))?;
+                let map = &body[start..at];
+                let mut q = 0usize;
+                while q < map.len() {
+                    if map.len() - q < 4 {
+                        return Err(format!("record 0x{opcode:02X}: a map entry is cut short"));
+                    }
+                    let n = u32_at(map, q);
+                    if n > map.len() - q - 4 {
+                        return Err(format!(
+                            "record 0x{opcode:02X}: a map string declares {n} bytes but only {} remain",
+                            map.len() - q - 4
+                        ));
+                    }
+                    q += 4 + n;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `mcap::parse_record` after [`check_lengths`].
+pub fn parse_record_checked(opcode: u8, body: &[u8]) -> mcap::McapResult<McapRecord<'_>> {
+    check_lengths(opcode, body).map_err(|e| {
+        mcap::McapError::from(std::io::Error::new(std::io::ErrorKind::InvalidData, e))
+    })?;
+    mcap::parse_record(opcode, body)
+}
+
 /// Reads the MCAP file `path`.
 pub fn read_mcap(path: &Path) -> anyhow::Result<McapRun> {
     let bytes =
@@ -40,11 +186,7 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
     if bytes.len() < mcap::MAGIC.len() || &bytes[..mcap::MAGIC.len()] != mcap::MAGIC {
         bail!("{source}: not an MCAP file (bad magic bytes at the start)");
     }
-    let reader = ChunkFlattener::new_with_options(
-        bytes,
-        Options::IgnoreEndMagic | Options::ValidateChunkCrcs,
-    )
-    .map_err(|e| anyhow!("{source}: {e}"))?;
+    let reader = BoundedRecords::new(bytes, true, bytes.len());
     let mut topics: HashMap<u16, String> = HashMap::new();
     let mut run = McapRun::default();
     let mut data_end = false;
@@ -194,7 +336,7 @@ mod tests {
 
     fn write(path: &Path, n: usize, finish: bool) {
         let mut meta = BTreeMap::new();
-        meta.insert("gains_toml".to_string(), "[pid]\nkp = 1.0\n".to_string());
+        meta.insert("gains_toml".to_string(), "[pid]\nkp = 1.0\nki = 0.0\nkd = 0.0\n".to_string());
         let mut log = McapLog::create(
             path,
             &meta,
@@ -242,7 +384,7 @@ mod tests {
         for (k, m) in run.loop_msgs.iter().enumerate() {
             assert!(same(m, &msg(k)), "message {k}: {m:?} != {:?}", msg(k));
         }
-        assert_eq!(run.metadata["gains_toml"], "[pid]\nkp = 1.0\n");
+        assert_eq!(run.metadata["gains_toml"], "[pid]\nkp = 1.0\nki = 0.0\nkd = 0.0\n");
         assert_eq!(run.record.len(), 1000);
         assert_eq!(run.record.u_v.as_ref().unwrap()[10], msg(10).u_v);
         assert!(run.record.ref_rad.as_ref().unwrap()[0].is_nan());
