@@ -32,7 +32,10 @@ fn fuzz<T, E: Display>(
         eprintln!("  e.g. {e}");
     }
     assert!(rep.failures.is_empty(), "{rep}");
-    assert!(rep.refused > 0, "{rep}: the mutations never reached an error");
+    assert!(
+        rep.refused > 0,
+        "{rep}: the mutations never reached an error"
+    );
 }
 
 fn text(b: &[u8]) -> anyhow::Result<&str> {
@@ -92,9 +95,12 @@ const GAINS: &str = "[pid]\nkp = 7.0476\nki = 86.121\nkd = 0.14418\ntl_s = 6.67e
 #[test]
 fn fuzz_csv_reader() {
     let own = "time_s,u_V,theta_l_rad,i_a_A,ref_rad\n0,1,0,0.1,1\n0.001,2,0.01,0.2,1\n0.002,2.5,0.02,0.25,1\n0.003,2,0.03,0.2,1\n";
-    let foreign = "# lab export\nt_ms;pos_deg;I_mA;u_V\n0;180;100;1\n1;90;-50;2\n2;91;-40;2\n3;92;-30;2\n";
+    let foreign =
+        "# lab export\nt_ms;pos_deg;I_mA;u_V\n0;180;100;1\n1;90;-50;2\n2;91;-40;2\n3;92;-30;2\n";
     let seeds = vec![own.as_bytes().to_vec(), foreign.as_bytes().to_vec()];
-    fuzz("csv", &seeds, 6000, |b| parse_csv(text(b)?, "fuzz.csv", None));
+    fuzz("csv", &seeds, 6000, |b| {
+        parse_csv(text(b)?, "fuzz.csv", None)
+    });
     fuzz("csv --columns", &seeds, 5000, |b| {
         parse_csv(
             text(b)?,
@@ -128,10 +134,15 @@ fn fuzz_toml_files() {
     fuzz("experiment file", &exps, 5000, |b| {
         Experiment::parse(text(b)?, "fuzz.toml")
     });
-    let refs: Vec<Vec<u8>> = ["step:1.5", "sine:amp=90deg,freq=0.5", "square:1,0.2", "ramp:2"]
-        .iter()
-        .map(|s| s.as_bytes().to_vec())
-        .collect();
+    let refs: Vec<Vec<u8>> = [
+        "step:1.5",
+        "sine:amp=90deg,freq=0.5",
+        "square:1,0.2",
+        "ramp:2",
+    ]
+    .iter()
+    .map(|s| s.as_bytes().to_vec())
+    .collect();
     fuzz("--ref", &refs, 5000, |b| {
         servo_core::control::Reference::parse(text(b)?).map_err(|e| anyhow::anyhow!("{e}"))
     });
@@ -139,7 +150,9 @@ fn fuzz_toml_files() {
 
 #[test]
 fn fuzz_mcap_reader() {
-    fuzz("mcap read", &mcap_seeds(), 10000, |b| parse_mcap(b, "fuzz.mcap"));
+    fuzz("mcap read", &mcap_seeds(), 10000, |b| {
+        parse_mcap(b, "fuzz.mcap")
+    });
 }
 
 #[test]
@@ -212,7 +225,10 @@ fn mcap_with_corrupted_lengths_is_refused_cleanly() {
         assert!(e.contains("bad.mcap"), "{e}");
         let r = servo_cli::cmd::log::recover_bytes(&b, std::io::Cursor::new(Vec::new())).unwrap();
         assert!(
-            r.stopped_because.as_deref().unwrap_or("").contains("cut short"),
+            r.stopped_because
+                .as_deref()
+                .unwrap_or("")
+                .contains("cut short"),
             "{r:?}"
         );
     }
@@ -222,7 +238,10 @@ fn mcap_with_corrupted_lengths_is_refused_cleanly() {
     b[us..us + 8].copy_from_slice(&(1u64 << 62).to_le_bytes());
     let r = servo_cli::cmd::log::recover_bytes(&b, std::io::Cursor::new(Vec::new())).unwrap();
     assert!(r.stopped_because.is_some(), "{r:?}");
-    assert!(parse_mcap(&b, "bad.mcap").is_err() || !parse_mcap(&b, "bad.mcap").unwrap().notes.is_empty());
+    assert!(
+        parse_mcap(&b, "bad.mcap").is_err()
+            || !parse_mcap(&b, "bad.mcap").unwrap().notes.is_empty()
+    );
 }
 
 #[test]
@@ -242,9 +261,6 @@ fn absurd_plant_constants_are_refused_not_hung_on() {
             .join("\n");
         assert_ne!(bad, model, "{key} not in the model file");
         let e = format!("{:#}", ModelFile::parse(&bad).unwrap_err());
-        assert!(
-            e.contains(key) && e.contains("physically sensible"),
-            "{e}"
-        );
+        assert!(e.contains(key) && e.contains("physically sensible"), "{e}");
     }
 }

@@ -134,7 +134,11 @@ pub fn mutate(rng: &mut Rng, input: &[u8]) -> Vec<u8> {
                 // Splice a token over a number-like spot or anywhere.
                 let t = TOKENS[rng.below(TOKENS.len())];
                 let i = rng.below(len + 1);
-                let n = if len > i { rng.below((len - i).min(8) + 1) } else { 0 };
+                let n = if len > i {
+                    rng.below((len - i).min(8) + 1)
+                } else {
+                    0
+                };
                 v.splice(i..i + n, t.iter().copied());
             }
         }

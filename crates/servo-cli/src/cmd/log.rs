@@ -347,9 +347,7 @@ pub fn recover_bytes<W: std::io::Write + std::io::Seek>(
     sink.report.good_bytes = (MAGIC.len() + n) as u64;
     sink.report.was_complete = data_end && buf.ends_with(MAGIC) && buf.len() > 2 * MAGIC.len();
     sink.report.stopped_because = why;
-    sink.w
-        .finish()
-        .context("finishing the recovered file")?;
+    sink.w.finish().context("finishing the recovered file")?;
     Ok(sink.report)
 }
 

@@ -349,7 +349,8 @@ mod tests {
             let t = format!("time_s,u_V,theta_l_rad\n0,1,0\n0.001,{v},0\n0.002,1,0\n");
             let e = format!("{:#}", parse_csv(&t, "big.csv", None).unwrap_err());
             assert!(
-                e.contains("big.csv: line 3, column 2 (`u_V`") && e.contains("wrong column or unit"),
+                e.contains("big.csv: line 3, column 2 (`u_V`")
+                    && e.contains("wrong column or unit"),
                 "{e}"
             );
         }

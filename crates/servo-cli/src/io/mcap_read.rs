@@ -61,9 +61,7 @@ impl Iterator for BoundedRecords<'_> {
             match event {
                 Ok(LinearReadEvent::ReadRequest(need)) => {
                     let n = need.min(self.rest.len());
-                    self.reader
-                        .insert(n)
-                        .copy_from_slice(&self.rest[..n]);
+                    self.reader.insert(n).copy_from_slice(&self.rest[..n]);
                     self.reader.notify_read(n);
                     self.rest = &self.rest[n..];
                 }
@@ -96,17 +94,17 @@ enum Field {
 pub fn check_lengths(opcode: u8, body: &[u8]) -> Result<(), String> {
     use Field::*;
     let fields: &[Field] = match opcode {
-        0x01 => &[Str, Str],                                            // header
-        0x03 => &[Fixed(2), Str, Str, Str],                             // schema
-        0x04 => &[Fixed(4), Str, Str, StrMap],                          // channel
-        0x06 => &[Fixed(28), Str, Bytes64],                             // chunk
-        0x07 => &[Fixed(2), Str],                                       // message index
-        0x08 => &[Fixed(32), Str, Fixed(8), Str, Fixed(16)],            // chunk index
-        0x09 => &[Fixed(16), Str, Str, Bytes64],                        // attachment
-        0x0A => &[Fixed(40), Str, Str],                                 // attachment index
-        0x0B => &[Fixed(42), Str],                                      // statistics
-        0x0C => &[Str, StrMap],                                         // metadata
-        0x0D => &[Fixed(16), Str],                                      // metadata index
+        0x01 => &[Str, Str],                                 // header
+        0x03 => &[Fixed(2), Str, Str, Str],                  // schema
+        0x04 => &[Fixed(4), Str, Str, StrMap],               // channel
+        0x06 => &[Fixed(28), Str, Bytes64],                  // chunk
+        0x07 => &[Fixed(2), Str],                            // message index
+        0x08 => &[Fixed(32), Str, Fixed(8), Str, Fixed(16)], // chunk index
+        0x09 => &[Fixed(16), Str, Str, Bytes64],             // attachment
+        0x0A => &[Fixed(40), Str, Str],                      // attachment index
+        0x0B => &[Fixed(42), Str],                           // statistics
+        0x0C => &[Str, StrMap],                              // metadata
+        0x0D => &[Fixed(16), Str],                           // metadata index
         _ => return Ok(()), // fixed-size or opaque records (message, footer, ...)
     };
     let mut at = 0usize;
@@ -140,7 +138,10 @@ pub fn check_lengths(opcode: u8, body: &[u8]) -> Result<(), String> {
                 let p = take(&mut at, 8)?;
                 let mut x = [0u8; 8];
                 x.copy_from_slice(&body[p..p + 8]);
-                take(&mut at, usize::try_from(u64::from_le_bytes(x)).unwrap_or(usize::MAX))?;
+                take(
+                    &mut at,
+                    usize::try_from(u64::from_le_bytes(x)).unwrap_or(usize::MAX),
+                )?;
             }
             StrMap => {
                 let p = take(&mut at, 4)?;
@@ -336,7 +337,10 @@ mod tests {
 
     fn write(path: &Path, n: usize, finish: bool) {
         let mut meta = BTreeMap::new();
-        meta.insert("gains_toml".to_string(), "[pid]\nkp = 1.0\nki = 0.0\nkd = 0.0\n".to_string());
+        meta.insert(
+            "gains_toml".to_string(),
+            "[pid]\nkp = 1.0\nki = 0.0\nkd = 0.0\n".to_string(),
+        );
         let mut log = McapLog::create(
             path,
             &meta,
@@ -384,7 +388,10 @@ mod tests {
         for (k, m) in run.loop_msgs.iter().enumerate() {
             assert!(same(m, &msg(k)), "message {k}: {m:?} != {:?}", msg(k));
         }
-        assert_eq!(run.metadata["gains_toml"], "[pid]\nkp = 1.0\nki = 0.0\nkd = 0.0\n");
+        assert_eq!(
+            run.metadata["gains_toml"],
+            "[pid]\nkp = 1.0\nki = 0.0\nkd = 0.0\n"
+        );
         assert_eq!(run.record.len(), 1000);
         assert_eq!(run.record.u_v.as_ref().unwrap()[10], msg(10).u_v);
         assert!(run.record.ref_rad.as_ref().unwrap()[0].is_nan());

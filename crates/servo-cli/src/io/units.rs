@@ -205,7 +205,9 @@ impl Unit {
     /// What the unit measures.
     pub fn dimension(self) -> Dimension {
         match self {
-            Unit::Second | Unit::Millisecond | Unit::Microsecond | Unit::Nanosecond => Dimension::Time,
+            Unit::Second | Unit::Millisecond | Unit::Microsecond | Unit::Nanosecond => {
+                Dimension::Time
+            }
             Unit::Rad | Unit::Deg | Unit::Rev | Unit::Counts(_) => Dimension::Angle,
             Unit::RadPerS | Unit::DegPerS | Unit::Rpm | Unit::RevPerS => Dimension::AngularSpeed,
             Unit::Volt | Unit::Millivolt => Dimension::Voltage,
