@@ -76,6 +76,7 @@ fn mcap_seeds() -> Vec<Vec<u8>> {
                 flush_period_s: 0.02,
                 compress,
                 start_unix_ns: 1_000,
+                ..McapLogOptions::default()
             },
         )
         .unwrap();

@@ -372,7 +372,15 @@ impl Run {
             keep_record: self.csv.is_some() || self.plot.is_some(),
         };
         let mut log = match &self.log {
-            Some(p) => Some(McapLog::create(p, &meta, McapLogOptions::default())?),
+            Some(p) => Some(McapLog::create(
+                p,
+                &meta,
+                McapLogOptions {
+                    // A simulation faster than real time: chunks by wall-clock time.
+                    flush_on_wall_clock: self.backend == BackendKind::Sim && !self.realtime,
+                    ..McapLogOptions::default()
+                },
+            )?),
             None => None,
         };
         let out = runner::run_loop(

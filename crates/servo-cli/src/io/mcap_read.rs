@@ -197,14 +197,33 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
             Ok(r) => r,
             Err(e) => {
                 if !data_end {
-                    let upto = run
-                        .loop_msgs
-                        .last()
-                        .map(|m| format!("{} s", m.time_s))
+                    let last_s = run.loop_msgs.last().map(|m| m.time_s);
+                    let upto = last_s
+                        .map(|t| format!("{t} s"))
                         .unwrap_or_else(|| "the start".into());
+                    let start_ns = run
+                        .metadata
+                        .get(super::mcap_write::START_TIME_KEY)
+                        .and_then(|v| v.parse::<u64>().ok())
+                        .unwrap_or(0);
+                    // Measured, not assumed: the chunk headers left in the file say up to which
+                    // log time messages were written.
+                    let lost = match (last_chunk_end_ns(bytes), last_s) {
+                        (Some(end_ns), Some(t)) => {
+                            let end_s = end_ns.saturating_sub(start_ns) as f64 * 1e-9;
+                            if end_s > t {
+                                format!(
+                                    "the damaged part held samples up to {end_s} s: {:.3} s of the run are lost",
+                                    end_s - t
+                                )
+                            } else {
+                                "no whole chunk after it is lost".into()
+                            }
+                        }
+                        _ => "how much is lost cannot be told from the file".into(),
+                    };
                     run.notes.push(format!(
-                        "{source}: the log is truncated or damaged ({e}); read {} samples up to {upto}, \
-                         the rest (the unflushed chunk, at most 100 ms of a killed run) is lost",
+                        "{source}: the log is truncated or damaged ({e}); read {} samples up to {upto}; {lost}",
                         run.loop_msgs.len()
                     ));
                 }
@@ -240,10 +259,22 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
         }
     }
     if !run.finished && run.notes.is_empty() {
+        let t = run.loop_msgs.last().map(|m| m.time_s).unwrap_or(0.0);
+        let planned = run
+            .metadata
+            .get(super::meta_keys::DURATION_S)
+            .and_then(|v| v.parse::<f64>().ok())
+            .filter(|d| *d > t);
         run.notes.push(format!(
-            "{source}: the log was not finished (run killed?); read {} samples up to {} s",
+            "{source}: the log was not finished (run killed?); read {} samples up to {t} s{}",
             run.loop_msgs.len(),
-            run.loop_msgs.last().map(|m| m.time_s).unwrap_or(0.0)
+            match planned {
+                Some(d) => format!(
+                    "; the run was planned for {d} s: samples after the last flush were never written (up to {:.3} s if it ran on)",
+                    d - t
+                ),
+                None => String::new(),
+            }
         ));
     }
     if run.loop_msgs.is_empty() {
@@ -266,6 +297,32 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
     }
     run.record = record_of(&run.loop_msgs, source);
     Ok(run)
+}
+
+/// The latest `message_end_time` [ns] of the chunk headers found walking the top-level records
+/// of `bytes` (a chunk cut short counts when its header is whole); no allocation.
+pub fn last_chunk_end_ns(bytes: &[u8]) -> Option<u64> {
+    let mut pos = mcap::MAGIC.len();
+    let mut end: Option<u64> = None;
+    let u64_at = |at: usize| {
+        let mut x = [0u8; 8];
+        x.copy_from_slice(&bytes[at..at + 8]);
+        u64::from_le_bytes(x)
+    };
+    while bytes.len().saturating_sub(pos) >= 9 {
+        let op = bytes[pos];
+        let len = u64_at(pos + 1);
+        let body = pos + 9;
+        if op == 0x06 && bytes.len().saturating_sub(body) >= 16 {
+            let e = u64_at(body + 8);
+            end = Some(end.map_or(e, |x| x.max(e)));
+        }
+        match usize::try_from(len).ok().and_then(|l| body.checked_add(l)) {
+            Some(next) if next <= bytes.len() => pos = next,
+            _ => break,
+        }
+    }
+    end
 }
 
 /// The [`Record`] of a sequence of loop messages (a signal only when some sample has it).
@@ -435,6 +492,33 @@ mod tests {
         assert!(!run.finished);
         assert_eq!(run.loop_msgs.len(), 1000);
         assert!(run.notes[0].contains("not finished"), "{:?}", run.notes);
+    }
+
+    #[test]
+    fn damaged_log_measures_the_lost_span() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("d.mcap");
+        write(&p, 1000, true);
+        let mut b = std::fs::read(&p).unwrap();
+        // Damage a byte inside a chunk about a third into the file: reading stops there, the
+        // chunks after it are intact but not trusted; the note measures what they held.
+        let mut at = b.len() / 3;
+        while b[at] == 0 {
+            at += 1;
+        }
+        b[at] ^= 0x55;
+        let run = parse_mcap(&b, "d.mcap").unwrap();
+        let t_last = run.loop_msgs.last().unwrap().time_s;
+        let note = &run.notes[0];
+        let lost: f64 = note
+            .split(": ")
+            .last()
+            .and_then(|x| x.split(' ').next())
+            .and_then(|x| x.parse().ok())
+            .unwrap_or_else(|| panic!("{note}"));
+        // Messages went up to 0.999 s.
+        assert!((lost - (0.999 - t_last)).abs() < 1e-6, "{note}");
+        assert!(lost > 0.3, "{note}");
     }
 
     #[test]
