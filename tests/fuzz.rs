@@ -64,7 +64,15 @@ fn msg(k: usize) -> LoopMsg {
 fn mcap_seeds() -> Vec<Vec<u8>> {
     let dir = tempfile::tempdir().unwrap();
     let mut out = Vec::new();
-    for (i, compress) in [true, false].into_iter().enumerate() {
+    use servo_cli::io::LogEncoding;
+    for (i, (compress, encoding)) in [
+        (true, LogEncoding::Json),
+        (false, LogEncoding::Json),
+        (true, LogEncoding::Protobuf),
+    ]
+    .into_iter()
+    .enumerate()
+    {
         let p = dir.path().join(format!("s{i}.mcap"));
         let mut meta = BTreeMap::new();
         meta.insert("gains_toml".into(), GAINS.to_string());
@@ -76,6 +84,8 @@ fn mcap_seeds() -> Vec<Vec<u8>> {
                 flush_period_s: 0.02,
                 compress,
                 start_unix_ns: 1_000,
+                encoding,
+                fast_compression: encoding == LogEncoding::Protobuf,
                 ..McapLogOptions::default()
             },
         )

@@ -88,6 +88,11 @@ pub struct Run {
     #[arg(long = "soft-limit-rev", value_name = "REV")]
     pub soft_limit_rev: Option<f64>,
 
+    /// Encoding of the loop messages in the --log MCAP: `protobuf` (compact and fast to write)
+    /// or `json` (JSON schema); both open in Foxglove, PlotJuggler and every servo command.
+    #[arg(long = "log-encoding", value_enum, default_value = "protobuf")]
+    pub log_encoding: crate::io::LogEncoding,
+
     /// Serial port of the board (`--backend serial`), e.g. /dev/ttyACM0 (see `servo ports`).
     #[arg(long, value_name = "PATH", default_value = "/dev/ttyACM0")]
     pub port: String,
@@ -378,6 +383,8 @@ impl Run {
                 McapLogOptions {
                     // A simulation faster than real time: chunks by wall-clock time.
                     flush_on_wall_clock: self.backend == BackendKind::Sim && !self.realtime,
+                    fast_compression: self.backend == BackendKind::Sim && !self.realtime,
+                    encoding: self.log_encoding,
                     ..McapLogOptions::default()
                 },
             )?),

@@ -188,7 +188,8 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
         bail!("{source}: not an MCAP file (bad magic bytes at the start)");
     }
     let reader = BoundedRecords::new(bytes, true, bytes.len());
-    let mut topics: HashMap<u16, String> = HashMap::new();
+    // Channel id -> (topic, message encoding).
+    let mut topics: HashMap<u16, (String, String)> = HashMap::new();
     let mut run = McapRun::default();
     let mut data_end = false;
     let mut other_topics: BTreeMap<String, u64> = BTreeMap::new();
@@ -232,17 +233,21 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
         };
         match rec {
             McapRecord::Channel(c) => {
-                topics.insert(c.id, c.topic);
+                topics.insert(c.id, (c.topic, c.message_encoding));
             }
             McapRecord::Message { header, data } if !data_end => {
-                let topic = topics
+                let (topic, encoding) = topics
                     .get(&header.channel_id)
-                    .map(String::as_str)
-                    .unwrap_or("");
+                    .map(|(t, e)| (t.as_str(), e.as_str()))
+                    .unwrap_or(("", ""));
                 if topic == LOOP_TOPIC {
-                    let m: LoopMsg = serde_json::from_slice(&data).map_err(|e| {
+                    let m: LoopMsg = match encoding {
+                        "protobuf" => LoopMsg::from_protobuf(&data).map_err(|e| e.to_string()),
+                        _ => serde_json::from_slice(&data).map_err(|e| e.to_string()),
+                    }
+                    .map_err(|e| {
                         anyhow!(
-                            "{source}: message {} on {LOOP_TOPIC} is not a servo loop message: {e}",
+                            "{source}: message {} on {LOOP_TOPIC} ({encoding}) is not a servo loop message: {e}",
                             header.sequence
                         )
                     })?;
@@ -492,6 +497,40 @@ mod tests {
         assert!(!run.finished);
         assert_eq!(run.loop_msgs.len(), 1000);
         assert!(run.notes[0].contains("not finished"), "{:?}", run.notes);
+    }
+
+    #[test]
+    fn protobuf_log_round_trips() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("pb.mcap");
+        let mut log = McapLog::create(
+            &p,
+            &BTreeMap::new(),
+            McapLogOptions {
+                encoding: crate::io::LogEncoding::Protobuf,
+                fast_compression: true,
+                ..McapLogOptions::default()
+            },
+        )
+        .unwrap();
+        for k in 0..500 {
+            log.write_loop(&msg(k)).unwrap();
+        }
+        log.finish().unwrap();
+        let run = read_mcap(&p).unwrap();
+        assert_eq!(run.loop_msgs.len(), 500);
+        for (k, m) in run.loop_msgs.iter().enumerate() {
+            assert!(same(m, &msg(k)), "message {k}");
+        }
+        let bytes = std::fs::read(&p).unwrap();
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        let ch = summary.channels.values().next().unwrap();
+        assert_eq!(ch.message_encoding, "protobuf");
+        let schema = ch.schema.as_ref().unwrap();
+        assert_eq!(
+            (schema.name.as_str(), schema.encoding.as_str()),
+            ("servo.Loop", "protobuf")
+        );
     }
 
     #[test]
