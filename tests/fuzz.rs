@@ -56,7 +56,7 @@ fn msg(k: usize) -> LoopMsg {
         i_v: -0.25,
         d_v: 0.0,
         i_a_a: 0.01 * k as f64,
-        saturated: k % 7 == 0,
+        saturated: k.is_multiple_of(7),
     }
 }
 

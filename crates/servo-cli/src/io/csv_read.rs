@@ -135,7 +135,7 @@ pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Res
                 let si = e.unit.to_si(v);
                 if !v.is_finite() {
                     nan_counts[k] += 1;
-                } else if !(si.abs() <= plausible_limit(e.signal)) {
+                } else if !si.is_finite() || si.abs() > plausible_limit(e.signal) {
                     bail!(
                         "{source}: line {line}, column {} (`{}`, signal `{}`): {cell} {} is {si:e} in SI units, \
                          beyond any DC servomotor (|{}| <= {:e}); wrong column or unit?",

@@ -213,7 +213,7 @@ impl McapLog {
         self.messages += 1;
         let due = if self.opts.flush_on_wall_clock {
             // The clock is read every 64 messages only.
-            self.messages % 64 == 0
+            self.messages.is_multiple_of(64)
                 && self.last_flush_wall.elapsed().as_secs_f64() >= self.opts.flush_period_s
         } else {
             msg.time_s - self.last_flush_s >= self.opts.flush_period_s - 1e-9 || msg.time_s.is_nan()
