@@ -400,13 +400,60 @@ fn ctrl_c_stops_at_zero_volts_and_finishes_the_log() {
     assert!(st.success());
     let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "Ctrl-C must exit non-zero");
+    assert_eq!(out.status.code(), Some(130), "Ctrl-C exits 130: {stderr}");
     assert!(stderr.contains("interrupted by Ctrl-C"), "{stderr}");
     let run = read_mcap(&log).unwrap();
     assert!(run.finished, "the log must be finished: {:?}", run.notes);
     let t_last = run.loop_msgs.last().unwrap().time_s;
     assert!((0.3..2.0).contains(&t_last), "{t_last}");
     assert!(!run.summary.is_empty(), "summary record written");
+    // The summary says what really ran, beside the planned duration.
+    assert_eq!(run.summary["stop_reason"], "interrupted by Ctrl-C");
+    assert_eq!(run.summary["planned_duration_s"], "5");
+    let ran: f64 = run.summary["duration_s"].parse().unwrap();
+    assert!((ran - (t_last + 1e-3)).abs() < 1e-6, "{ran} vs {t_last}");
+}
+
+#[test]
+fn diverging_simulation_and_soft_limit_stop_with_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let gains = write_gains(dir.path());
+    let g = gains.to_str().unwrap();
+    let (ok, _, err) = servo_e2e::servo(&[
+        "run",
+        "--gains",
+        g,
+        "--ref",
+        "step:1.5",
+        "--duration",
+        "2",
+        "--plant-effect",
+        "imbalance:amplitude=1e300",
+    ]);
+    assert!(
+        !ok && err.contains("diverged") && !err.contains("inf"),
+        "{err}"
+    );
+    let (ok, _, err) = servo_e2e::servo(&[
+        "run",
+        "--gains",
+        g,
+        "--ref",
+        "ramp:10",
+        "--duration",
+        "5",
+        "--soft-limit-rev",
+        "2",
+    ]);
+    assert!(
+        !ok && err.contains("soft position limit") && err.contains("2.000 rev"),
+        "{err}"
+    );
+    assert!(err.contains("0 V (acknowledged)"), "{err}");
+    // Absurd durations are refused before anything runs (no allocation sized by them).
+    let (ok, _, err) =
+        servo_e2e::servo(&["run", "--gains", g, "--ref", "step:1", "--duration", "1e12"]);
+    assert!(!ok && err.contains("samples"), "{err}");
 }
 
 #[test]

@@ -23,11 +23,9 @@ use std::path::Path;
 pub struct PidSection {
     /// Proportional gain K_P [V/rad].
     pub kp: f64,
-    /// Integral gain K_I [V/(rad s)].
-    #[serde(default)]
+    /// Integral gain K_I [V/(rad s)] (required: write `ki = 0` for no integral action).
     pub ki: f64,
-    /// Derivative gain K_D [V s/rad].
-    #[serde(default)]
+    /// Derivative gain K_D [V s/rad] (required: write `kd = 0` for no derivative action).
     pub kd: f64,
     /// Real-derivative time constant T_L [s] (eq. 53); 0 means an ideal derivative.
     #[serde(default)]
@@ -70,7 +68,25 @@ impl GainsFile {
     }
 
     /// Parses and validates TOML text.
+    ///
+    /// `kp`, `ki` and `kd` must all be given: a file holding only `kp` is refused rather than
+    /// run silently as a P controller (write `ki = 0`, `kd = 0` for that).
     pub fn parse(text: &str) -> anyhow::Result<GainsFile> {
+        if let Ok(table) = text.parse::<toml::Table>() {
+            if let Some(pid) = table.get("pid").and_then(|p| p.as_table()) {
+                let missing: Vec<&str> = ["kp", "ki", "kd"]
+                    .into_iter()
+                    .filter(|k| !pid.contains_key(*k))
+                    .collect();
+                if !missing.is_empty() {
+                    bail!(
+                        "[pid] must give kp, ki and kd explicitly; missing: {} (write e.g. `ki = 0` \
+                         and `kd = 0` for a P controller; `servo design -o gains.toml` writes a full file)",
+                        missing.join(", ")
+                    );
+                }
+            }
+        }
         let g: GainsFile =
             toml::from_str(text).map_err(|e| anyhow!("{}", e.to_string().trim_end()))?;
         g.validate()?;
@@ -175,18 +191,30 @@ mod tests {
         );
         let e = format!(
             "{:#}",
-            GainsFile::parse("[pid]\nkp = 1\nderivative_on = \"output\"\n").unwrap_err()
+            GainsFile::parse("[pid]\nkp = 1\nki = 0\nkd = 0\nderivative_on = \"output\"\n")
+                .unwrap_err()
         );
         assert!(
             e.contains("derivative_on") || e.contains("measurement"),
             "{e}"
         );
-        let e = format!("{:#}", GainsFile::parse("[pid]\nkp = -1\n").unwrap_err());
+        let e = format!(
+            "{:#}",
+            GainsFile::parse("[pid]\nkp = -1\nki = 0\nkd = 0\n").unwrap_err()
+        );
         assert!(e.contains("kp"), "{e}");
         let e = format!(
             "{:#}",
-            GainsFile::parse("[pid]\nkp = 1\nkq = 2\n").unwrap_err()
+            GainsFile::parse("[pid]\nkp = 1\nki = 0\nkd = 0\nkq = 2\n").unwrap_err()
         );
         assert!(e.contains("kq"), "{e}");
+    }
+
+    #[test]
+    fn gains_file_with_only_kp_is_refused() {
+        let e = format!("{:#}", GainsFile::parse("[pid]\nkp = 5\n").unwrap_err());
+        assert!(e.contains("missing: ki, kd") && e.contains("ki = 0"), "{e}");
+        let g = GainsFile::parse("[pid]\nkp = 5\nki = 0\nkd = 0\n").unwrap();
+        assert_eq!((g.pid.ki, g.pid.kd), (0.0, 0.0));
     }
 }

@@ -23,6 +23,7 @@ macro_rules! out {
 }
 
 pub mod cmd;
+pub mod fuzz;
 pub mod gains_file;
 pub mod io;
 pub mod model_file;
@@ -62,7 +63,12 @@ where
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            std::process::ExitCode::FAILURE
+            if e.downcast_ref::<runner::Interrupted>().is_some() {
+                // Like a shell after SIGINT.
+                std::process::ExitCode::from(130)
+            } else {
+                std::process::ExitCode::FAILURE
+            }
         }
     }
 }

@@ -75,6 +75,10 @@ pub struct RunConfig {
     pub speed_bandwidth_rad_s: f64,
     /// Stop cleanly on Ctrl-C (installs a process-wide handler once).
     pub handle_ctrlc: bool,
+    /// Keep every sample in [`RunOutput::record`]. Without it the record stays empty and the
+    /// run's memory does not depend on its length: samples go only to the log sink and to the
+    /// running summary ([`RunOutput::summary`]).
+    pub keep_record: bool,
 }
 
 impl RunConfig {
@@ -89,6 +93,7 @@ impl RunConfig {
             u_limit_v: 10.0,
             speed_bandwidth_rad_s: DEFAULT_SPEED_BANDWIDTH_RAD_S,
             handle_ctrlc: true,
+            keep_record: true,
         }
     }
     /// An open-loop run (voltage program) with the same defaults.
@@ -119,21 +124,55 @@ pub enum StopReason {
 /// What a run produced.
 #[derive(Debug, Clone)]
 pub struct RunOutput {
-    /// Every sample: time, u (applied), theta_l, omega_l (estimate), i_a, ref (closed loop).
+    /// Every sample: time, u (applied), theta_l, omega_l (estimate), i_a, ref (closed loop);
+    /// empty unless [`RunConfig::keep_record`].
     pub record: Record,
-    /// Per sample: the output was clipped at the limit.
+    /// Per sample: the output was clipped at the limit (empty unless `keep_record`).
     pub saturated: Vec<bool>,
     /// The voltage limit in force [V].
     pub u_limit_v: f64,
     pub stop: StopReason,
+    /// Samples that ran and the run time of the last one [s].
+    pub samples: usize,
+    pub last_time_s: f64,
+    /// The figures of merit (5 % settling band), computed while the loop ran.
+    pub summary: RunSummary,
 }
 
 impl RunOutput {
     /// The figures of merit (5 % settling band).
     pub fn summary(&self) -> RunSummary {
-        RunSummary::compute(&self.record, &self.saturated, 0.05)
+        self.summary.clone()
+    }
+    /// Run time that really ran [s] (samples x T_s; less than planned after Ctrl-C).
+    pub fn ran_s(&self) -> f64 {
+        self.summary.duration_s
     }
 }
+
+/// The error of a run stopped by Ctrl-C (after the board was stopped and the logs closed):
+/// `servo` exits with status 130 on it, like a shell.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("interrupted by Ctrl-C at t = {at_s:.3} s")]
+pub struct Interrupted {
+    /// Run time of the last sample [s].
+    pub at_s: f64,
+}
+
+/// How stopping the board went after the loop failed, attached as context to the loop's error:
+/// `servo run` claims 0 V only for [`StopOutcome::Acknowledged`] (the backend sent 0 V and the
+/// board confirmed, or the simulator applied it).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StopOutcome {
+    #[error("run stopped, board at 0 V (acknowledged)")]
+    Acknowledged,
+    #[error("run stopped; 0 V NOT confirmed ({0})")]
+    Failed(String),
+}
+
+/// Longest run the loop accepts, in samples (about 3.2 years at 1 kHz): beyond, the sample
+/// index loses precision as a time.
+pub const MAX_SAMPLES: f64 = 1e11;
 
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 static HANDLER: std::sync::Once = std::sync::Once::new();
@@ -209,18 +248,32 @@ pub fn run_loop(
     if cfg.handle_ctrlc {
         install_ctrlc_handler();
     }
-    let n = ((cfg.duration_s / ts) - 1e-9).ceil().max(1.0) as usize;
+    let n_f = ((cfg.duration_s / ts) - 1e-9).ceil().max(1.0);
+    if n_f > MAX_SAMPLES {
+        bail!(
+            "--duration {} s at T_s = {ts} s is {n_f:e} samples; servo runs at most {MAX_SAMPLES:e}",
+            cfg.duration_s
+        );
+    }
+    let n = n_f as usize;
+    // Memory grows with the run only when the caller keeps the samples; then it grows as they
+    // come (no allocation sized by the planned duration).
+    let keep = cfg.keep_record;
+    let some_if = |keep: bool| keep.then(Vec::new);
     let mut rec = Record {
         source: format!("servo run on {}", info.firmware),
-        time_s: Vec::with_capacity(n),
-        u_v: Some(Vec::with_capacity(n)),
-        theta_l_rad: Some(Vec::with_capacity(n)),
-        omega_l_rad_s: Some(Vec::with_capacity(n)),
-        i_a_a: Some(Vec::with_capacity(n)),
-        ref_rad: Some(Vec::with_capacity(n)),
+        time_s: Vec::new(),
+        u_v: some_if(keep),
+        theta_l_rad: some_if(keep),
+        omega_l_rad_s: some_if(keep),
+        i_a_a: some_if(keep),
+        ref_rad: some_if(keep),
         ..Record::default()
     };
-    let mut saturated = Vec::with_capacity(n);
+    let mut saturated = Vec::new();
+    let mut acc = summary::SummaryAccumulator::new(ts, 0.05);
+    let mut last_t = 0.0;
+    let mut any_ref = false;
     let mut speed = SpeedEstimator::new(cfg.speed_bandwidth_rad_s, ts);
     let mut stop = StopReason::Completed;
     let mut was_open_loop = false;
@@ -267,13 +320,18 @@ pub fn run_loop(
             backend
                 .apply(u)
                 .with_context(|| format!("applying u = {u} V at t = {t} s"))?;
-            rec.time_s.push(t);
-            push(&mut rec.u_v, u);
-            push(&mut rec.theta_l_rad, s.theta_l_rad);
-            push(&mut rec.omega_l_rad_s, omega);
-            push(&mut rec.i_a_a, s.i_a_a);
-            push(&mut rec.ref_rad, r);
-            saturated.push(sat);
+            acc.push(t, r, s.theta_l_rad, u, sat);
+            last_t = t;
+            any_ref |= !r.is_nan();
+            if keep {
+                rec.time_s.push(t);
+                push(&mut rec.u_v, u);
+                push(&mut rec.theta_l_rad, s.theta_l_rad);
+                push(&mut rec.omega_l_rad_s, omega);
+                push(&mut rec.i_a_a, s.i_a_a);
+                push(&mut rec.ref_rad, r);
+                saturated.push(sat);
+            }
             if let Some(sink) = sink.as_deref_mut() {
                 sink.write_loop(&LoopMsg {
                     time_s: t,
@@ -296,14 +354,15 @@ pub fn run_loop(
     // Always: 0 V, then make the log durable.
     let stopped = backend.stop().context("stopping the board (0 V)");
     let flushed = sink.map_or(Ok(()), |s| s.flush());
-    result?;
+    if let Err(e) = result {
+        return Err(match stopped {
+            Ok(()) => e.context(StopOutcome::Acknowledged),
+            Err(se) => e.context(StopOutcome::Failed(format!("{se:#}"))),
+        });
+    }
     stopped?;
     flushed?;
-    if rec
-        .ref_rad
-        .as_ref()
-        .is_some_and(|r| r.iter().all(|v| v.is_nan()))
-    {
+    if !any_ref {
         rec.ref_rad = None;
     }
     Ok(RunOutput {
@@ -311,6 +370,9 @@ pub fn run_loop(
         saturated,
         u_limit_v: u_limit,
         stop,
+        samples: acc.samples(),
+        last_time_s: last_t,
+        summary: acc.finish(),
     })
 }
 

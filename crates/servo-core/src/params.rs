@@ -22,7 +22,40 @@ pub enum ParamError {
         unit: &'static str,
         value: f64,
     },
+    /// A parameter lies outside any physically sensible range for a DC gearmotor (e.g. a
+    /// torque constant of 1e308 N m/A, a typo or a unit slip); computations on it would overflow
+    /// or never converge.
+    #[error("parameter `{key}` = {value} {unit} is outside the physically sensible range {min:e} .. {max:e} {unit} for a DC gearmotor (a typo or a unit slip?)")]
+    OutOfRange {
+        key: &'static str,
+        unit: &'static str,
+        value: f64,
+        min: f64,
+        max: f64,
+    },
 }
+
+/// Physically sensible ranges (generous: from micro motors to large industrial drives) of the
+/// parameters, `(key, unit, min, max)`; a value outside is refused by [`PlantParams::validate`].
+/// Zero is allowed where the key may be absent or zero (friction, optional inertias).
+pub const SENSIBLE_RANGES: [(&str, &str, f64, f64); 16] = [
+    ("r_a", "ohm", 1e-4, 1e4),
+    ("l_a", "H", 1e-9, 10.0),
+    ("k_e", "V s/rad", 1e-6, 100.0),
+    ("k_t", "N m/A", 1e-6, 100.0),
+    ("j_m", "kg m^2", 1e-13, 100.0),
+    ("n", "-", 1e-2, 1e5),
+    ("k_drv", "V/V", 1e-3, 1e3),
+    ("f_c_drv", "Hz", 1e-2, 1e9),
+    ("j_eq", "kg m^2", 1e-13, 1e4),
+    ("j_72", "kg m^2", 0.0, 1e4),
+    ("j_d", "kg m^2", 0.0, 1e4),
+    ("b_m", "N m s/rad", 0.0, 1e3),
+    ("b_l", "N m s/rad", 0.0, 1e5),
+    ("r_s", "ohm", 0.0, 1e4),
+    ("b_eq", "N m s/rad", 0.0, 1e3),
+    ("tau_sf", "N m", 0.0, 1e5),
+];
 
 /// DC gearmotor parameters, named after the handout's Table 2. SI units throughout.
 ///
@@ -203,6 +236,35 @@ impl PlantParams {
                 return Err(ParamError::Negative { key, unit, value });
             }
         }
+        let values = [
+            self.r_a,
+            self.l_a,
+            self.k_e,
+            self.k_t,
+            self.j_m,
+            self.n,
+            self.k_drv,
+            self.f_c_drv,
+            self.j_eq.unwrap_or(1e-6),
+            self.j_72,
+            self.j_d,
+            self.b_m,
+            self.b_l,
+            self.r_s,
+            self.b_eq.unwrap_or(0.0),
+            self.tau_sf.unwrap_or(0.0),
+        ];
+        for ((key, unit, min, max), value) in SENSIBLE_RANGES.into_iter().zip(values) {
+            if !(value >= min && value <= max) {
+                return Err(ParamError::OutOfRange {
+                    key,
+                    unit,
+                    value,
+                    min,
+                    max,
+                });
+            }
+        }
         Ok(())
     }
 }
@@ -252,5 +314,22 @@ mod tests {
             p.validate(),
             Err(ParamError::NotFinite { key: "r_a", .. })
         ));
+    }
+
+    #[test]
+    fn rejects_absurd_constants() {
+        for key in ["k_t", "k_e", "f_c_drv"] {
+            let mut p = PlantParams::TABLE2;
+            match key {
+                "k_t" => p.k_t = 1e308,
+                "k_e" => p.k_e = 1e308,
+                _ => p.f_c_drv = 1e308,
+            }
+            let e = p.validate().unwrap_err();
+            assert!(
+                matches!(e, ParamError::OutOfRange { key: k, .. } if k == key),
+                "{e}"
+            );
+        }
     }
 }

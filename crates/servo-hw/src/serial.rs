@@ -517,8 +517,12 @@ impl Backend for SerialBackend {
                 _ => {}
             }
         }
-        // No confirmation: the board watchdog brings it to 0 V anyway.
-        Ok(())
+        // No confirmation: 0 V was sent but is not known to hold (the board's watchdog should
+        // bring it to 0 V); say so rather than claim it.
+        Err(HwError::Protocol(
+            "the board did not acknowledge Stop within 200 ms: 0 V was sent but not confirmed"
+                .into(),
+        ))
     }
 }
 

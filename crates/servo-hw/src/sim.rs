@@ -21,7 +21,16 @@ pub struct SimBackend {
     voltage_limit_v: f64,
     last_u_v: f64,
     realtime: Option<std::time::Instant>,
+    position_limit_rad: Option<f64>,
 }
+
+/// Largest |theta_l| [rad] a simulation may reach before it is declared diverged (about 1.6e8
+/// load revolutions: days of continuous rotation at full speed; a diverging model gets there,
+/// or to a non-finite state, within a few samples).
+pub const DIVERGED_THETA_RAD: f64 = 1e9;
+/// Largest motor speed |omega_m| [rad/s] before the simulation is declared diverged (about
+/// 10 million rpm: no motor spins that fast).
+pub const DIVERGED_OMEGA_RAD_S: f64 = 1e6;
 
 impl SimBackend {
     /// A simulated board for `plant` with control period `dt_s` [s].
@@ -32,6 +41,7 @@ impl SimBackend {
             voltage_limit_v: 10.0,
             last_u_v: 0.0,
             realtime: None,
+            position_limit_rad: None,
         })
     }
     /// Paces the simulation to wall-clock time.
@@ -51,6 +61,57 @@ impl SimBackend {
         Ok(self)
     }
     /// The underlying plant simulator (true state, per-effect torques).
+    /// Soft position limit: [`Backend::sample`] fails (and the run stops) when |theta_l| exceeds
+    /// `limit_rad`, as a board trips its +-2 rev limit
+    /// ([`servo_core::safety::SafetyLimits`]).
+    pub fn with_position_limit(mut self, limit_rad: f64) -> Result<Self, HwError> {
+        if !(limit_rad > 0.0 && limit_rad.is_finite()) {
+            return Err(HwError::Safety(format!(
+                "position limit must be > 0 rad and finite, got {limit_rad}"
+            )));
+        }
+        self.position_limit_rad = Some(limit_rad);
+        Ok(self)
+    }
+    /// Fails when the simulated state is non-finite or beyond [`DIVERGED_THETA_RAD`] /
+    /// [`DIVERGED_OMEGA_RAD_S`] (a diverging model or effect), or beyond the soft position limit.
+    fn check_state(&self, s: &servo_core::sim::PlantState) -> Result<(), HwError> {
+        let finite = [
+            s.theta_l_rad,
+            s.omega_l_rad_s,
+            s.theta_m_rad,
+            s.omega_m_rad_s,
+            s.i_a_a,
+            s.u_drv_v,
+        ]
+        .iter()
+        .all(|v| v.is_finite());
+        if !finite
+            || s.theta_l_rad.abs() > DIVERGED_THETA_RAD
+            || s.omega_m_rad_s.abs() > DIVERGED_OMEGA_RAD_S
+        {
+            return Err(HwError::Safety(
+                servo_core::sim::SimError::Diverged {
+                    time_s: s.time_s,
+                    theta_l_rad: s.theta_l_rad,
+                    omega_m_rad_s: s.omega_m_rad_s,
+                }
+                .to_string(),
+            ));
+        }
+        if let Some(lim) = self.position_limit_rad {
+            if s.theta_l_rad.abs() > lim {
+                return Err(HwError::Safety(format!(
+                    "soft position limit: theta_l = {:.4} rad ({:.3} rev) beyond +-{lim} rad ({:.3} rev) at t = {:.4} s",
+                    s.theta_l_rad,
+                    s.theta_l_rad / std::f64::consts::TAU,
+                    lim / std::f64::consts::TAU,
+                    s.time_s
+                )));
+            }
+        }
+        Ok(())
+    }
     pub fn plant_sim(&self) -> &PlantSim {
         &self.sim
     }
@@ -71,6 +132,7 @@ impl Backend for SimBackend {
     }
     fn sample(&mut self) -> Result<Sample, HwError> {
         let s = *self.sim.state();
+        self.check_state(&s)?;
         if let Some(start) = self.realtime {
             let due = std::time::Duration::from_secs_f64(s.time_s);
             if let Some(wait) = due.checked_sub(start.elapsed()) {

@@ -65,6 +65,8 @@ impl Export {
                 }
                 let opts = McapLogOptions {
                     start_unix_ns: 0,
+                    // A conversion, not a live run: chunks by wall-clock time.
+                    flush_on_wall_clock: true,
                     ..McapLogOptions::default()
                 };
                 let mut log = McapLog::create(&output, &entries, opts)?;

@@ -124,6 +124,8 @@ struct Sink<W: std::io::Write + std::io::Seek> {
     w: mcap::Writer<W>,
     report: RecoveryReport,
     channel_topics: std::collections::BTreeMap<u16, String>,
+    /// Largest buffer a length field may ask for [bytes]: the input's size.
+    limit: usize,
 }
 
 impl<W: std::io::Write + std::io::Seek> Sink<W> {
@@ -230,7 +232,17 @@ fn walk<W: std::io::Write + std::io::Seek>(
             );
         }
         let body = &buf[body_start..body_start + len as usize];
-        let rec = match mcap::parse_record(op, body) {
+        if op == OP_CHUNK && depth == 0 {
+            // Chunks are read record by record through the streaming reader, whose buffers are
+            // bounded by the input's size: a corrupted `uncompressed_size` cannot make it
+            // allocate more than that.
+            if let Err(e) = chunk_records(&buf[pos..body_start + len as usize], sink) {
+                return (pos, Some(format!("chunk: {e:#}")), false);
+            }
+            pos = body_start + len as usize;
+            continue;
+        }
+        let rec = match crate::io::mcap_read::parse_record_checked(op, body) {
             Ok(r) => r,
             Err(e) => {
                 return (
@@ -248,6 +260,18 @@ fn walk<W: std::io::Write + std::io::Seek>(
         pos = body_start + len as usize;
     }
     (pos, None, false)
+}
+
+/// Copies the records of one whole chunk record (`chunk`: opcode, length and body) to `sink`,
+/// decompressing incrementally with every buffer bounded by [`Sink::limit`].
+fn chunk_records<W: std::io::Write + std::io::Seek>(
+    chunk: &[u8],
+    sink: &mut Sink<W>,
+) -> anyhow::Result<()> {
+    for rec in crate::io::mcap_read::BoundedRecords::new(chunk, false, sink.limit) {
+        sink.record(rec?, 1)?;
+    }
+    Ok(())
 }
 
 /// Salvages the records of an uncompressed chunk that was cut short; returns (bytes of the
@@ -290,31 +314,40 @@ fn partial_chunk<W: std::io::Write + std::io::Seek>(
 /// Recovers `input` into `output`.
 pub fn recover(input: &Path, output: &Path) -> anyhow::Result<RecoveryReport> {
     let buf = std::fs::read(input).with_context(|| format!("reading {}", input.display()))?;
-    if buf.len() < MAGIC.len() || &buf[..MAGIC.len()] != MAGIC {
-        bail!(
-            "{} is not an MCAP file (no MCAP magic at its start)",
-            input.display()
-        );
-    }
     let file =
         std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
+    recover_bytes(&buf, BufWriter::new(file))
+        .with_context(|| format!("recovering {} into {}", input.display(), output.display()))
+}
+
+/// Recovers the MCAP bytes `buf` into `out` (a file, or a `Cursor<Vec<u8>>` in tests).
+///
+/// Never panics and allocates nothing sized by the input's length fields beyond the input's
+/// own size (records longer than the rest of the input are "cut short"; chunks decompress
+/// record by record).
+pub fn recover_bytes<W: std::io::Write + std::io::Seek>(
+    buf: &[u8],
+    out: W,
+) -> anyhow::Result<RecoveryReport> {
+    if buf.len() < MAGIC.len() || &buf[..MAGIC.len()] != MAGIC {
+        bail!("not an MCAP file (no MCAP magic at its start)");
+    }
     let w = mcap::WriteOptions::new()
         .library(concat!("servo log recover ", env!("CARGO_PKG_VERSION")))
-        .create(BufWriter::new(file))
-        .with_context(|| format!("writing {}", output.display()))?;
+        .create(out)
+        .context("writing the recovered file")?;
     let mut sink = Sink {
         w,
         report: RecoveryReport::default(),
         channel_topics: Default::default(),
+        limit: buf.len(),
     };
     let (n, why, data_end) = walk(&buf[MAGIC.len()..], &mut sink, 0);
     sink.report.total_bytes = buf.len() as u64;
     sink.report.good_bytes = (MAGIC.len() + n) as u64;
     sink.report.was_complete = data_end && buf.ends_with(MAGIC) && buf.len() > 2 * MAGIC.len();
     sink.report.stopped_because = why;
-    sink.w
-        .finish()
-        .with_context(|| format!("finishing {}", output.display()))?;
+    sink.w.finish().context("finishing the recovered file")?;
     Ok(sink.report)
 }
 

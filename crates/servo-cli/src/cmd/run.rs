@@ -82,6 +82,17 @@ pub struct Run {
     #[arg(long)]
     pub realtime: bool,
 
+    /// Simulator: stop the run with an error when |theta_l| exceeds this many load revolutions,
+    /// like the board's soft position limit (+-2 rev: `--soft-limit-rev 2`). Off by default;
+    /// a diverging simulation (non-finite state, |theta_l| > 1e9 rad) always stops.
+    #[arg(long = "soft-limit-rev", value_name = "REV")]
+    pub soft_limit_rev: Option<f64>,
+
+    /// Encoding of the loop messages in the --log MCAP: `protobuf` (compact and fast to write)
+    /// or `json` (JSON schema); both open in Foxglove, PlotJuggler and every servo command.
+    #[arg(long = "log-encoding", value_enum, default_value = "protobuf")]
+    pub log_encoding: crate::io::LogEncoding,
+
     /// Serial port of the board (`--backend serial`), e.g. /dev/ttyACM0 (see `servo ports`).
     #[arg(long, value_name = "PATH", default_value = "/dev/ttyACM0")]
     pub port: String,
@@ -130,8 +141,9 @@ impl Run {
     pub fn run(self) -> anyhow::Result<()> {
         let report = self.execute()?;
         if report.output.stop == StopReason::Interrupted {
-            let t = report.output.record.time_s.last().copied().unwrap_or(0.0);
-            bail!("interrupted by Ctrl-C at t = {t:.3} s; the board was stopped at 0 V and the logs are closed");
+            let at_s = report.output.last_time_s;
+            eprintln!("the board was stopped at 0 V and the logs are closed");
+            return Err(runner::Interrupted { at_s }.into());
         }
         Ok(())
     }
@@ -257,6 +269,12 @@ impl Run {
                 let sim = SimBackend::new(&plant, sensors, ts_s)
                     .context("simulator")?
                     .realtime(self.realtime);
+                let sim = match self.soft_limit_rev {
+                    Some(rev) => sim
+                        .with_position_limit(rev * std::f64::consts::TAU)
+                        .context("--soft-limit-rev")?,
+                    None => sim,
+                };
                 let mut meta = BTreeMap::new();
                 let mut mf = ModelFile::from_plant(&plant);
                 mf.sensors = Some(sensors);
@@ -355,9 +373,21 @@ impl Run {
             u_limit_v,
             speed_bandwidth_rad_s: 2.0 * std::f64::consts::PI * self.speed_bandwidth_hz,
             handle_ctrlc: true,
+            // Samples stay in memory only for --csv and --plot; the log and the summary stream.
+            keep_record: self.csv.is_some() || self.plot.is_some(),
         };
         let mut log = match &self.log {
-            Some(p) => Some(McapLog::create(p, &meta, McapLogOptions::default())?),
+            Some(p) => Some(McapLog::create(
+                p,
+                &meta,
+                McapLogOptions {
+                    // A simulation faster than real time: chunks by wall-clock time.
+                    flush_on_wall_clock: self.backend == BackendKind::Sim && !self.realtime,
+                    fast_compression: self.backend == BackendKind::Sim && !self.realtime,
+                    encoding: self.log_encoding,
+                    ..McapLogOptions::default()
+                },
+            )?),
             None => None,
         };
         let out = runner::run_loop(
@@ -372,15 +402,22 @@ impl Run {
                 if let Some(ls) = &link {
                     eprintln!("{ls}");
                 }
+                let stop = e.downcast_ref::<runner::StopOutcome>().cloned();
                 if let Some(l) = log.as_mut() {
-                    if let Some(ls) = &link {
-                        let _ = l.write_summary(&ls.to_map());
-                    }
+                    let mut map = link.as_ref().map(|ls| ls.to_map()).unwrap_or_default();
+                    map.insert("stop_reason".into(), format!("error: {e:#}"));
+                    map.insert("samples".into(), l.messages().to_string());
+                    let _ = l.write_summary(&map);
                     let _ = l.finish();
                     eprintln!(
-                        "the board was commanded to 0 V; log {} finished with the {} samples before the fault",
+                        "log {} finished with the {} samples before the fault",
                         l.path().display(),
                         l.messages()
+                    );
+                }
+                if let Some(runner::StopOutcome::Failed(why)) = stop {
+                    eprintln!(
+                        "WARNING: 0 V could not be confirmed ({why}); check the motor and power"
                     );
                 }
                 return Err(e);
@@ -396,6 +433,15 @@ impl Run {
             if let Some(ls) = &link {
                 map.extend(ls.to_map());
             }
+            // What really ran (the run metadata holds the planned duration).
+            map.insert("planned_duration_s".into(), duration_s.to_string());
+            map.insert(
+                "stop_reason".into(),
+                match out.stop {
+                    StopReason::Completed => "completed".into(),
+                    StopReason::Interrupted => "interrupted by Ctrl-C".into(),
+                },
+            );
             l.write_summary(&map)?;
             l.finish()?;
             outln!(

@@ -132,10 +132,22 @@ pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Res
                 last_t = t;
                 data[k].push(t);
             } else {
+                let si = e.unit.to_si(v);
                 if !v.is_finite() {
                     nan_counts[k] += 1;
+                } else if !si.is_finite() || si.abs() > plausible_limit(e.signal) {
+                    bail!(
+                        "{source}: line {line}, column {} (`{}`, signal `{}`): {cell} {} is {si:e} in SI units, \
+                         beyond any DC servomotor (|{}| <= {:e}); wrong column or unit?",
+                        i + 1,
+                        e.column,
+                        e.signal,
+                        e.unit,
+                        e.signal,
+                        plausible_limit(e.signal)
+                    );
                 }
-                data[k].push(e.unit.to_si(v));
+                data[k].push(si);
             }
         }
     }
@@ -167,11 +179,72 @@ pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Res
             header.join(",")
         );
     }
+    check_sample_period(&rec.time_s, &map, source)?;
     Ok(CsvImport {
         record: rec,
         map,
         notes,
     })
+}
+
+/// Largest magnitude (SI units) a signal of a DC servomotor log may take: values beyond are a
+/// wrong column or unit (or garbage), and would overflow the fits (1e30 V gives a fit of
+/// -3.4e29 %, 1e308 makes the least squares NaN).
+pub fn plausible_limit(signal: Signal) -> f64 {
+    match signal {
+        Signal::Time => f64::INFINITY,
+        Signal::U => 1e4,
+        Signal::IA => 1e5,
+        Signal::ThetaL | Signal::ThetaM | Signal::Ref => 1e9,
+        Signal::OmegaL | Signal::OmegaM => 1e7,
+    }
+}
+
+/// Sample periods a servo log may have [s]: 10 us .. 1 s.
+pub const SAMPLE_PERIOD_RANGE_S: (f64, f64) = (1e-5, 1.0);
+
+/// Refuses a log whose median time step lies outside [`SAMPLE_PERIOD_RANGE_S`]: the time column's
+/// unit is almost certainly not the one it was read in (nanoseconds read as seconds give dt =
+/// 1e6 s).
+fn check_sample_period(time_s: &[f64], map: &ColumnMap, source: &str) -> anyhow::Result<()> {
+    if time_s.len() < 2 {
+        return Ok(());
+    }
+    let mut d: Vec<f64> = time_s.windows(2).map(|w| w[1] - w[0]).collect();
+    d.sort_by(f64::total_cmp);
+    let dt = d[d.len() / 2];
+    let (lo, hi) = SAMPLE_PERIOD_RANGE_S;
+    if dt >= lo && dt <= hi {
+        return Ok(());
+    }
+    let Some(e) = map.entries.iter().find(|e| e.signal == Signal::Time) else {
+        return Ok(());
+    };
+    let guesses: Vec<String> = [("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9)]
+        .into_iter()
+        .filter(|(_, f)| {
+            let p = dt / e.unit.to_si(1.0) * f;
+            p >= lo && p <= hi
+        })
+        .map(|(u, f)| {
+            format!(
+                "`--columns time={}:{u}` (T_s = {:e} s)",
+                e.column,
+                dt / e.unit.to_si(1.0) * f
+            )
+        })
+        .collect();
+    bail!(
+        "{source}: column `{}` read in {} gives a sample period of {dt:e} s, outside {lo:e} .. {hi} s; \
+         which unit is the time column in?{}",
+        e.column,
+        e.unit,
+        if guesses.is_empty() {
+            String::new()
+        } else {
+            format!(" If it is {}, give {}", if guesses.len() > 1 { "one of these" } else { "this" }, guesses.join(" or "))
+        }
+    )
 }
 
 fn csv_error_text(e: &csv::Error) -> String {
@@ -268,5 +341,31 @@ mod tests {
             parse_csv("time_s,u_V\n", "empty.csv", None).unwrap_err()
         );
         assert!(e.contains("no data rows"), "{e}");
+    }
+
+    #[test]
+    fn absurd_values_and_time_units_are_refused() {
+        for v in ["1e308", "1e30", "-1e300"] {
+            let t = format!("time_s,u_V,theta_l_rad\n0,1,0\n0.001,{v},0\n0.002,1,0\n");
+            let e = format!("{:#}", parse_csv(&t, "big.csv", None).unwrap_err());
+            assert!(
+                e.contains("big.csv: line 3, column 2 (`u_V`")
+                    && e.contains("wrong column or unit"),
+                "{e}"
+            );
+        }
+        // Time in nanoseconds read as seconds: dt = 1e6 s.
+        let t = "time_s,u_V\n0,1\n1000000,1\n2000000,1\n";
+        let e = format!("{:#}", parse_csv(t, "ns.csv", None).unwrap_err());
+        assert!(
+            e.contains("which unit") && e.contains("--columns time=time_s:ns"),
+            "{e}"
+        );
+        let r = parse_csv(t, "ns.csv", Some("time=time_s:ns,u=u_V")).unwrap();
+        assert_eq!(r.record.time_s[1], 1e-3);
+        // Too slow as well: 10 s.
+        let t = "time_s,u_V\n0,1\n10,1\n20,1\n";
+        let e = format!("{:#}", parse_csv(t, "slow.csv", None).unwrap_err());
+        assert!(e.contains("outside"), "{e}");
     }
 }

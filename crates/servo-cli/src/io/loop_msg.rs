@@ -50,6 +50,213 @@ pub struct LoopMsg {
     pub saturated: bool,
 }
 
+impl LoopMsg {
+    /// Appends the message as JSON to `out`: the same JSON value serde_json writes (shortest
+    /// round-trip numbers, non-finite as null), by hand because it is the log's hot path.
+    pub fn write_json(&self, out: &mut Vec<u8>) {
+        let mut b = ryu::Buffer::new();
+        let mut num = |out: &mut Vec<u8>, key: &[u8], v: f64| {
+            out.extend_from_slice(key);
+            if v.is_finite() {
+                out.extend_from_slice(b.format_finite(v).as_bytes());
+            } else {
+                out.extend_from_slice(b"null");
+            }
+        };
+        num(out, b"{\"time_s\":", self.time_s);
+        num(out, b",\"ref_rad\":", self.ref_rad);
+        num(out, b",\"theta_l_rad\":", self.theta_l_rad);
+        num(out, b",\"omega_l_rad_s\":", self.omega_l_rad_s);
+        num(out, b",\"err_rad\":", self.err_rad);
+        num(out, b",\"u_v\":", self.u_v);
+        num(out, b",\"ff_v\":", self.ff_v);
+        num(out, b",\"p_v\":", self.p_v);
+        num(out, b",\"i_v\":", self.i_v);
+        num(out, b",\"d_v\":", self.d_v);
+        num(out, b",\"i_a_a\":", self.i_a_a);
+        out.extend_from_slice(if self.saturated {
+            b",\"saturated\":true}"
+        } else {
+            b",\"saturated\":false}"
+        });
+    }
+}
+
+/// Fully qualified protobuf name of [`LoopMsg`] (package `servo`, message `Loop`): the MCAP
+/// schema name of a protobuf-encoded log.
+pub const LOOP_PROTO_NAME: &str = "servo.Loop";
+
+/// The numeric fields of the protobuf message, in field-number order (1..=11); field 12 is
+/// `saturated` (bool). Every field is written, NaN where a value does not apply.
+const PROTO_F64_FIELDS: [&str; 11] = [
+    "time_s",
+    "ref_rad",
+    "theta_l_rad",
+    "omega_l_rad_s",
+    "err_rad",
+    "u_v",
+    "ff_v",
+    "p_v",
+    "i_v",
+    "d_v",
+    "i_a_a",
+];
+
+fn pb_varint(out: &mut Vec<u8>, mut v: u64) {
+    while v >= 0x80 {
+        out.push((v as u8) | 0x80);
+        v >>= 7;
+    }
+    out.push(v as u8);
+}
+
+fn pb_bytes(out: &mut Vec<u8>, field: u64, bytes: &[u8]) {
+    pb_varint(out, field << 3 | 2);
+    pb_varint(out, bytes.len() as u64);
+    out.extend_from_slice(bytes);
+}
+
+fn pb_read_varint(b: &[u8], at: &mut usize) -> Result<u64, String> {
+    let mut v = 0u64;
+    for shift in (0..64).step_by(7) {
+        let Some(&x) = b.get(*at) else {
+            return Err("varint cut short".into());
+        };
+        *at += 1;
+        v |= u64::from(x & 0x7f) << shift;
+        if x < 0x80 {
+            return Ok(v);
+        }
+    }
+    Err("varint longer than 10 bytes".into())
+}
+
+/// The protobuf schema of [`LoopMsg`] as a serialized `google.protobuf.FileDescriptorSet`
+/// (file `servo/loop.proto`, proto3, message `servo.Loop`), the MCAP schema data Foxglove and
+/// PlotJuggler expect for `protobuf` channels.
+pub fn loop_descriptor_set() -> Vec<u8> {
+    // FieldDescriptorProto: name = 1, number = 3, label = 4 (1: optional), type = 5
+    // (1: double, 8: bool), json_name = 10.
+    let field = |name: &str, number: u64, ty: u64| {
+        let mut f = Vec::new();
+        pb_bytes(&mut f, 1, name.as_bytes());
+        pb_varint(&mut f, 3 << 3);
+        pb_varint(&mut f, number);
+        pb_varint(&mut f, 4 << 3);
+        pb_varint(&mut f, 1);
+        pb_varint(&mut f, 5 << 3);
+        pb_varint(&mut f, ty);
+        pb_bytes(&mut f, 10, name.as_bytes());
+        f
+    };
+    // DescriptorProto: name = 1, field = 2.
+    let mut msg = Vec::new();
+    pb_bytes(&mut msg, 1, b"Loop");
+    for (i, name) in PROTO_F64_FIELDS.iter().enumerate() {
+        pb_bytes(&mut msg, 2, &field(name, i as u64 + 1, 1));
+    }
+    pb_bytes(&mut msg, 2, &field("saturated", 12, 8));
+    // FileDescriptorProto: name = 1, package = 2, message_type = 4, syntax = 12.
+    let mut file = Vec::new();
+    pb_bytes(&mut file, 1, b"servo/loop.proto");
+    pb_bytes(&mut file, 2, b"servo");
+    pb_bytes(&mut file, 4, &msg);
+    pb_bytes(&mut file, 12, b"proto3");
+    // FileDescriptorSet: file = 1.
+    let mut set = Vec::new();
+    pb_bytes(&mut set, 1, &file);
+    set
+}
+
+impl LoopMsg {
+    fn f64_fields(&self) -> [f64; 11] {
+        [
+            self.time_s,
+            self.ref_rad,
+            self.theta_l_rad,
+            self.omega_l_rad_s,
+            self.err_rad,
+            self.u_v,
+            self.ff_v,
+            self.p_v,
+            self.i_v,
+            self.d_v,
+            self.i_a_a,
+        ]
+    }
+
+    /// Appends the message in protobuf wire format (`servo.Loop`, [`loop_descriptor_set`]):
+    /// fields 1-11 as 64-bit doubles, 12 as a bool; 101 bytes, no number formatting.
+    pub fn write_protobuf(&self, out: &mut Vec<u8>) {
+        for (i, v) in self.f64_fields().into_iter().enumerate() {
+            out.push(((i as u8 + 1) << 3) | 1);
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.push(12 << 3);
+        out.push(self.saturated as u8);
+    }
+
+    /// Parses a protobuf `servo.Loop` message (fields absent from the bytes take proto3's
+    /// default, 0; unknown fields are skipped).
+    pub fn from_protobuf(b: &[u8]) -> Result<LoopMsg, String> {
+        let mut v = [0.0f64; 11];
+        let mut saturated = false;
+        let mut at = 0usize;
+        while at < b.len() {
+            let key = pb_read_varint(b, &mut at)?;
+            let (field, wire) = (key >> 3, key & 7);
+            match wire {
+                1 => {
+                    let Some(x) = b.get(at..at + 8) else {
+                        return Err(format!("field {field}: 64-bit value cut short"));
+                    };
+                    at += 8;
+                    if (1..=11).contains(&field) {
+                        let mut a = [0u8; 8];
+                        a.copy_from_slice(x);
+                        v[field as usize - 1] = f64::from_le_bytes(a);
+                    }
+                }
+                0 => {
+                    let x = pb_read_varint(b, &mut at)?;
+                    if field == 12 {
+                        saturated = x != 0;
+                    }
+                }
+                2 => {
+                    let n = pb_read_varint(b, &mut at)?;
+                    let n = usize::try_from(n).unwrap_or(usize::MAX);
+                    if n > b.len() - at {
+                        return Err(format!("field {field}: length {n} beyond the message"));
+                    }
+                    at += n;
+                }
+                5 => {
+                    if b.len() - at < 4 {
+                        return Err(format!("field {field}: 32-bit value cut short"));
+                    }
+                    at += 4;
+                }
+                w => return Err(format!("field {field}: unsupported wire type {w}")),
+            }
+        }
+        Ok(LoopMsg {
+            time_s: v[0],
+            ref_rad: v[1],
+            theta_l_rad: v[2],
+            omega_l_rad_s: v[3],
+            err_rad: v[4],
+            u_v: v[5],
+            ff_v: v[6],
+            p_v: v[7],
+            i_v: v[8],
+            d_v: v[9],
+            i_a_a: v[10],
+            saturated,
+        })
+    }
+}
+
 /// JSON schema of [`LoopMsg`] (draft 2020-12, as Foxglove reads it).
 pub fn loop_schema() -> String {
     let num = |d: &str| serde_json::json!({ "type": ["number", "null"], "description": d });
@@ -125,6 +332,46 @@ mod tests {
             (b.time_s, b.theta_l_rad, b.u_v, b.p_v),
             (m.time_s, m.theta_l_rad, m.u_v, m.p_v)
         );
+        // The hand-written encoder writes exactly serde's text.
+        for v in [
+            0.0,
+            -0.0,
+            1.0,
+            1e-300,
+            -2.5e300,
+            0.1 + 0.2,
+            f64::NAN,
+            f64::INFINITY,
+            123456789.0,
+        ] {
+            let x = LoopMsg {
+                time_s: v,
+                ref_rad: v,
+                u_v: -v,
+                saturated: v > 0.5,
+                ..m
+            };
+            let mut out = Vec::new();
+            x.write_json(&mut out);
+            // The same JSON value as serde's (serde writes `2.5e+300` where ryu writes
+            // `2.5e300`; both parse to the same number).
+            let ours: serde_json::Value = serde_json::from_slice(&out).unwrap();
+            let theirs = serde_json::to_value(x).unwrap();
+            assert_eq!(ours, theirs, "{}", String::from_utf8_lossy(&out));
+        }
+        // Protobuf: exact round trip, NaN included.
+        let mut pb = Vec::new();
+        m.write_protobuf(&mut pb);
+        assert_eq!(pb.len(), 101);
+        let back = LoopMsg::from_protobuf(&pb).unwrap();
+        assert_eq!(
+            back.f64_fields().map(f64::to_bits),
+            m.f64_fields().map(f64::to_bits)
+        );
+        assert_eq!(back.saturated, m.saturated);
+        assert!(LoopMsg::from_protobuf(&pb[..50]).is_err());
+        let d = loop_descriptor_set();
+        assert!(d.windows(4).any(|w| w == b"Loop"));
         let schema: serde_json::Value = serde_json::from_str(&loop_schema()).unwrap();
         let props = schema["properties"].as_object().unwrap();
         for k in serde_json::from_str::<serde_json::Value>(&s)

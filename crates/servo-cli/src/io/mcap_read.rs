@@ -5,7 +5,6 @@
 use super::loop_msg::{LoopMsg, LOOP_TOPIC};
 use super::mcap_write::{RUN_METADATA, SUMMARY_METADATA};
 use anyhow::{anyhow, bail, Context};
-use mcap::read::{ChunkFlattener, Options};
 use mcap::records::Record as McapRecord;
 use servo_core::record::Record;
 use std::collections::{BTreeMap, HashMap};
@@ -28,6 +27,154 @@ pub struct McapRun {
     pub notes: Vec<String>,
 }
 
+/// The records of MCAP bytes, chunks flattened, read incrementally by the library's streaming
+/// reader with every buffer bounded by `limit` bytes (the file's size): a corrupted length or
+/// `uncompressed_size` field gives an error instead of a huge allocation. (mcap's own
+/// `ChunkFlattener` sets no limit.) Chunk CRCs are checked after each chunk's records.
+pub struct BoundedRecords<'a> {
+    reader: mcap::sans_io::LinearReader,
+    rest: &'a [u8],
+}
+
+impl<'a> BoundedRecords<'a> {
+    /// `with_magic`: `bytes` starts with the MCAP magic (a whole file) rather than at a record.
+    pub fn new(bytes: &'a [u8], with_magic: bool, limit: usize) -> BoundedRecords<'a> {
+        BoundedRecords {
+            reader: mcap::sans_io::LinearReader::new_with_options(
+                mcap::sans_io::LinearReaderOptions::default()
+                    .with_skip_start_magic(!with_magic)
+                    .with_skip_end_magic(true)
+                    .with_record_length_limit(limit)
+                    .with_validate_chunk_crcs(true),
+            ),
+            rest: bytes,
+        }
+    }
+}
+
+impl Iterator for BoundedRecords<'_> {
+    type Item = mcap::McapResult<McapRecord<'static>>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        use mcap::sans_io::LinearReadEvent;
+        while let Some(event) = self.reader.next_event() {
+            match event {
+                Ok(LinearReadEvent::ReadRequest(need)) => {
+                    let n = need.min(self.rest.len());
+                    self.reader.insert(n).copy_from_slice(&self.rest[..n]);
+                    self.reader.notify_read(n);
+                    self.rest = &self.rest[n..];
+                }
+                Ok(LinearReadEvent::Record { data, opcode }) => {
+                    return Some(parse_record_checked(opcode, data).map(|r| r.into_owned()))
+                }
+                Err(e) => return Some(Err(e)),
+            }
+        }
+        None
+    }
+}
+
+/// One field of a record body, for [`check_lengths`].
+#[derive(Clone, Copy)]
+enum Field {
+    /// Fixed size [bytes].
+    Fixed(usize),
+    /// u32 length + bytes (a string or a byte array of fixed-size items).
+    Str,
+    /// u32 length + string/string pairs.
+    StrMap,
+    /// u64 length + bytes.
+    Bytes64,
+}
+
+/// Checks every length prefix of an MCAP record body against the bytes that remain, so that
+/// `mcap::parse_record` (binrw reserves each string's declared length up front, up to 4 GiB)
+/// allocates nothing beyond the record's own size.
+pub fn check_lengths(opcode: u8, body: &[u8]) -> Result<(), String> {
+    use Field::*;
+    let fields: &[Field] = match opcode {
+        0x01 => &[Str, Str],                                 // header
+        0x03 => &[Fixed(2), Str, Str, Str],                  // schema
+        0x04 => &[Fixed(4), Str, Str, StrMap],               // channel
+        0x06 => &[Fixed(28), Str, Bytes64],                  // chunk
+        0x07 => &[Fixed(2), Str],                            // message index
+        0x08 => &[Fixed(32), Str, Fixed(8), Str, Fixed(16)], // chunk index
+        0x09 => &[Fixed(16), Str, Str, Bytes64],             // attachment
+        0x0A => &[Fixed(40), Str, Str],                      // attachment index
+        0x0B => &[Fixed(42), Str],                           // statistics
+        0x0C => &[Str, StrMap],                              // metadata
+        0x0D => &[Fixed(16), Str],                           // metadata index
+        _ => return Ok(()), // fixed-size or opaque records (message, footer, ...)
+    };
+    let mut at = 0usize;
+    let left = |at: usize| body.len().saturating_sub(at);
+    let take = |at: &mut usize, n: usize| -> Result<usize, String> {
+        if n > left(*at) {
+            return Err(format!(
+                "record 0x{opcode:02X}: a field declares {n} bytes but only {} remain",
+                left(*at)
+            ));
+        }
+        let start = *at;
+        *at += n;
+        Ok(start)
+    };
+    let u32_at = |b: &[u8], at: usize| -> usize {
+        let mut x = [0u8; 4];
+        x.copy_from_slice(&b[at..at + 4]);
+        u32::from_le_bytes(x) as usize
+    };
+    for f in fields {
+        match *f {
+            Fixed(n) => {
+                take(&mut at, n)?;
+            }
+            Str => {
+                let p = take(&mut at, 4)?;
+                take(&mut at, u32_at(body, p))?;
+            }
+            Bytes64 => {
+                let p = take(&mut at, 8)?;
+                let mut x = [0u8; 8];
+                x.copy_from_slice(&body[p..p + 8]);
+                take(
+                    &mut at,
+                    usize::try_from(u64::from_le_bytes(x)).unwrap_or(usize::MAX),
+                )?;
+            }
+            StrMap => {
+                let p = take(&mut at, 4)?;
+                let start = take(&mut at, u32_at(body, p))?;
+                let map = &body[start..at];
+                let mut q = 0usize;
+                while q < map.len() {
+                    if map.len() - q < 4 {
+                        return Err(format!("record 0x{opcode:02X}: a map entry is cut short"));
+                    }
+                    let n = u32_at(map, q);
+                    if n > map.len() - q - 4 {
+                        return Err(format!(
+                            "record 0x{opcode:02X}: a map string declares {n} bytes but only {} remain",
+                            map.len() - q - 4
+                        ));
+                    }
+                    q += 4 + n;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `mcap::parse_record` after [`check_lengths`].
+pub fn parse_record_checked(opcode: u8, body: &[u8]) -> mcap::McapResult<McapRecord<'_>> {
+    check_lengths(opcode, body).map_err(|e| {
+        mcap::McapError::from(std::io::Error::new(std::io::ErrorKind::InvalidData, e))
+    })?;
+    mcap::parse_record(opcode, body)
+}
+
 /// Reads the MCAP file `path`.
 pub fn read_mcap(path: &Path) -> anyhow::Result<McapRun> {
     let bytes =
@@ -40,12 +187,9 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
     if bytes.len() < mcap::MAGIC.len() || &bytes[..mcap::MAGIC.len()] != mcap::MAGIC {
         bail!("{source}: not an MCAP file (bad magic bytes at the start)");
     }
-    let reader = ChunkFlattener::new_with_options(
-        bytes,
-        Options::IgnoreEndMagic | Options::ValidateChunkCrcs,
-    )
-    .map_err(|e| anyhow!("{source}: {e}"))?;
-    let mut topics: HashMap<u16, String> = HashMap::new();
+    let reader = BoundedRecords::new(bytes, true, bytes.len());
+    // Channel id -> (topic, message encoding).
+    let mut topics: HashMap<u16, (String, String)> = HashMap::new();
     let mut run = McapRun::default();
     let mut data_end = false;
     let mut other_topics: BTreeMap<String, u64> = BTreeMap::new();
@@ -54,14 +198,33 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
             Ok(r) => r,
             Err(e) => {
                 if !data_end {
-                    let upto = run
-                        .loop_msgs
-                        .last()
-                        .map(|m| format!("{} s", m.time_s))
+                    let last_s = run.loop_msgs.last().map(|m| m.time_s);
+                    let upto = last_s
+                        .map(|t| format!("{t} s"))
                         .unwrap_or_else(|| "the start".into());
+                    let start_ns = run
+                        .metadata
+                        .get(super::mcap_write::START_TIME_KEY)
+                        .and_then(|v| v.parse::<u64>().ok())
+                        .unwrap_or(0);
+                    // Measured, not assumed: the chunk headers left in the file say up to which
+                    // log time messages were written.
+                    let lost = match (last_chunk_end_ns(bytes), last_s) {
+                        (Some(end_ns), Some(t)) => {
+                            let end_s = end_ns.saturating_sub(start_ns) as f64 * 1e-9;
+                            if end_s > t {
+                                format!(
+                                    "the damaged part held samples up to {end_s} s: {:.3} s of the run are lost",
+                                    end_s - t
+                                )
+                            } else {
+                                "no whole chunk after it is lost".into()
+                            }
+                        }
+                        _ => "how much is lost cannot be told from the file".into(),
+                    };
                     run.notes.push(format!(
-                        "{source}: the log is truncated or damaged ({e}); read {} samples up to {upto}, \
-                         the rest (the unflushed chunk, at most 100 ms of a killed run) is lost",
+                        "{source}: the log is truncated or damaged ({e}); read {} samples up to {upto}; {lost}",
                         run.loop_msgs.len()
                     ));
                 }
@@ -70,17 +233,21 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
         };
         match rec {
             McapRecord::Channel(c) => {
-                topics.insert(c.id, c.topic);
+                topics.insert(c.id, (c.topic, c.message_encoding));
             }
             McapRecord::Message { header, data } if !data_end => {
-                let topic = topics
+                let (topic, encoding) = topics
                     .get(&header.channel_id)
-                    .map(String::as_str)
-                    .unwrap_or("");
+                    .map(|(t, e)| (t.as_str(), e.as_str()))
+                    .unwrap_or(("", ""));
                 if topic == LOOP_TOPIC {
-                    let m: LoopMsg = serde_json::from_slice(&data).map_err(|e| {
+                    let m: LoopMsg = match encoding {
+                        "protobuf" => LoopMsg::from_protobuf(&data).map_err(|e| e.to_string()),
+                        _ => serde_json::from_slice(&data).map_err(|e| e.to_string()),
+                    }
+                    .map_err(|e| {
                         anyhow!(
-                            "{source}: message {} on {LOOP_TOPIC} is not a servo loop message: {e}",
+                            "{source}: message {} on {LOOP_TOPIC} ({encoding}) is not a servo loop message: {e}",
                             header.sequence
                         )
                     })?;
@@ -97,10 +264,22 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
         }
     }
     if !run.finished && run.notes.is_empty() {
+        let t = run.loop_msgs.last().map(|m| m.time_s).unwrap_or(0.0);
+        let planned = run
+            .metadata
+            .get(super::meta_keys::DURATION_S)
+            .and_then(|v| v.parse::<f64>().ok())
+            .filter(|d| *d > t);
         run.notes.push(format!(
-            "{source}: the log was not finished (run killed?); read {} samples up to {} s",
+            "{source}: the log was not finished (run killed?); read {} samples up to {t} s{}",
             run.loop_msgs.len(),
-            run.loop_msgs.last().map(|m| m.time_s).unwrap_or(0.0)
+            match planned {
+                Some(d) => format!(
+                    "; the run was planned for {d} s: samples after the last flush were never written (up to {:.3} s if it ran on)",
+                    d - t
+                ),
+                None => String::new(),
+            }
         ));
     }
     if run.loop_msgs.is_empty() {
@@ -123,6 +302,32 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
     }
     run.record = record_of(&run.loop_msgs, source);
     Ok(run)
+}
+
+/// The latest `message_end_time` [ns] of the chunk headers found walking the top-level records
+/// of `bytes` (a chunk cut short counts when its header is whole); no allocation.
+pub fn last_chunk_end_ns(bytes: &[u8]) -> Option<u64> {
+    let mut pos = mcap::MAGIC.len();
+    let mut end: Option<u64> = None;
+    let u64_at = |at: usize| {
+        let mut x = [0u8; 8];
+        x.copy_from_slice(&bytes[at..at + 8]);
+        u64::from_le_bytes(x)
+    };
+    while bytes.len().saturating_sub(pos) >= 9 {
+        let op = bytes[pos];
+        let len = u64_at(pos + 1);
+        let body = pos + 9;
+        if op == 0x06 && bytes.len().saturating_sub(body) >= 16 {
+            let e = u64_at(body + 8);
+            end = Some(end.map_or(e, |x| x.max(e)));
+        }
+        match usize::try_from(len).ok().and_then(|l| body.checked_add(l)) {
+            Some(next) if next <= bytes.len() => pos = next,
+            _ => break,
+        }
+    }
+    end
 }
 
 /// The [`Record`] of a sequence of loop messages (a signal only when some sample has it).
@@ -194,7 +399,10 @@ mod tests {
 
     fn write(path: &Path, n: usize, finish: bool) {
         let mut meta = BTreeMap::new();
-        meta.insert("gains_toml".to_string(), "[pid]\nkp = 1.0\n".to_string());
+        meta.insert(
+            "gains_toml".to_string(),
+            "[pid]\nkp = 1.0\nki = 0.0\nkd = 0.0\n".to_string(),
+        );
         let mut log = McapLog::create(
             path,
             &meta,
@@ -242,7 +450,10 @@ mod tests {
         for (k, m) in run.loop_msgs.iter().enumerate() {
             assert!(same(m, &msg(k)), "message {k}: {m:?} != {:?}", msg(k));
         }
-        assert_eq!(run.metadata["gains_toml"], "[pid]\nkp = 1.0\n");
+        assert_eq!(
+            run.metadata["gains_toml"],
+            "[pid]\nkp = 1.0\nki = 0.0\nkd = 0.0\n"
+        );
         assert_eq!(run.record.len(), 1000);
         assert_eq!(run.record.u_v.as_ref().unwrap()[10], msg(10).u_v);
         assert!(run.record.ref_rad.as_ref().unwrap()[0].is_nan());
@@ -286,6 +497,67 @@ mod tests {
         assert!(!run.finished);
         assert_eq!(run.loop_msgs.len(), 1000);
         assert!(run.notes[0].contains("not finished"), "{:?}", run.notes);
+    }
+
+    #[test]
+    fn protobuf_log_round_trips() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("pb.mcap");
+        let mut log = McapLog::create(
+            &p,
+            &BTreeMap::new(),
+            McapLogOptions {
+                encoding: crate::io::LogEncoding::Protobuf,
+                fast_compression: true,
+                ..McapLogOptions::default()
+            },
+        )
+        .unwrap();
+        for k in 0..500 {
+            log.write_loop(&msg(k)).unwrap();
+        }
+        log.finish().unwrap();
+        let run = read_mcap(&p).unwrap();
+        assert_eq!(run.loop_msgs.len(), 500);
+        for (k, m) in run.loop_msgs.iter().enumerate() {
+            assert!(same(m, &msg(k)), "message {k}");
+        }
+        let bytes = std::fs::read(&p).unwrap();
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        let ch = summary.channels.values().next().unwrap();
+        assert_eq!(ch.message_encoding, "protobuf");
+        let schema = ch.schema.as_ref().unwrap();
+        assert_eq!(
+            (schema.name.as_str(), schema.encoding.as_str()),
+            ("servo.Loop", "protobuf")
+        );
+    }
+
+    #[test]
+    fn damaged_log_measures_the_lost_span() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("d.mcap");
+        write(&p, 1000, true);
+        let mut b = std::fs::read(&p).unwrap();
+        // Damage a byte inside a chunk about a third into the file: reading stops there, the
+        // chunks after it are intact but not trusted; the note measures what they held.
+        let mut at = b.len() / 3;
+        while b[at] == 0 {
+            at += 1;
+        }
+        b[at] ^= 0x55;
+        let run = parse_mcap(&b, "d.mcap").unwrap();
+        let t_last = run.loop_msgs.last().unwrap().time_s;
+        let note = &run.notes[0];
+        let lost: f64 = note
+            .split(": ")
+            .last()
+            .and_then(|x| x.split(' ').next())
+            .and_then(|x| x.parse().ok())
+            .unwrap_or_else(|| panic!("{note}"));
+        // Messages went up to 0.999 s.
+        assert!((lost - (0.999 - t_last)).abs() < 1e-6, "{note}");
+        assert!(lost > 0.3, "{note}");
     }
 
     #[test]

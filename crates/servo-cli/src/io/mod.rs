@@ -23,7 +23,7 @@ pub mod mcap_write;
 pub mod units;
 
 pub use loop_msg::LoopMsg;
-pub use mcap_write::{McapLog, McapLogOptions};
+pub use mcap_write::{LogEncoding, McapLog, McapLogOptions};
 
 pub use columns::ColumnMap;
 pub use csv_write::write_csv;

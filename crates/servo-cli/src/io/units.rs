@@ -139,6 +139,7 @@ pub enum Unit {
     Second,
     Millisecond,
     Microsecond,
+    Nanosecond,
     Rad,
     Deg,
     Rev,
@@ -184,6 +185,7 @@ impl Unit {
             "s" | "sec" => Unit::Second,
             "ms" => Unit::Millisecond,
             "us" | "µs" => Unit::Microsecond,
+            "ns" => Unit::Nanosecond,
             "rad" => Unit::Rad,
             "deg" => Unit::Deg,
             "rev" => Unit::Rev,
@@ -203,7 +205,9 @@ impl Unit {
     /// What the unit measures.
     pub fn dimension(self) -> Dimension {
         match self {
-            Unit::Second | Unit::Millisecond | Unit::Microsecond => Dimension::Time,
+            Unit::Second | Unit::Millisecond | Unit::Microsecond | Unit::Nanosecond => {
+                Dimension::Time
+            }
             Unit::Rad | Unit::Deg | Unit::Rev | Unit::Counts(_) => Dimension::Angle,
             Unit::RadPerS | Unit::DegPerS | Unit::Rpm | Unit::RevPerS => Dimension::AngularSpeed,
             Unit::Volt | Unit::Millivolt => Dimension::Voltage,
@@ -229,6 +233,7 @@ impl Unit {
             Unit::Second | Unit::Rad | Unit::RadPerS | Unit::Volt | Unit::Ampere => 1.0,
             Unit::Millisecond | Unit::Millivolt | Unit::Milliampere => 1e-3,
             Unit::Microsecond => 1e-6,
+            Unit::Nanosecond => 1e-9,
             Unit::Deg => PI / 180.0,
             Unit::Rev => 2.0 * PI,
             Unit::Counts(n) => 2.0 * PI / n,
@@ -254,6 +259,7 @@ impl fmt::Display for Unit {
             Unit::Second => f.write_str("s"),
             Unit::Millisecond => f.write_str("ms"),
             Unit::Microsecond => f.write_str("us"),
+            Unit::Nanosecond => f.write_str("ns"),
             Unit::Rad => f.write_str("rad"),
             Unit::Deg => f.write_str("deg"),
             Unit::Rev => f.write_str("rev"),

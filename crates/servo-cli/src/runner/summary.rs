@@ -44,36 +44,25 @@ pub struct RunSummary {
 impl RunSummary {
     /// Computes the summary of `rec` (needs `u_v`; tracking figures need `ref_rad` and
     /// `theta_l_rad`), with per-sample saturation flags `saturated` (empty: none known).
+    /// The same figures as [`SummaryAccumulator`] fed sample by sample.
     pub fn compute(rec: &Record, saturated: &[bool], band: f64) -> RunSummary {
         let n = rec.len();
         let ts = if n >= 2 { rec.sample_period_s() } else { 0.0 };
-        let mut s = RunSummary {
-            duration_s: n as f64 * ts,
-            samples: n,
-            band,
-            saturation_time_s: saturated.iter().filter(|&&b| b).count() as f64 * ts,
-            ..RunSummary::default()
-        };
-        if let Some(u) = &rec.u_v {
-            s.u_rms_v = rms(u.iter().copied());
+        let mut acc = SummaryAccumulator::new(ts, band);
+        let get = |v: &Option<Vec<f64>>, k: usize| v.as_ref().map_or(f64::NAN, |v| v[k]);
+        for k in 0..n {
+            acc.push(
+                rec.time_s[k],
+                get(&rec.ref_rad, k),
+                get(&rec.theta_l_rad, k),
+                get(&rec.u_v, k),
+                saturated.get(k).copied().unwrap_or(false),
+            );
         }
-        let (Some(r), Some(y)) = (&rec.ref_rad, &rec.theta_l_rad) else {
-            return s;
-        };
-        let valid: Vec<usize> = (0..n)
-            .filter(|&k| r[k].is_finite() && y[k].is_finite())
-            .collect();
-        if valid.is_empty() {
-            return s;
+        let mut s = acc.finish();
+        if rec.u_v.is_none() {
+            s.u_rms_v = 0.0;
         }
-        s.err_rms_rad = Some(rms(valid.iter().map(|&k| r[k] - y[k])));
-        s.err_max_rad = Some(
-            valid
-                .iter()
-                .map(|&k| (r[k] - y[k]).abs())
-                .fold(0.0, f64::max),
-        );
-        s.steps = steps(&rec.time_s, r, y, band);
         s
     }
 
@@ -124,73 +113,188 @@ impl RunSummary {
     }
 }
 
-fn rms(it: impl Iterator<Item = f64>) -> f64 {
-    let (mut s, mut n) = (0.0, 0usize);
-    for v in it.filter(|v| v.is_finite()) {
-        s += v * v;
-        n += 1;
-    }
-    if n == 0 {
-        0.0
-    } else {
-        (s / n as f64).sqrt()
+/// Samples per block of the step detector: the "ordinary per-sample change" of the reference is
+/// the median |r_k - r_(k-1)| over a block (bounded memory, whatever the run's length).
+const STEP_BLOCK: usize = 1024;
+
+/// The response to the step being measured.
+#[derive(Debug, Clone, Copy)]
+struct OpenStep {
+    k0: usize,
+    time_s: f64,
+    from_rad: f64,
+    to_rad: f64,
+    peak: f64,
+    last_out: Option<usize>,
+    /// Time of the sample after `last_out`.
+    t_after_out_s: Option<f64>,
+}
+
+impl OpenStep {
+    fn close(self, k1: usize) -> StepMetrics {
+        let size = self.to_rad - self.from_rad;
+        let settling_time_s = match self.last_out {
+            None => Some(0.0),
+            Some(k) if k + 1 < k1 => self.t_after_out_s.map(|t| t - self.time_s),
+            Some(_) => None,
+        };
+        StepMetrics {
+            time_s: self.time_s,
+            from_rad: self.from_rad,
+            to_rad: self.to_rad,
+            overshoot_pct: (100.0 * self.peak / size.abs()).max(0.0),
+            settling_time_s,
+        }
     }
 }
 
-/// Finds the reference's steps (jumps much larger than its ordinary per-sample change) and
-/// measures the response to each one until the next.
-fn steps(t: &[f64], r: &[f64], y: &[f64], band: f64) -> Vec<StepMetrics> {
-    let n = r.len();
-    let mut d: Vec<f64> = r
-        .windows(2)
-        .map(|w| (w[1] - w[0]).abs())
-        .filter(|v| v.is_finite())
-        .collect();
-    d.sort_by(f64::total_cmp);
-    let typical = d.get(d.len() / 2).copied().unwrap_or(0.0);
-    let thresh = (50.0 * typical).max(1e-6);
-    // (index of the step, value before).
-    let mut starts: Vec<(usize, f64)> = Vec::new();
-    if n > 0 && (r[0] - y[0]).abs() > thresh {
-        starts.push((0, y[0]));
-    }
-    for k in 1..n {
-        if (r[k] - r[k - 1]).abs() > thresh {
-            starts.push((k, r[k - 1]));
+/// The figures of a [`RunSummary`] computed while the run goes, in memory independent of its
+/// length: running sums for the RMS values, and the reference's steps found block by block
+/// (a jump larger than 50 times the block's median per-sample change, at least 1e-6 rad) and
+/// measured until the next step.
+#[derive(Debug, Clone)]
+pub struct SummaryAccumulator {
+    ts_s: f64,
+    band: f64,
+    n: usize,
+    saturated: usize,
+    u_sq: f64,
+    u_n: usize,
+    e_sq: f64,
+    e_n: usize,
+    e_max: f64,
+    /// The block being collected: (t, r, y).
+    block: Vec<(f64, f64, f64)>,
+    /// Reference of the sample before the block.
+    r_prev: Option<f64>,
+    open: Option<OpenStep>,
+    steps: Vec<StepMetrics>,
+}
+
+impl SummaryAccumulator {
+    /// For a run at sample period `ts_s` [s] with settling band `band` (0.05 = 5 %).
+    pub fn new(ts_s: f64, band: f64) -> SummaryAccumulator {
+        SummaryAccumulator {
+            ts_s,
+            band,
+            n: 0,
+            saturated: 0,
+            u_sq: 0.0,
+            u_n: 0,
+            e_sq: 0.0,
+            e_n: 0,
+            e_max: 0.0,
+            block: Vec::with_capacity(STEP_BLOCK),
+            r_prev: None,
+            open: None,
+            steps: Vec::new(),
         }
     }
-    let mut out = Vec::with_capacity(starts.len());
-    for (j, &(k0, from)) in starts.iter().enumerate() {
-        let k1 = starts.get(j + 1).map_or(n, |s| s.0);
-        let to = r[k0];
-        let size = to - from;
-        if size.abs() <= thresh {
-            continue;
+
+    /// One sample: time [s], reference [rad] (NaN in open loop), measured angle [rad], u [V],
+    /// output clipped.
+    pub fn push(&mut self, t_s: f64, r: f64, y: f64, u_v: f64, saturated: bool) {
+        self.n += 1;
+        self.saturated += saturated as usize;
+        if u_v.is_finite() {
+            self.u_sq += u_v * u_v;
+            self.u_n += 1;
         }
-        let dir = size.signum();
-        let mut peak = f64::NEG_INFINITY;
-        let mut last_out = None;
-        for k in k0..k1 {
-            let e = y[k] - r[k];
-            peak = peak.max(dir * e);
-            if e.abs() > band * size.abs() {
-                last_out = Some(k);
+        if r.is_finite() && y.is_finite() {
+            let e = r - y;
+            self.e_sq += e * e;
+            self.e_n += 1;
+            self.e_max = self.e_max.max(e.abs());
+        }
+        self.block.push((t_s, r, y));
+        if self.block.len() == STEP_BLOCK {
+            self.flush_block();
+        }
+    }
+
+    fn flush_block(&mut self) {
+        if self.block.is_empty() {
+            return;
+        }
+        let first = self.n - self.block.len();
+        let mut d: Vec<f64> = Vec::with_capacity(self.block.len());
+        let mut prev = self.r_prev;
+        for &(_, r, _) in &self.block {
+            if let Some(p) = prev {
+                let x = (r - p).abs();
+                if x.is_finite() {
+                    d.push(x);
+                }
             }
+            prev = Some(r);
         }
-        let settling_time_s = match last_out {
-            None => Some(0.0),
-            Some(k) if k + 1 < k1 => Some(t[k + 1] - t[k0]),
-            Some(_) => None,
-        };
-        out.push(StepMetrics {
-            time_s: t[k0],
-            from_rad: from,
-            to_rad: to,
-            overshoot_pct: (100.0 * peak / size.abs()).max(0.0),
-            settling_time_s,
-        });
+        d.sort_by(f64::total_cmp);
+        let typical = d.get(d.len() / 2).copied().unwrap_or(0.0);
+        let thresh = (50.0 * typical).max(1e-6);
+        let block = std::mem::take(&mut self.block);
+        for (j, &(t, r, y)) in block.iter().enumerate() {
+            let k = first + j;
+            let start = match self.r_prev {
+                None if (r - y).abs() > thresh => Some(y),
+                Some(p) if (r - p).abs() > thresh => Some(p),
+                _ => None,
+            };
+            if let Some(from) = start {
+                if let Some(o) = self.open.take() {
+                    self.steps.push(o.close(k));
+                }
+                if (r - from).abs() > thresh {
+                    self.open = Some(OpenStep {
+                        k0: k,
+                        time_s: t,
+                        from_rad: from,
+                        to_rad: r,
+                        peak: f64::NEG_INFINITY,
+                        last_out: None,
+                        t_after_out_s: None,
+                    });
+                }
+            }
+            if let Some(o) = self.open.as_mut() {
+                let size = o.to_rad - o.from_rad;
+                if o.last_out == Some(k.wrapping_sub(1)) && k > o.k0 {
+                    o.t_after_out_s = Some(t);
+                }
+                let e = y - r;
+                o.peak = o.peak.max(size.signum() * e);
+                if e.abs() > self.band * size.abs() {
+                    o.last_out = Some(k);
+                }
+            }
+            self.r_prev = Some(r);
+        }
+        self.block = block;
+        self.block.clear();
     }
-    out
+
+    /// Samples pushed so far.
+    pub fn samples(&self) -> usize {
+        self.n
+    }
+
+    /// The summary of everything pushed.
+    pub fn finish(mut self) -> RunSummary {
+        self.flush_block();
+        if let Some(o) = self.open.take() {
+            self.steps.push(o.close(self.n));
+        }
+        let rms = |sq: f64, n: usize| if n == 0 { 0.0 } else { (sq / n as f64).sqrt() };
+        RunSummary {
+            duration_s: self.n as f64 * self.ts_s,
+            samples: self.n,
+            err_rms_rad: (self.e_n > 0).then(|| rms(self.e_sq, self.e_n)),
+            err_max_rad: (self.e_n > 0).then_some(self.e_max),
+            band: self.band,
+            steps: if self.e_n > 0 { self.steps } else { Vec::new() },
+            saturation_time_s: self.saturated as f64 * self.ts_s,
+            u_rms_v: rms(self.u_sq, self.u_n),
+        }
+    }
 }
 
 impl fmt::Display for RunSummary {

@@ -92,7 +92,15 @@ pub fn check_controller(
         };
         let b =
             DVector::from_iterator(y.len(), (0..n).filter(|k| inside(*k)).map(|k| u[k] - ff(k)));
-        if let Ok(x) = a.clone().svd(true, true).solve(&b, 1e-12) {
+        // nalgebra's SVD panics on non-finite input ("singular value was NaN"): absurd or
+        // overflowing samples leave the LS gains unknown instead.
+        let finite = a.iter().chain(b.iter()).all(|v| v.is_finite());
+        let solved = if finite {
+            a.clone().svd(true, true).solve(&b, 1e-12).ok()
+        } else {
+            None
+        };
+        if let Some(x) = solved {
             let g = [x[0], x[1], x[2]];
             if g.iter().all(|v| v.is_finite()) {
                 let pred: Vec<f64> = (&a * &x)

@@ -96,6 +96,14 @@ pub enum SimError {
     },
     #[error("sample period {dt_s} s needs more than {max} internal sub-steps of {h_s} s")]
     TooManySubsteps { dt_s: f64, h_s: f64, max: usize },
+    /// The simulated state left any physical range (non-finite, or absurd angle or speed): the
+    /// model or an effect makes it diverge.
+    #[error("the simulation diverged at t = {time_s} s (theta_l = {theta_l_rad:e} rad, omega_m = {omega_m_rad_s:e} rad/s): check the plant's parameters and effects")]
+    Diverged {
+        time_s: f64,
+        theta_l_rad: f64,
+        omega_m_rad_s: f64,
+    },
 }
 
 /// The physical state of the simulated gearmotor (true values, before the sensors).

@@ -1,0 +1,277 @@
+//! Hostile inputs: every reader of untrusted bytes over a deterministic mutation corpus (seeded,
+//! thousands of cases, about half a minute in release), plus the specific inputs of issue #14.
+//!
+//! Each reader must refuse bad input with an error: 0 panics, 0 aborts, 0 hangs, and no single
+//! allocation beyond `64 x input + 64 MiB` (tracked by the global allocator below). To add a
+//! reader, add one `#[test]` calling `fuzz(name, seeds, cases, |bytes| reader(bytes))`. For
+//! longer runs use the `cargo fuzz` targets in `fuzz/` (see fuzz/README.md).
+
+use servo_cli::fuzz::{check_reader, FuzzConfig, TrackingAlloc};
+use servo_cli::gains_file::GainsFile;
+use servo_cli::io::mcap_read::parse_mcap;
+use servo_cli::io::{csv_read::parse_csv, LoopMsg, McapLog, McapLogOptions};
+use servo_cli::model_file::ModelFile;
+use servo_cli::reference_file::Experiment;
+use std::collections::BTreeMap;
+use std::fmt::Display;
+
+#[global_allocator]
+static ALLOC: TrackingAlloc = TrackingAlloc;
+
+const SEED: u64 = 0x5e4f_0014;
+
+fn fuzz<T, E: Display>(
+    name: &str,
+    seeds: &[Vec<u8>],
+    cases: usize,
+    reader: impl Fn(&[u8]) -> Result<T, E>,
+) {
+    let rep = check_reader(name, seeds, FuzzConfig::new(cases, SEED), reader);
+    eprintln!("{rep}");
+    for e in &rep.sample_errors {
+        eprintln!("  e.g. {e}");
+    }
+    assert!(rep.failures.is_empty(), "{rep}");
+    assert!(
+        rep.refused > 0,
+        "{rep}: the mutations never reached an error"
+    );
+}
+
+fn text(b: &[u8]) -> anyhow::Result<&str> {
+    std::str::from_utf8(b).map_err(|e| anyhow::anyhow!("not UTF-8 text: {e}"))
+}
+
+fn msg(k: usize) -> LoopMsg {
+    let t = k as f64 * 1e-3;
+    LoopMsg {
+        time_s: t,
+        ref_rad: 1.5,
+        theta_l_rad: (t * 7.0).sin(),
+        omega_l_rad_s: (t * 7.0).cos() * 7.0,
+        err_rad: 1.5 - (t * 7.0).sin(),
+        u_v: (k as f64 * 0.37).sin() * 10.0,
+        ff_v: f64::NAN,
+        p_v: 1.0,
+        i_v: -0.25,
+        d_v: 0.0,
+        i_a_a: 0.01 * k as f64,
+        saturated: k.is_multiple_of(7),
+    }
+}
+
+/// Small servo MCAP logs: zstd and uncompressed chunks of 20 samples, finished and cut.
+fn mcap_seeds() -> Vec<Vec<u8>> {
+    let dir = tempfile::tempdir().unwrap();
+    let mut out = Vec::new();
+    use servo_cli::io::LogEncoding;
+    for (i, (compress, encoding)) in [
+        (true, LogEncoding::Json),
+        (false, LogEncoding::Json),
+        (true, LogEncoding::Protobuf),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let p = dir.path().join(format!("s{i}.mcap"));
+        let mut meta = BTreeMap::new();
+        meta.insert("gains_toml".into(), GAINS.to_string());
+        meta.insert("duration_s".into(), "0.1".to_string());
+        let mut log = McapLog::create(
+            &p,
+            &meta,
+            McapLogOptions {
+                flush_period_s: 0.02,
+                compress,
+                start_unix_ns: 1_000,
+                encoding,
+                fast_compression: encoding == LogEncoding::Protobuf,
+                ..McapLogOptions::default()
+            },
+        )
+        .unwrap();
+        for k in 0..100 {
+            log.write_loop(&msg(k)).unwrap();
+        }
+        log.finish().unwrap();
+        let b = std::fs::read(&p).unwrap();
+        out.push(b[..b.len() * 2 / 3].to_vec());
+        out.push(b);
+    }
+    out
+}
+
+const GAINS: &str = "[pid]\nkp = 7.0476\nki = 86.121\nkd = 0.14418\ntl_s = 6.67e-3\nts_s = 1e-3\nkw = 30.0\nu_limit_v = 10\n[design]\nwc_rad_s = 30.0\n";
+
+#[test]
+fn fuzz_csv_reader() {
+    let own = "time_s,u_V,theta_l_rad,i_a_A,ref_rad\n0,1,0,0.1,1\n0.001,2,0.01,0.2,1\n0.002,2.5,0.02,0.25,1\n0.003,2,0.03,0.2,1\n";
+    let foreign =
+        "# lab export\nt_ms;pos_deg;I_mA;u_V\n0;180;100;1\n1;90;-50;2\n2;91;-40;2\n3;92;-30;2\n";
+    let seeds = vec![own.as_bytes().to_vec(), foreign.as_bytes().to_vec()];
+    fuzz("csv", &seeds, 6000, |b| {
+        parse_csv(text(b)?, "fuzz.csv", None)
+    });
+    fuzz("csv --columns", &seeds, 5000, |b| {
+        parse_csv(
+            text(b)?,
+            "fuzz.csv",
+            Some("time=t_ms:ms,theta_l=pos_deg:deg,i_a=I_mA:mA,u=u_V"),
+        )
+    });
+}
+
+#[test]
+fn fuzz_toml_files() {
+    let model = ModelFile::from_plant(&servo_core::Plant::nominal()).to_toml_commented();
+    let mut with_effects = model.clone();
+    with_effects.push_str("\n[effects.backlash]\ngap = 0.04\nstiffness = 5.0\ndamping = 0.01\nload_inertia_fraction = 0.5\n[effects.cogging]\namplitude = 0.002\nharmonic = 12\nphase = 0.3\n");
+    fuzz(
+        "model file",
+        &[model.into_bytes(), with_effects.into_bytes()],
+        3000,
+        |b| ModelFile::parse(text(b)?).and_then(|m| m.plant()),
+    );
+    fuzz("gains file", &[GAINS.as_bytes().to_vec()], 5000, |b| {
+        GainsFile::parse(text(b)?)
+    });
+    let mut exps = Vec::new();
+    for f in ["steps.toml", "chirp.toml", "identify_friction.toml"] {
+        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("experiments")
+            .join(f);
+        exps.push(std::fs::read(p).unwrap());
+    }
+    fuzz("experiment file", &exps, 5000, |b| {
+        Experiment::parse(text(b)?, "fuzz.toml")
+    });
+    let refs: Vec<Vec<u8>> = [
+        "step:1.5",
+        "sine:amp=90deg,freq=0.5",
+        "square:1,0.2",
+        "ramp:2",
+    ]
+    .iter()
+    .map(|s| s.as_bytes().to_vec())
+    .collect();
+    fuzz("--ref", &refs, 5000, |b| {
+        servo_core::control::Reference::parse(text(b)?).map_err(|e| anyhow::anyhow!("{e}"))
+    });
+}
+
+#[test]
+fn fuzz_mcap_reader() {
+    fuzz("mcap read", &mcap_seeds(), 10000, |b| {
+        parse_mcap(b, "fuzz.mcap")
+    });
+}
+
+#[test]
+fn fuzz_mcap_recover() {
+    fuzz("log recover", &mcap_seeds(), 10000, |b| {
+        servo_cli::cmd::log::recover_bytes(b, std::io::Cursor::new(Vec::new()))
+    });
+}
+
+#[test]
+fn fuzz_wire_decoder() {
+    use servo_core::protocol::{Decoder, Frame, Message};
+    let msgs = [
+        Message::Hello {
+            protocol_version: 1,
+        },
+        Message::Start,
+        Message::SetVoltage { seq: 7, u_v: 2.5 },
+        Message::LoopReference {
+            seq: 9,
+            ref_rad: -1.0,
+        },
+        Message::Stop,
+        Message::Stopped,
+        Message::GainsAck,
+    ];
+    let mut stream = Vec::new();
+    for m in &msgs {
+        stream.extend_from_slice(Frame::new(m).as_bytes());
+    }
+    let singles: Vec<Vec<u8>> = msgs
+        .iter()
+        .map(|m| Frame::new(m).as_bytes().to_vec())
+        .collect();
+    let mut seeds = vec![stream];
+    seeds.extend(singles);
+    fuzz("wire decoder", &seeds, 20000, |b| {
+        let mut d = Decoder::default();
+        let (mut ok, mut bad) = (0usize, 0usize);
+        d.feed(b, |r| match r {
+            Ok(_) => ok += 1,
+            Err(_) => bad += 1,
+        });
+        // A stream is "refused" when some frame in it was rejected.
+        if bad > 0 {
+            Err(format!("{bad} bad frames, {ok} good"))
+        } else {
+            Ok(ok)
+        }
+    });
+}
+
+/// The hostile inputs listed in issue #14, one by one: each gets a clear error.
+#[test]
+fn mcap_with_corrupted_lengths_is_refused_cleanly() {
+    let seeds = mcap_seeds();
+    let good = &seeds[1];
+    // A record length of u64::MAX right after the magic and at the first chunk.
+    let chunk_at = good
+        .windows(1)
+        .enumerate()
+        .skip(8)
+        .find(|(_, w)| w[0] == 0x06)
+        .map(|(i, _)| i)
+        .unwrap();
+    for at in [8usize, chunk_at] {
+        let mut b = good.clone();
+        b[at + 1..at + 9].copy_from_slice(&u64::MAX.to_le_bytes());
+        let e = format!("{:#}", parse_mcap(&b, "bad.mcap").unwrap_err());
+        assert!(e.contains("bad.mcap"), "{e}");
+        let r = servo_cli::cmd::log::recover_bytes(&b, std::io::Cursor::new(Vec::new())).unwrap();
+        assert!(
+            r.stopped_because
+                .as_deref()
+                .unwrap_or("")
+                .contains("cut short"),
+            "{r:?}"
+        );
+    }
+    // The chunk's uncompressed_size (after two u64 times) set to 2^62.
+    let mut b = good.clone();
+    let us = chunk_at + 9 + 16;
+    b[us..us + 8].copy_from_slice(&(1u64 << 62).to_le_bytes());
+    let r = servo_cli::cmd::log::recover_bytes(&b, std::io::Cursor::new(Vec::new())).unwrap();
+    assert!(r.stopped_because.is_some(), "{r:?}");
+    assert!(
+        parse_mcap(&b, "bad.mcap").is_err()
+            || !parse_mcap(&b, "bad.mcap").unwrap().notes.is_empty()
+    );
+}
+
+#[test]
+fn absurd_plant_constants_are_refused_not_hung_on() {
+    let model = ModelFile::from_plant(&servo_core::Plant::nominal()).to_toml_commented();
+    for key in ["k_t", "k_e", "f_c_drv"] {
+        let bad: String = model
+            .lines()
+            .map(|l| {
+                if l.trim_start().starts_with(&format!("{key} ")) {
+                    format!("{key} = 1e308")
+                } else {
+                    l.to_string()
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n");
+        assert_ne!(bad, model, "{key} not in the model file");
+        let e = format!("{:#}", ModelFile::parse(&bad).unwrap_err());
+        assert!(e.contains(key) && e.contains("physically sensible"), "{e}");
+    }
+}
