@@ -205,16 +205,23 @@ pub fn against_model(measured: &Frf, model: impl Fn(f64) -> Complex<f64>) -> Com
                 })
                 .collect();
             for (a, b) in runs(&flag) {
-                let worst = pts[a..=b]
-                    .iter()
-                    .map(|p| pick(p).0)
-                    .fold(0.0, |m: f64, e| if sign * e > sign * m { e } else { m });
+                let worst = pts[a..=b].iter().map(|p| pick(p).0).fold(0.0, |m: f64, e| {
+                    if sign * e > sign * m {
+                        e
+                    } else {
+                        m
+                    }
+                });
                 let (lo, hi) = (pts[a].omega_rad_s, pts[b].omega_rad_s);
                 let to_end = b + 3 >= n;
                 let from_start = a <= 2;
                 let words = match (q, sign > 0.0) {
-                    ("magnitude", true) => format!("gain is above the model by up to {:.1} dB", worst.abs()),
-                    ("magnitude", false) => format!("gain is below the model by up to {:.1} dB", worst.abs()),
+                    ("magnitude", true) => {
+                        format!("gain is above the model by up to {:.1} dB", worst.abs())
+                    }
+                    ("magnitude", false) => {
+                        format!("gain is below the model by up to {:.1} dB", worst.abs())
+                    }
                     (_, true) => format!("phase leads the model by up to {:.1} deg", worst.abs()),
                     (_, false) => {
                         let mut s = format!("phase lags the model by up to {:.1} deg", worst.abs());
@@ -262,7 +269,8 @@ pub fn against_model(measured: &Frf, model: impl Fn(f64) -> Complex<f64>) -> Com
         math::sqrt(s / sw)
     };
     let delay_rms = rms(&|w| -tau * w);
-    let tau_ci = 1.96 * (delay_rms.to_radians() / math::sqrt(sww / wts.iter().sum::<f64>())) / math::sqrt(n as f64);
+    let tau_ci = 1.96 * (delay_rms.to_radians() / math::sqrt(sww / wts.iter().sum::<f64>()))
+        / math::sqrt(n as f64);
     // pole: golden-section on log p over [w_lo / 10, 1000 w_hi]
     let cost = |lp: f64| rms(&|w| -math::atan(w / math::exp(lp)));
     let (mut a, mut b) = (math::ln(w_lo / 10.0), math::ln(1000.0 * w_hi));
@@ -378,7 +386,13 @@ pub fn amplitude_dependence(ests: &[AtAmplitude]) -> Option<AmplitudeDependence>
         return None;
     }
     let by = |f: fn(f64, f64) -> bool| {
-        (0..ests.len()).fold(0, |b, i| if f(ests[i].u_rms_v, ests[b].u_rms_v) { i } else { b })
+        (0..ests.len()).fold(0, |b, i| {
+            if f(ests[i].u_rms_v, ests[b].u_rms_v) {
+                i
+            } else {
+                b
+            }
+        })
     };
     let (small, large) = (by(|a, b| a < b), by(|a, b| a > b));
     let (s, l) = (ests[small].estimate, ests[large].estimate);
@@ -464,7 +478,10 @@ mod tests {
         assert!((d.delay_s - 0.006).abs() < 2e-4, "{d:?}");
         assert!(d.delay_rms_deg < d.pole_rms_deg);
         assert!(c.sentences[0].contains("delay"), "{:?}", c.sentences);
-        assert!(c.bands.iter().any(|b| b.quantity == "phase" && b.worst < -20.0));
+        assert!(c
+            .bands
+            .iter()
+            .any(|b| b.quantity == "phase" && b.worst < -20.0));
     }
 
     #[test]
@@ -480,7 +497,8 @@ mod tests {
         let meas = frf_of(|w| {
             let s = Complex::new(0.0, w);
             let z = 0.05;
-            let res = (s * s + s * (2.0 * 0.5 * wr) + wr * wr) / (s * s + s * (2.0 * z * wr) + wr * wr);
+            let res =
+                (s * s + s * (2.0 * 0.5 * wr) + wr * wr) / (s * s + s * (2.0 * z * wr) + wr * wr);
             model(w) * res
         });
         let c = against_model(&meas, model);

@@ -60,27 +60,43 @@ fn lerp(a: f64, b: f64, t: f64) -> f64 {
     a + (b - a) * t
 }
 
-/// Where `f(pt) - level` changes sign between consecutive points, nearest to index `near`
-/// looking in direction `dir` (-1 left, +1 right); returns log w of the crossing.
-fn crossing(pts: &[Pt], f: &dyn Fn(&Pt) -> f64, level: f64, near: usize, dir: i32) -> Option<f64> {
-    let n = pts.len();
-    let mut i = near as i64;
-    loop {
-        let j = i + dir as i64;
-        if i < 0 || j < 0 || i as usize >= n || j as usize >= n {
-            return None;
+/// The edge of the interval around a crossing at log w `lw_c` (where the band [lo, hi] of
+/// `band(point)` holds `level`, with `at_c` the band there): walks from point `from` in direction
+/// `dir` while the bands hold `level`, and interpolates where the violated bound reaches it.
+/// Returns the first/last point's log w when the band holds `level` up to the data's end.
+fn edge(
+    pts: &[Pt],
+    band: &dyn Fn(&Pt) -> (f64, f64),
+    level: f64,
+    lw_c: f64,
+    at_c: (f64, f64),
+    from: usize,
+    dir: i64,
+) -> f64 {
+    let (mut plw, mut pb) = (lw_c, at_c);
+    let mut i = from as i64;
+    while i >= 0 && (i as usize) < pts.len() {
+        let p = &pts[i as usize];
+        let b = band(p);
+        if b.0 <= level && level <= b.1 {
+            plw = p.lw;
+            pb = b;
+            i += dir;
+            continue;
         }
-        let (a, b) = (&pts[i as usize], &pts[j as usize]);
-        let (fa, fb) = (f(a) - level, f(b) - level);
-        if fa == 0.0 {
-            return Some(a.lw);
-        }
-        if (fa > 0.0) != (fb > 0.0) {
-            let t = fa / (fa - fb);
-            return Some(lerp(a.lw, b.lw, t));
-        }
-        i = j;
+        let (v0, v1) = if b.0 > level {
+            (pb.0, b.0)
+        } else {
+            (pb.1, b.1)
+        };
+        let t = if v1 != v0 {
+            ((level - v0) / (v1 - v0)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        return lerp(plw, p.lw, t);
     }
+    plw
 }
 
 /// The range of `g` over the points with log w in [lw_lo, lw_hi], together with the points'
@@ -139,14 +155,8 @@ pub fn achieved_margins(l: &Frf, min_coherence: f64, start_deg: f64) -> Achieved
         ));
         return out;
     }
-    out.band_rad_s = (
-        math::exp(pts[0].lw),
-        math::exp(pts[pts.len() - 1].lw),
-    );
-    let band = alloc::format!(
-        "{:.3}..{:.1} rad/s",
-        out.band_rad_s.0, out.band_rad_s.1
-    );
+    out.band_rad_s = (math::exp(pts[0].lw), math::exp(pts[pts.len() - 1].lw));
+    let band = alloc::format!("{:.3}..{:.1} rad/s", out.band_rad_s.0, out.band_rad_s.1);
     let upper = |p: &Pt| p.lm + math::ln(1.0 + p.rel);
     let lower = |p: &Pt| p.lm + math::ln((1.0 - p.rel).max(1e-300));
     // Gain crossovers.
@@ -159,35 +169,11 @@ pub fn achieved_margins(l: &Frf, min_coherence: f64, start_deg: f64) -> Achieved
         let t = a.lm / (a.lm - b.lm);
         let lw = lerp(a.lw, b.lw, t);
         let pm = 180.0 + lerp(a.ph, b.ph, t);
-        // Crossover interval: where the bounds reach 1 on either side.
-        let cands = [
-            crossing(&pts, &upper, 0.0, k, -1),
-            crossing(&pts, &upper, 0.0, k + 1, 1),
-            crossing(&pts, &lower, 0.0, k, -1),
-            crossing(&pts, &lower, 0.0, k + 1, 1),
-        ];
-        // On each side, the bound that crosses farther from the crossover (the band holds 1
-        // up to there); a side without any crossing is open to the band's edge.
-        let left = cands[0]
-            .into_iter()
-            .chain(cands[2])
-            .fold(f64::INFINITY, f64::min)
-            .min(lw);
-        let right = cands[1]
-            .into_iter()
-            .chain(cands[3])
-            .fold(f64::NEG_INFINITY, f64::max)
-            .max(lw);
-        let left = if cands[0].is_none() && cands[2].is_none() {
-            pts[0].lw
-        } else {
-            left
-        };
-        let right = if cands[1].is_none() && cands[3].is_none() {
-            pts[pts.len() - 1].lw
-        } else {
-            right
-        };
+        // Crossover interval: where 1 lies inside the magnitude bounds around the crossover.
+        let band = |p: &Pt| (lower(p), upper(p));
+        let at_c = (lerp(lower(a), lower(b), t), lerp(upper(a), upper(b), t));
+        let left = edge(&pts, &band, 0.0, lw, at_c, k, -1);
+        let right = edge(&pts, &band, 0.0, lw, at_c, k + 1, 1);
         let (lo, hi) = range_over(&pts, left, right, &|p, s| 180.0 + p.ph + s * p.dph);
         let wc = Interval {
             value: math::exp(lw),
@@ -229,32 +215,13 @@ pub fn achieved_margins(l: &Frf, min_coherence: f64, start_deg: f64) -> Achieved
             let t = (target - a.ph) / (b.ph - a.ph);
             let lw = lerp(a.lw, b.lw, t);
             let gm = -20.0 * lerp(a.lm, b.lm, t) / math::ln(10.0);
-            let up = |p: &Pt| p.ph + p.dph;
-            let dn = |p: &Pt| p.ph - p.dph;
-            let ends = [
-                crossing(&pts, &up, target, k, -1),
-                crossing(&pts, &up, target, k + 1, 1),
-                crossing(&pts, &dn, target, k, -1),
-                crossing(&pts, &dn, target, k + 1, 1),
-            ];
-            let left = ends[0]
-                .into_iter()
-                .chain(ends[2])
-                .fold(lw, f64::min);
-            let right = ends[1]
-                .into_iter()
-                .chain(ends[3])
-                .fold(lw, f64::max);
-            let left = if ends[0].is_none() && ends[2].is_none() {
-                pts[0].lw
-            } else {
-                left
-            };
-            let right = if ends[1].is_none() && ends[3].is_none() {
-                pts[pts.len() - 1].lw
-            } else {
-                right
-            };
+            let band = |p: &Pt| (p.ph - p.dph, p.ph + p.dph);
+            let at_c = (
+                lerp(a.ph - a.dph, b.ph - b.dph, t),
+                lerp(a.ph + a.dph, b.ph + b.dph, t),
+            );
+            let left = edge(&pts, &band, target, lw, at_c, k, -1);
+            let right = edge(&pts, &band, target, lw, at_c, k + 1, 1);
             let db = 20.0 / math::ln(10.0);
             let (glo, ghi) = range_over(&pts, left, right, &|p, s| {
                 -db * if s < 0.0 { upper(p) } else { lower(p) }

@@ -39,7 +39,9 @@ pub enum FrfError {
     #[error("{0}")]
     Invalid(&'static str),
     /// The records are shorter than one averaging segment.
-    #[error("the longest record has {samples} samples, fewer than one averaging segment of {needed}")]
+    #[error(
+        "the longest record has {samples} samples, fewer than one averaging segment of {needed}"
+    )]
     TooShort { samples: usize, needed: usize },
 }
 

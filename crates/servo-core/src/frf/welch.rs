@@ -116,7 +116,9 @@ pub fn cross_spectra(
     opts: &WelchOptions,
 ) -> Result<CrossSpectra, FrfError> {
     if !(dt_s.is_finite() && dt_s > 0.0) {
-        return Err(FrfError::Invalid("the sample period must be finite and > 0"));
+        return Err(FrfError::Invalid(
+            "the sample period must be finite and > 0",
+        ));
     }
     if !(0.0..=0.9).contains(&opts.overlap) {
         return Err(FrfError::Invalid("the overlap must be between 0 and 0.9"));
@@ -136,7 +138,11 @@ pub fn cross_spectra(
                 "input and outputs of a record must have equal lengths",
             ));
         }
-        if r.input.iter().chain(r.outputs.iter().flat_map(|o| o.iter())).any(|v| !v.is_finite()) {
+        if r.input
+            .iter()
+            .chain(r.outputs.iter().flat_map(|o| o.iter()))
+            .any(|v| !v.is_finite())
+        {
             return Err(FrfError::Invalid(
                 "a signal has a non-finite sample (NaN or infinity)",
             ));
@@ -227,11 +233,7 @@ fn equivalent_averages(w: &[f64], hop: usize, count: usize) -> f64 {
     let mut denom = 1.0;
     let mut k = 1;
     while k < count && k * hop < w.len() {
-        let s: f64 = w[k * hop..]
-            .iter()
-            .zip(w)
-            .map(|(a, b)| a * b)
-            .sum::<f64>();
+        let s: f64 = w[k * hop..].iter().zip(w).map(|(a, b)| a * b).sum::<f64>();
         let rho = (s / e) * (s / e);
         denom += 2.0 * (1.0 - k as f64 / count as f64) * rho;
         k += 1;
@@ -299,7 +301,9 @@ mod tests {
         let mut s = 12345u64;
         let x: Vec<f64> = (0..20000)
             .map(|_| {
-                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
                 (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
             })
             .collect();
@@ -319,7 +323,11 @@ mod tests {
         for (i, f) in est.freq_hz.iter().enumerate().step_by(37) {
             let wt = math::TAU * f * 1e-3;
             let truth = Complex::new(0.5 + 0.25 * math::cos(wt), -0.25 * math::sin(wt));
-            assert!((est.h[i] - truth).norm() < 2e-3, "{f}: {} vs {truth}", est.h[i]);
+            assert!(
+                (est.h[i] - truth).norm() < 2e-3,
+                "{f}: {} vs {truth}",
+                est.h[i]
+            );
             assert!(est.coherence[i] > 0.999);
         }
     }
