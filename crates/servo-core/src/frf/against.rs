@@ -217,14 +217,14 @@ pub fn against_model(measured: &Frf, model: impl Fn(f64) -> Complex<f64>) -> Com
                 let from_start = a <= 2;
                 let words = match (q, sign > 0.0) {
                     ("magnitude", true) => {
-                        format!("gain is above the model by up to {:.1} dB", worst.abs())
+                        format!("is above the model by up to {:.1} dB", worst.abs())
                     }
                     ("magnitude", false) => {
-                        format!("gain is below the model by up to {:.1} dB", worst.abs())
+                        format!("is below the model by up to {:.1} dB", worst.abs())
                     }
-                    (_, true) => format!("phase leads the model by up to {:.1} deg", worst.abs()),
+                    (_, true) => format!("leads the model by up to {:.1} deg", worst.abs()),
                     (_, false) => {
-                        let mut s = format!("phase lags the model by up to {:.1} deg", worst.abs());
+                        let mut s = format!("lags the model by up to {:.1} deg", worst.abs());
                         // the lag at the top of the run as a delay
                         let tau = worst.abs().to_radians() / hi;
                         s.push_str(&format!(
