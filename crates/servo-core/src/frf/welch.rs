@@ -264,6 +264,15 @@ impl CrossSpectra {
             coherence.push(g2);
             rel.push(relative_radius(g2, self.averages, confidence));
         }
+        // Resolution bias: the window smooths H over about one bin each side; allow for the
+        // local curvature |H[k-1] - 2 H[k] + H[k+1]| / 2 on top of the random error.
+        for k in 1..h.len().saturating_sub(1) {
+            let curv = (h[k - 1] - h[k] * 2.0 + h[k + 1]).norm() / 2.0;
+            let m = h[k].norm();
+            if m > 0.0 && curv.is_finite() {
+                rel[k] += curv / m;
+            }
+        }
         Frf {
             freq_hz: self.freq_hz.clone(),
             h,
