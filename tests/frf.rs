@@ -96,6 +96,9 @@ fn coverage(v: &Value, truth: &dyn Fn(f64) -> Complex<f64>) -> (f64, usize, f64)
         let err = (est - t).norm();
         n += 1;
         inside += usize::from(err <= radius);
+        if err > radius {
+            println!("  outside at {:.3} Hz: error {:.4} > radius {:.4} (relative {:.4} > {:.4}), coherence {:.4}", f(&p["freq_hz"]), err, radius, err / t.norm(), radius / f(&p["mag"]), f(&p["coherence"]));
+        }
         worst = worst.max(err / t.norm());
     }
     (inside as f64 / n.max(1) as f64, n, worst)

@@ -62,6 +62,9 @@ pub struct Frf {
     pub json: bool,
 }
 
+/// One log's signals: the varying reference (closed loop), u [V] and theta_l [rad].
+type Signals<'a> = (Option<&'a [f64]>, &'a [f64], &'a [f64]);
+
 struct Log {
     name: String,
     rec: Record,
@@ -153,7 +156,7 @@ impl Frf {
         let total: usize = recs.iter().map(|r| r.1.len()).sum();
         let longest = recs.iter().map(|r| r.1.len()).max().unwrap_or(0);
         opts.segment_len = Some(opts.segment_for(total, longest));
-        let estimate = |rs: &[(Option<&[f64]>, &[f64], &[f64])]| -> anyhow::Result<(
+        let estimate = |rs: &[Signals]| -> anyhow::Result<(
             Estimate,
             Option<Estimate>,
             servo_core::frf::CrossSpectra,

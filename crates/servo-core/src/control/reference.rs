@@ -227,7 +227,7 @@ impl Shape {
         };
         let k_lo = math::round(f0_hz * period_s + 0.5 - 1e-9).max(1.0);
         let k_hi = math::floor(f1_hz * period_s + 1e-9);
-        if !(k_hi >= k_lo) || k_hi > 1e9 {
+        if k_hi.is_nan() || k_hi < k_lo || k_hi > 1e9 {
             return 0;
         }
         let (k_lo, k_hi) = (k_lo as u32, k_hi as u32);
@@ -242,7 +242,7 @@ impl Shape {
         // log-spaced, strictly increasing, leaving room for the lines still to place
         let ratio = k_hi as f64 / k_lo as f64;
         let mut prev = 0u32;
-        for i in 0..n {
+        for (i, slot) in out.iter_mut().take(n).enumerate() {
             let x = if n > 1 {
                 k_lo as f64 * math::pow(ratio, i as f64 / (n - 1) as f64)
             } else {
@@ -252,7 +252,7 @@ impl Shape {
             let k = (math::round(x) as u32)
                 .max(if i == 0 { k_lo } else { prev + 1 })
                 .min(room);
-            out[i] = k;
+            *slot = k;
             prev = k;
         }
         n

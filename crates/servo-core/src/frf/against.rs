@@ -325,7 +325,7 @@ pub fn against_model(measured: &Frf, model: impl Fn(f64) -> Complex<f64>) -> Com
             && rise > 3.0 + p.mag_bound_db
             && i > lo
             && i < hi
-            && best.map_or(true, |r| r.peak_db < rise)
+            && !matches!(best, Some(r) if r.peak_db >= rise)
         {
             best = Some(Resonance {
                 omega_rad_s: p.omega_rad_s,

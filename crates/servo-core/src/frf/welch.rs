@@ -102,7 +102,7 @@ pub fn f_2_m(m: f64, alpha: f64) -> f64 {
 /// `averages` independent averages at `confidence` (B&P eq. 9.90); infinite when undetermined.
 pub fn relative_radius(gamma2: f64, averages: f64, confidence: f64) -> f64 {
     let n = 2.0 * averages;
-    if !(n > 2.0) || !(gamma2 > 0.0) {
+    if n.is_nan() || n <= 2.0 || gamma2.is_nan() || gamma2 <= 0.0 {
         return f64::INFINITY;
     }
     let g = gamma2.min(1.0);
