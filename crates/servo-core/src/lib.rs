@@ -7,6 +7,8 @@
 //! * [`plant`]: a parameter set together with its active effects: the model of one gearmotor.
 //! * [`control`]: discrete PID, feedforward compensation, reference generators and sequences.
 //! * [`board`]: the servo board firmware core (protocol state machine over a small HAL trait).
+//! * `frf` (std): frequency-response estimates from logs (Welch/H1, coherence, bounds), the
+//!   margins a measured loop achieved and the model's errors by frequency.
 //! * [`sim`]: integration of the plant with its effects (truth for the simulator, model for
 //!   `compare`).
 //!
@@ -28,6 +30,8 @@ pub mod diagnose;
 pub mod effects;
 #[cfg(feature = "alloc")]
 pub mod fit;
+#[cfg(feature = "std")]
+pub mod frf;
 #[cfg(feature = "alloc")]
 pub mod ident;
 pub mod linalg;

@@ -6,6 +6,7 @@ pub mod demo;
 pub mod design;
 pub mod diagnose;
 pub mod export;
+pub mod frf;
 pub mod identify;
 pub mod identify_ramp;
 pub mod inspect;
@@ -35,6 +36,8 @@ pub enum Command {
     Compare(compare::Compare),
     /// Find which physical effect the model is missing.
     Diagnose(diagnose::Diagnose),
+    /// Measured frequency response, achieved margins and where the model fails in frequency.
+    Frf(frf::Frf),
     /// Run a virtual board on a pseudo-terminal.
     Board(board::Board),
     /// List serial ports that may be boards.
@@ -55,6 +58,7 @@ impl Command {
             Command::Identify(c) => c.run(),
             Command::Compare(c) => c.run(),
             Command::Diagnose(c) => c.run(),
+            Command::Frf(c) => c.run(),
             Command::Board(c) => c.run(),
             Command::Ports(c) => c.run(),
             Command::Log(c) => c.run(),

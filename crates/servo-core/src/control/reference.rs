@@ -18,13 +18,15 @@
 //! | `chirp` | `amp`* (rad), `f0` (Hz), `f1` (Hz), `duration` (s), `mode` (`linear` default, or `log`) |
 //! | `square` | `amp`* (rad), `period` (s), `duty` (0..1, default 0.5): +amp then -amp |
 //! | `prbs` | `amp`* (rad), `bit` (s), `seed` (integer, default 1), `order` (2..16, default 10): maximal-length LFSR sequence of +-amp, period (2^order - 1) bits |
+//! | `multisine` | `amp`* (rad), `f0` (Hz), `f1` (Hz), `period` (s), `lines` (integer 1..=200, default 40): periodic sum of harmonics of 1/period between f0 and f1 (log-spaced when there are more than `lines`), equal amplitudes amp/sqrt(lines) (the power of one sine of amplitude amp), Schroeder phases for a low crest factor (peak about 1.2 amp with consecutive harmonics, about 2.3 amp log-spaced) |
 //!
 //! Every kind also takes `t0` (s, start time, also written `@t0` at the end) and `offset` (rad).
 //! Values may carry a unit suffix: angles `rad`, `deg`, `rev`; speeds `rad/s`, `deg/s`, `rpm`;
 //! accelerations `rad/s2`, `deg/s2`; times `s`, `ms`; frequencies `Hz`. Without a suffix the SI
 //! unit of the table applies. Examples: `step:1.5`, `step:90deg@0.5`, `ramp:speed=2`,
 //! `sine:amp=0.5,freq=1`, `chirp:amp=0.2,f0=0.1,f1=20,duration=10,mode=log`,
-//! `trap:distance=3.0,vmax=10,amax=100`, `square:amp=1,period=2`, `prbs:amp=0.5,bit=0.05,seed=1`.
+//! `trap:distance=3.0,vmax=10,amax=100`, `square:amp=1,period=2`, `prbs:amp=0.5,bit=0.05,seed=1`,
+//! `multisine:amp=0.2,f0=0.2,f1=20,period=10,lines=40`.
 //!
 //! Times within [`TIME_EPS_S`] (1 ns) of a start instant count as at it (floating-point sample
 //! times). After its `duration` a chirp keeps oscillating at f1 (phase-continuous); a trapezoid holds the
@@ -117,7 +119,23 @@ pub enum Shape {
         seed: u32,
         order: u8,
     },
+    /// Periodic multisine for frequency-response measurement: `lines` harmonics k/`period_s` in
+    /// [`f0_hz`, `f1_hz`] (log-spaced when the band holds more), each of amplitude
+    /// `amplitude_rad / sqrt(lines)` (the power of a sine of amplitude `amplitude_rad`), with
+    /// Schroeder phases -pi i (i + 1) / lines: crest factor about 1.7 when the lines are
+    /// consecutive harmonics (band / period <= lines), about 3 when they are log-spaced. Averaging over whole periods
+    /// gives leakage-free spectra; see [`Shape::multisine_lines`].
+    Multisine {
+        amplitude_rad: f64,
+        f0_hz: f64,
+        f1_hz: f64,
+        period_s: f64,
+        lines: u16,
+    },
 }
+
+/// Largest number of lines of a multisine (each costs a sine per sample).
+pub const MULTISINE_MAX_LINES: u16 = 200;
 
 /// A reference: a shape started at `t0_s` [s] and shifted by `offset_rad` [rad].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -190,7 +208,54 @@ impl Shape {
             Shape::Chirp { .. } => "chirp",
             Shape::Square { .. } => "square",
             Shape::Prbs { .. } => "prbs",
+            Shape::Multisine { .. } => "multisine",
         }
+    }
+
+    /// The harmonic numbers k (frequency k / period) of a multisine's lines, in increasing order,
+    /// written into `out`; returns how many (0 for other shapes or an empty band).
+    pub fn multisine_lines(&self, out: &mut [u32; MULTISINE_MAX_LINES as usize]) -> usize {
+        let Shape::Multisine {
+            f0_hz,
+            f1_hz,
+            period_s,
+            lines,
+            ..
+        } = *self
+        else {
+            return 0;
+        };
+        let k_lo = math::round(f0_hz * period_s + 0.5 - 1e-9).max(1.0);
+        let k_hi = math::floor(f1_hz * period_s + 1e-9);
+        if k_hi.is_nan() || k_hi < k_lo || k_hi > 1e9 {
+            return 0;
+        }
+        let (k_lo, k_hi) = (k_lo as u32, k_hi as u32);
+        let available = (k_hi - k_lo + 1) as usize;
+        let n = (lines.clamp(1, MULTISINE_MAX_LINES) as usize).min(available);
+        if n == available {
+            for (i, o) in out.iter_mut().take(n).enumerate() {
+                *o = k_lo + i as u32;
+            }
+            return n;
+        }
+        // log-spaced, strictly increasing, leaving room for the lines still to place
+        let ratio = k_hi as f64 / k_lo as f64;
+        let mut prev = 0u32;
+        for (i, slot) in out.iter_mut().take(n).enumerate() {
+            let x = if n > 1 {
+                k_lo as f64 * math::pow(ratio, i as f64 / (n - 1) as f64)
+            } else {
+                k_lo as f64
+            };
+            let room = k_hi - (n - 1 - i) as u32;
+            let k = (math::round(x) as u32)
+                .max(if i == 0 { k_lo } else { prev + 1 })
+                .min(room);
+            *slot = k;
+            prev = k;
+        }
+        n
     }
 
     /// Total duration of a trapezoid [s] (accelerate, cruise, decelerate); `None` for others.
@@ -294,6 +359,30 @@ impl Shape {
                 } else {
                     -amplitude_rad
                 })
+            }
+            Shape::Multisine {
+                amplitude_rad,
+                period_s,
+                ..
+            } => {
+                let mut ks = [0u32; MULTISINE_MAX_LINES as usize];
+                let n = self.multisine_lines(&mut ks);
+                let mut out = RefSample::at_rest(0.0);
+                if n == 0 {
+                    return out;
+                }
+                let a = amplitude_rad / math::sqrt(n as f64);
+                // phase of the local time within the period, for accuracy over long runs
+                let tau = math::rem_euclid(tau_s, period_s);
+                for (i, &k) in ks.iter().take(n).enumerate() {
+                    let w = math::TAU * k as f64 / period_s;
+                    let ph = w * tau - math::PI * (i * (i + 1)) as f64 / n as f64;
+                    let (sn, cs) = (math::sin(ph), math::cos(ph));
+                    out.pos_rad += a * sn;
+                    out.vel_rad_s += a * w * cs;
+                    out.acc_rad_s2 -= a * w * w * sn;
+                }
+                out
             }
         }
     }
@@ -457,6 +546,31 @@ impl Reference {
                     "must be an integer in 2..=16",
                 )
             }
+            Shape::Multisine {
+                amplitude_rad,
+                f0_hz,
+                f1_hz,
+                period_s,
+                lines,
+            } => {
+                finite("amp", amplitude_rad)?;
+                positive("f0", f0_hz)?;
+                positive("f1", f1_hz)?;
+                require(f1_hz >= f0_hz, "f1", "must be >= f0")?;
+                positive("period", period_s)?;
+                require(
+                    (1..=MULTISINE_MAX_LINES).contains(&lines),
+                    "lines",
+                    "must be an integer in 1..=200",
+                )?;
+                require(
+                    self.shape
+                        .multisine_lines(&mut [0; MULTISINE_MAX_LINES as usize])
+                        > 0,
+                    "period",
+                    "leaves no harmonic of 1/period between f0 and f1 (make the period longer)",
+                )
+            }
         }
     }
 
@@ -520,6 +634,16 @@ impl fmt::Display for Reference {
             } => write!(
                 f,
                 "amp={amplitude_rad},bit={bit_s},seed={seed},order={order}"
+            )?,
+            Shape::Multisine {
+                amplitude_rad,
+                f0_hz,
+                f1_hz,
+                period_s,
+                lines,
+            } => write!(
+                f,
+                "amp={amplitude_rad},f0={f0_hz},f1={f1_hz},period={period_s},lines={lines}"
             )?,
         }
         if self.offset_rad != 0.0 {
@@ -751,6 +875,49 @@ mod tests {
             // Position continuous at the end of the sweep.
             assert!((r.at(10.0 - 1e-9).pos_rad - r.at(10.0 + 1e-9).pos_rad).abs() < 1e-6);
         }
+    }
+
+    #[test]
+    fn multisine_lines_phases_and_crest_factor() {
+        let r = Reference::parse("multisine:amp=0.2,f0=0.2,f1=20,period=10,lines=40").unwrap();
+        let mut ks = [0u32; MULTISINE_MAX_LINES as usize];
+        let n = r.shape.multisine_lines(&mut ks);
+        assert_eq!(n, 40);
+        assert_eq!((ks[0], ks[n - 1]), (2, 200));
+        assert!(ks[..n].windows(2).all(|w| w[0] < w[1]));
+        // periodic, smooth, analytic derivatives
+        assert!(close(r.at(1.234).pos_rad, r.at(11.234).pos_rad, 1e-9));
+        check_derivatives(&r, 3.21, 1e-5, 1e-4);
+        // power of a sine of amplitude amp; Schroeder phases keep the peak low
+        let m = 100_000;
+        let (mut sq, mut peak) = (0.0f64, 0.0f64);
+        for k in 0..m {
+            let v = r.at(10.0 * k as f64 / m as f64).pos_rad;
+            sq += v * v;
+            peak = peak.max(v.abs());
+        }
+        let rms = math::sqrt(sq / m as f64);
+        assert!(close(rms, 0.2 / math::sqrt(2.0), 1e-3), "{rms}");
+        assert!(peak / rms < 3.4, "crest factor {}", peak / rms);
+        // consecutive harmonics: Schroeder's low crest factor (random phases give ~3)
+        let r = Reference::parse("multisine:amp=0.2,f0=0.1,f1=4,period=10,lines=40").unwrap();
+        assert_eq!(r.shape.multisine_lines(&mut ks), 40);
+        let (mut sq, mut peak) = (0.0f64, 0.0f64);
+        for k in 0..m {
+            let v = r.at(10.0 * k as f64 / m as f64).pos_rad;
+            sq += v * v;
+            peak = peak.max(v.abs());
+        }
+        let crest = peak / math::sqrt(sq / m as f64);
+        assert!(crest < 2.0, "crest factor {crest}");
+        // every harmonic when the band holds fewer than `lines`
+        let r = Reference::parse("multisine:0.1,f0=1,f1=3,period=2").unwrap();
+        assert_eq!(r.shape.multisine_lines(&mut ks), 5);
+        assert_eq!(&ks[..5], &[2, 3, 4, 5, 6]);
+        assert!(Reference::parse("multisine:0.1,f0=1.1,f1=1.2,period=1").is_err());
+        assert!(Reference::parse("multisine:0.1,f0=1,f1=3,period=2,lines=500").is_err());
+        let round = Reference::parse(&r.to_string()).unwrap();
+        assert_eq!(round, r);
     }
 
     #[test]

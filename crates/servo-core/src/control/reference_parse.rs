@@ -121,6 +121,17 @@ const KINDS: &[KindSpec] = &[
         ],
         listing: "amp, bit, seed, order, t0, offset",
     },
+    KindSpec {
+        kind: "multisine",
+        keys: &[
+            ("amp", Quantity::Angle),
+            ("f0", Quantity::Freq),
+            ("f1", Quantity::Freq),
+            ("period", Quantity::Time),
+            ("lines", Quantity::Integer),
+        ],
+        listing: "amp, f0, f1, period, lines, t0, offset",
+    },
 ];
 
 /// Index of the common keys after a kind's own keys.
@@ -280,6 +291,22 @@ pub(crate) fn parse(text: &str) -> Result<Reference, RefParseError> {
             period_s: need(1, "s")?,
             duty: values[2].unwrap_or(0.5),
         },
+        "multisine" => {
+            let lines = values[4].unwrap_or(40.0);
+            if lines > f64::from(super::reference::MULTISINE_MAX_LINES) {
+                return Err(RefParseError::Invalid {
+                    key: "lines",
+                    reason: "must be an integer in 1..=200",
+                });
+            }
+            Shape::Multisine {
+                amplitude_rad: need(0, "rad")?,
+                f0_hz: need(1, "Hz")?,
+                f1_hz: need(2, "Hz")?,
+                period_s: need(3, "s")?,
+                lines: lines as u16,
+            }
+        }
         _ => {
             let order = values[3].unwrap_or(10.0);
             if order > 16.0 {
