@@ -184,6 +184,9 @@ fn print_ranking(tag: &str, d: &diagnose::Diagnosis, take: usize) {
             c.oe_reduction_pct.map(|v| (v * 10.0).round() / 10.0),
             c.bic_gain
         );
+        for k in &c.checks {
+            eprintln!("[{tag}]    check {} passed={} {}", k.name, k.passed, k.detail);
+        }
     }
 }
 

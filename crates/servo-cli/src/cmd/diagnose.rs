@@ -193,6 +193,7 @@ fn thresholds_json(t: &Thresholds) -> Value {
         "unexplained_ratio": f(t.unexplained_ratio),
         "min_signature_share": f(t.min_signature_share),
         "consistency_tol": f(t.consistency_tol),
+        "electrical_block_ratio": f(t.electrical_block_ratio),
     })
 }
 

@@ -271,10 +271,9 @@ pub fn consistency(ds: &Dataset, model: &Plant, c: &Candidate, th: &Thresholds) 
             th.consistency_tol,
         ));
     }
-    if matches!(
-        kind,
-        EffectKind::Cogging | EffectKind::Imbalance | EffectKind::Coulomb
-    ) {
+    // Cogging is left out: at speed its frequency passes the filter's cut-off and the fast
+    // rows carry no information on it.
+    if matches!(kind, EffectKind::Imbalance | EffectKind::Coulomb) {
         let mut speeds: Vec<f64> = (0..ds.mech_rows.len())
             .map(|i| ds.recs[ds.mech_rows.rec[i]].omega_f[ds.mech_rows.k[i]].abs())
             .collect();

@@ -240,9 +240,11 @@ pub fn diagnose_dataset(
     // The electrical balance holds no mechanical effect: when it is itself unexplained, the
     // current or the speed measurement is inconsistent and the torque balance (which uses
     // both) cannot be trusted to name a torque.
-    let electrical_broken = balances
-        .iter()
-        .find(|b| b.equation == Equation::Electrical && b.above_noise);
+    let electrical_broken = balances.iter().find(|b| {
+        b.equation == Equation::Electrical
+            && b.above_noise
+            && b.ratio_to_noise >= th.electrical_block_ratio
+    });
     let mut kinds = candidate_kinds(model, opts);
     if !ds.has_input {
         // Without a logged input the data say nothing of the drive (saturation, dead zone,
@@ -267,8 +269,11 @@ pub fn diagnose_dataset(
                     &solved,
                     opts,
                 );
-                if let (true, true, Some(e)) =
-                    (c.significant, kind.is_mechanical(), electrical_broken)
+                if let (true, true, Some(e)) = (
+                    c.significant,
+                    kind.is_mechanical() && *kind != EffectKind::Backlash,
+                    electrical_broken,
+                )
                 {
                     c.checks.push(checks::Check {
                         name: "electrical balance consistent",

@@ -32,6 +32,10 @@ pub struct Thresholds {
     /// Parameters fitted on independent halves of the data agree within this relative difference
     /// (or 3 combined standard errors).
     pub consistency_tol: f64,
+    /// No torque (mechanical effect other than backlash, which breaks the angle-speed relation
+    /// itself) is named while the electrical balance, which holds no torque, is this many times
+    /// its noise floor: the current or speed measurement is then inconsistent.
+    pub electrical_block_ratio: f64,
 }
 
 impl Default for Thresholds {
@@ -42,6 +46,7 @@ impl Default for Thresholds {
             unexplained_ratio: 2.0,
             min_signature_share: 0.15,
             consistency_tol: 0.35,
+            electrical_block_ratio: 6.0,
         }
     }
 }
@@ -226,7 +231,12 @@ const MAX_ROWS: usize = 12_000;
 fn view(ds: &Dataset, rows: &Rows, sol: &EqSolution) -> View {
     let n = rows.len().min(sol.resid.len());
     let stride = n.div_ceil(MAX_ROWS).max(1);
-    let idx: Vec<usize> = (0..n).step_by(stride).collect();
+    // With the load angle measured, the motor speed is unknown near reversals of the motor
+    // torque when the gears have play: the electrical balance is judged away from them.
+    let idx: Vec<usize> = (0..n)
+        .step_by(stride)
+        .filter(|&i| !rows.torque_reversal.get(i).copied().unwrap_or(false))
+        .collect();
     let mut v = View {
         r: Vec::with_capacity(idx.len()),
         fit: Vec::new(),
@@ -379,9 +389,9 @@ pub fn analyse(
     } else {
         &ds.mech_rows
     };
-    let rms = sol.rms();
-    let ratio = if floor > 0.0 { rms / floor } else { f64::INFINITY };
     let v = view(ds, rows, sol);
+    let rms = math::sqrt(v.r.iter().map(|x| x * x).sum::<f64>() / v.r.len().max(1) as f64);
+    let ratio = if floor > 0.0 { rms / floor } else { f64::INFINITY };
     let unit = sol.equation.unit();
     let mut sigs: Vec<Signature> = Vec::new();
     let mut push = |kind: &'static str, description: String, (share, rms_x): (f64, f64)| {
