@@ -47,6 +47,7 @@ pub fn constraints(
     kind: EffectKind,
     params: &[ParamEstimate],
     cand: &Plant,
+    base: &Plant,
 ) -> Vec<Check> {
     let mut out = Vec::new();
     match kind {
@@ -57,6 +58,14 @@ pub fn constraints(
                 passed: ts > 1.05 * tf,
                 detail: alloc::format!(
                     "breakaway torque tau_s = {ts:.4} N m against the Coulomb level tau_sf = {tf:.4} N m: Stribeck friction decays from a breakaway above the Coulomb level (needs tau_s > 1.05 tau_sf); a best fit below it is a friction rising with speed, not Stribeck"
+                ),
+            });
+            out.push(Check {
+                name: "tau_sf off its bound",
+                passed: tf > 0.1 * base.tau_sf().max(1e-12),
+                detail: alloc::format!(
+                    "with it the Coulomb level falls to {tf:.4} N m from {:.4} N m without it (needs more than 10 % of it: a friction level pinned at zero is a curve of another shape, not Stribeck on top of Coulomb)",
+                    base.tau_sf()
                 ),
             });
             let ws = get(params, "omega_s").unwrap_or(f64::NAN);

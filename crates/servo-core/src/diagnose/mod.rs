@@ -269,6 +269,39 @@ pub fn diagnose_dataset(
                     &solved,
                     opts,
                 );
+                // A mimic leaves the structure it was meant to explain: the shape that carried
+                // the balance's residual is still there, above the noise floor, after adding it.
+                if c.significant && !matches!(*kind, EffectKind::Backlash | EffectKind::Coulomb) {
+                    if let (Some(b), Some(sol)) = (bal, solved.equation(eq)) {
+                        if let Some(top) = b.signatures.first().filter(|_| b.above_noise) {
+                            let after =
+                                structure::analyse(ds, sol, floor_of(eq), &th, ds.gear_ratio);
+                            let left = after.signatures.iter().find(|s| s.kind == top.kind);
+                            let still = after.above_noise
+                                && left.is_some_and(|s| {
+                                    s.explained_rms >= th.min_noise_ratio * floor_of(eq)
+                                });
+                            c.checks.push(checks::Check {
+                                name: "explains the structure it fits",
+                                passed: !still,
+                                detail: alloc::format!(
+                                    "before it, the {} residual was {:.1} times its noise floor, carried by a shape that {}; with it, {:.1} times, and that shape still carries {:.0} % of it",
+                                    eq.name(),
+                                    b.ratio_to_noise,
+                                    top.description,
+                                    after.ratio_to_noise,
+                                    100.0 * left.map_or(0.0, |s| s.share)
+                                ),
+                            });
+                            if still {
+                                c.significant = false;
+                                c.experiment =
+                                    Some(String::from(evidence::experiment(c.effect)));
+                                evidence::append_failed(&mut c);
+                            }
+                        }
+                    }
+                }
                 if let (true, true, Some(e)) = (
                     c.significant,
                     kind.is_mechanical() && *kind != EffectKind::Backlash,
@@ -601,7 +634,7 @@ fn judge(
                 ),
             });
         }
-        found.extend(checks::constraints(ds, kind, &params, &cand.plant));
+        found.extend(checks::constraints(ds, kind, &params, &cand.plant, &base.plant));
     }
     let significant = statistically && found.iter().all(|c| c.passed);
     let ev = evidence::describe(

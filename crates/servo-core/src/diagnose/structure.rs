@@ -215,6 +215,8 @@ fn small_lsq(cols: &[Vec<f64>], r: &[f64], sel: &[usize]) -> Option<Vec<f64>> {
 
 /// Rows (subsampled) and the signals at them.
 struct View {
+    /// Index of each view row in the equation's rows.
+    row_idx: Vec<usize>,
     r: Vec<f64>,
     fit: Vec<usize>,
     hold: Vec<usize>,
@@ -238,6 +240,7 @@ fn view(ds: &Dataset, rows: &Rows, sol: &EqSolution) -> View {
         .filter(|&i| !rows.torque_reversal.get(i).copied().unwrap_or(false))
         .collect();
     let mut v = View {
+        row_idx: idx.clone(),
         r: Vec::with_capacity(idx.len()),
         fit: Vec::new(),
         hold: Vec::new(),
@@ -370,6 +373,29 @@ fn pair(x: &[f64], c: f64, scale: Option<&[f64]>) -> Vec<Vec<f64>> {
     alloc::vec![s, co]
 }
 
+/// sin and cos of `c_m` times the motor angle, modulated by `m(omega_m)`, through each record's
+/// filter, at the rows of the view.
+fn filtered_pair(
+    ds: &Dataset,
+    rows: &Rows,
+    v: &View,
+    c_m: f64,
+    m: fn(f64) -> f64,
+) -> Vec<Vec<f64>> {
+    let mut out = Vec::new();
+    for f in [math::sin as fn(f64) -> f64, math::cos] {
+        let col = ds.column(rows, |r: &RecData| {
+            r.theta_m_rad
+                .iter()
+                .zip(&r.omega_raw)
+                .map(|(t, w)| f(c_m * t) * m(*w))
+                .collect()
+        });
+        out.push(v.row_idx.iter().map(|&i| col[i]).collect());
+    }
+    out
+}
+
 fn pow_odd(x: &[f64], p: f64) -> Vec<f64> {
     x.iter()
         .map(|&w| math::sign(w) * math::pow(w.abs(), p))
@@ -456,18 +482,41 @@ pub fn analyse(
             );
         }
     }
-    // Periodic in angle (load-angle cycles per load revolution; motor harmonics = c / N).
+    // Periodic in angle (load-angle cycles per load revolution; motor harmonics = c / N), with
+    // an amplitude that is constant (a torque ripple), grows with speed (the derivative of an
+    // angle error), with speed squared (its second derivative), or reverses with the direction
+    // of motion (a friction that varies with position). Each modulation gets its own scan; the
+    // regressors at the peak go through the record's filter, as the residual did.
     {
         let n = gear_ratio.max(1.0);
-        let th_l: Vec<f64> = v.theta_m.iter().map(|t| t / n).collect();
-        let fit_r: Vec<f64> = v.fit.iter().map(|&i| v.r[i]).collect();
-        let fit_x: Vec<f64> = v.fit.iter().map(|&i| th_l[i]).collect();
-        if let Some(c) = peak(&fit_r, &fit_x, grid(0.5, n * 45.0, 0.1)) {
-            let plain = held_out(&v, &pair(&th_l, c, None));
-            let w_abs: Vec<f64> = v.omega_m.iter().map(|w| w.abs()).collect();
-            let w2: Vec<f64> = v.omega_m.iter().map(|w| w * w).collect();
-            let by_w = held_out(&v, &pair(&th_l, c, Some(&w_abs)));
-            let by_w2 = held_out(&v, &pair(&th_l, c, Some(&w2)));
+        let mods: [(&str, fn(f64) -> f64); 4] = [
+            ("with an amplitude independent of speed", |_| 1.0),
+            ("with an amplitude growing in proportion to speed", |w| w),
+            ("with an amplitude growing like speed^2", |w| w * w),
+            (
+                "reversing with the direction of motion (a friction that varies with position)",
+                math::sign,
+            ),
+        ];
+        let scan_idx: Vec<usize> = v.fit.iter().copied().step_by(v.fit.len().div_ceil(4000).max(1)).collect();
+        let fit_x: Vec<f64> = scan_idx.iter().map(|&i| v.theta_m[i] / n).collect();
+        let mut best: Option<(f64, usize, (f64, f64))> = None;
+        for (mi, (_, m)) in mods.iter().enumerate() {
+            let w_max = v.omega_m.iter().fold(0.0f64, |a, w| a.max(w.abs())).max(1e-9);
+            let fit_r: Vec<f64> = scan_idx
+                .iter()
+                .map(|&i| v.r[i] * m(v.omega_m[i] / w_max))
+                .collect();
+            let Some(c) = peak(&fit_r, &fit_x, grid(0.5, n * 45.0, 0.1)) else {
+                continue;
+            };
+            let cols = filtered_pair(ds, rows, &v, c / n, *m);
+            let res = held_out(&v, &cols);
+            if best.as_ref().is_none_or(|b| res.0 > b.2 .0) {
+                best = Some((c, mi, res));
+            }
+        }
+        if let Some((c, mi, res)) = best {
             let cm = c / n;
             let near_int = |x: f64| (x - math::round(x)).abs() < 0.06 && math::round(x) >= 1.0;
             let which = if near_int(cm) {
@@ -483,13 +532,6 @@ pub fn analyse(
                     "{c:.2} cycles per load revolution = {cm:.3} per motor revolution (no harmonic of either shaft)"
                 )
             };
-            let (res, amp) = if by_w2.0 > 1.2 * plain.0.max(by_w.0) {
-                (by_w2, "with an amplitude growing like speed^2")
-            } else if by_w.0 > 1.2 * plain.0 {
-                (by_w, "with an amplitude growing in proportion to speed")
-            } else {
-                (plain, "with an amplitude independent of speed")
-            };
             let kind = if near_int(cm) {
                 "motor_angle"
             } else {
@@ -497,7 +539,7 @@ pub fn analyse(
             };
             push(
                 kind,
-                alloc::format!("periodic in angle at {which}, {amp}"),
+                alloc::format!("periodic in angle at {which}, {}", mods[mi].0),
                 res,
             );
         }
