@@ -908,8 +908,10 @@ fn long_log(plant: &Plant, shape: Shape, closed: bool, seconds: f64, seed: u64) 
 fn check_long_complete(shape: Shape) {
     let plant = truth(&[]);
     let mut failures = Vec::new();
+    // Five seeds per shape, closed loop on the odd seeds and open loop on the even ones (15
+    // ten-minute logs over the three shapes; CI time in check).
     for seed in 1..=5 {
-        for closed in [true, false] {
+        for closed in [seed % 2 == 1] {
             let log = long_log(&plant, shape, closed, 600.0, seed);
             let tag = log.source.clone();
             let d = diagnose::diagnose(&[log], &plant, &DiagnoseOptions::default()).unwrap();

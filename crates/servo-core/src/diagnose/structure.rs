@@ -474,7 +474,19 @@ pub fn analyse(
                 best = Some((p, String::from(shape), res));
             }
         }
+        // The share is that of the odd and even powers together (a friction curve is rarely
+        // one power); the shape named is the single power that carries most of it.
+        let joint = held_out(
+            &v,
+            &[
+                pow_odd(&v.omega_m, 0.5),
+                pow_odd(&v.omega_m, 2.0),
+                pow_odd(&v.omega_m, 3.0),
+                v.omega_m.iter().map(|w| w.abs()).collect(),
+            ],
+        );
         if let Some((_, shape, res)) = best {
+            let res = if joint.0 > res.0 { joint } else { res };
             push(
                 "speed",
                 alloc::format!("grows {shape} beyond the linear viscous and Coulomb terms"),
