@@ -273,9 +273,11 @@ fn text_report(first: &Diagnosis, ladder: &[Rung], diags: &[Diagnosis], auto: bo
             b.floor,
             b.equation.unit(),
             b.ratio_to_noise,
-            b.signatures
-                .first()
-                .map_or(String::new(), |g| format!("; strongest shape: {} ({:.0} % of the held-out residual)", g.description, 100.0 * g.share))
+            b.signatures.first().map_or(String::new(), |g| format!(
+                "; strongest shape: {} ({:.0} % of the held-out residual)",
+                g.description,
+                100.0 * g.share
+            ))
         );
     }
     for (step, d) in diags.iter().enumerate() {

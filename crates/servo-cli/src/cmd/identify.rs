@@ -240,10 +240,7 @@ impl Identify {
                 logs.push(path);
             }
         }
-        if records
-            .iter()
-            .all(|r| r.i_a_a.is_none() && r.u_v.is_some())
-        {
+        if records.iter().all(|r| r.i_a_a.is_none() && r.u_v.is_some()) {
             return self.run_without_current(&records, &logs, params);
         }
         let mut exps = Vec::new();

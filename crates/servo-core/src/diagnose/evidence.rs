@@ -313,7 +313,10 @@ pub fn verdict(
             }
             let rejected: Vec<String> = ranking
                 .iter()
-                .filter_map(|c| c.failed_check().map(|k| alloc::format!("{} ({})", c.effect, k.name)))
+                .filter_map(|c| {
+                    c.failed_check()
+                        .map(|k| alloc::format!("{} ({})", c.effect, k.name))
+                })
                 .collect();
             if !rejected.is_empty() {
                 let _ = write!(

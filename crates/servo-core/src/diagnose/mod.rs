@@ -295,8 +295,7 @@ pub fn diagnose_dataset(
                             });
                             if still {
                                 c.significant = false;
-                                c.experiment =
-                                    Some(String::from(evidence::experiment(c.effect)));
+                                c.experiment = Some(String::from(evidence::experiment(c.effect)));
                                 evidence::append_failed(&mut c);
                             }
                         }
@@ -306,8 +305,7 @@ pub fn diagnose_dataset(
                     c.significant,
                     kind.is_mechanical() && *kind != EffectKind::Backlash,
                     electrical_broken,
-                )
-                {
+                ) {
                     c.checks.push(checks::Check {
                         name: "electrical balance consistent",
                         passed: false,
@@ -333,6 +331,11 @@ pub fn diagnose_dataset(
             c.significant = false;
         }
         c.checks.extend(cons);
+        if c.significant && c.effect == EffectKind::Backlash {
+            if let Some(note) = checks::backlash_stiffness(ds, model, c) {
+                c.evidence.push_str(&note);
+            }
+        }
         if !c.significant {
             c.experiment = Some(String::from(evidence::experiment(c.effect)));
             evidence::append_failed(c);
@@ -634,7 +637,13 @@ fn judge(
                 ),
             });
         }
-        found.extend(checks::constraints(ds, kind, &params, &cand.plant, &base.plant));
+        found.extend(checks::constraints(
+            ds,
+            kind,
+            &params,
+            &cand.plant,
+            &base.plant,
+        ));
     }
     let significant = statistically && found.iter().all(|c| c.passed);
     let ev = evidence::describe(

@@ -417,7 +417,11 @@ pub fn analyse(
     };
     let v = view(ds, rows, sol);
     let rms = math::sqrt(v.r.iter().map(|x| x * x).sum::<f64>() / v.r.len().max(1) as f64);
-    let ratio = if floor > 0.0 { rms / floor } else { f64::INFINITY };
+    let ratio = if floor > 0.0 {
+        rms / floor
+    } else {
+        f64::INFINITY
+    };
     let unit = sol.equation.unit();
     let mut sigs: Vec<Signature> = Vec::new();
     let mut push = |kind: &'static str, description: String, (share, rms_x): (f64, f64)| {
@@ -464,7 +468,9 @@ pub fn analyse(
             };
             let res = held_out(&v, &[col]);
             let shape = match (p, odd) {
-                (0.5, true) => "like sign(omega) sqrt|omega| (rises steeply at low speed, then flattens)",
+                (0.5, true) => {
+                    "like sign(omega) sqrt|omega| (rises steeply at low speed, then flattens)"
+                }
                 (2.0, true) => "quadratically with speed, opposing the motion (omega |omega|)",
                 (3.0, true) => "with the cube of speed, opposing the motion (omega^3)",
                 (1.0, false) => "with |omega|, the same in both directions",
@@ -510,11 +516,20 @@ pub fn analyse(
                 math::sign,
             ),
         ];
-        let scan_idx: Vec<usize> = v.fit.iter().copied().step_by(v.fit.len().div_ceil(4000).max(1)).collect();
+        let scan_idx: Vec<usize> = v
+            .fit
+            .iter()
+            .copied()
+            .step_by(v.fit.len().div_ceil(4000).max(1))
+            .collect();
         let fit_x: Vec<f64> = scan_idx.iter().map(|&i| v.theta_m[i] / n).collect();
         let mut best: Option<(f64, usize, (f64, f64))> = None;
         for (mi, (_, m)) in mods.iter().enumerate() {
-            let w_max = v.omega_m.iter().fold(0.0f64, |a, w| a.max(w.abs())).max(1e-9);
+            let w_max = v
+                .omega_m
+                .iter()
+                .fold(0.0f64, |a, w| a.max(w.abs()))
+                .max(1e-9);
             let fit_r: Vec<f64> = scan_idx
                 .iter()
                 .map(|&i| v.r[i] * m(v.omega_m[i] / w_max))
@@ -589,7 +604,10 @@ pub fn analyse(
             let a = held_out(&v, &[sq.clone()]);
             let b = held_out(&v, &[sg]);
             if b.0 > a.0 {
-                (b, "a step with the sign of the current (a brush or switch voltage drop)")
+                (
+                    b,
+                    "a step with the sign of the current (a brush or switch voltage drop)",
+                )
             } else {
                 (a, "grows faster than linearly with the current (a current-dependent resistance or sensor gain)")
             }
@@ -607,9 +625,15 @@ pub fn analyse(
         let a = held_out(&v, &[u3]);
         let b = held_out(&v, &[su]);
         let (res, what) = if b.0 > a.0 {
-            (b, "a step with the sign of the command u (a driver offset or dead band)")
+            (
+                b,
+                "a step with the sign of the command u (a driver offset or dead band)",
+            )
         } else {
-            (a, "grows with the cube of the command u (a nonlinear driver gain)")
+            (
+                a,
+                "grows with the cube of the command u (a nonlinear driver gain)",
+            )
         };
         push("voltage", String::from(what), res);
     }
@@ -622,7 +646,8 @@ pub fn analyse(
     // (J times its second derivative), follows the angle sensor.
     let sensor = sigs.first().is_some_and(|s| {
         (s.kind == "motor_angle" || s.kind == "load_angle")
-            && ((sol.equation == Equation::Electrical && s.description.contains("proportion to speed"))
+            && ((sol.equation == Equation::Electrical
+                && s.description.contains("proportion to speed"))
                 || (sol.equation != Equation::Electrical && s.description.contains("speed^2")))
     });
     let balance = if sensor {
