@@ -301,26 +301,34 @@ pub fn diagnose_dataset(
                         }
                     }
                 }
-                if let (true, true, Some(e)) = (
-                    c.significant,
-                    kind.is_mechanical() && *kind != EffectKind::Backlash,
-                    electrical_broken,
-                ) {
-                    c.checks.push(checks::Check {
-                        name: "electrical balance consistent",
-                        passed: false,
-                        detail: alloc::format!(
-                            "the electrical balance, which holds no mechanical effect, is itself {:.1} times its noise floor: the current or speed measurement is inconsistent, so no torque can be named from the torque balance",
-                            e.ratio_to_noise
-                        ),
-                    });
-                    c.significant = false;
-                    c.experiment = Some(String::from(evidence::experiment(c.effect)));
-                    evidence::append_failed(&mut c);
-                }
                 ranking.push(c);
             }
             Err(e) => ranking.push(failed(&base, *kind, &e)),
+        }
+    }
+    // A drive-side effect that explains most of the electrical residual (an input delay, a dead
+    // zone) accounts for it: the measurements are then not suspect.
+    let drive_explains = ranking
+        .iter()
+        .any(|c| c.equation == Equation::Electrical && c.error_reduction_pct >= 50.0);
+    let electrical_broken = electrical_broken.filter(|_| !drive_explains);
+    for c in ranking.iter_mut() {
+        if let (true, true, Some(e)) = (
+            c.significant,
+            c.effect.is_mechanical() && c.effect != EffectKind::Backlash,
+            electrical_broken,
+        ) {
+            c.checks.push(checks::Check {
+                name: "electrical balance consistent",
+                passed: false,
+                detail: alloc::format!(
+                    "the electrical balance, which holds no mechanical effect, is itself {:.1} times its noise floor and no drive-side effect explains it: the current or speed measurement is inconsistent, so no torque can be named from the torque balance",
+                    e.ratio_to_noise
+                ),
+            });
+            c.significant = false;
+            c.experiment = Some(String::from(evidence::experiment(c.effect)));
+            evidence::append_failed(c);
         }
     }
     // Physical consistency of the candidates that pass every other check: their parameters
