@@ -177,7 +177,7 @@ fn small_lsq(cols: &[Vec<f64>], r: &[f64], sel: &[usize]) -> Option<Vec<f64>> {
         }
     }
     let scale = (0..p).map(|u| a[u * p + u]).fold(0.0f64, f64::max);
-    if !(scale > 0.0) {
+    if scale.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
         return None;
     }
     for u in 0..p {
@@ -290,7 +290,7 @@ fn held_out(v: &View, cols: &[Vec<f64>]) -> (f64, f64) {
     let full = held_out_raw(v, &all);
     // Share beyond the intercept alone (an offset is its own signature).
     let ss: f64 = v.hold.iter().map(|&i| v.r[i] * v.r[i]).sum();
-    if !(ss > 0.0) {
+    if ss.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
         return (0.0, 0.0);
     }
     let gain = (base - full).max(0.0);
@@ -507,7 +507,8 @@ pub fn analyse(
     // regressors at the peak go through the record's filter, as the residual did.
     {
         let n = gear_ratio.max(1.0);
-        let mods: [(&str, fn(f64) -> f64); 4] = [
+        type Modulation = (&'static str, fn(f64) -> f64);
+        let mods: [Modulation; 4] = [
             ("with an amplitude independent of speed", |_| 1.0),
             ("with an amplitude growing in proportion to speed", |w| w),
             ("with an amplitude growing like speed^2", |w| w * w),
@@ -601,7 +602,7 @@ pub fn analyse(
         let sq: Vec<f64> = pow_odd(i, 2.0);
         let sg: Vec<f64> = i.iter().map(|x| math::sign(*x)).collect();
         let (res, what) = if sol.equation == Equation::Electrical {
-            let a = held_out(&v, &[sq.clone()]);
+            let a = held_out(&v, core::slice::from_ref(&sq));
             let b = held_out(&v, &[sg]);
             if b.0 > a.0 {
                 (
@@ -617,7 +618,7 @@ pub fn analyse(
                 "grows faster than linearly with the current (a torque constant that falls with current, or a current-sensor nonlinearity)",
             )
         };
-        push("current", alloc::format!("{what}"), res);
+        push("current", String::from(what), res);
     }
     if ds.has_input {
         let u3 = pow_odd(&v.u, 3.0);
