@@ -184,6 +184,12 @@ fn print_ranking(tag: &str, d: &diagnose::Diagnosis, take: usize) {
             c.oe_reduction_pct.map(|v| (v * 10.0).round() / 10.0),
             c.bic_gain
         );
+        for k in &c.checks {
+            eprintln!(
+                "[{tag}]    check {} passed={} {}",
+                k.name, k.passed, k.detail
+            );
+        }
     }
 }
 
@@ -526,6 +532,41 @@ fn real_logs_without_voltage_name_the_missing_friction() {
 /// tau_sf tanh(omega_l / 0.05 rad/s) (the shaft creeps instead of sticking, as in many
 /// simulators), an optional imbalance, the same sensors. Returns (open-loop, closed-loop) logs.
 fn other_simulator_logs(imbalance: Option<(f64, f64)>, seed: u64) -> Vec<Record> {
+    // The imbalance is a load torque a sin(theta_l + phase), seen at the motor divided by N.
+    let extra = move |th_m: f64, _w_m: f64| {
+        imbalance.map_or(0.0, |(a, ph)| a * (th_m / 14.0 + ph).sin() / 14.0)
+    };
+    other_simulator_with(
+        &Mechanism {
+            motor_torque: &extra,
+            ..Mechanism::NONE
+        },
+        seed,
+    )
+}
+
+/// A mechanism outside the catalogue, added to the other simulator: an extra load torque seen
+/// at the motor [N m] as a function of (motor angle [rad], motor speed [rad/s]), an offset of the
+/// current sensor [A], an error of the load-angle sensor [rad] as a function of the load angle,
+/// and an optional compliant shaft (stiffness [N m/rad] at the load, damping [N m s/rad], share
+/// of J_eq on the load side).
+struct Mechanism<'a> {
+    motor_torque: &'a dyn Fn(f64, f64) -> f64,
+    current_offset_a: f64,
+    angle_error: &'a dyn Fn(f64) -> f64,
+    shaft: Option<(f64, f64, f64)>,
+}
+
+impl Mechanism<'_> {
+    const NONE: Mechanism<'static> = Mechanism {
+        motor_torque: &|_, _| 0.0,
+        current_offset_a: 0.0,
+        angle_error: &|_| 0.0,
+        shaft: None,
+    };
+}
+
+fn other_simulator_with(m: &Mechanism, seed: u64) -> Vec<Record> {
     let p = PlantParams {
         j_eq: Some(7.0e-7),
         b_eq: Some(1.0e-6),
@@ -534,41 +575,62 @@ fn other_simulator_logs(imbalance: Option<(f64, f64)>, seed: u64) -> Vec<Record>
     };
     let (n, j, b, r, l) = (p.n, p.j_eq(), p.b_eq(), p.r_eq(), p.l_a);
     let t_drv = p.t_drv();
-    // x = [u_drv, i_a, omega_m, theta_m]
-    let f = |x: [f64; 4], u: f64| -> [f64; 4] {
-        let w_l = x[2] / n;
-        let mut tau_l = 0.01 * (w_l / 0.05).tanh();
-        if let Some((a, ph)) = imbalance {
-            tau_l += a * (x[3] / n + ph).sin();
+    // x = [u_drv, i_a, omega_m, theta_m, omega_l N, theta_l N] (the last two: the load's motion
+    // seen at the motor side, only with a compliant shaft).
+    let f = |x: [f64; 6], u: f64| -> [f64; 6] {
+        let tau_m = p.k_t * x[1];
+        let (load_w, load_th) = if m.shaft.is_some() {
+            (x[4], x[5])
+        } else {
+            (x[2], x[3])
+        };
+        let w_l = load_w / n;
+        let tau_l = 0.01 * (w_l / 0.05).tanh() / n + (m.motor_torque)(load_th, load_w);
+        let mut d = [0.0; 6];
+        d[0] = (p.k_drv * u - x[0]) / t_drv;
+        d[1] = (x[0] - r * x[1] - p.k_e * x[2]) / l;
+        match m.shaft {
+            None => {
+                d[2] = (tau_m - b * x[2] - tau_l) / j;
+                d[3] = x[2];
+            }
+            Some((k, c, frac)) => {
+                // Spring between motor and load, referred to the motor side.
+                let (km, cm) = (k / (n * n), c / (n * n));
+                let spring = km * (x[3] - x[5]) + cm * (x[2] - x[4]);
+                d[2] = (tau_m - b * x[2] - spring) / (j * (1.0 - frac));
+                d[3] = x[2];
+                d[4] = (spring - tau_l) / (j * frac);
+                d[5] = x[4];
+            }
         }
-        [
-            (p.k_drv * u - x[0]) / t_drv,
-            (x[0] - r * x[1] - p.k_e * x[2]) / l,
-            (p.k_t * x[1] - b * x[2] - tau_l / n) / j,
-            x[2],
-        ]
+        d
     };
-    let step = |x: &mut [f64; 4], u: f64| {
+    let step = |x: &mut [f64; 6], u: f64| {
         let h = 20e-6;
         for _ in 0..50 {
             let k1 = f(*x, u);
-            let a = |k: &[f64; 4], s: f64| core::array::from_fn(|i| x[i] + s * k[i]);
+            let a = |k: &[f64; 6], s: f64| core::array::from_fn(|i| x[i] + s * k[i]);
             let k2 = f(a(&k1, h / 2.0), u);
             let k3 = f(a(&k2, h / 2.0), u);
             let k4 = f(a(&k3, h), u);
-            for i in 0..4 {
+            for i in 0..6 {
                 x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
             }
         }
     };
     let cpr = 4096.0;
-    let quant =
-        |th_l: f64| (th_l / std::f64::consts::TAU * cpr).floor() * std::f64::consts::TAU / cpr;
+    let shaft = m.shaft.is_some();
+    let read = |x: &[f64; 6]| {
+        let th_l = if shaft { x[5] } else { x[3] } / n;
+        let th = th_l + (m.angle_error)(th_l);
+        (th / std::f64::consts::TAU * cpr).floor() * std::f64::consts::TAU / cpr
+    };
     let mut rng = SplitMix64(seed ^ 0xA11CE);
     let mut out = Vec::new();
     // Open loop: voltage steps of random size and sign every 0.4 s.
     {
-        let mut x = [0.0; 4];
+        let mut x = [0.0; 6];
         let (mut t, mut th, mut ia, mut uv) = (vec![], vec![], vec![], vec![]);
         let mut u = 0.0;
         for k in 0..16_000 {
@@ -577,21 +639,21 @@ fn other_simulator_logs(imbalance: Option<(f64, f64)>, seed: u64) -> Vec<Record>
                 u = if rng.uniform() < 0.5 { -mag } else { mag };
             }
             t.push(k as f64 * DT);
-            th.push(quant(x[3] / n));
-            ia.push(x[1] + 2e-3 * rng.normal());
+            th.push(read(&x));
+            ia.push(x[1] + m.current_offset_a + 2e-3 * rng.normal());
             uv.push(u);
             step(&mut x, u);
         }
         out.push(record(t, th, ia, uv, None, "other-sim open-loop"));
     }
     // Closed loop: the same PID as `closed_loop`.
-    let x = core::cell::RefCell::new([0.0; 4]);
+    let x = core::cell::RefCell::new([0.0; 6]);
     out.push(pid_log(
         12_000,
         &mut rng,
         |rng| {
             let x = x.borrow();
-            (quant(x[3] / n), x[1] + 2e-3 * rng.normal())
+            (read(&x), x[1] + m.current_offset_a + 2e-3 * rng.normal())
         },
         |u| step(&mut x.borrow_mut(), u),
         "other-sim closed-loop",
@@ -637,5 +699,417 @@ fn another_simulators_data_are_diagnosed_on_the_physics() {
             (a / 0.006 - 1.0).abs() < 0.15,
             "[seed {seed}] amplitude {a}"
         );
+    }
+}
+
+/// Mechanisms outside the catalogue, in the other simulator: the verdict is "unexplained", no
+/// catalogue effect is named, and the balance and the shape that carry the error are named.
+fn check_outside(tag: &str, m: &Mechanism, balance: &str, signature: &str, seeds: &[u64]) {
+    for &seed in seeds {
+        let logs = other_simulator_with(m, seed);
+        let model = identified(&logs);
+        let d = diagnose::diagnose(&logs, &model, &DiagnoseOptions::default()).unwrap();
+        print_ranking(&format!("{tag} {seed}"), &d, 4);
+        for b in &d.balances {
+            eprintln!(
+                "[{tag} {seed}] {} ratio {:.2} above={} sigs {:?}",
+                b.balance.name(),
+                b.ratio_to_noise,
+                b.above_noise,
+                b.signatures
+                    .iter()
+                    .map(|s| (s.kind, (100.0 * s.share).round(), s.description.clone()))
+                    .collect::<Vec<_>>()
+            );
+        }
+        assert!(
+            d.winner().is_none(),
+            "[{tag} seed {seed}] a catalogue effect was named: {}",
+            d.verdict
+        );
+        assert_eq!(
+            d.status,
+            diagnose::Status::Unexplained,
+            "[{tag} seed {seed}] {}",
+            d.verdict
+        );
+        let hit = d.unexplained.iter().any(|b| {
+            b.balance.name() == balance && b.signatures.first().is_some_and(|s| s.kind == signature)
+        });
+        assert!(
+            hit,
+            "[{tag} seed {seed}] expected the {balance} balance with a {signature} signature: {}",
+            d.verdict
+        );
+    }
+}
+
+#[test]
+fn friction_rising_faster_than_linear_is_unexplained() {
+    // Load friction growing with the square of speed (a fluid drag), 5e-5 N m s^2/rad^2 at the
+    // load: 0.005 N m at 10 rad/s.
+    let drag = |_th: f64, w_m: f64| {
+        let w_l = w_m / 14.0;
+        5e-5 * w_l * w_l.abs() / 14.0
+    };
+    check_outside(
+        "quadratic drag",
+        &Mechanism {
+            motor_torque: &drag,
+            ..Mechanism::NONE
+        },
+        "torque",
+        "speed",
+        &[41, 42],
+    );
+}
+
+#[test]
+fn torque_ripple_at_a_non_harmonic_is_unexplained() {
+    // 7.5 cycles per motor revolution: no harmonic of the motor (cogging) nor the load.
+    let ripple = |th_m: f64, _w: f64| 4e-4 * (7.5 * th_m + 0.3).sin();
+    check_outside(
+        "ripple 7.5/rev",
+        &Mechanism {
+            motor_torque: &ripple,
+            ..Mechanism::NONE
+        },
+        "torque",
+        "load_angle",
+        &[43, 44],
+    );
+}
+
+#[test]
+fn current_sensor_offset_is_unexplained() {
+    check_outside(
+        "current offset",
+        &Mechanism {
+            current_offset_a: 0.02,
+            ..Mechanism::NONE
+        },
+        "electrical",
+        "offset",
+        &[45, 46],
+    );
+}
+
+#[test]
+fn periodic_angle_sensor_error_is_unexplained() {
+    // The load encoder reads 0.01 rad too far at twice per revolution (an eccentric disc).
+    let err = |th_l: f64| 0.01 * (2.0 * th_l).sin();
+    check_outside(
+        "angle sensor",
+        &Mechanism {
+            angle_error: &err,
+            ..Mechanism::NONE
+        },
+        "sensor",
+        "load_angle",
+        &[47, 48],
+    );
+}
+
+/// Reference (closed loop) or input (open loop) shape of a long log.
+#[derive(Debug, Clone, Copy)]
+enum Shape {
+    /// Random steps (closed loop: position steps every 0.8 s; open loop: voltage steps and
+    /// ramps every 0.4 s).
+    Steps,
+    /// Square wave (closed loop: +/- 1 rad, period 2 s; open loop: +/- 4 V, period 1 s).
+    Square,
+    /// Closed loop: a 0.5 rad chirp from 0.2 to 3 Hz over 10 s, repeated; open loop: a 5 V sine
+    /// at 1.3 Hz.
+    Chirp,
+}
+
+/// A long log of `plant` on servo's simulator with its sensors: closed loop (the PID of
+/// [`pid_log`]) or open loop.
+fn long_log(plant: &Plant, shape: Shape, closed: bool, seconds: f64, seed: u64) -> Record {
+    let n = (seconds / DT) as usize;
+    let mut sim = PlantSim::new(plant, DT).unwrap();
+    let mut sensors = Sensors::new(SensorConfig {
+        seed: seed + 101,
+        ..SensorConfig::default()
+    });
+    let mut rng = SplitMix64(seed ^ 0x10_0C);
+    let (kp, ki, kd, tl) = (7.5244, 94.0379, 0.1505, 0.003);
+    let (mut t, mut th, mut ia, mut uv, mut rv) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
+    let (mut integ, mut d_state, mut prev_y, mut r, mut u_ol) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let tau = std::f64::consts::TAU;
+    for k in 0..n {
+        let tk = k as f64 * DT;
+        let m = sensors.measure(sim.state());
+        let u = if closed {
+            r = match shape {
+                Shape::Steps => {
+                    if k % 800 == 0 {
+                        r + (if rng.uniform() < 0.5 { -1.0 } else { 1.0 })
+                            * (0.2 + 1.4 * rng.uniform())
+                    } else {
+                        r
+                    }
+                }
+                Shape::Square => {
+                    if (tk / 1.0).floor() as i64 % 2 == 0 {
+                        1.0
+                    } else {
+                        -1.0
+                    }
+                }
+                Shape::Chirp => {
+                    let tc = tk % 10.0;
+                    0.5 * (tau * (0.2 * tc + 0.5 * (3.0 - 0.2) / 10.0 * tc * tc)).sin()
+                }
+            };
+            let y = m.theta_l_rad;
+            let e = r - y;
+            let dy = (y - prev_y) / DT;
+            d_state += DT / (tl + DT) * (dy - d_state);
+            prev_y = y;
+            let raw = kp * e + ki * integ - kd * d_state;
+            let u = raw.clamp(-10.0, 10.0);
+            if raw == u {
+                integ += e * DT;
+            }
+            u
+        } else {
+            u_ol = match shape {
+                Shape::Steps => {
+                    if k % 400 == 0 {
+                        let mag = 0.8 + 7.0 * rng.uniform();
+                        if rng.uniform() < 0.5 {
+                            -mag
+                        } else {
+                            mag
+                        }
+                    } else {
+                        u_ol
+                    }
+                }
+                Shape::Square => {
+                    if (tk / 0.5).floor() as i64 % 2 == 0 {
+                        4.0
+                    } else {
+                        -4.0
+                    }
+                }
+                Shape::Chirp => 5.0 * (tau * 1.3 * tk).sin(),
+            };
+            u_ol
+        };
+        t.push(tk);
+        th.push(m.theta_l_rad);
+        ia.push(m.i_a_a);
+        uv.push(u);
+        rv.push(r);
+        sim.step(u);
+    }
+    let src = format!(
+        "{shape:?} {} seed {seed}",
+        if closed { "closed" } else { "open" }
+    );
+    record(t, th, ia, uv, closed.then_some(rv), &src)
+}
+
+/// Complete models on long logs: 10 minutes of servo's simulator, closed and open loop, five
+/// seeds, diagnosed against the very plant that produced them: status "complete", nothing named.
+fn check_long_complete(shape: Shape) {
+    let plant = truth(&[]);
+    let mut failures = Vec::new();
+    // Five seeds per shape, closed loop on the odd seeds and open loop on the even ones (15
+    // ten-minute logs over the three shapes; CI time in check).
+    for seed in 1..=5 {
+        for closed in [seed % 2 == 1] {
+            let log = long_log(&plant, shape, closed, 600.0, seed);
+            let tag = log.source.clone();
+            let d = diagnose::diagnose(&[log], &plant, &DiagnoseOptions::default()).unwrap();
+            print_ranking(&tag, &d, 2);
+            for b in &d.balances {
+                eprintln!(
+                    "[{tag}] {} ratio {:.2}",
+                    b.equation.name(),
+                    b.ratio_to_noise
+                );
+            }
+            if d.status != diagnose::Status::Complete {
+                failures.push(format!("[{tag}] {:?}: {}", d.status, d.verdict));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
+fn ten_minute_logs_of_complete_models_are_complete_steps() {
+    check_long_complete(Shape::Steps);
+}
+
+#[test]
+fn ten_minute_logs_of_complete_models_are_complete_square() {
+    check_long_complete(Shape::Square);
+}
+
+#[test]
+fn ten_minute_logs_of_complete_models_are_complete_chirp() {
+    check_long_complete(Shape::Chirp);
+}
+
+/// One hour of closed-loop square waves (the case, six times longer): complete.
+#[test]
+fn hour_long_log_of_a_complete_model_is_complete() {
+    let plant = truth(&[]);
+    let log = long_log(&plant, Shape::Square, true, 3600.0, 7);
+    let d = diagnose::diagnose(&[log], &plant, &DiagnoseOptions::default()).unwrap();
+    print_ranking("hour", &d, 3);
+    assert_eq!(d.status, diagnose::Status::Complete, "{}", d.verdict);
+    assert!(d.winner().is_none());
+}
+
+/// Logs of u and angle only (no current sensor): identify estimates J_eq, B_eq and tau_sf from
+/// the u-driven balance within 10 % and widens their intervals by the drive-constant tolerance;
+/// diagnose names a hidden imbalance in such logs; identify, compare and diagnose run end to end
+/// on a CSV without a current column.
+#[test]
+fn logs_without_current_are_identified_and_diagnosed() {
+    let strip = |logs: Vec<Record>| -> Vec<Record> {
+        logs.into_iter()
+            .map(|r| Record { i_a_a: None, ..r })
+            .collect()
+    };
+    let plant = truth(&[]);
+    let no_i = strip(logs(&plant, 51));
+    let est =
+        fit::identify_without_current(&no_i, &PlantParams::TABLE2, &FitOptions::default()).unwrap();
+    for (key, want) in [("j_eq", 7.0e-7), ("b_eq", 1.0e-6), ("tau_sf", 0.01)] {
+        let e = est.iter().find(|e| e.key == key).unwrap();
+        eprintln!(
+            "{key}: {:.4e} (true {want:.4e}) +/- {:.2e} -> {:.2e}",
+            e.value, e.std_err, e.std_err_total
+        );
+        assert!(e.std_err_total >= e.std_err, "{key}: interval narrowed");
+        if key != "b_eq" {
+            assert!(
+                (e.value / want - 1.0).abs() < 0.10,
+                "{key}: {} vs {want}",
+                e.value
+            );
+        } else {
+            // B_eq is a small difference of large terms (B_eq + k_t k_e / R_eq): within 10 % of
+            // the total viscous damping the u-driven balance sees, and inside its interval.
+            let p = PlantParams::TABLE2;
+            let total = want + p.k_t * p.k_e / p.r_eq();
+            assert!((e.value - want).abs() < 0.10 * total, "b_eq {}", e.value);
+        }
+    }
+    // A hidden imbalance is named in logs without current.
+    let hidden = Effect::parse("imbalance:amplitude=0.01,phase=0.5").unwrap();
+    let with_imb = strip(logs(&truth(&[hidden]), 52));
+    let est =
+        fit::identify_without_current(&with_imb[..1], &PlantParams::TABLE2, &FitOptions::default())
+            .unwrap();
+    let get = |k: &str| est.iter().find(|e| e.key == k).map(|e| e.value);
+    let model = Plant::from_params(PlantParams {
+        j_eq: get("j_eq"),
+        b_eq: get("b_eq").map(|b| b.max(0.0)),
+        tau_sf: get("tau_sf"),
+        ..PlantParams::TABLE2
+    })
+    .unwrap();
+    let d = diagnose::diagnose(&with_imb, &model, &DiagnoseOptions::default()).unwrap();
+    print_ranking("no current, imbalance", &d, 3);
+    let w = d
+        .winner()
+        .unwrap_or_else(|| panic!("nothing named: {}", d.verdict));
+    assert_eq!(w.effect, EffectKind::Imbalance, "{}", d.verdict);
+    assert_eq!(d.status, diagnose::Status::Missing);
+
+    // End to end through the commands, on a CSV without a current column.
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("no_current.csv");
+    let r = &no_i[1];
+    let mut text = String::from("time_s,u_V,theta_l_rad\n");
+    for k in 0..r.len() {
+        text.push_str(&format!(
+            "{:.6},{:.6},{:.10}\n",
+            r.time_s[k],
+            r.u_v.as_ref().unwrap()[k],
+            r.theta_l_rad.as_ref().unwrap()[k]
+        ));
+    }
+    std::fs::write(&csv, text).unwrap();
+    let model = dir.path().join("model.toml");
+    let (ok, out, err) = servo_e2e::servo(&[
+        "identify",
+        csv.to_str().unwrap(),
+        "-o",
+        model.to_str().unwrap(),
+    ]);
+    assert!(ok, "identify failed: {err}");
+    assert!(out.contains("no log records the armature current"), "{out}");
+    assert!(out.contains("wider"), "{out}");
+    let (ok, out, err) = servo_e2e::servo(&[
+        "compare",
+        csv.to_str().unwrap(),
+        "--model",
+        model.to_str().unwrap(),
+    ]);
+    assert!(ok, "compare failed: {err}\n{out}");
+    let (ok, out, err) = servo_e2e::servo(&[
+        "diagnose",
+        csv.to_str().unwrap(),
+        "--model",
+        model.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(ok, "diagnose failed: {err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(v["status"].is_string(), "{out}");
+}
+
+/// Three hidden effects at once (Stribeck + imbalance + delay): the loop adds all three, one at a
+/// time, and their main parameters come out within 25 %. (Stribeck + backlash + delay does not
+/// pass yet: after the delay, neither Stribeck nor backlash clears the information criterion on
+/// these short logs, and the verdict says "unexplained".)
+#[test]
+fn three_hidden_effects_are_found_with_their_parameters() {
+    let specs = [
+        "stribeck:tau_s=0.02,omega_s=0.5",
+        "imbalance:amplitude=0.01,phase=0.5",
+        "delay:delay=0.003",
+    ];
+    let hidden: Vec<Effect> = specs.iter().map(|s| Effect::parse(s).unwrap()).collect();
+    let plant = truth(&hidden);
+    let logs = logs(&plant, 23);
+    let model = identified(&logs);
+    let (ladder, diags) =
+        diagnose::diagnose_loop(&logs, &model, &DiagnoseOptions::default(), 4).unwrap();
+    for d in &diags {
+        eprintln!("[three] {:?}: {}", d.status, d.verdict);
+        print_ranking("three", d, 3);
+    }
+    let added: Vec<EffectKind> = ladder.iter().filter_map(|r| r.added).collect();
+    assert!(
+        hidden.iter().all(|h| added.contains(&h.kind)),
+        "added {added:?}"
+    );
+    let last = &ladder.last().unwrap().plant;
+    for h in &hidden {
+        for key in main_param(h.kind) {
+            let got = last.effects.value(h.kind, key).unwrap();
+            let want = h.get(key).unwrap();
+            eprintln!("[three] {} {key}: {got} (true {want})", h.kind);
+            assert!(
+                (got / want - 1.0).abs() < 0.25,
+                "{} {key}: fitted {got}, true {want}",
+                h.kind
+            );
+        }
     }
 }

@@ -9,7 +9,9 @@ use crate::model_file::ModelFile;
 use crate::plot::{line_chart_svg, Chart, Series};
 use anyhow::{anyhow, Context};
 use serde_json::{json, Value};
-use servo_core::diagnose::{self, regimes::Regime, Candidate, DiagnoseOptions, Diagnosis, Rung};
+use servo_core::diagnose::{
+    self, regimes::Regime, BalanceReport, Candidate, DiagnoseOptions, Diagnosis, Rung, Thresholds,
+};
 use servo_core::effects::EffectKind;
 use servo_core::fit::{Dataset, Equation};
 use servo_core::record::Record;
@@ -94,6 +96,10 @@ impl Diagnose {
         let last = diags.last().unwrap_or(first);
         if self.json {
             let mut v = json!({
+                "status": last.status.name(),
+                "unexplained": last.unexplained.iter().map(balance_json).collect::<Vec<_>>(),
+                "balances": last.balances.iter().map(balance_json).collect::<Vec<_>>(),
+                "thresholds": thresholds_json(&opts.thresholds),
                 "ranking": last.ranking.iter().map(candidate_json).collect::<Vec<_>>(),
                 "verdict": last.verdict,
                 "base": base_json(first),
@@ -156,7 +162,61 @@ fn candidate_json(c: &Candidate) -> Value {
         "params": params,
         "evidence": c.evidence,
         "experiment": c.experiment,
+        "noise_ratio": f(c.noise_ratio),
+        "structured_share": f(c.structured_share),
+        "checks": c.checks.iter().map(|k| json!({ "check": k.name, "passed": k.passed, "detail": k.detail })).collect::<Vec<_>>(),
     })
+}
+
+fn balance_json(b: &BalanceReport) -> Value {
+    json!({
+        "balance": b.balance.name(),
+        "equation": b.equation.name(),
+        "unit": b.equation.unit(),
+        "rms": f(b.rms),
+        "noise_floor": f(b.floor),
+        "ratio_to_noise": f(b.ratio_to_noise),
+        "above_noise": b.above_noise,
+        "signatures": b.signatures.iter().map(|s| json!({
+            "kind": s.kind,
+            "description": s.description,
+            "share_of_heldout_residual": f(s.share),
+            "explained_rms": f(s.explained_rms),
+        })).collect::<Vec<_>>(),
+        "experiment": b.experiment,
+    })
+}
+
+fn thresholds_json(t: &Thresholds) -> Value {
+    json!({
+        "min_noise_ratio": f(t.min_noise_ratio),
+        "min_structured_share": f(t.min_structured_share),
+        "unexplained_ratio": f(t.unexplained_ratio),
+        "min_signature_share": f(t.min_signature_share),
+        "consistency_tol": f(t.consistency_tol),
+        "electrical_block_ratio": f(t.electrical_block_ratio),
+    })
+}
+
+/// The headline of the text and HTML outputs: the final status and, after `--auto`, what was
+/// added on the way.
+fn headline(ladder: &[Rung], last: &Diagnosis) -> String {
+    let added: Vec<String> = ladder
+        .iter()
+        .filter_map(|r| r.added.map(|k| k.name().to_string()))
+        .collect();
+    let status = match last.status {
+        servo_core::diagnose::Status::Complete => "complete: nothing material is left",
+        servo_core::diagnose::Status::Missing => "missing: a catalogue effect is still missing",
+        servo_core::diagnose::Status::Unexplained => {
+            "unexplained: structured error above the noise floor that no catalogue effect explains"
+        }
+    };
+    if added.is_empty() {
+        format!("Status: {status}")
+    } else {
+        format!("Added {}; status after them: {status}", added.join(", "))
+    }
 }
 
 fn base_json(d: &Diagnosis) -> Value {
@@ -206,6 +266,21 @@ fn text_report(first: &Diagnosis, ladder: &[Rung], diags: &[Diagnosis], auto: bo
     let mut s = String::new();
     let _ = writeln!(s, "Model residual (base parameters refitted):");
     s.push_str(&where_it_fails(first));
+    for b in &first.balances {
+        let _ = writeln!(
+            s,
+            "  {}: noise floor {:.3e} {}, residual {:.1} x the floor{}",
+            b.equation.name(),
+            b.floor,
+            b.equation.unit(),
+            b.ratio_to_noise,
+            b.signatures.first().map_or(String::new(), |g| format!(
+                "; strongest shape: {} ({:.0} % of the held-out residual)",
+                g.description,
+                100.0 * g.share
+            ))
+        );
+    }
     for (step, d) in diags.iter().enumerate() {
         if auto {
             let _ = writeln!(s, "\nStep {}:", step + 1);
@@ -242,6 +317,9 @@ fn text_report(first: &Diagnosis, ladder: &[Rung], diags: &[Diagnosis], auto: bo
     if auto {
         let _ = writeln!(s, "\nError ladder:");
         s.push_str(&ladder_text(ladder));
+    }
+    if let Some(last) = diags.last() {
+        let _ = writeln!(s, "\n{}", headline(ladder, last));
     }
     s
 }
@@ -397,7 +475,13 @@ fn html_report(
         "<p>Model effects: <code>{}</code></p>",
         esc(&effects.join(" "))
     );
-    let _ = write!(h, "<h2>Verdict</h2><p><b>{}</b></p>", esc(&last.verdict));
+    let _ = write!(
+        h,
+        "<h2>Verdict</h2><p class=\"status-{}\"><b>{}</b></p><p>{}</p>",
+        last.status.name(),
+        esc(&headline(ladder, last)),
+        esc(&last.verdict)
+    );
     let _ = write!(
         h,
         "<h2>The fit and where it fails</h2><pre>{}</pre>",

@@ -2,7 +2,8 @@
 //! undecided effects.
 
 use super::regimes::{self, Regime};
-use super::Candidate;
+use super::structure::{self, BalanceReport, Thresholds};
+use super::{Candidate, Status};
 use crate::effects::EffectKind;
 use crate::fit::dataset::{Dataset, RecData};
 use crate::fit::model::{EqSolution, Equation};
@@ -269,8 +270,70 @@ pub fn describe(
     s
 }
 
+/// Appends to a candidate's evidence the first check it failed.
+pub fn append_failed(c: &mut Candidate) {
+    if let Some(k) = c.failed_check() {
+        let add = alloc::format!(" Not accepted: check \"{}\" failed: {}.", k.name, k.detail);
+        c.evidence.push_str(&add);
+    }
+}
+
+/// The thresholds in one sentence (stated in every verdict).
+pub fn thresholds_text(th: &Thresholds) -> String {
+    alloc::format!(
+        "Thresholds: an effect must pass the information criterion, the held-out residual and simulation drops, explain at least {:.1} times its balance's noise floor (RMS) and {:.0} % of its structured error, have physically meaningful parameters and agree within {:.0} % across halves of the data; no torque is named while the electrical balance is {:.0} times its noise floor; a balance is incomplete when its residual exceeds {:.1} times its noise floor; a shape is named when it explains {:.0} % of the held-out residual.",
+        th.min_noise_ratio,
+        100.0 * th.min_structured_share,
+        100.0 * th.consistency_tol,
+        th.electrical_block_ratio,
+        th.unexplained_ratio,
+        100.0 * th.min_signature_share
+    )
+}
+
 /// The verdict paragraph.
-pub fn verdict(ranking: &[Candidate]) -> String {
+pub fn verdict(
+    status: Status,
+    ranking: &[Candidate],
+    unexplained: &[BalanceReport],
+    th: &Thresholds,
+) -> String {
+    let mut s = match status {
+        Status::Missing => verdict_missing(ranking),
+        Status::Complete => verdict_complete(ranking),
+        Status::Unexplained => {
+            let mut s = String::from(
+                "The model is incomplete, and no catalogue effect explains what is missing (status: unexplained): ",
+            );
+            for (i, b) in unexplained.iter().enumerate() {
+                if i > 0 {
+                    s.push_str(" Also, ");
+                }
+                s.push_str(&structure::describe(b));
+            }
+            let rejected: Vec<String> = ranking
+                .iter()
+                .filter_map(|c| {
+                    c.failed_check()
+                        .map(|k| alloc::format!("{} ({})", c.effect, k.name))
+                })
+                .collect();
+            if !rejected.is_empty() {
+                let _ = write!(
+                    s,
+                    " Catalogue effects that fit some of it but fail a physical check: {}.",
+                    rejected.join(", ")
+                );
+            }
+            s
+        }
+    };
+    s.push(' ');
+    s.push_str(&thresholds_text(th));
+    s
+}
+
+fn verdict_missing(ranking: &[Candidate]) -> String {
     let sig: Vec<&Candidate> = ranking.iter().filter(|c| c.significant).collect();
     match sig.first() {
         Some(w) => {
@@ -291,23 +354,25 @@ pub fn verdict(ranking: &[Candidate]) -> String {
             }
             s
         }
-        None => {
-            let mut s = String::from(
-                "No missing effect is significant: the model explains these logs as well as any catalogue effect added to it, judged on held-out data.",
-            );
-            let unres: Vec<&str> = ranking
-                .iter()
-                .filter(|c| !c.resolvable)
-                .map(|c| c.effect.name())
-                .collect();
-            if !unres.is_empty() {
-                let _ = write!(
-                    s,
-                    " Below the noise floor and not resolvable with this data: {}.",
-                    unres.join(", ")
-                );
-            }
-            s
-        }
+        None => String::new(),
     }
+}
+
+fn verdict_complete(ranking: &[Candidate]) -> String {
+    let mut s = String::from(
+        "No missing effect is significant and nothing material is left (status: complete): every balance's residual is near its noise floor, and no catalogue effect added to the model explains a material part of it, judged on held-out data.",
+    );
+    let unres: Vec<&str> = ranking
+        .iter()
+        .filter(|c| !c.resolvable)
+        .map(|c| c.effect.name())
+        .collect();
+    if !unres.is_empty() {
+        let _ = write!(
+            s,
+            " Below the noise floor and not resolvable with this data: {}.",
+            unres.join(", ")
+        );
+    }
+    s
 }

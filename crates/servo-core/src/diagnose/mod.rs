@@ -18,8 +18,12 @@
 //! fitted torque is below the current-noise torque is reported as not resolvable with this data,
 //! with the experiment that would resolve it.
 
+pub mod checks;
 pub mod evidence;
 pub mod regimes;
+pub mod structure;
+
+pub use structure::{BalanceKind, BalanceReport, Signature, Thresholds};
 
 use crate::effects::EffectKind;
 use crate::fit::model::Equation;
@@ -49,6 +53,8 @@ pub struct DiagnoseOptions {
     pub candidates: Vec<EffectKind>,
     /// Run candidates on two threads (std builds).
     pub parallel: bool,
+    /// Practical-significance and "unexplained" thresholds.
+    pub thresholds: Thresholds,
 }
 
 impl Default for DiagnoseOptions {
@@ -64,6 +70,7 @@ impl Default for DiagnoseOptions {
             min_backlash_oe_drop: 0.08,
             candidates: Vec::new(),
             parallel: true,
+            thresholds: Thresholds::default(),
         }
     }
 }
@@ -92,6 +99,41 @@ pub struct Candidate {
     pub evidence: String,
     /// For non-significant candidates: the experiment that would resolve it.
     pub experiment: Option<String>,
+    /// RMS of what it explains in its equation over the balance's noise floor.
+    pub noise_ratio: f64,
+    /// Share of the balance's structured error (squared residual above the noise floor) it
+    /// explains.
+    pub structured_share: f64,
+    /// Practical-significance and physical-consistency checks, in the order applied.
+    pub checks: Vec<checks::Check>,
+}
+
+impl Candidate {
+    /// The first check that failed.
+    pub fn failed_check(&self) -> Option<&checks::Check> {
+        self.checks.iter().find(|c| !c.passed)
+    }
+}
+
+/// What the diagnosis concludes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Status {
+    /// Nothing material is left in any balance.
+    Complete,
+    /// A catalogue effect passes every check: it is `ranking[0]`.
+    Missing,
+    /// Structured error above the noise floor that no catalogue effect explains.
+    Unexplained,
+}
+
+impl Status {
+    pub const fn name(self) -> &'static str {
+        match self {
+            Status::Complete => "complete",
+            Status::Missing => "missing",
+            Status::Unexplained => "unexplained",
+        }
+    }
 }
 
 /// Residual summary of the model being diagnosed.
@@ -116,6 +158,12 @@ pub struct Diagnosis {
     /// One paragraph for the user.
     pub verdict: String,
     pub base: BaseSummary,
+    /// complete / missing / unexplained.
+    pub status: Status,
+    /// Every balance's residual of the base model: noise floor, ratio and signatures.
+    pub balances: Vec<BalanceReport>,
+    /// The balances left unexplained (status `Unexplained`; empty otherwise).
+    pub unexplained: Vec<BalanceReport>,
 }
 
 impl Diagnosis {
@@ -168,6 +216,35 @@ pub fn diagnose_dataset(
     };
     let base_oe = reference.oe_holdout;
     let noise = current_noise(ds);
+    let th = opts.thresholds;
+    // Every balance of the base model: its noise floor and what structure is left.
+    let floors: Vec<(Equation, f64)> = core::iter::once(&base.mech)
+        .chain(base.elec.as_ref())
+        .map(|sol| {
+            (
+                sol.equation,
+                structure::noise_floor(ds, sol.equation, &base.plant, noise),
+            )
+        })
+        .collect();
+    let floor_of = |eq: Equation| {
+        floors
+            .iter()
+            .find(|(e, _)| *e == eq)
+            .map_or(0.0, |(_, f)| *f)
+    };
+    let balances: Vec<BalanceReport> = core::iter::once(&base.mech)
+        .chain(base.elec.as_ref())
+        .map(|sol| structure::analyse(ds, sol, floor_of(sol.equation), &th, ds.gear_ratio))
+        .collect();
+    // The electrical balance holds no mechanical effect: when it is itself unexplained, the
+    // current or the speed measurement is inconsistent and the torque balance (which uses
+    // both) cannot be trusted to name a torque.
+    let electrical_broken = balances.iter().find(|b| {
+        b.equation == Equation::Electrical
+            && b.above_noise
+            && b.ratio_to_noise >= th.electrical_block_ratio
+    });
     let mut kinds = candidate_kinds(model, opts);
     if !ds.has_input {
         // Without a logged input the data say nothing of the drive (saturation, dead zone,
@@ -178,8 +255,98 @@ pub fn diagnose_dataset(
     let mut ranking = Vec::new();
     for (kind, res) in kinds.iter().zip(results) {
         match res {
-            Ok(solved) => ranking.push(judge(ds, &base, &reference, noise, *kind, &solved, opts)),
+            Ok(solved) => {
+                let eq = fit::model::Config::equation_of(*kind, ds.has_current);
+                let bal = balances.iter().find(|b| b.equation == eq);
+                let mut c = judge(
+                    ds,
+                    &base,
+                    &reference,
+                    noise,
+                    floor_of(eq),
+                    bal.map_or(0.0, |b| b.rms),
+                    *kind,
+                    &solved,
+                    opts,
+                );
+                // A mimic leaves the structure it was meant to explain: the shape that carried
+                // the balance's residual is still there, above the noise floor, after adding it.
+                if c.significant && !matches!(*kind, EffectKind::Backlash | EffectKind::Coulomb) {
+                    if let (Some(b), Some(sol)) = (bal, solved.equation(eq)) {
+                        if let Some(top) = b.signatures.first().filter(|_| b.above_noise) {
+                            let after =
+                                structure::analyse(ds, sol, floor_of(eq), &th, ds.gear_ratio);
+                            let left = after.signatures.iter().find(|s| s.kind == top.kind);
+                            let still = after.above_noise
+                                && left.is_some_and(|s| {
+                                    s.explained_rms >= th.min_noise_ratio * floor_of(eq)
+                                });
+                            c.checks.push(checks::Check {
+                                name: "explains the structure it fits",
+                                passed: !still,
+                                detail: alloc::format!(
+                                    "before it, the {} residual was {:.1} times its noise floor, carried by a shape that {}; with it, {:.1} times, and that shape still carries {:.0} % of it",
+                                    eq.name(),
+                                    b.ratio_to_noise,
+                                    top.description,
+                                    after.ratio_to_noise,
+                                    100.0 * left.map_or(0.0, |s| s.share)
+                                ),
+                            });
+                            if still {
+                                c.significant = false;
+                                c.experiment = Some(String::from(evidence::experiment(c.effect)));
+                                evidence::append_failed(&mut c);
+                            }
+                        }
+                    }
+                }
+                ranking.push(c);
+            }
             Err(e) => ranking.push(failed(&base, *kind, &e)),
+        }
+    }
+    // A drive-side effect that explains most of the electrical residual (an input delay, a dead
+    // zone) accounts for it: the measurements are then not suspect.
+    let drive_explains = ranking
+        .iter()
+        .any(|c| c.equation == Equation::Electrical && c.error_reduction_pct >= 50.0);
+    let electrical_broken = electrical_broken.filter(|_| !drive_explains);
+    for c in ranking.iter_mut() {
+        if let (true, true, Some(e)) = (
+            c.significant,
+            c.effect.is_mechanical() && c.effect != EffectKind::Backlash,
+            electrical_broken,
+        ) {
+            c.checks.push(checks::Check {
+                name: "electrical balance consistent",
+                passed: false,
+                detail: alloc::format!(
+                    "the electrical balance, which holds no mechanical effect, is itself {:.1} times its noise floor and no drive-side effect explains it: the current or speed measurement is inconsistent, so no torque can be named from the torque balance",
+                    e.ratio_to_noise
+                ),
+            });
+            c.significant = false;
+            c.experiment = Some(String::from(evidence::experiment(c.effect)));
+            evidence::append_failed(c);
+        }
+    }
+    // Physical consistency of the candidates that pass every other check: their parameters
+    // must agree across independent parts of the data.
+    for c in ranking.iter_mut().filter(|c| c.significant) {
+        let cons = checks::consistency(ds, model, c, &th);
+        if cons.iter().any(|k| !k.passed) {
+            c.significant = false;
+        }
+        c.checks.extend(cons);
+        if c.significant && c.effect == EffectKind::Backlash {
+            if let Some(note) = checks::backlash_stiffness(ds, model, c) {
+                c.evidence.push_str(&note);
+            }
+        }
+        if !c.significant {
+            c.experiment = Some(String::from(evidence::experiment(c.effect)));
+            evidence::append_failed(c);
         }
     }
     ranking.sort_by(|a, b| {
@@ -218,7 +385,20 @@ pub fn diagnose_dataset(
         oe_cost_rad: base_oe,
         current_noise_a: noise,
     };
-    let mut verdict = evidence::verdict(&ranking);
+    let winner = ranking.first().filter(|c| c.significant).is_some();
+    let unexplained: Vec<BalanceReport> = if winner {
+        Vec::new()
+    } else {
+        balances.iter().filter(|b| b.above_noise).cloned().collect()
+    };
+    let status = if winner {
+        Status::Missing
+    } else if unexplained.is_empty() {
+        Status::Complete
+    } else {
+        Status::Unexplained
+    };
+    let mut verdict = evidence::verdict(status, &ranking, &unexplained, &th);
     if !ds.has_input {
         verdict.push_str(" No log records the input voltage u: judged on the torque balance alone (information criterion and held-out residual), without a simulation check; saturation, dead zone, delay and backlash were not tried.");
     }
@@ -226,6 +406,9 @@ pub fn diagnose_dataset(
         ranking,
         verdict,
         base: summary,
+        status,
+        balances,
+        unexplained,
     })
 }
 
@@ -330,11 +513,14 @@ struct Reference {
     oe_holdout: Option<f64>,
 }
 
+#[allow(clippy::too_many_arguments)]
 fn judge(
     ds: &Dataset,
     base: &Solved,
     reference: &Reference,
     noise_a: Option<f64>,
+    balance_floor: f64,
+    balance_rms: f64,
     kind: EffectKind,
     cand: &Solved,
     opts: &DiagnoseOptions,
@@ -403,7 +589,7 @@ fn judge(
     } else {
         opts.min_eq_drop
     };
-    let significant = bic_gain > opts.min_bic_gain && eq_drop >= min_drop && oe_ok;
+    let statistically = bic_gain > opts.min_bic_gain && eq_drop >= min_drop && oe_ok;
     // Detection floor: RMS of what the effect explains versus the sensor-noise torque/voltage.
     let explained: f64 = {
         let s: f64 = b
@@ -419,6 +605,55 @@ fn judge(
         _ => s * base.plant.params.k_t,
     });
     let resolvable = floor.is_none_or(|f| explained >= f);
+    // Practical significance: what it explains against the noise floor of its balance (sensor
+    // noise and quantisation through the equation's filter and derivatives), and against the
+    // structured error of that balance (the squared residual above the floor). Backlash, judged
+    // on the simulation, is held to its simulation drop.
+    let th = &opts.thresholds;
+    let noise_ratio = if balance_floor > 0.0 {
+        explained / balance_floor
+    } else {
+        f64::INFINITY
+    };
+    let structured_sq = (balance_rms * balance_rms - balance_floor * balance_floor).max(0.0);
+    let structured_share = if structured_sq > 0.0 {
+        (explained * explained / structured_sq).min(1.0)
+    } else {
+        0.0
+    };
+    let mut found: Vec<checks::Check> = Vec::new();
+    if statistically {
+        let unit = eq.unit();
+        if !backlash {
+            found.push(checks::Check {
+                name: "above the noise floor",
+                passed: noise_ratio >= th.min_noise_ratio,
+                detail: alloc::format!(
+                    "explains {explained:.2e} {unit} RMS, {noise_ratio:.2} times the {} noise floor {balance_floor:.2e} {unit} (needs {:.1})",
+                    eq.name(),
+                    th.min_noise_ratio
+                ),
+            });
+            found.push(checks::Check {
+                name: "material share of the structured error",
+                passed: structured_share >= th.min_structured_share,
+                detail: alloc::format!(
+                    "explains {:.0} % of the structured (above-noise) error of the {} (needs {:.0} %)",
+                    100.0 * structured_share,
+                    eq.name(),
+                    100.0 * th.min_structured_share
+                ),
+            });
+        }
+        found.extend(checks::constraints(
+            ds,
+            kind,
+            &params,
+            &cand.plant,
+            &base.plant,
+        ));
+    }
+    let significant = statistically && found.iter().all(|c| c.passed);
     let ev = evidence::describe(
         ds,
         kind,
@@ -431,9 +666,9 @@ fn judge(
         eq_drop,
         oe_drop,
         bic_gain,
-        significant,
+        statistically,
     );
-    Candidate {
+    let mut out = Candidate {
         effect: kind,
         significant,
         resolvable,
@@ -449,7 +684,14 @@ fn judge(
         } else {
             Some(String::from(evidence::experiment(kind)))
         },
+        noise_ratio,
+        structured_share,
+        checks: found,
+    };
+    if statistically && !significant {
+        evidence::append_failed(&mut out);
     }
+    out
 }
 
 fn failed(base: &Solved, kind: EffectKind, e: &FitError) -> Candidate {
@@ -465,6 +707,9 @@ fn failed(base: &Solved, kind: EffectKind, e: &FitError) -> Candidate {
         plant: base.plant,
         evidence: alloc::format!("could not be fitted to these logs ({e})"),
         experiment: Some(String::from(evidence::experiment(kind))),
+        noise_ratio: 0.0,
+        structured_share: 0.0,
+        checks: Vec::new(),
     }
 }
 

@@ -223,6 +223,100 @@ pub fn fit_model(
     ds.fit(base, effects)
 }
 
+/// Relative tolerance assumed for each of k_drv, R_a, k_e and k_t when the mechanical parameters
+/// are identified from u and the angle alone (datasheet-grade constants).
+pub const DRIVE_CONSTANT_TOLERANCE: f64 = 0.05;
+
+/// One mechanical parameter identified from the u-driven balance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UDrivenEstimate {
+    pub key: &'static str,
+    pub unit: &'static str,
+    pub value: f64,
+    /// Statistical standard error (least squares).
+    pub std_err: f64,
+    /// Standard error including the tolerance of the drive constants
+    /// ([`DRIVE_CONSTANT_TOLERANCE`] on each of k_drv, R_a, k_e, k_t, root-sum-square).
+    pub std_err_total: f64,
+}
+
+/// J_eq, B_eq and tau_sf from logs of u and angle alone (no current), through the u-driven
+/// balance k_drv k_t u / R_eq = J_eq dw/dt + (B_eq + k_t k_e / R_eq) w + tau_sf/N sign(w), with
+/// k_drv, R_eq, k_e and k_t taken from `params`. Without the current these constants cannot be
+/// checked: each is perturbed by [`DRIVE_CONSTANT_TOLERANCE`] and the shift of every estimate is
+/// added to its interval (B_eq, a small difference of large terms, widens most).
+pub fn identify_without_current(
+    records: &[Record],
+    params: &crate::params::PlantParams,
+    opts: &FitOptions,
+) -> Result<Vec<UDrivenEstimate>, FitError> {
+    let start = |p: crate::params::PlantParams| {
+        Plant::from_params(crate::params::PlantParams {
+            tau_sf: Some(p.tau_sf.unwrap_or(0.005)),
+            ..p
+        })
+        .map_err(|e| FitError::BadModel(alloc::format!("{e}")))
+    };
+    let strip: Vec<Record> = records
+        .iter()
+        .map(|r| Record {
+            i_a_a: None,
+            ..r.clone()
+        })
+        .collect();
+    let fit_with = |p: crate::params::PlantParams| -> Result<Vec<ParamEstimate>, FitError> {
+        let ds = Dataset::new(&strip, &p, opts)?;
+        Ok(ds.fit(&start(p)?, &[])?.params)
+    };
+    let nominal = fit_with(*params)?;
+    let keys = ["j_eq", "b_eq", "tau_sf"];
+    let mut shifts = [0.0f64; 3];
+    let tol = DRIVE_CONSTANT_TOLERANCE;
+    let perturbed = [
+        crate::params::PlantParams {
+            k_drv: params.k_drv * (1.0 + tol),
+            ..*params
+        },
+        crate::params::PlantParams {
+            r_a: params.r_a * (1.0 + tol),
+            ..*params
+        },
+        crate::params::PlantParams {
+            k_e: params.k_e * (1.0 + tol),
+            ..*params
+        },
+        crate::params::PlantParams {
+            k_t: params.k_t * (1.0 + tol),
+            ..*params
+        },
+    ];
+    for p in perturbed {
+        let est = fit_with(p)?;
+        for (j, key) in keys.iter().enumerate() {
+            let a = nominal.iter().find(|e| e.key == *key).map(|e| e.value);
+            let b = est.iter().find(|e| e.key == *key).map(|e| e.value);
+            if let (Some(a), Some(b)) = (a, b) {
+                shifts[j] += (b - a) * (b - a);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for (j, key) in keys.iter().enumerate() {
+        let Some(e) = nominal.iter().find(|e| e.key == *key) else {
+            continue;
+        };
+        let se = e.std_err.unwrap_or(0.0);
+        out.push(UDrivenEstimate {
+            key,
+            unit: e.unit,
+            value: e.value,
+            std_err: se,
+            std_err_total: math::sqrt(se * se + shifts[j]),
+        });
+    }
+    Ok(out)
+}
+
 /// Internal outcome of fitting one configuration.
 #[derive(Debug, Clone)]
 pub struct Solved {

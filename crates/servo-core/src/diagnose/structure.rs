@@ -1,0 +1,724 @@
+//! What is left in a balance, in physical terms: its noise floor, how far above it the residual
+//! sits, and which interpretable shape carries the structured part (speed, load or motor angle,
+//! time, current, voltage, an oscillation in time).
+//!
+//! A residual that sits well above the noise floor of its balance and that no catalogue effect
+//! explains is reported as *unexplained*, with these signatures: the user's first step towards
+//! the missing term. The shapes are fitted on the fit blocks and judged on the held-out blocks,
+//! so a shape is only named when it predicts the residual on data it was not fitted to.
+
+use crate::fit::dataset::{Dataset, RecData, Rows};
+use crate::fit::model::{EqSolution, Equation};
+use crate::math;
+use crate::plant::Plant;
+use crate::signal::derivative;
+use alloc::string::String;
+use alloc::vec::Vec;
+use core::fmt::Write;
+
+/// Thresholds of the practical-significance gates and of "unexplained" (stated in the output and
+/// the README).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Thresholds {
+    /// An effect must explain at least this multiple of its balance's noise floor (RMS).
+    pub min_noise_ratio: f64,
+    /// An effect must explain at least this share of the structured error (squared residual
+    /// above the noise floor) of its balance.
+    pub min_structured_share: f64,
+    /// A balance whose residual RMS exceeds this multiple of its noise floor is incomplete.
+    pub unexplained_ratio: f64,
+    /// A shape is named when it explains at least this share of the held-out residual's variance.
+    pub min_signature_share: f64,
+    /// Parameters fitted on independent halves of the data agree within this relative difference
+    /// (or 3 combined standard errors).
+    pub consistency_tol: f64,
+    /// No torque (mechanical effect other than backlash, which breaks the angle-speed relation
+    /// itself) is named while the electrical balance, which holds no torque, is this many times
+    /// its noise floor: the current or speed measurement is then inconsistent.
+    pub electrical_block_ratio: f64,
+}
+
+impl Default for Thresholds {
+    fn default() -> Self {
+        Thresholds {
+            min_noise_ratio: 1.0,
+            min_structured_share: 0.25,
+            unexplained_ratio: 2.0,
+            min_signature_share: 0.15,
+            consistency_tol: 0.35,
+            electrical_block_ratio: 6.0,
+        }
+    }
+}
+
+/// Where a residual lives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BalanceKind {
+    /// The torque balance (or the u-driven torque balance without current): a missing torque.
+    Torque,
+    /// The electrical balance: the drive, the winding or the current sensor.
+    Electrical,
+    /// The measured angle itself (the error follows the angle sensor, not a torque or voltage).
+    Sensor,
+}
+
+impl BalanceKind {
+    pub const fn name(self) -> &'static str {
+        match self {
+            BalanceKind::Torque => "torque",
+            BalanceKind::Electrical => "electrical",
+            BalanceKind::Sensor => "sensor",
+        }
+    }
+}
+
+/// One interpretable shape of a residual.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Signature {
+    /// Family: `speed`, `load_angle`, `motor_angle`, `time_drift`, `oscillation`, `current`,
+    /// `voltage`, `offset`.
+    pub kind: &'static str,
+    /// Plain-language description with the measured figure (shape, cycles per revolution, ...).
+    pub description: String,
+    /// Share of the held-out residual variance it explains (0..1).
+    pub share: f64,
+    /// RMS of what it explains on held-out rows [unit of the balance].
+    pub explained_rms: f64,
+}
+
+/// The residual of one balance after the model's base parameters are refitted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BalanceReport {
+    pub equation: Equation,
+    /// Where the structure points (torque, electrical, sensor).
+    pub balance: BalanceKind,
+    /// RMS of the residual [unit].
+    pub rms: f64,
+    /// Noise floor of the balance [unit]: sensor noise and encoder quantisation through the
+    /// filter and derivatives of the equation.
+    pub floor: f64,
+    /// rms / floor.
+    pub ratio_to_noise: f64,
+    /// Shapes that predict the held-out residual, strongest first.
+    pub signatures: Vec<Signature>,
+    /// Above the noise floor by [`Thresholds::unexplained_ratio`] (and structured).
+    pub above_noise: bool,
+    /// The experiment that would tell the candidates apart.
+    pub experiment: String,
+}
+
+/// Variance gains of the record's filter applied to white noise: (value, first derivative,
+/// second derivative) [1, 1/s^2, 1/s^4].
+fn filter_gains(r: &RecData) -> (f64, f64, f64) {
+    let m = 2001.min(r.u_v.len().max(3) | 1);
+    let mut imp = alloc::vec![0.0; m];
+    imp[m / 2] = 1.0;
+    let h = r.filt(&imp);
+    let h1 = derivative(&h, r.dt_s);
+    let h2 = derivative(&h1, r.dt_s);
+    let ss = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
+    (ss(&h), ss(&h1), ss(&h2))
+}
+
+/// Noise floor (RMS) of an equation's residual [unit]: white current noise `sigma_i_a` and the
+/// encoder quantisation of the angle (uniform, q / sqrt(12)), through the filter and the
+/// derivatives each term takes.
+pub fn noise_floor(ds: &Dataset, eq: Equation, plant: &Plant, sigma_i_a: Option<f64>) -> f64 {
+    let Some(r) = ds.recs.first() else {
+        return 0.0;
+    };
+    let (g0, g1, g2) = filter_gains(r);
+    let q = ds
+        .recs
+        .iter()
+        .filter_map(|r| crate::compare::quantum::encoder_quantum(&r.theta_m_rad))
+        .fold(0.0f64, f64::max);
+    let sq = q / math::sqrt(12.0);
+    let si = sigma_i_a.unwrap_or(0.0);
+    let p = &plant.params;
+    let (j, b) = (plant.params.j_eq(), plant.b_eq());
+    let v = match eq {
+        Equation::Torque => {
+            (p.k_t * si) * (p.k_t * si) * g0 + (j * sq) * (j * sq) * g2 + (b * sq) * (b * sq) * g1
+        }
+        Equation::Electrical => {
+            let k = p.k_drv.max(1e-12);
+            let a = p.r_eq() / k * si;
+            let e = p.k_e / k * sq;
+            let l = p.l_a / k * si;
+            a * a * g0 + e * e * g1 + l * l * g1
+        }
+        Equation::Combined => {
+            let bb = b + p.k_t * p.k_e / p.r_eq();
+            (j * sq) * (j * sq) * g2 + (bb * sq) * (bb * sq) * g1
+        }
+    };
+    math::sqrt(v)
+}
+
+/// Solves the small normal equations (A^T A) x = A^T r by Gaussian elimination with a ridge of
+/// 1e-12 relative; `None` when singular.
+fn small_lsq(cols: &[Vec<f64>], r: &[f64], sel: &[usize]) -> Option<Vec<f64>> {
+    let p = cols.len();
+    let mut a = alloc::vec![0.0; p * p];
+    let mut b = alloc::vec![0.0; p];
+    for &i in sel {
+        for u in 0..p {
+            let cu = cols[u][i];
+            b[u] += cu * r[i];
+            for v in u..p {
+                a[u * p + v] += cu * cols[v][i];
+            }
+        }
+    }
+    for u in 0..p {
+        for v in 0..u {
+            a[u * p + v] = a[v * p + u];
+        }
+    }
+    let scale = (0..p).map(|u| a[u * p + u]).fold(0.0f64, f64::max);
+    if scale.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+        return None;
+    }
+    for u in 0..p {
+        a[u * p + u] += 1e-12 * scale;
+    }
+    for c in 0..p {
+        let piv = (c..p).max_by(|&x, &y| a[x * p + c].abs().total_cmp(&a[y * p + c].abs()))?;
+        if a[piv * p + c].abs() < 1e-300 {
+            return None;
+        }
+        if piv != c {
+            for k in 0..p {
+                a.swap(c * p + k, piv * p + k);
+            }
+            b.swap(c, piv);
+        }
+        for rr in c + 1..p {
+            let f = a[rr * p + c] / a[c * p + c];
+            for k in c..p {
+                a[rr * p + k] -= f * a[c * p + k];
+            }
+            b[rr] -= f * b[c];
+        }
+    }
+    let mut x = alloc::vec![0.0; p];
+    for c in (0..p).rev() {
+        let mut s = b[c];
+        for k in c + 1..p {
+            s -= a[c * p + k] * x[k];
+        }
+        x[c] = s / a[c * p + c];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// Rows (subsampled) and the signals at them.
+struct View {
+    /// Index of each view row in the equation's rows.
+    row_idx: Vec<usize>,
+    r: Vec<f64>,
+    fit: Vec<usize>,
+    hold: Vec<usize>,
+    omega_m: Vec<f64>,
+    theta_m: Vec<f64>,
+    t_norm: Vec<f64>,
+    time_s: Vec<f64>,
+    i_a: Option<Vec<f64>>,
+    u: Vec<f64>,
+}
+
+const MAX_ROWS: usize = 12_000;
+
+fn view(ds: &Dataset, rows: &Rows, sol: &EqSolution) -> View {
+    let n = rows.len().min(sol.resid.len());
+    let stride = n.div_ceil(MAX_ROWS).max(1);
+    // With the load angle measured, the motor speed is unknown near reversals of the motor
+    // torque when the gears have play: the electrical balance is judged away from them.
+    let idx: Vec<usize> = (0..n)
+        .step_by(stride)
+        .filter(|&i| !rows.torque_reversal.get(i).copied().unwrap_or(false))
+        .collect();
+    let mut v = View {
+        row_idx: idx.clone(),
+        r: Vec::with_capacity(idx.len()),
+        fit: Vec::new(),
+        hold: Vec::new(),
+        omega_m: Vec::new(),
+        theta_m: Vec::new(),
+        t_norm: Vec::new(),
+        time_s: Vec::new(),
+        i_a: ds.has_current.then(Vec::new),
+        u: Vec::new(),
+    };
+    for (j, &i) in idx.iter().enumerate() {
+        let rec = &ds.recs[rows.rec[i]];
+        let k = rows.k[i];
+        v.r.push(sol.resid[i]);
+        if rows.fit[i] {
+            v.fit.push(j);
+        } else {
+            v.hold.push(j);
+        }
+        v.omega_m.push(rec.omega_f[k]);
+        v.theta_m.push(rec.theta_m_rad[k]);
+        let span = rec.time_s.last().copied().unwrap_or(1.0) - rec.time_s[0];
+        v.t_norm
+            .push(2.0 * (rec.time_s[k] - rec.time_s[0]) / span.max(1e-9) - 1.0);
+        v.time_s.push(rec.time_s[k] - rec.time_s[0]);
+        if let (Some(out), Some(i_f)) = (v.i_a.as_mut(), rec.i_f.as_ref()) {
+            out.push(i_f[k]);
+        }
+        v.u.push(rec.u_v[k]);
+    }
+    // Without held-out rows, judge on every other row.
+    if v.hold.is_empty() {
+        let all: Vec<usize> = (0..v.r.len()).collect();
+        v.fit = all.iter().copied().filter(|j| j % 2 == 0).collect();
+        v.hold = all.into_iter().filter(|j| j % 2 == 1).collect();
+    }
+    v
+}
+
+/// Held-out share of variance explained by `cols` (fitted on the fit rows, with an intercept),
+/// and the RMS it explains.
+fn held_out(v: &View, cols: &[Vec<f64>]) -> (f64, f64) {
+    let mut all: Vec<Vec<f64>> = Vec::with_capacity(cols.len() + 1);
+    all.push(alloc::vec![1.0; v.r.len()]);
+    all.extend(cols.iter().cloned());
+    let base = held_out_raw(v, &all[..1]);
+    let full = held_out_raw(v, &all);
+    // Share beyond the intercept alone (an offset is its own signature).
+    let ss: f64 = v.hold.iter().map(|&i| v.r[i] * v.r[i]).sum();
+    if ss.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+        return (0.0, 0.0);
+    }
+    let gain = (base - full).max(0.0);
+    (gain / ss, math::sqrt(gain / v.hold.len().max(1) as f64))
+}
+
+/// Held-out residual sum of squares after fitting `cols` on the fit rows.
+fn held_out_raw(v: &View, cols: &[Vec<f64>]) -> f64 {
+    let ss: f64 = v.hold.iter().map(|&i| v.r[i] * v.r[i]).sum();
+    let Some(x) = small_lsq(cols, &v.r, &v.fit) else {
+        return ss;
+    };
+    v.hold
+        .iter()
+        .map(|&i| {
+            let pred: f64 = cols.iter().zip(&x).map(|(c, b)| c[i] * b).sum();
+            let e = v.r[i] - pred;
+            e * e
+        })
+        .sum()
+}
+
+/// Periodogram peak of `r` (mean removed) against phase `x * c` over the grid of `c`; returns
+/// the c with the largest power.
+fn peak(r: &[f64], x: &[f64], grid: impl Iterator<Item = f64>) -> Option<f64> {
+    let n = r.len();
+    if n < 10 {
+        return None;
+    }
+    let m = r.iter().sum::<f64>() / n as f64;
+    let mut best: Option<(f64, f64)> = None;
+    let cs: Vec<f64> = grid.collect();
+    if cs.is_empty() {
+        return None;
+    }
+    let dc = if cs.len() > 1 { cs[1] - cs[0] } else { 0.0 };
+    // Phasors advanced by rotation along the uniform grid of c.
+    let mut re: Vec<f64> = x.iter().map(|&t| math::cos(cs[0] * t)).collect();
+    let mut im: Vec<f64> = x.iter().map(|&t| math::sin(cs[0] * t)).collect();
+    let rot_c: Vec<f64> = x.iter().map(|&t| math::cos(dc * t)).collect();
+    let rot_s: Vec<f64> = x.iter().map(|&t| math::sin(dc * t)).collect();
+    for (j, &c) in cs.iter().enumerate() {
+        if j > 0 {
+            for i in 0..n {
+                let (a, b) = (re[i], im[i]);
+                re[i] = a * rot_c[i] - b * rot_s[i];
+                im[i] = a * rot_s[i] + b * rot_c[i];
+            }
+        }
+        let (mut sc, mut ss) = (0.0, 0.0);
+        for i in 0..n {
+            let d = r[i] - m;
+            sc += d * re[i];
+            ss += d * im[i];
+        }
+        let p = sc * sc + ss * ss;
+        if best.is_none_or(|(_, bp)| p > bp) {
+            best = Some((c, p));
+        }
+    }
+    best.map(|(c, _)| c)
+}
+
+fn grid(lo: f64, hi: f64, step: f64) -> impl Iterator<Item = f64> {
+    let n = ((hi - lo) / step).max(0.0) as usize;
+    (0..=n).map(move |j| lo + step * j as f64)
+}
+
+fn pair(x: &[f64], c: f64, scale: Option<&[f64]>) -> Vec<Vec<f64>> {
+    let s: Vec<f64> = x
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| math::sin(c * t) * scale.map_or(1.0, |w| w[i]))
+        .collect();
+    let co: Vec<f64> = x
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| math::cos(c * t) * scale.map_or(1.0, |w| w[i]))
+        .collect();
+    alloc::vec![s, co]
+}
+
+/// sin and cos of `c_m` times the motor angle, modulated by `m(omega_m)`, through each record's
+/// filter, at the rows of the view.
+fn filtered_pair(
+    ds: &Dataset,
+    rows: &Rows,
+    v: &View,
+    c_m: f64,
+    m: fn(f64) -> f64,
+) -> Vec<Vec<f64>> {
+    let mut out = Vec::new();
+    for f in [math::sin as fn(f64) -> f64, math::cos] {
+        let col = ds.column(rows, |r: &RecData| {
+            r.theta_m_rad
+                .iter()
+                .zip(&r.omega_raw)
+                .map(|(t, w)| f(c_m * t) * m(*w))
+                .collect()
+        });
+        out.push(v.row_idx.iter().map(|&i| col[i]).collect());
+    }
+    out
+}
+
+fn pow_odd(x: &[f64], p: f64) -> Vec<f64> {
+    x.iter()
+        .map(|&w| math::sign(w) * math::pow(w.abs(), p))
+        .collect()
+}
+
+/// Analyses the residual of one balance of the base model.
+pub fn analyse(
+    ds: &Dataset,
+    sol: &EqSolution,
+    floor: f64,
+    th: &Thresholds,
+    gear_ratio: f64,
+) -> BalanceReport {
+    let rows = if sol.equation == Equation::Electrical {
+        &ds.elec_rows
+    } else {
+        &ds.mech_rows
+    };
+    let v = view(ds, rows, sol);
+    let rms = math::sqrt(v.r.iter().map(|x| x * x).sum::<f64>() / v.r.len().max(1) as f64);
+    let ratio = if floor > 0.0 {
+        rms / floor
+    } else {
+        f64::INFINITY
+    };
+    let unit = sol.equation.unit();
+    let mut sigs: Vec<Signature> = Vec::new();
+    let mut push = |kind: &'static str, description: String, (share, rms_x): (f64, f64)| {
+        sigs.push(Signature {
+            kind,
+            description,
+            share,
+            explained_rms: rms_x,
+        });
+    };
+    // Constant offset.
+    {
+        let ss: f64 = v.hold.iter().map(|&i| v.r[i] * v.r[i]).sum();
+        let m = v.fit.iter().map(|&i| v.r[i]).sum::<f64>() / v.fit.len().max(1) as f64;
+        let after: f64 = v.hold.iter().map(|&i| (v.r[i] - m) * (v.r[i] - m)).sum();
+        let gain = (ss - after).max(0.0);
+        let what = match sol.equation {
+            Equation::Electrical => "an offset of the current sensor or of the driver's voltage",
+            _ => "a constant torque (a steady load, or an offset of the current sensor)",
+        };
+        push(
+            "offset",
+            alloc::format!("a constant offset of {m:.3e} {unit}: {what}"),
+            (
+                if ss > 0.0 { gain / ss } else { 0.0 },
+                math::sqrt(gain / v.hold.len().max(1) as f64),
+            ),
+        );
+    }
+    // Speed: odd and even powers (linear and sign are in the base model).
+    {
+        let mut best: Option<(f64, String, (f64, f64))> = None;
+        for (p, odd) in [
+            (0.5, true),
+            (2.0, true),
+            (3.0, true),
+            (1.0, false),
+            (2.0, false),
+        ] {
+            let col: Vec<f64> = if odd {
+                pow_odd(&v.omega_m, p)
+            } else {
+                v.omega_m.iter().map(|w| math::pow(w.abs(), p)).collect()
+            };
+            let res = held_out(&v, &[col]);
+            let shape = match (p, odd) {
+                (0.5, true) => {
+                    "like sign(omega) sqrt|omega| (rises steeply at low speed, then flattens)"
+                }
+                (2.0, true) => "quadratically with speed, opposing the motion (omega |omega|)",
+                (3.0, true) => "with the cube of speed, opposing the motion (omega^3)",
+                (1.0, false) => "with |omega|, the same in both directions",
+                _ => "with omega^2, the same in both directions",
+            };
+            if best.as_ref().is_none_or(|b| res.0 > b.2 .0) {
+                best = Some((p, String::from(shape), res));
+            }
+        }
+        // The share is that of the odd and even powers together (a friction curve is rarely
+        // one power); the shape named is the single power that carries most of it.
+        let joint = held_out(
+            &v,
+            &[
+                pow_odd(&v.omega_m, 0.5),
+                pow_odd(&v.omega_m, 2.0),
+                pow_odd(&v.omega_m, 3.0),
+                v.omega_m.iter().map(|w| w.abs()).collect(),
+            ],
+        );
+        if let Some((_, shape, res)) = best {
+            let res = if joint.0 > res.0 { joint } else { res };
+            push(
+                "speed",
+                alloc::format!("grows {shape} beyond the linear viscous and Coulomb terms"),
+                res,
+            );
+        }
+    }
+    // Periodic in angle (load-angle cycles per load revolution; motor harmonics = c / N), with
+    // an amplitude that is constant (a torque ripple), grows with speed (the derivative of an
+    // angle error), with speed squared (its second derivative), or reverses with the direction
+    // of motion (a friction that varies with position). Each modulation gets its own scan; the
+    // regressors at the peak go through the record's filter, as the residual did.
+    {
+        let n = gear_ratio.max(1.0);
+        type Modulation = (&'static str, fn(f64) -> f64);
+        let mods: [Modulation; 4] = [
+            ("with an amplitude independent of speed", |_| 1.0),
+            ("with an amplitude growing in proportion to speed", |w| w),
+            ("with an amplitude growing like speed^2", |w| w * w),
+            (
+                "reversing with the direction of motion (a friction that varies with position)",
+                math::sign,
+            ),
+        ];
+        let scan_idx: Vec<usize> = v
+            .fit
+            .iter()
+            .copied()
+            .step_by(v.fit.len().div_ceil(4000).max(1))
+            .collect();
+        let fit_x: Vec<f64> = scan_idx.iter().map(|&i| v.theta_m[i] / n).collect();
+        let mut best: Option<(f64, usize, (f64, f64))> = None;
+        for (mi, (_, m)) in mods.iter().enumerate() {
+            let w_max = v
+                .omega_m
+                .iter()
+                .fold(0.0f64, |a, w| a.max(w.abs()))
+                .max(1e-9);
+            let fit_r: Vec<f64> = scan_idx
+                .iter()
+                .map(|&i| v.r[i] * m(v.omega_m[i] / w_max))
+                .collect();
+            let Some(c) = peak(&fit_r, &fit_x, grid(0.5, n * 45.0, 0.1)) else {
+                continue;
+            };
+            let cols = filtered_pair(ds, rows, &v, c / n, *m);
+            let res = held_out(&v, &cols);
+            if best.as_ref().is_none_or(|b| res.0 > b.2 .0) {
+                best = Some((c, mi, res));
+            }
+        }
+        if let Some((c, mi, res)) = best {
+            let cm = c / n;
+            let near_int = |x: f64| (x - math::round(x)).abs() < 0.06 && math::round(x) >= 1.0;
+            let which = if near_int(cm) {
+                alloc::format!(
+                    "{c:.1} cycles per load revolution = {cm:.2} per motor revolution (a motor-angle harmonic)"
+                )
+            } else if near_int(c) {
+                alloc::format!(
+                    "{c:.1} cycles per load revolution (a load-angle harmonic; {cm:.2} per motor revolution)"
+                )
+            } else {
+                alloc::format!(
+                    "{c:.2} cycles per load revolution = {cm:.3} per motor revolution (no harmonic of either shaft)"
+                )
+            };
+            let kind = if near_int(cm) {
+                "motor_angle"
+            } else {
+                "load_angle"
+            };
+            push(
+                kind,
+                alloc::format!("periodic in angle at {which}, {}", mods[mi].0),
+                res,
+            );
+        }
+    }
+    // Oscillation in time (a resonance or a ripple at a fixed frequency).
+    {
+        let fit_r: Vec<f64> = v.fit.iter().map(|&i| v.r[i]).collect();
+        let fit_t: Vec<f64> = v.fit.iter().map(|&i| v.time_s[i]).collect();
+        let tau = core::f64::consts::TAU;
+        let f_max = (0.9 * ds.opts.filter_hz).max(1.0);
+        if let Some(w) = peak(&fit_r, &fit_t, grid(tau * 0.5, tau * f_max, tau * 0.02)) {
+            let res = held_out(&v, &pair(&v.time_s, w, None));
+            push(
+                "oscillation",
+                alloc::format!("an oscillation at {:.2} Hz in time", w / tau),
+                res,
+            );
+        }
+    }
+    // Drift with time over each log.
+    {
+        let p2: Vec<f64> = v.t_norm.iter().map(|t| 1.5 * t * t - 0.5).collect();
+        let res = held_out(&v, &[v.t_norm.clone(), p2]);
+        push(
+            "time_drift",
+            String::from("drifts with time over the log (a temperature-dependent resistance or friction, a drifting sensor)"),
+            res,
+        );
+    }
+    // Current and voltage.
+    if let Some(i) = &v.i_a {
+        let sq: Vec<f64> = pow_odd(i, 2.0);
+        let sg: Vec<f64> = i.iter().map(|x| math::sign(*x)).collect();
+        let (res, what) = if sol.equation == Equation::Electrical {
+            let a = held_out(&v, core::slice::from_ref(&sq));
+            let b = held_out(&v, &[sg]);
+            if b.0 > a.0 {
+                (
+                    b,
+                    "a step with the sign of the current (a brush or switch voltage drop)",
+                )
+            } else {
+                (a, "grows faster than linearly with the current (a current-dependent resistance or sensor gain)")
+            }
+        } else {
+            (
+                held_out(&v, &[sq]),
+                "grows faster than linearly with the current (a torque constant that falls with current, or a current-sensor nonlinearity)",
+            )
+        };
+        push("current", String::from(what), res);
+    }
+    if ds.has_input {
+        let u3 = pow_odd(&v.u, 3.0);
+        let su: Vec<f64> = v.u.iter().map(|x| math::sign(*x)).collect();
+        let a = held_out(&v, &[u3]);
+        let b = held_out(&v, &[su]);
+        let (res, what) = if b.0 > a.0 {
+            (
+                b,
+                "a step with the sign of the command u (a driver offset or dead band)",
+            )
+        } else {
+            (
+                a,
+                "grows with the cube of the command u (a nonlinear driver gain)",
+            )
+        };
+        push("voltage", String::from(what), res);
+    }
+    sigs.retain(|s| s.share >= th.min_signature_share && s.explained_rms > 0.0);
+    sigs.sort_by(|a, b| b.share.total_cmp(&a.share));
+    let structured = !sigs.is_empty() || ratio >= 2.0 * th.unexplained_ratio;
+    let above_noise = ratio >= th.unexplained_ratio && structured;
+    // Where it lives: an error whose angle-periodic part grows with speed in the electrical
+    // balance (k_e times an angle error's derivative), or with speed^2 in the torque balance
+    // (J times its second derivative), follows the angle sensor.
+    let sensor = sigs.first().is_some_and(|s| {
+        (s.kind == "motor_angle" || s.kind == "load_angle")
+            && ((sol.equation == Equation::Electrical
+                && s.description.contains("proportion to speed"))
+                || (sol.equation != Equation::Electrical && s.description.contains("speed^2")))
+    });
+    let balance = if sensor {
+        BalanceKind::Sensor
+    } else if sol.equation == Equation::Electrical {
+        BalanceKind::Electrical
+    } else {
+        BalanceKind::Torque
+    };
+    let experiment = experiment_for(balance, sigs.first());
+    BalanceReport {
+        equation: sol.equation,
+        balance,
+        rms,
+        floor,
+        ratio_to_noise: ratio,
+        signatures: sigs,
+        above_noise,
+        experiment,
+    }
+}
+
+/// The experiment that would separate the candidate mechanisms behind a signature.
+fn experiment_for(balance: BalanceKind, top: Option<&Signature>) -> String {
+    let base = match top.map(|s| s.kind) {
+        Some("speed") => "run a friction staircase (constant speeds in both directions, slow to fast) and log the current: the torque at each speed gives the friction curve's shape directly",
+        Some("motor_angle") | Some("load_angle") => "turn the shaft at two different constant speeds over several revolutions: a torque ripple keeps its amplitude in N m, an angle-sensor error grows with speed in the torque and electrical balances, and a periodic error in both the load and motor encoders points at the sensor",
+        Some("oscillation") => "apply a chirp or PRBS of small amplitude and log motor and load angles: a compliant shaft shows a resonance at a fixed frequency between the two angles; a ripple at a fixed frequency stays when the speed changes",
+        Some("time_drift") => "repeat the same experiment cold and after 10 minutes of running, and log the winding temperature or resistance",
+        Some("current") => "apply slow current (torque) ramps at standstill and at constant speed and compare the current sensor with an external meter",
+        Some("voltage") => "apply slow voltage ramps through zero with the motor free and clamped, and measure the driver output with a meter",
+        Some("offset") => "log the current and the voltage with the motor at rest and powered off: a nonzero reading is a sensor offset; a constant torque that reverses with the mounting is a load",
+        _ => "log motor and load angles and the current over slow constant-speed and fast chirp segments to expose the structure",
+    };
+    match balance {
+        BalanceKind::Sensor => alloc::format!(
+            "{base}; to confirm a sensor error, compare the encoder with a second angle sensor or turn the shaft by hand through known angles"
+        ),
+        _ => String::from(base),
+    }
+}
+
+/// Text of a balance report (for the verdict).
+pub fn describe(b: &BalanceReport) -> String {
+    let mut s = alloc::format!(
+        "the {} balance ({}) leaves {:.2e} {} RMS, {:.1} times its noise floor ({:.2e} {})",
+        b.balance.name(),
+        b.equation.name(),
+        b.rms,
+        b.equation.unit(),
+        b.ratio_to_noise,
+        b.floor,
+        b.equation.unit()
+    );
+    if b.signatures.is_empty() {
+        s.push_str("; no simple shape of speed, angle, time, current or voltage carries it");
+    } else {
+        s.push_str("; it ");
+        for (i, sig) in b.signatures.iter().take(3).enumerate() {
+            if i > 0 {
+                s.push_str("; also ");
+            }
+            let _ = write!(
+                s,
+                "{} ({:.0} % of the held-out residual)",
+                sig.description,
+                100.0 * sig.share
+            );
+        }
+    }
+    let _ = write!(s, ". To tell the candidates apart: {}.", b.experiment);
+    s
+}
