@@ -152,12 +152,10 @@ fn chirp_estimates_match_the_true_plant_and_the_true_discrete_loop_margins() {
             100.0 * frac, 100.0 * worst, f(&pm["value"]), f(&pm["lo"]), f(&pm["hi"])
         );
         assert!(n >= 10, "too few coherent bins: {n}");
-        let misses = n - (frac * n as f64).round() as usize;
-        assert!(
-            misses <= allowed_misses(n),
-            "{misses} of {n} coherent bins miss the truth (chance allows {})",
-            allowed_misses(n)
-        );
+        // The Done-means, literally: the truth in every bin with coherence > 0.9. (The binomial
+        // allowance of 95 % circles, 7 of 37, would also have passed the estimates without the
+        // leakage allowance, which missed 4-5 adjacent bins at 10-12 Hz.)
+        assert_eq!(frac, 1.0, "coherent bins miss the truth (printed above)");
         assert!((f(&pm["value"]) - pm_true).abs() < 2.0);
         assert!(f(&pm["lo"]) <= pm_true && pm_true <= f(&pm["hi"]));
         let sentences = v["against_model"]["sentences"].to_string();
