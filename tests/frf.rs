@@ -81,8 +81,23 @@ fn f(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
 }
 
+/// The most misses 95 % circles may show among `n` bins by chance: the smallest k with
+/// P(Binomial(n, 0.05) > k) < 1e-3 (bins treated as independent).
+fn allowed_misses(n: usize) -> usize {
+    let p: f64 = 0.05;
+    let mut term = (1.0 - p).powi(n as i32); // P(X = 0)
+    let mut cdf = term;
+    let mut k = 0;
+    while 1.0 - cdf >= 1e-3 && k < n {
+        term *= (n - k) as f64 / (k + 1) as f64 * p / (1.0 - p);
+        cdf += term;
+        k += 1;
+    }
+    k
+}
+
 /// Fraction of the bins with coherence > 0.9 whose truth lies in the estimate's confidence
-/// circle, the number of such bins and the worst error relative to |truth|.
+/// circle, the number of such bins and the worst error relative to |truth|; prints every miss.
 fn coverage(v: &Value, truth: &dyn Fn(f64) -> Complex<f64>) -> (f64, usize, f64) {
     let (mut inside, mut n, mut worst) = (0usize, 0usize, 0.0f64);
     for p in v["frf"]["plant"].as_array().unwrap() {
@@ -137,12 +152,10 @@ fn chirp_estimates_match_the_true_plant_and_the_true_discrete_loop_margins() {
             100.0 * frac, 100.0 * worst, f(&pm["value"]), f(&pm["lo"]), f(&pm["hi"])
         );
         assert!(n >= 10, "too few coherent bins: {n}");
-        // Known shortfall: leakage of the swept sine through the window is not fully covered by the
-        // bounds (about 89 % of the bins hold the truth at 95 %).
-        assert!(
-            frac >= 0.85,
-            "only {frac} of the coherent bins hold the truth"
-        );
+        // The Done-means, literally: the truth in every bin with coherence > 0.9. (The binomial
+        // allowance of 95 % circles, 7 of 37, would also have passed the estimates without the
+        // leakage allowance, which missed 4-5 adjacent bins at 10-12 Hz.)
+        assert_eq!(frac, 1.0, "coherent bins miss the truth (printed above)");
         assert!((f(&pm["value"]) - pm_true).abs() < 2.0);
         assert!(f(&pm["lo"]) <= pm_true && pm_true <= f(&pm["hi"]));
         let sentences = v["against_model"]["sentences"].to_string();
@@ -189,7 +202,12 @@ fn backlash_estimates_match_the_rigid_plant_where_coherent_and_show_amplitude_de
     let (frac, n, worst) = coverage(&v, &true_plant(0.0));
     let pm = f(&v["achieved"]["phase_margin_deg"]["value"]);
     println!("backlash 0.01 rad, 0.2 rad chirp: {n} coherent bins, {:.1} % hold the rigid plant, worst {:.2} %; PM {pm:.2} deg (rigid loop {:.2})", 100.0 * frac, 100.0 * worst, true_pm(0.0));
-    assert!(n >= 10 && frac >= 0.7, "{frac} of {n}");
+    let misses = n - (frac * n as f64).round() as usize;
+    assert!(
+        n >= 10 && misses <= allowed_misses(n),
+        "{misses} of {n} coherent bins miss the rigid plant (chance allows {})",
+        allowed_misses(n)
+    );
     let both = run_json(&[
         "frf",
         &big,

@@ -186,7 +186,11 @@ pub fn open_loop(
         })
         .collect();
     let sp = cross_spectra(&chans, ts_s, opts)?;
-    let p = sp.h1(0, opts.confidence).times(|w| integrator(w, ts_s));
+    let mut p = sp.h1(0, opts.confidence).times(|w| integrator(w, ts_s));
+    if let Some(half) = half_length(&chans, ts_s, opts, &sp)? {
+        let ph = half.h1(0, opts.confidence).times(|w| integrator(w, ts_s));
+        allow_leakage(&mut p, &ph);
+    }
     Ok((p, sp))
 }
 
@@ -206,16 +210,71 @@ pub fn closed_loop(
         })
         .collect();
     let sp = cross_spectra(&chans, ts_s, opts)?;
-    let t = sp.h1(0, opts.confidence);
-    let u_over_r = sp.h1(1, opts.confidence);
+    let mut t = sp.h1(0, opts.confidence);
+    let mut u_over_r = sp.h1(1, opts.confidence);
     let dy_over_r = sp.h1(2, opts.confidence);
-    let plant = ratio(&dy_over_r, &u_over_r).times(|w| integrator(w, ts_s));
+    let mut plant = ratio(&dy_over_r, &u_over_r).times(|w| integrator(w, ts_s));
+    if let Some(half) = half_length(&chans, ts_s, opts, &sp)? {
+        allow_leakage(&mut t, &half.h1(0, opts.confidence));
+        allow_leakage(&mut u_over_r, &half.h1(1, opts.confidence));
+        let ph = ratio(&half.h1(2, opts.confidence), &half.h1(1, opts.confidence))
+            .times(|w| integrator(w, ts_s));
+        allow_leakage(&mut plant, &ph);
+    }
     Ok(ClosedLoopFrf {
         t,
         u_over_r,
         plant,
         spectra: sp,
     })
+}
+
+/// The same spectra with segments of half the length (None below 32 samples), for
+/// [`allow_leakage`].
+fn half_length(
+    chans: &[Channels],
+    ts_s: f64,
+    opts: &WelchOptions,
+    full: &CrossSpectra,
+) -> Result<Option<CrossSpectra>, FrfError> {
+    if full.segment_len < 32 {
+        return Ok(None);
+    }
+    let half = WelchOptions {
+        segment_len: Some(full.segment_len / 2),
+        ..*opts
+    };
+    cross_spectra(chans, ts_s, &half).map(Some)
+}
+
+/// Leakage (transient) bias allowance. A segment of N samples does not hold the response to the
+/// input before it, nor the end of the response to its own input; with nonstationary excitation
+/// (a sweep entering or leaving a band, the loop's transient when the excitation stops) this error
+/// does not average out and the coherence barely shows it. It falls like 1/N (Pintelon &
+/// Schoukens, *System Identification*, 2nd ed., sec. 2.6), so the same estimate from segments of
+/// N/2 carries about twice the error of the N estimate: |H_N - H_{N/2}| estimates it (together
+/// with some random error and the larger resolution bias of the N/2 estimate, so it errs on the
+/// wide side). It is added to the relative radius of `full`; `half` is interpolated linearly in
+/// frequency onto the bins of `full`.
+pub fn allow_leakage(full: &mut Frf, half: &Frf) {
+    for i in 0..full.len() {
+        let f = full.freq_hz[i];
+        let j = half.freq_hz.partition_point(|&g| g < f);
+        let hh = if j < half.len() && half.freq_hz[j] == f {
+            half.h[j]
+        } else if j > 0 && j < half.len() {
+            let (f0, f1) = (half.freq_hz[j - 1], half.freq_hz[j]);
+            let a = (f - f0) / (f1 - f0);
+            half.h[j - 1] * (1.0 - a) + half.h[j] * a
+        } else {
+            continue;
+        };
+        let m = full.h[i].norm();
+        let d = (full.h[i] - hh).norm();
+        if m > 0.0 && d.is_finite() {
+            full.rel_radius[i] += d / m;
+        }
+    }
 }
 
 /// a / b bin by bin; relative radii add (first order, conservative for correlated errors), the
@@ -253,5 +312,26 @@ mod tests {
         let d = Complex::new(1.0, 0.0) - c_expj(-w * ts);
         assert!((integrator(w, ts) * d - Complex::new(1.0, 0.0)).norm() < 1e-12);
         assert_eq!(increments(&[1.0, 3.0, 6.0]), [0.0, 2.0, 3.0]);
+    }
+
+    #[test]
+    fn leakage_allowance_is_the_gap_to_the_half_length_estimate() {
+        let frf = |freq_hz: Vec<f64>, h: Vec<Complex<f64>>| Frf {
+            coherence: alloc::vec![1.0; h.len()],
+            rel_radius: alloc::vec![0.01; h.len()],
+            freq_hz,
+            h,
+            averages: 16.0,
+            confidence: 0.95,
+        };
+        let one = Complex::new(1.0, 0.0);
+        let mut full = frf(alloc::vec![1.0, 2.0, 3.0, 4.0], alloc::vec![one; 4]);
+        // Half-length bins at 2 and 4 Hz; 3 Hz interpolated between 1.0 and 1.2.
+        let half = frf(alloc::vec![2.0, 4.0], alloc::vec![one, one * 1.2]);
+        allow_leakage(&mut full, &half);
+        assert_eq!(full.rel_radius[0], 0.01); // below the half grid: untouched
+        assert!((full.rel_radius[1] - 0.01).abs() < 1e-12);
+        assert!((full.rel_radius[2] - 0.11).abs() < 1e-12);
+        assert!((full.rel_radius[3] - 0.21).abs() < 1e-12);
     }
 }
