@@ -162,16 +162,7 @@ pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Res
                 e.column
             ));
         }
-        match e.signal {
-            Signal::Time => rec.time_s = col,
-            Signal::U => rec.u_v = Some(col),
-            Signal::ThetaL => rec.theta_l_rad = Some(col),
-            Signal::ThetaM => rec.theta_m_rad = Some(col),
-            Signal::OmegaL => rec.omega_l_rad_s = Some(col),
-            Signal::OmegaM => rec.omega_m_rad_s = Some(col),
-            Signal::IA => rec.i_a_a = Some(col),
-            Signal::Ref => rec.ref_rad = Some(col),
-        }
+        e.signal.store(&mut rec, col);
     }
     if rec.time_s.is_empty() {
         bail!(

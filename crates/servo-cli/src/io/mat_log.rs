@@ -127,15 +127,8 @@ pub fn import(file: &MatFile, source: &str, columns: Option<&str>) -> anyhow::Re
             ));
         }
         let col: Vec<f64> = raw.iter().map(|&v| e.unit.to_si(v)).collect();
-        match e.signal {
-            Signal::Time => {}
-            Signal::U => rec.u_v = Some(col),
-            Signal::ThetaL => rec.theta_l_rad = Some(col),
-            Signal::ThetaM => rec.theta_m_rad = Some(col),
-            Signal::OmegaL => rec.omega_l_rad_s = Some(col),
-            Signal::OmegaM => rec.omega_m_rad_s = Some(col),
-            Signal::IA => rec.i_a_a = Some(col),
-            Signal::Ref => rec.ref_rad = Some(col),
+        if e.signal != Signal::Time {
+            e.signal.store(&mut rec, col);
         }
     }
     for s in &file.skipped {

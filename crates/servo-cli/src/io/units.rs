@@ -21,6 +21,23 @@ pub enum Signal {
     Ref,
 }
 
+impl Signal {
+    /// Stores `col` (SI units) as this signal's column of `rec`; the time column replaces
+    /// `rec.time_s`. The one place that maps a signal to its record field, for every log reader.
+    pub fn store(self, rec: &mut servo_core::record::Record, col: Vec<f64>) {
+        match self {
+            Signal::Time => rec.time_s = col,
+            Signal::U => rec.u_v = Some(col),
+            Signal::ThetaL => rec.theta_l_rad = Some(col),
+            Signal::ThetaM => rec.theta_m_rad = Some(col),
+            Signal::OmegaL => rec.omega_l_rad_s = Some(col),
+            Signal::OmegaM => rec.omega_m_rad_s = Some(col),
+            Signal::IA => rec.i_a_a = Some(col),
+            Signal::Ref => rec.ref_rad = Some(col),
+        }
+    }
+}
+
 /// What a signal measures; decides which units it accepts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Dimension {
