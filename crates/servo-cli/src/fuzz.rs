@@ -1,4 +1,4 @@
-//! Deterministic mutation fuzzing of servo's readers, shared by the test suite (`tests/fuzz.rs`)
+//! Deterministic mutation fuzzing of servo's readers, shared by the test suite (`tests/e2e/fuzz.rs`)
 //! and the `cargo fuzz` targets in `fuzz/`.
 //!
 //! Every reader of untrusted bytes (CSV, the TOML files, MCAP, `servo log recover`, the wire
@@ -7,7 +7,7 @@
 //! mutations of valid inputs and reports every panic and every oversized allocation.
 //!
 //! Adding a reader (e.g. a MATLAB `.mat` reader) to the suite takes a few lines in
-//! `tests/fuzz.rs`:
+//! `tests/e2e/fuzz.rs`:
 //!
 //! ```no_run
 //! # fn read_mat_bytes(_: &[u8]) -> anyhow::Result<()> { Ok(()) }
@@ -20,7 +20,7 @@
 //! ```
 //!
 //! Oversized allocations are seen only in a binary that installs [`TrackingAlloc`] as its global
-//! allocator (`tests/fuzz.rs` does); elsewhere only panics are checked.
+//! allocator (`tests/e2e/fuzz.rs` does); elsewhere only panics are checked.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;

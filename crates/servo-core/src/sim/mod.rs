@@ -37,7 +37,7 @@
 //! breakaway torque of [`Friction::breakaway_l`] (tau_s with Stribeck, else the Coulomb level of
 //! that direction). Below breakaway the shaft does not creep and there is no chattering around
 //! zero speed. Events (sticking, breakaway, contact) are resolved at sub-step resolution. Against
-//! RK4 at 1 us (tests/sim.rs) the load angle agrees within ~1e-4 rad with dry friction, ~1e-6 rad
+//! RK4 at 1 us (tests/e2e/sim.rs) the load angle agrees within ~1e-4 rad with dry friction, ~1e-6 rad
 //! with cogging or imbalance, and ~2-4e-3 rad with backlash (impacts at 100 us resolution; the
 //! motor side is put back on the flank when a free sub-step ends in penetration). While a rigid
 //! drivetrain is stuck and stays below breakaway, a whole period is one exact step.

@@ -1,0 +1,16 @@
+//! The end-to-end tests, one module per area, in ONE integration-test binary (as ripgrep does),
+//! so a change relinks once. Shared helpers live in the `servo_e2e` library (src/lib.rs).
+//! Run one area with `cargo test --release --test e2e diagnose::`.
+
+mod compare;
+mod control_loop;
+mod demo;
+mod design;
+mod diagnose;
+mod frf;
+mod fuzz;
+mod identify;
+mod mat;
+mod run_log;
+mod serial;
+mod sim;
