@@ -723,6 +723,21 @@ fn cli_identify_ramp_runs_the_experiments_on_the_simulator() {
     assert!(
         logs.join("identify_friction.mcap").exists() && logs.join("identify_inertia.mcap").exists()
     );
+    // The logs record the speed reference the runner's speed loop followed (load side): the
+    // staircase's steps, and the ramps' triangle up to the peak speed.
+    let load = |m: f64| m / truth_params_for_cli().n;
+    for (log, top) in [
+        ("identify_friction.mcap", load(550.0)),
+        ("identify_inertia.mcap", load(600.0)),
+    ] {
+        let run = servo_cli::io::mcap_read::read_mcap(&logs.join(log)).unwrap();
+        let w_max = run
+            .loop_msgs
+            .iter()
+            .map(|m| m.ref_omega_l_rad_s.abs())
+            .fold(0.0, f64::max);
+        assert!((w_max - top).abs() < 0.01 * top, "{log}: {w_max} vs {top}");
+    }
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     let b = v["B_eq"]["value"].as_f64().unwrap();
     let t = v["tau_sf"]["value"].as_f64().unwrap();

@@ -108,7 +108,6 @@ impl Board {
                 i_trip_a: self.i_trip_a,
             },
             current_scale_a_per_lsb: self.current_scale_a,
-            ..BoardConfig::default()
         };
         cfg.limits
             .validate()
