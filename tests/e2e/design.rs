@@ -343,7 +343,7 @@ fn writes_gains_file_and_plots() {
 #[test]
 fn params_file_is_used() {
     let dir = tempfile::tempdir().unwrap();
-    let (ok, text, _) = servo(&["params"]);
+    let (ok, text, _) = servo(&["params", "--preset", "table2"]);
     assert!(ok);
     // double the disc inertia: T_m grows, so the gains change
     let heavy = text.replace("j_d = 3e-5", "j_d = 6e-5");
@@ -440,6 +440,8 @@ fn meet_specs_gains_meet_the_specs_in_servo_run() {
             "1.5",
             "--counts-per-rev",
             "0",
+            "--plant-preset",
+            "table2",
             "--csv",
             csv.to_str().unwrap(),
         ]);

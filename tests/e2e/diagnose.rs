@@ -481,7 +481,7 @@ fn real_logs_without_voltage_name_the_missing_friction() {
     let tmp = std::env::temp_dir().join(format!("servo-diag-nou-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).unwrap();
     let model = tmp.join("nominal.toml");
-    let (ok, out, err) = servo_e2e::servo(&["params"]);
+    let (ok, out, err) = servo_e2e::servo(&["params", "--preset", "table2"]);
     assert!(ok, "{err}");
     std::fs::write(&model, out).unwrap();
     let logs: Vec<String> = ["friction_pos.csv", "friction_neg.csv", "inertia.csv"]

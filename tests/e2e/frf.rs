@@ -62,6 +62,8 @@ fn sim(dir: &Path, name: &str, extra: &[&str]) -> String {
         gains.to_str().unwrap(),
         "--log",
         log.to_str().unwrap(),
+        "--plant-preset",
+        "table2",
     ];
     a.extend_from_slice(extra);
     let (ok, out, err) = servo(&a);

@@ -57,6 +57,7 @@ fn msg(k: usize) -> LoopMsg {
         d_v: 0.0,
         i_a_a: 0.01 * k as f64,
         saturated: k.is_multiple_of(7),
+        ref_omega_l_rad_s: f64::NAN,
     }
 }
 

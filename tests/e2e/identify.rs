@@ -4,7 +4,8 @@
 //! * The real Padova lab data (../shared/realdata, or SERVO_REALDATA): the published estimates of
 //!   each SOURCE.txt reproduced within 3 %, and the electrical check of padova2021-jacopisky.
 
-use servo_cli::cmd::identify_ramp::{run_speed_loop, FrictionRecipe, InertiaRecipe};
+use servo_cli::cmd::identify_ramp::{FrictionRecipe, InertiaRecipe};
+use servo_cli::runner::{run_loop, RunConfig, SpeedLoopConfig};
 use servo_core::ident::combined::{identify_combined, CombinedConfig};
 use servo_core::ident::electrical::identify_electrical;
 use servo_core::ident::friction::{identify_friction, FrictionConfig};
@@ -281,21 +282,23 @@ fn simulate(seed: u64) -> (Record, Record) {
         cycles: 4,
         rest_s: 0.3,
     };
-    let mut b = SimBackend::new(&plant, sensors, 1e-3).unwrap();
-    let f = run_speed_loop(&mut b, &p, "sim friction", |t| {
-        fr.reference(t).map(|w| (w, 0.0))
-    })
-    .unwrap();
-    let mut b = SimBackend::new(
-        &plant,
-        SensorConfig {
-            seed: seed + 1000,
-            ..sensors
-        },
-        1e-3,
-    )
-    .unwrap();
-    let i = run_speed_loop(&mut b, &p, "sim inertia", |t| ir.reference(t)).unwrap();
+    // The shared runner with its speed controller, as `servo identify --ramp` runs them.
+    let run = |profile: servo_cli::runner::SpeedProfile, seed: u64, source: &str| {
+        let mut b = SimBackend::new(&plant, SensorConfig { seed, ..sensors }, 1e-3).unwrap();
+        let cfg = RunConfig {
+            handle_ctrlc: false,
+            ..RunConfig::speed(profile, SpeedLoopConfig::from_params(&p, 50.0).unwrap())
+        };
+        let mut rec = run_loop(&mut b, &cfg, None).unwrap().record;
+        rec.source = source.to_string();
+        // The estimators on the encoder angle (differentiated without lag), not on the loop's
+        // tracking-loop speed estimate, whose 2/w_b lag under acceleration would bias the
+        // combined fit (J_eq by B_eq 2/w_b, about 1 %).
+        rec.omega_l_rad_s = None;
+        rec
+    };
+    let f = run(fr.profile(p.n).unwrap(), seed, "sim friction");
+    let i = run(ir.profile(p.n).unwrap(), seed + 1000, "sim inertia");
     (f, i)
 }
 
@@ -720,6 +723,21 @@ fn cli_identify_ramp_runs_the_experiments_on_the_simulator() {
     assert!(
         logs.join("identify_friction.mcap").exists() && logs.join("identify_inertia.mcap").exists()
     );
+    // The logs record the speed reference the runner's speed loop followed (load side): the
+    // staircase's steps, and the ramps' triangle up to the peak speed.
+    let load = |m: f64| m / truth_params_for_cli().n;
+    for (log, top) in [
+        ("identify_friction.mcap", load(550.0)),
+        ("identify_inertia.mcap", load(600.0)),
+    ] {
+        let run = servo_cli::io::mcap_read::read_mcap(&logs.join(log)).unwrap();
+        let w_max = run
+            .loop_msgs
+            .iter()
+            .map(|m| m.ref_omega_l_rad_s.abs())
+            .fold(0.0, f64::max);
+        assert!((w_max - top).abs() < 0.01 * top, "{log}: {w_max} vs {top}");
+    }
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     let b = v["B_eq"]["value"].as_f64().unwrap();
     let t = v["tau_sf"]["value"].as_f64().unwrap();

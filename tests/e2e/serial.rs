@@ -189,6 +189,7 @@ on_both_boards!(
     handshake_reports_the_board,
     a_vanished_host_trips_the_board_watchdog_within_50_ms,
     onboard_loop_tracks_the_reference,
+    an_experiment_runs_over_serial,
 );
 
 /// What the proxy does to the bytes.
@@ -664,6 +665,95 @@ fn onboard_loop_tracks_the_reference(kind: Kind) {
     assert!(rep.faults.is_empty(), "{:?}", rep.faults);
 }
 
+/// `servo run --experiment` with `--backend serial`: a closed-loop step, an open-loop voltage
+/// segment, then a closed-loop step again, through the shared runner on the board at 2 ms.
+fn an_experiment_runs_over_serial(kind: Kind) {
+    let _rt = realtime();
+    let cfg = BoardConfig {
+        sample_period_s: 2e-3,
+        ..tolerant()
+    };
+    let Some((mut host, board)) = direct_on(kind, cfg) else {
+        return;
+    };
+    // `servo run` opens the same pty by its path and locks it: hand it over, keeping a plain
+    // descriptor open so that the board's end does not see the terminal hang up meanwhile.
+    host.set_exclusive(false).unwrap();
+    let port = host.name().expect("the board's pty has a path");
+    let keep_open = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&port)
+        .expect("open the board's pty");
+    drop(host);
+    let dir = tempfile::tempdir().unwrap();
+    let g = dir.path().join("gains.toml");
+    let (ok, _, err) = servo_e2e::servo(&[
+        "design",
+        "--pm",
+        "60",
+        "--wc",
+        "30",
+        "--ts",
+        "0.002",
+        "-o",
+        g.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let exp = dir.path().join("exp.toml");
+    std::fs::write(
+        &exp,
+        "[[segment]]\nref = \"step:1\"\nduration_s = 1.5\n\n\
+         [[segment]]\nu = \"step:-1\"\nduration_s = 0.3\n\n\
+         [[segment]]\nref = \"step:0.5\"\nduration_s = 1.2\n",
+    )
+    .unwrap();
+    let log = dir.path().join("exp.mcap");
+    let (ok, out, err) = servo_e2e::servo(&[
+        "run",
+        "--backend",
+        "serial",
+        "--port",
+        &port,
+        "--gains",
+        g.to_str().unwrap(),
+        "--experiment",
+        exp.to_str().unwrap(),
+        "--log",
+        log.to_str().unwrap(),
+        "--board-timeout-ms",
+        "500",
+    ]);
+    drop(keep_open);
+    let (rep, u_end) = board.finish();
+    assert!(ok, "{out}\n{err}");
+    let r = servo_cli::io::read_log(&log, None).expect("log readable");
+    let (th, u, rf) = (
+        r.theta_l_rad.unwrap(),
+        r.u_v.unwrap(),
+        r.ref_rad.expect("closed-loop segments log their reference"),
+    );
+    assert_eq!(r.time_s.len(), 1500, "3 s at 2 ms");
+    let at = |t: f64| (t / 2e-3).round() as usize;
+    // The step is reached, the open-loop segment applies its voltage and turns the motor
+    // back, the last step is reached.
+    assert!((th[at(1.49)] - 1.0).abs() < 0.05, "{}", th[at(1.49)]);
+    for k in at(1.5)..at(1.8) {
+        assert_eq!(u[k], -1.0, "sample {k}");
+        assert!(rf[k].is_nan());
+    }
+    assert!(
+        th[at(1.79)] < th[at(1.5)] - 0.3,
+        "{} -> {}",
+        th[at(1.5)],
+        th[at(1.79)]
+    );
+    assert!((th[1499] - 0.5).abs() < 0.05, "ends at {}", th[1499]);
+    assert_eq!(rep.runs, 1);
+    assert!(rep.faults.is_empty(), "{:?}", rep.faults);
+    assert_eq!(u_end, 0.0);
+}
+
 // ---- The binaries: `servo board --pty` and `servo run --backend serial` as separate processes.
 
 mod cli {
@@ -1092,12 +1182,34 @@ mod qemu_cli {
             dir.path().to_str().unwrap(),
             "--board-timeout-ms",
             "500",
+            "--progress",
+            "always",
             "--json",
         ]);
         let stats = board.stats_after(Duration::from_millis(1200));
         board.quit();
         eprintln!("{err}\nQEMU: {stats}");
         assert!(ok, "{out}\n{err}");
+        // Live progress (stderr is not a terminal here: a line every 2 s), then the log's
+        // speed reference: the staircase the runner's speed loop followed.
+        assert!(
+            err.contains("identify_friction: ")
+                && err.contains(" s left, ")
+                && err.contains("missed deadline"),
+            "{err}"
+        );
+        let run = servo_cli::io::mcap_read::read_mcap(&dir.path().join("identify_friction.mcap"))
+            .unwrap();
+        let w_ref: Vec<f64> = run.loop_msgs.iter().map(|m| m.ref_omega_l_rad_s).collect();
+        let top = 550.0 / 14.0;
+        assert!(
+            w_ref.iter().any(|w| (w - top).abs() < 1e-9),
+            "no {top} rad/s step"
+        );
+        assert!(
+            w_ref.iter().any(|w| (w + top).abs() < 1e-9),
+            "no -{top} rad/s step"
+        );
         let v: serde_json::Value = serde_json::from_str(&out).expect("JSON report");
         let truth = servo_core::PlantParams::LAB;
         for (key, want) in [

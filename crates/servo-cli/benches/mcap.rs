@@ -24,6 +24,7 @@ fn msg(k: usize) -> LoopMsg {
         d_v: -0.01 * (t * 3.0).cos(),
         i_a_a: 0.2 * (t * 7.0).sin(),
         saturated: k < 10,
+        ref_omega_l_rad_s: f64::NAN,
     }
 }
 

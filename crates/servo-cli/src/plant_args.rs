@@ -4,12 +4,14 @@
 //!
 //! ```text
 //! --plant truth.toml                          model file: [params], [effects.<name>], [sensors]
+//! --plant-preset table2                       a built-in plant instead of a file (default: lab)
 //! --plant-effect backlash:gap=0.04            repeatable; catalogue syntax name:key=value,...
 //! --seed 7 --counts-per-rev 4096 --current-noise-a 2e-3
 //! ```
 //!
-//! Precedence: Table 2 (no friction) when no file is given; the file's params and effects; then
-//! each `--plant-effect` activates or replaces its effect; the sensor flags override `[sensors]`.
+//! Precedence: the built-in plant [`DEFAULT_PLANT`] (the lab motor, with friction as measured
+//! on real SRV-02s) when no file or preset is given; the file's params and effects; then each
+//! `--plant-effect` activates or replaces its effect; the sensor flags override `[sensors]`.
 
 use crate::model_file::ModelFile;
 use anyhow::{bail, Context};
@@ -18,12 +20,54 @@ use servo_core::sim::SensorConfig;
 use servo_core::Plant;
 use std::path::PathBuf;
 
+/// The built-in simulated plants.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PlantPreset {
+    /// A realistic SRV-02 (`servo params`): Table 2 with J_eq = 7.0e-7 kg m^2, viscous
+    /// B_eq = 1.0e-6 N m s/rad and Coulomb tau_sf = 9.0e-3 N m, the levels the Padova groups
+    /// measured on their lab motors.
+    Lab,
+    /// The handout's Table 2 as printed: no friction (B_m = B_l = 0), J_eq from eq. 10.
+    Table2,
+}
+
+/// The simulated plant of every command when no `--plant`/`--plant-preset` is given.
+pub const DEFAULT_PLANT: PlantPreset = PlantPreset::Lab;
+
+impl PlantPreset {
+    /// The preset as a model file (no sensors section).
+    pub fn model_file(self) -> ModelFile {
+        match self {
+            PlantPreset::Lab => ModelFile::from_plant(&Plant::lab()),
+            PlantPreset::Table2 => ModelFile::default(),
+        }
+    }
+    /// Its name in messages.
+    pub fn describe(self) -> &'static str {
+        match self {
+            PlantPreset::Lab => "the lab plant (Table 2 with measured friction)",
+            PlantPreset::Table2 => "Table 2 (no friction)",
+        }
+    }
+}
+
 /// Options that define the simulated plant ("truth") and its sensors.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct PlantArgs {
-    /// Plant file (TOML model file: [params], [effects.<name>], [sensors]); default: Table 2.
+    /// Plant file (TOML model file: [params], [effects.<name>], [sensors]); default: the lab
+    /// plant of `servo params` (Table 2 with friction as measured on real SRV-02s).
     #[arg(long = "plant", value_name = "FILE")]
     pub plant: Option<PathBuf>,
+
+    /// A built-in plant instead of a file: `lab` (the default) or `table2` (the handout's
+    /// Table 2 without friction).
+    #[arg(
+        long = "plant-preset",
+        value_enum,
+        value_name = "PRESET",
+        conflicts_with = "plant"
+    )]
+    pub plant_preset: Option<PlantPreset>,
 
     /// Activate or replace a physical effect of the simulated plant, e.g. `backlash:gap=0.04`,
     /// `coulomb:tau_sf=0.006`, `cogging:amplitude=2e-4,harmonic=12`. Repeatable. Effects:
@@ -58,13 +102,14 @@ fn parse_plant_effect(s: &str) -> Result<Effect, String> {
 impl PlantArgs {
     /// The plant and sensor configuration these options describe.
     pub fn load(&self) -> anyhow::Result<(Plant, SensorConfig)> {
+        let preset = self.plant_preset.unwrap_or(DEFAULT_PLANT);
         let file = match &self.plant {
             Some(path) => ModelFile::load(path).context("--plant")?,
-            None => ModelFile::default(),
+            None => preset.model_file(),
         };
         let mut plant = file.plant().with_context(|| match &self.plant {
             Some(p) => format!("--plant {}", p.display()),
-            None => "default plant (Table 2)".to_string(),
+            None => format!("built-in plant: {}", preset.describe()),
         })?;
         for e in &self.plant_effect {
             e.check_complete()
@@ -159,6 +204,24 @@ mod tests {
         assert_eq!(sensors.counts_per_rev, 2048);
         assert_eq!(sensors.current_offset_a, 0.01);
         assert_eq!(sensors.seed, 5);
+    }
+
+    #[test]
+    fn the_default_plant_is_the_lab_motor_and_table2_is_asked_for() {
+        let (plant, _) = Cli::try_parse_from(["x"]).unwrap().plant.load().unwrap();
+        // (Effects hold NaN in unused slots: compare what they mean.)
+        let lab = Plant::lab();
+        assert_eq!(plant.params, lab.params);
+        assert_eq!((plant.b_eq(), plant.tau_sf()), (lab.b_eq(), lab.tau_sf()));
+        assert_eq!(plant.effects.iter().count(), 2);
+        assert!(plant.b_eq() > 0.0 && plant.tau_sf() > 0.0);
+        let cli = Cli::try_parse_from(["x", "--plant-preset", "table2"]).unwrap();
+        let (plant, _) = cli.plant.load().unwrap();
+        assert_eq!(plant.params, Plant::nominal().params);
+        assert_eq!((plant.b_eq(), plant.tau_sf()), (0.0, 0.0));
+        assert!(
+            Cli::try_parse_from(["x", "--plant-preset", "table2", "--plant", "f.toml"]).is_err()
+        );
     }
 
     #[test]

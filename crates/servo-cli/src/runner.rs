@@ -4,9 +4,13 @@
 //!
 //! Each period k: `sample()` gives the sensors at t_k; the speed estimator updates; the program
 //! gives the setpoint (a position reference for the PID, with optional feedforward from the
-//! reference's speed and acceleration, or an open-loop voltage); the output is clipped to the
+//! reference's speed and acceleration, an open-loop voltage, or a speed reference for the speed
+//! controller [`SpeedLoop`], e.g. the identification staircase); the output is clipped to the
 //! voltage limit and applied with `apply(u_k)`, held until t_{k+1}. Row k of the record and of
 //! the log holds the measurements at t_k and u_k (servo's log convention).
+//!
+//! With [`RunConfig::progress`], long runs show their progress on stderr: run time elapsed and
+//! left, and the missed deadlines of a board.
 //!
 //! Ctrl-C (with [`RunConfig::handle_ctrlc`]): the loop stops at the next sample, the backend is
 //! stopped at 0 V, the log is flushed and the output says [`StopReason::Interrupted`]; a second
@@ -18,13 +22,12 @@ pub mod program;
 pub mod speed;
 pub mod summary;
 
-pub use program::Program;
-pub use speed::SpeedEstimator;
+pub use program::{Program, Setpoint, SpeedProfile};
+pub use speed::{SpeedEstimator, SpeedLoop, SpeedLoopConfig};
 pub use summary::{RunSummary, StepMetrics};
 
 use crate::io::{LoopMsg, McapLog};
 use anyhow::{bail, Context};
-use servo_core::control::sequence::Setpoint;
 use servo_core::control::{Feedforward, Pid, PidConfig};
 use servo_core::record::Record;
 use servo_hw::Backend;
@@ -79,6 +82,10 @@ pub struct RunConfig {
     /// run's memory does not depend on its length: samples go only to the log sink and to the
     /// running summary ([`RunOutput::summary`]).
     pub keep_record: bool,
+    /// The speed controller (required when the program has speed parts, [`Program::Speed`]).
+    pub speed_loop: Option<SpeedLoopConfig>,
+    /// Live progress on stderr (None: silent).
+    pub progress: Option<Progress>,
 }
 
 impl RunConfig {
@@ -94,6 +101,8 @@ impl RunConfig {
             speed_bandwidth_rad_s: DEFAULT_SPEED_BANDWIDTH_RAD_S,
             handle_ctrlc: true,
             keep_record: true,
+            speed_loop: None,
+            progress: None,
         }
     }
     /// An open-loop run (voltage program) with the same defaults.
@@ -107,10 +116,107 @@ impl RunConfig {
             )
         }
     }
+    /// A speed-controlled run (the identification experiments) with the same defaults.
+    pub fn speed(profile: SpeedProfile, speed_loop: SpeedLoopConfig) -> RunConfig {
+        RunConfig {
+            duration_s: profile.duration_s(),
+            speed_loop: Some(speed_loop),
+            ..RunConfig::open_loop(Program::Speed(profile), 1.0)
+        }
+    }
 }
 
 /// Default bandwidth of the speed estimator: 2 pi 50 Hz [rad/s].
 pub const DEFAULT_SPEED_BANDWIDTH_RAD_S: f64 = 2.0 * std::f64::consts::PI * 50.0;
+
+/// When and how [`run_loop`] shows its progress on stderr.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Progress {
+    /// What runs (`servo run`, `identify_friction`, ...), the start of each line.
+    pub label: String,
+    /// Wall-clock time between two updates [s]; the first comes after one interval, so short
+    /// runs print nothing.
+    pub interval_s: f64,
+    /// Rewrite one line in place (a terminal) instead of printing a line per update (a log).
+    pub in_place: bool,
+}
+
+/// How `--progress` is chosen on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum ProgressMode {
+    /// When stderr is a terminal: one line updated in place twice a second.
+    #[default]
+    Auto,
+    /// Always: in place on a terminal, else a line every 2 s (for logs and CI).
+    Always,
+    /// Never.
+    Never,
+}
+
+impl Progress {
+    /// The progress `mode` asks for, labelled `label` (None: silent).
+    pub fn from_mode(mode: ProgressMode, label: &str) -> Option<Progress> {
+        use std::io::IsTerminal;
+        let tty = std::io::stderr().is_terminal();
+        let show = match mode {
+            ProgressMode::Auto => tty,
+            ProgressMode::Always => true,
+            ProgressMode::Never => false,
+        };
+        show.then(|| Progress {
+            label: label.to_string(),
+            interval_s: if tty { 0.5 } else { 2.0 },
+            in_place: tty,
+        })
+    }
+
+    /// The text of one update: run time elapsed and planned [s], time left, missed deadlines
+    /// (None: the backend has no deadlines).
+    pub fn line(&self, t_s: f64, total_s: f64, missed: Option<u64>) -> String {
+        let mut s = format!(
+            "{}: {t_s:.1} s of {total_s:.1} s, {:.1} s left",
+            self.label,
+            (total_s - t_s).max(0.0)
+        );
+        if let Some(m) = missed {
+            s.push_str(&format!(
+                ", {m} missed deadline{}",
+                if m == 1 { "" } else { "s" }
+            ));
+        }
+        s
+    }
+}
+
+/// The progress display of one run.
+struct ProgressState {
+    cfg: Progress,
+    start: std::time::Instant,
+    next_s: f64,
+    shown: bool,
+}
+
+impl ProgressState {
+    fn tick(&mut self, t_s: f64, total_s: f64, backend: &dyn Backend) {
+        let wall = self.start.elapsed().as_secs_f64();
+        if wall < self.next_s {
+            return;
+        }
+        self.next_s = wall + self.cfg.interval_s;
+        let line = self.cfg.line(t_s, total_s, backend.missed_deadlines());
+        if self.cfg.in_place {
+            eprint!("\r{line}\x1b[K");
+        } else {
+            eprintln!("{line}");
+        }
+        self.shown = true;
+    }
+    fn finish(&self) {
+        if self.shown && self.cfg.in_place {
+            eprint!("\r\x1b[K");
+        }
+    }
+}
 
 /// Why the loop ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -245,6 +351,17 @@ pub fn run_loop(
         ),
         (None, false) => None,
     };
+    let mut speed_ctl = match (&cfg.speed_loop, cfg.program.needs_speed_loop()) {
+        (Some(c), _) => Some(SpeedLoop::new(*c, ts)),
+        (None, true) => bail!("the program has speed-controlled parts but no speed controller"),
+        (None, false) => None,
+    };
+    let mut progress = cfg.progress.clone().map(|p| ProgressState {
+        next_s: p.interval_s,
+        cfg: p,
+        start: std::time::Instant::now(),
+        shown: false,
+    });
     if cfg.handle_ctrlc {
         install_ctrlc_handler();
     }
@@ -289,6 +406,7 @@ pub fn run_loop(
             // Run time from the sample index: the board clock may start anywhere.
             let t = k as f64 * ts;
             let omega = speed.update(s.theta_l_rad);
+            let mut w_ref = f64::NAN;
             let (u, r, terms, sat) = match cfg.program.at(t) {
                 Setpoint::Position(r) => {
                     let pid = pid
@@ -315,6 +433,18 @@ pub fn run_loop(
                     was_open_loop = true;
                     let u = u_v.clamp(-u_limit, u_limit);
                     (u, f64::NAN, [0.0, 0.0, 0.0, 0.0], u != u_v)
+                }
+                Setpoint::Speed {
+                    omega_l_rad_s,
+                    alpha_l_rad_s2,
+                } => {
+                    was_open_loop = true;
+                    let c = speed_ctl
+                        .as_mut()
+                        .context("speed segment without a speed controller")?;
+                    let o = c.update(omega_l_rad_s, alpha_l_rad_s2, omega, u_limit);
+                    w_ref = omega_l_rad_s;
+                    (o.u_v, f64::NAN, [o.p_v, o.i_v, 0.0, o.ff_v], o.saturated)
                 }
             };
             backend
@@ -346,11 +476,18 @@ pub fn run_loop(
                     d_v: terms[2],
                     i_a_a: s.i_a_a,
                     saturated: sat,
+                    ref_omega_l_rad_s: w_ref,
                 })?;
+            }
+            if let Some(p) = progress.as_mut() {
+                p.tick(t, n as f64 * ts, &*backend);
             }
         }
         Ok(())
     })();
+    if let Some(p) = &progress {
+        p.finish();
+    }
     // Always: 0 V, then make the log durable.
     let stopped = backend.stop().context("stopping the board (0 V)");
     let flushed = sink.map_or(Ok(()), |s| s.flush());

@@ -67,4 +67,9 @@ pub trait Backend {
     fn link_stats(&self) -> Option<crate::serial::LinkStats> {
         None
     }
+    /// Periods whose command reached the board too late so far (cheap: for live progress while
+    /// the loop runs); `None` for backends without a deadline (the simulator).
+    fn missed_deadlines(&self) -> Option<u64> {
+        None
+    }
 }

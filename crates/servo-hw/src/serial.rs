@@ -429,6 +429,10 @@ impl Backend for SerialBackend {
         Some(self.stats())
     }
 
+    fn missed_deadlines(&self) -> Option<u64> {
+        Some(self.stats.missed_deadlines)
+    }
+
     fn sample(&mut self) -> Result<Sample, HwError> {
         if self.stopped {
             return Err(HwError::Protocol("the run was stopped".into()));

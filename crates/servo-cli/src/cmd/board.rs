@@ -56,6 +56,10 @@ pub struct Board {
     /// Control (sample) period of the board [ms].
     #[arg(long = "period-ms", default_value_t = 1.0, value_name = "MS")]
     pub period_ms: f64,
+    /// Physics sub-steps of the simulated plant per period, 1..=20: the time resolution at which
+    /// a command takes effect (period / N), and the plant's cost per period on the QEMU image.
+    #[arg(long = "physics-substeps", default_value_t = 5, value_name = "N")]
+    pub physics_substeps: u32,
     /// Board watchdog: no voltage command for this long means 0 V and a fault [ms].
     #[arg(long = "watchdog-ms", default_value_t = 50.0, value_name = "MS")]
     pub watchdog_ms: f64,
@@ -87,7 +91,14 @@ impl Board {
         if !(self.period_ms.is_finite() && self.period_ms > 0.0) {
             bail!("--period-ms must be > 0 ms, got {}", self.period_ms);
         }
+        if !(1..=20).contains(&self.physics_substeps) {
+            bail!(
+                "--physics-substeps must be 1..=20, got {}",
+                self.physics_substeps
+            );
+        }
         let cfg = BoardConfig {
+            physics_substeps: self.physics_substeps,
             sample_period_s: self.period_ms * 1e-3,
             watchdog_s: self.watchdog_ms * 1e-3,
             limits: SafetyLimits {
@@ -97,7 +108,6 @@ impl Board {
                 i_trip_a: self.i_trip_a,
             },
             current_scale_a_per_lsb: self.current_scale_a,
-            ..BoardConfig::default()
         };
         cfg.limits
             .validate()
@@ -182,7 +192,7 @@ impl Board {
             elf: elf.clone(),
             period_us: (self.period_ms * 1e3).round() as u32,
             watchdog_ms: self.watchdog_ms.round() as u32,
-            substeps: 5,
+            substeps: self.physics_substeps,
             theta_limit_mrad: (theta_limit_rad * 1e3).round().min(u32::MAX as f64) as u32,
             plant: if self.qemu_plant == "table2" {
                 servo_hw::qemu::QemuPlant::Table2

@@ -145,12 +145,17 @@ pub struct Identify {
     #[arg(long = "board-timeout-ms", value_name = "MS", default_value_t = 250.0)]
     pub board_timeout_ms: f64,
 
+    /// Live progress of the `--ramp` experiments on stderr (elapsed, left, missed deadlines):
+    /// `auto` on a terminal, `always`, `never`.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub progress: crate::runner::ProgressMode,
+
     /// Directory for the `--ramp` logs.
     #[arg(long = "log-dir", value_name = "DIR", default_value = ".")]
     pub log_dir: PathBuf,
 
-    /// Simulated plant for `--ramp` on the simulator; default: the lab plant of
-    /// `servo params --lab` (friction as measured on real SRV-02s).
+    /// Simulated plant for `--ramp` on the simulator; default: the lab plant of `servo params`
+    /// (friction as measured on real SRV-02s).
     #[command(flatten)]
     pub plant: crate::plant_args::PlantArgs,
 }

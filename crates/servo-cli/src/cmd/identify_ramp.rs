@@ -5,21 +5,22 @@
 //! * inertia (4.2): constant acceleration/deceleration ramps (`experiments/identify_inertia.toml`,
 //!   likewise).
 //!
-//! Both run on any backend: the simulator or a board over serial.
-//!
-//! The speed loop is a PI on the motor speed (differentiated encoder angle, first-order filtered)
-//! with a back-EMF and inertia feedforward from the nominal parameters, designed for a 50 rad/s
-//! crossover on the reduced model k_m / (T_m s + 1); it talks to the [`Backend`] trait directly.
+//! Each recipe becomes a load-speed profile ([`SpeedProfile`]) that the shared runner
+//! ([`crate::runner::run_loop`]) executes with its speed controller ([`SpeedLoopConfig`]: a PI on
+//! the load-speed estimate with back-EMF and inertia feedforward from the nominal parameters,
+//! 50 rad/s crossover) on any backend: the simulator, the virtual board or a board over serial.
+//! The logs record the speed reference (`ref_omega_l_rad_s`) beside the measurements.
 
 use anyhow::{bail, Context};
-use servo_core::record::Record;
 use servo_core::PlantParams;
 use servo_hw::backend::Backend;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::identify::Identify;
-use crate::io::{LoopMsg, McapLog, McapLogOptions};
+use crate::io::{meta_keys, McapLog, McapLogOptions};
+use crate::runner::speed::SPEED_LOOP_CROSSOVER_RAD_S;
+use crate::runner::{self, Progress, RunConfig, SpeedLoopConfig, SpeedProfile, StopReason};
 
 /// Friction staircase recipe.
 #[derive(Debug, Clone, serde::Deserialize)]
@@ -116,20 +117,24 @@ impl FrictionRecipe {
         let one_dir = self.rest_s + self.step_duration_s * self.speeds_rad_s.len() as f64;
         one_dir * if self.both_directions { 2.0 } else { 1.0 }
     }
-    /// Speed reference [rad/s] at time `t` [s]; None after the end.
-    pub fn reference(&self, t: f64) -> Option<f64> {
-        let one_dir = self.rest_s + self.step_duration_s * self.speeds_rad_s.len() as f64;
-        let dirs = if self.both_directions { 2.0 } else { 1.0 };
-        if t >= one_dir * dirs {
-            return None;
+    /// The staircase as a load-speed profile for gear ratio `n` (the recipe's speeds are at
+    /// the motor): a rest, then each speed for `step_duration_s`; then the same negative.
+    pub fn profile(&self, n: f64) -> anyhow::Result<SpeedProfile> {
+        let mut p = SpeedProfile::new();
+        let signs: &[f64] = if self.both_directions {
+            &[1.0, -1.0]
+        } else {
+            &[1.0]
+        };
+        for sign in signs {
+            if self.rest_s > 0.0 {
+                p.hold(self.rest_s, 0.0)?;
+            }
+            for w in &self.speeds_rad_s {
+                p.hold(self.step_duration_s, sign * w / n)?;
+            }
         }
-        let sign = if t < one_dir { 1.0 } else { -1.0 };
-        let tt = t % one_dir - self.rest_s;
-        if tt < 0.0 {
-            return Some(0.0);
-        }
-        let k = ((tt / self.step_duration_s) as usize).min(self.speeds_rad_s.len() - 1);
-        Some(sign * self.speeds_rad_s[k])
+        Ok(p)
     }
 }
 
@@ -162,230 +167,132 @@ impl InertiaRecipe {
         let half = (self.peak_speed_rad_s - self.base_speed_rad_s) / self.accel_rad_s2;
         self.rest_s + self.base_speed_rad_s / self.accel_rad_s2 + 2.0 * half * self.cycles as f64
     }
-    /// (speed [rad/s], acceleration [rad/s^2]) reference at `t`; None after the end.
-    pub fn reference(&self, t: f64) -> Option<(f64, f64)> {
+    /// The ramps as a load-speed profile for gear ratio `n` (the recipe's speeds are at the
+    /// motor): a rest, a run-up to the base speed at the same acceleration, then the cycles
+    /// base -> peak -> base.
+    pub fn profile(&self, n: f64) -> anyhow::Result<SpeedProfile> {
+        let mut p = SpeedProfile::new();
+        if self.rest_s > 0.0 {
+            p.hold(self.rest_s, 0.0)?;
+        }
+        let (base, peak) = (self.base_speed_rad_s / n, self.peak_speed_rad_s / n);
+        if self.base_speed_rad_s > 0.0 {
+            p.ramp(self.base_speed_rad_s / self.accel_rad_s2, 0.0, base)?;
+        }
         let half = (self.peak_speed_rad_s - self.base_speed_rad_s) / self.accel_rad_s2;
-        // Reach the base speed first (at the same acceleration), then cycle.
-        let lead = self.base_speed_rad_s / self.accel_rad_s2;
-        let t = t - self.rest_s;
-        if t < 0.0 {
-            return Some((0.0, 0.0));
+        for _ in 0..self.cycles {
+            p.ramp(half, base, peak)?;
+            p.ramp(half, peak, base)?;
         }
-        if t < lead {
-            return Some((self.accel_rad_s2 * t, self.accel_rad_s2));
-        }
-        let tc = t - lead;
-        if tc >= 2.0 * half * self.cycles as f64 {
-            return None;
-        }
-        let p = tc % (2.0 * half);
-        if p < half {
-            Some((
-                self.base_speed_rad_s + self.accel_rad_s2 * p,
-                self.accel_rad_s2,
-            ))
-        } else {
-            Some((
-                self.peak_speed_rad_s - self.accel_rad_s2 * (p - half),
-                -self.accel_rad_s2,
-            ))
-        }
+        Ok(p)
     }
 }
 
-/// Closed-loop speed control of `backend` following `reference(t) -> (w_ref, a_ref)` until it
-/// returns None; returns the log.
-pub fn run_speed_loop(
-    backend: &mut dyn Backend,
-    p: &PlantParams,
-    source: &str,
-    reference: impl FnMut(f64) -> Option<(f64, f64)>,
-) -> anyhow::Result<Record> {
-    Ok(run_speed_loop_logged(backend, p, source, reference)?.0)
-}
-
-/// As [`run_speed_loop`], also returning one [`LoopMsg`] per sample for the MCAP log (no position
-/// reference: `ref_rad` and `err_rad` are null; `omega_l_rad_s` is the differenced encoder speed).
-pub fn run_speed_loop_logged(
-    backend: &mut dyn Backend,
-    p: &PlantParams,
-    source: &str,
-    mut reference: impl FnMut(f64) -> Option<(f64, f64)>,
-) -> anyhow::Result<(Record, Vec<LoopMsg>)> {
-    let mut msgs = Vec::new();
-    let info = backend.info();
-    let dt = info.sample_period_s;
-    let u_max = info.voltage_limit_v;
-    // Reduced model k_m / (T_m s + 1) from the nominal parameters; PI cancels the pole.
-    let (k_m, t_m) = (p.k_m(), p.t_m());
-    let omega_c = 50.0;
-    let kp = omega_c * t_m / k_m;
-    let ki = kp / t_m;
-    let tau_f = 0.005; // speed filter time constant [s]
-    let mut rec = Record {
-        source: source.to_string(),
-        ..Record::default()
-    };
-    let (mut u_log, mut th_log, mut i_log) = (Vec::new(), Vec::new(), Vec::new());
-    let mut last_theta: Option<f64> = None;
-    let (mut w_f, mut integ) = (0.0, 0.0);
-    let mut k = 0usize;
-    let result = (|| -> anyhow::Result<()> {
-        loop {
-            let s = backend.sample()?;
-            let t = k as f64 * dt;
-            let Some((w_ref, a_ref)) = reference(t) else {
-                break;
-            };
-            let w_meas = match last_theta {
-                Some(th) => (s.theta_l_rad - th) / dt * p.n,
-                None => 0.0,
-            };
-            last_theta = Some(s.theta_l_rad);
-            w_f += (w_meas - w_f) * dt / (tau_f + dt);
-            let err = w_ref - w_f;
-            let ff = (p.k_e * w_ref + p.r_eq() * p.j_eq() * a_ref / p.k_t) / p.k_drv;
-            // A zero reference is a rest: 0 V and the motor coasts (braking from full speed
-            // against the back-EMF would draw more than the board's over-current trip).
-            let rest = w_ref == 0.0 && a_ref == 0.0;
-            if rest {
-                integ = 0.0;
-            }
-            let u_unsat = if rest { 0.0 } else { ff + kp * err + integ };
-            let u = u_unsat.clamp(-u_max, u_max);
-            // Conditional integration (anti-windup).
-            if !rest && (u == u_unsat || err.signum() != u_unsat.signum()) {
-                integ += ki * err * dt;
-            }
-            backend.apply(u)?;
-            msgs.push(LoopMsg {
-                time_s: s.time_s,
-                ref_rad: f64::NAN,
-                theta_l_rad: s.theta_l_rad,
-                omega_l_rad_s: w_meas / p.n,
-                err_rad: f64::NAN,
-                u_v: u,
-                ff_v: if rest { 0.0 } else { ff },
-                p_v: if rest { 0.0 } else { kp * err },
-                i_v: integ,
-                d_v: 0.0,
-                i_a_a: s.i_a_a,
-                saturated: u != u_unsat,
-            });
-            rec.time_s.push(s.time_s);
-            th_log.push(s.theta_l_rad);
-            i_log.push(s.i_a_a);
-            u_log.push(u);
-            k += 1;
-        }
-        Ok(())
-    })();
-    backend.stop()?;
-    result?;
-    rec.u_v = Some(u_log);
-    rec.theta_l_rad = Some(th_log);
-    rec.i_a_a = Some(i_log);
-    Ok((rec, msgs))
-}
-
-/// The simulated plant of `--ramp`: `--plant`/`--plant-effect` when given, else the realistic
-/// lab plant (`servo params --lab`: friction as measured on real SRV-02s), so that a fresh
-/// install identifies meaningful friction rather than Table 2's zero.
-fn sim_plant(
-    args: &Identify,
-) -> anyhow::Result<(servo_core::Plant, servo_core::sim::SensorConfig)> {
-    let (mut plant, sensors) = args.plant.load()?;
-    if args.plant.plant.is_none() {
-        plant = servo_core::Plant::lab();
-        for e in &args.plant.plant_effect {
-            plant.effects.insert(*e);
-        }
-    }
-    Ok((plant, sensors))
-}
-
-/// Live progress of a real-time run on stderr, every 5 s of run time: elapsed and remaining.
-fn progress(name: &str, t: f64, total_s: f64, realtime: bool, next_s: &mut f64) {
-    if realtime && t >= *next_s && t < total_s {
-        eprintln!(
-            "  {name}: {t:.0} s of {total_s:.0} s, {:.0} s left",
-            total_s - t
-        );
-        *next_s += 5.0;
+/// The backend of one experiment: the simulator of the command's plant options, or the board on
+/// `--port` with the host's position limits off (the staircase turns the load for many
+/// revolutions; the board keeps its own).
+fn open_backend(args: &Identify) -> anyhow::Result<Box<dyn Backend>> {
+    if args.backend == crate::cmd::run::BackendKind::Serial {
+        let cfg = servo_hw::SerialConfig {
+            port: args.port.clone(),
+            baud: args.baud,
+            timeout_s: args.board_timeout_ms * 1e-3,
+            limits: servo_core::safety::SafetyLimits {
+                theta_min_rad: -1e12,
+                theta_max_rad: 1e12,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        Ok(Box::new(servo_hw::SerialBackend::open(cfg).with_context(
+            || format!("--backend serial --port {}", args.port),
+        )?))
+    } else {
+        let (plant, sensors) = args.plant.load()?;
+        Ok(Box::new(servo_hw::sim::SimBackend::new(
+            &plant, sensors, 1e-3,
+        )?))
     }
 }
 
-/// Runs both experiments on the simulator described by the command's plant options, logs each
-/// to MCAP in `--log-dir` (identify_friction.mcap, identify_inertia.mcap) and returns the paths.
+/// Runs both experiments on the command's backend through the shared runner, logs each to MCAP
+/// in `--log-dir` (identify_friction.mcap, identify_inertia.mcap) and returns the paths.
 pub fn run_experiments(args: &Identify, p: &PlantParams) -> anyhow::Result<Vec<PathBuf>> {
     let built_in = PathBuf::from(BUILT_IN);
     let friction_recipe = args.friction_recipe.clone().unwrap_or(built_in.clone());
     let inertia_recipe = args.inertia_recipe.clone().unwrap_or(built_in);
     let fr = FrictionRecipe::load(&friction_recipe).context("--friction-recipe")?;
     let ir = InertiaRecipe::load(&inertia_recipe).context("--inertia-recipe")?;
+    let speed_loop = SpeedLoopConfig::from_params(p, SPEED_LOOP_CROSSOVER_RAD_S)?;
     std::fs::create_dir_all(&args.log_dir)
         .with_context(|| format!("--log-dir {}", args.log_dir.display()))?;
     let serial = args.backend == crate::cmd::run::BackendKind::Serial;
     let backend_name = if serial { "serial" } else { "sim" };
     let mut out = Vec::new();
-    for (name, recipe) in [
-        ("identify_friction", &friction_recipe),
-        ("identify_inertia", &inertia_recipe),
+    for (name, recipe, profile) in [
+        ("identify_friction", &friction_recipe, fr.profile(p.n)?),
+        ("identify_inertia", &inertia_recipe, ir.profile(p.n)?),
     ] {
-        let mut b: Box<dyn Backend> = if serial {
-            let cfg = servo_hw::SerialConfig {
-                port: args.port.clone(),
-                baud: args.baud,
-                timeout_s: args.board_timeout_ms * 1e-3,
-                limits: servo_core::safety::SafetyLimits {
-                    theta_min_rad: -1e12,
-                    theta_max_rad: 1e12,
-                    ..Default::default()
-                },
-                ..Default::default()
-            };
-            Box::new(
-                servo_hw::SerialBackend::open(cfg)
-                    .with_context(|| format!("--backend serial --port {}", args.port))?,
-            )
-        } else {
-            let (plant, sensors) = sim_plant(args)?;
-            Box::new(servo_hw::sim::SimBackend::new(&plant, sensors, 1e-3)?)
-        };
-        let source = format!("servo identify --ramp: {name} ({backend_name})");
-        let (_, msgs) = if name == "identify_friction" {
-            let (total_s, mut next_s) = (fr.duration_s(), 0.0);
-            run_speed_loop_logged(&mut *b, p, &source, |t| {
-                progress(name, t, total_s, serial, &mut next_s);
-                fr.reference(t).map(|w| (w, 0.0))
-            })?
-        } else {
-            let (total_s, mut next_s) = (ir.duration_s(), 0.0);
-            run_speed_loop_logged(&mut *b, p, &source, |t| {
-                progress(name, t, total_s, serial, &mut next_s);
-                ir.reference(t)
-            })?
-        };
-        if let Some(ls) = b.link_stats() {
-            eprintln!(
-                "  {name}: {} samples, {} missed deadlines, {} lost frames",
-                ls.samples, ls.missed_deadlines, ls.lost_frames
-            );
-        }
+        let mut b = open_backend(args)?;
+        let info = b.info();
         let path = args.log_dir.join(format!("{name}.mcap"));
         let mut meta = BTreeMap::new();
         meta.insert("experiment".to_string(), name.to_string());
         meta.insert("recipe".to_string(), recipe.display().to_string());
-        meta.insert("backend".to_string(), backend_name.to_string());
+        meta.insert(meta_keys::BACKEND.to_string(), backend_name.to_string());
+        meta.insert(meta_keys::FIRMWARE.to_string(), info.firmware.to_string());
+        meta.insert(
+            meta_keys::SAMPLE_PERIOD_S.to_string(),
+            info.sample_period_s.to_string(),
+        );
+        meta.insert(
+            meta_keys::DURATION_S.to_string(),
+            profile.duration_s().to_string(),
+        );
         if serial {
             meta.insert("serial_port".to_string(), args.port.clone());
         }
         let mut log = McapLog::create(&path, &meta, McapLogOptions::default())
             .with_context(|| format!("creating log {}", path.display()))?;
-        for m in &msgs {
-            log.write_loop(m)?;
+        let cfg = RunConfig {
+            keep_record: false,
+            progress: Progress::from_mode(args.progress, name),
+            ..RunConfig::speed(profile, speed_loop)
+        };
+        let result = runner::run_loop(&mut *b, &cfg, Some(&mut log));
+        let link = b.link_stats();
+        if let Some(ls) = &link {
+            eprintln!(
+                "  {name}: {} samples, {} missed deadlines, {} lost frames",
+                ls.samples, ls.missed_deadlines, ls.lost_frames
+            );
         }
+        let mut summary = link.as_ref().map(|ls| ls.to_map()).unwrap_or_default();
+        let run = match result {
+            Ok(r) => r,
+            Err(e) => {
+                summary.insert("stop_reason".into(), format!("error: {e:#}"));
+                let _ = log.write_summary(&summary);
+                let _ = log.finish();
+                return Err(e.context(format!(
+                    "{name} (log of the samples before the fault: {})",
+                    path.display()
+                )));
+            }
+        };
+        summary.insert("samples".into(), run.samples.to_string());
+        log.write_summary(&summary)?;
         log.finish()?;
+        if run.stop == StopReason::Interrupted {
+            eprintln!(
+                "the board was stopped at 0 V; {} holds the samples so far",
+                path.display()
+            );
+            return Err(runner::Interrupted {
+                at_s: run.last_time_s,
+            }
+            .into());
+        }
         out.push(path);
     }
     Ok(out)
@@ -396,32 +303,41 @@ mod tests {
     use super::*;
 
     #[test]
-    fn staircase_reference_steps_through_the_speeds() {
+    fn staircase_profile_steps_through_the_speeds() {
         let r = FrictionRecipe {
             speeds_rad_s: vec![10.0, 20.0],
             step_duration_s: 2.0,
             both_directions: true,
             rest_s: 1.0,
         };
-        assert_eq!(r.reference(0.5), Some(0.0));
-        assert_eq!(r.reference(1.5), Some(10.0));
-        assert_eq!(r.reference(3.5), Some(20.0));
-        assert_eq!(r.reference(5.5), Some(0.0));
-        assert_eq!(r.reference(6.5), Some(-10.0));
-        assert_eq!(r.reference(10.0), None);
+        // Motor speeds in the recipe, load speeds in the profile (N = 10).
+        let p = r.profile(10.0).unwrap();
+        assert_eq!(p.duration_s(), r.duration_s());
+        assert_eq!(p.at(0.5), (0.0, 0.0));
+        assert_eq!(p.at(1.5), (1.0, 0.0));
+        assert_eq!(p.at(3.5), (2.0, 0.0));
+        assert_eq!(p.at(5.5), (0.0, 0.0));
+        assert_eq!(p.at(6.5), (-1.0, 0.0));
+        assert_eq!(p.at(10.0), (0.0, 0.0));
     }
 
     #[test]
-    fn ramps_reference_is_a_triangle() {
+    fn ramps_profile_is_a_triangle() {
         let r = InertiaRecipe {
             accel_rad_s2: 100.0,
             peak_speed_rad_s: 100.0,
-            base_speed_rad_s: 0.0,
+            base_speed_rad_s: 20.0,
             cycles: 2,
-            rest_s: 0.0,
+            rest_s: 0.5,
         };
-        assert_eq!(r.reference(0.5), Some((50.0, 100.0)));
-        assert_eq!(r.reference(1.5), Some((50.0, -100.0)));
-        assert!(r.reference(4.1).is_none());
+        let p = r.profile(1.0).unwrap();
+        assert!((p.duration_s() - r.duration_s()).abs() < 1e-12);
+        assert_eq!(p.at(0.25), (0.0, 0.0));
+        let close = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).abs() < 1e-9 && a.1 == b.1;
+        assert!(close(p.at(0.6), (10.0, 100.0))); // run-up to the base speed
+        assert!(close(p.at(1.0), (50.0, 100.0)));
+        assert!(close(p.at(1.8), (70.0, -100.0)));
+        assert!(close(p.at(2.5), (40.0, 100.0)));
+        assert_eq!(p.at(4.0), (0.0, 0.0));
     }
 }

@@ -82,6 +82,11 @@ pub struct Run {
     #[arg(long)]
     pub realtime: bool,
 
+    /// Live progress on stderr (run time elapsed and left, missed deadlines of a board): `auto`
+    /// on a terminal, `always` (a line every 2 s when stderr is not a terminal), `never`.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub progress: runner::ProgressMode,
+
     /// Simulator: stop the run with an error when |theta_l| exceeds this many load revolutions,
     /// like the board's soft position limit (+-2 rev: `--soft-limit-rev 2`). Off by default;
     /// a diverging simulation (non-finite state, |theta_l| > 1e9 rad) always stops.
@@ -375,6 +380,8 @@ impl Run {
             handle_ctrlc: true,
             // Samples stay in memory only for --csv and --plot; the log and the summary stream.
             keep_record: self.csv.is_some() || self.plot.is_some(),
+            speed_loop: None,
+            progress: runner::Progress::from_mode(self.progress, "servo run"),
         };
         let mut log = match &self.log {
             Some(p) => Some(McapLog::create(

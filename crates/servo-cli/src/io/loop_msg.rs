@@ -48,6 +48,10 @@ pub struct LoopMsg {
     /// True when the controller output was clipped at the voltage limit (false when absent).
     #[serde(default)]
     pub saturated: bool,
+    /// Speed reference at the load [rad/s] of a speed-controlled run (the identification
+    /// staircase and ramps); null otherwise.
+    #[serde(with = "nullable", default = "nullable::absent")]
+    pub ref_omega_l_rad_s: f64,
 }
 
 impl LoopMsg {
@@ -75,10 +79,12 @@ impl LoopMsg {
         num(out, b",\"d_v\":", self.d_v);
         num(out, b",\"i_a_a\":", self.i_a_a);
         out.extend_from_slice(if self.saturated {
-            b",\"saturated\":true}"
+            b",\"saturated\":true"
         } else {
-            b",\"saturated\":false}"
+            b",\"saturated\":false"
         });
+        num(out, b",\"ref_omega_l_rad_s\":", self.ref_omega_l_rad_s);
+        out.push(b'}');
     }
 }
 
@@ -87,7 +93,8 @@ impl LoopMsg {
 pub const LOOP_PROTO_NAME: &str = "servo.Loop";
 
 /// The numeric fields of the protobuf message, in field-number order (1..=11); field 12 is
-/// `saturated` (bool). Every field is written, NaN where a value does not apply.
+/// `saturated` (bool), field 13 `ref_omega_l_rad_s` (double). Every field is written, NaN where
+/// a value does not apply.
 const PROTO_F64_FIELDS: [&str; 11] = [
     "time_s",
     "ref_rad",
@@ -156,6 +163,7 @@ pub fn loop_descriptor_set() -> Vec<u8> {
         pb_bytes(&mut msg, 2, &field(name, i as u64 + 1, 1));
     }
     pb_bytes(&mut msg, 2, &field("saturated", 12, 8));
+    pb_bytes(&mut msg, 2, &field("ref_omega_l_rad_s", 13, 1));
     // FileDescriptorProto: name = 1, package = 2, message_type = 4, syntax = 12.
     let mut file = Vec::new();
     pb_bytes(&mut file, 1, b"servo/loop.proto");
@@ -186,7 +194,7 @@ impl LoopMsg {
     }
 
     /// Appends the message in protobuf wire format (`servo.Loop`, [`loop_descriptor_set`]):
-    /// fields 1-11 as 64-bit doubles, 12 as a bool; 101 bytes, no number formatting.
+    /// fields 1-11 and 13 as 64-bit doubles, 12 as a bool; 110 bytes, no number formatting.
     pub fn write_protobuf(&self, out: &mut Vec<u8>) {
         for (i, v) in self.f64_fields().into_iter().enumerate() {
             out.push(((i as u8 + 1) << 3) | 1);
@@ -194,12 +202,16 @@ impl LoopMsg {
         }
         out.push(12 << 3);
         out.push(self.saturated as u8);
+        out.push((13 << 3) | 1);
+        out.extend_from_slice(&self.ref_omega_l_rad_s.to_le_bytes());
     }
 
     /// Parses a protobuf `servo.Loop` message (fields absent from the bytes take proto3's
-    /// default, 0; unknown fields are skipped).
+    /// default, 0, except `ref_omega_l_rad_s`, which logs written before it existed lack: null;
+    /// unknown fields are skipped).
     pub fn from_protobuf(b: &[u8]) -> Result<LoopMsg, String> {
         let mut v = [0.0f64; 11];
+        let mut ref_omega = f64::NAN;
         let mut saturated = false;
         let mut at = 0usize;
         while at < b.len() {
@@ -211,10 +223,12 @@ impl LoopMsg {
                         return Err(format!("field {field}: 64-bit value cut short"));
                     };
                     at += 8;
+                    let mut a = [0u8; 8];
+                    a.copy_from_slice(x);
                     if (1..=11).contains(&field) {
-                        let mut a = [0u8; 8];
-                        a.copy_from_slice(x);
                         v[field as usize - 1] = f64::from_le_bytes(a);
+                    } else if field == 13 {
+                        ref_omega = f64::from_le_bytes(a);
                     }
                 }
                 0 => {
@@ -253,6 +267,7 @@ impl LoopMsg {
             d_v: v[9],
             i_a_a: v[10],
             saturated,
+            ref_omega_l_rad_s: ref_omega,
         })
     }
 }
@@ -278,7 +293,8 @@ pub fn loop_schema() -> String {
             "i_v": num("PID integral term [V]"),
             "d_v": num("PID derivative term [V]"),
             "i_a_a": num("measured armature current i_a [A]"),
-            "saturated": { "type": "boolean", "description": "controller output clipped at the voltage limit" }
+            "saturated": { "type": "boolean", "description": "controller output clipped at the voltage limit" },
+            "ref_omega_l_rad_s": num("speed reference at the load [rad/s] of a speed-controlled run (identification staircase and ramps; null otherwise)")
         },
         "required": ["time_s", "theta_l_rad", "u_v", "i_a_a"]
     })
@@ -323,6 +339,7 @@ mod tests {
             d_v: 0.25,
             i_a_a: 0.1,
             saturated: true,
+            ref_omega_l_rad_s: 12.5,
         };
         let s = serde_json::to_string(&m).unwrap();
         assert!(s.contains("\"ref_rad\":null"), "{s}");
@@ -348,6 +365,7 @@ mod tests {
                 time_s: v,
                 ref_rad: v,
                 u_v: -v,
+                ref_omega_l_rad_s: v,
                 saturated: v > 0.5,
                 ..m
             };
@@ -362,13 +380,19 @@ mod tests {
         // Protobuf: exact round trip, NaN included.
         let mut pb = Vec::new();
         m.write_protobuf(&mut pb);
-        assert_eq!(pb.len(), 101);
+        assert_eq!(pb.len(), 110);
         let back = LoopMsg::from_protobuf(&pb).unwrap();
         assert_eq!(
             back.f64_fields().map(f64::to_bits),
             m.f64_fields().map(f64::to_bits)
         );
         assert_eq!(back.saturated, m.saturated);
+        assert_eq!(back.ref_omega_l_rad_s, 12.5);
+        // A message written before field 13 existed: no speed reference (null).
+        assert!(LoopMsg::from_protobuf(&pb[..101])
+            .unwrap()
+            .ref_omega_l_rad_s
+            .is_nan());
         assert!(LoopMsg::from_protobuf(&pb[..50]).is_err());
         let d = loop_descriptor_set();
         assert!(d.windows(4).any(|w| w == b"Loop"));

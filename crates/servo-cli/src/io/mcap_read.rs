@@ -369,6 +369,7 @@ pub fn loop_msgs_of(rec: &Record) -> Vec<LoopMsg> {
                 d_v: f64::NAN,
                 i_a_a: get(&rec.i_a_a, k),
                 saturated: false,
+                ref_omega_l_rad_s: f64::NAN,
             }
         })
         .collect()
@@ -394,6 +395,7 @@ mod tests {
             d_v: 1e-9 * k as f64,
             i_a_a: 0.01 * k as f64,
             saturated: k.is_multiple_of(7),
+            ref_omega_l_rad_s: f64::NAN,
         }
     }
 
@@ -436,6 +438,7 @@ mod tests {
             && eq(a.i_v, b.i_v)
             && eq(a.d_v, b.d_v)
             && eq(a.i_a_a, b.i_a_a)
+            && eq(a.ref_omega_l_rad_s, b.ref_omega_l_rad_s)
             && a.saturated == b.saturated
     }
 

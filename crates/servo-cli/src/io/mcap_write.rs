@@ -46,10 +46,10 @@ pub struct McapLogOptions {
 /// every servo command.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum LogEncoding {
-    /// JSON text with a JSON schema (`jsonschema`): readable anywhere, ~330 bytes a sample.
+    /// JSON text with a JSON schema (`jsonschema`): readable anywhere, ~360 bytes a sample.
     #[default]
     Json,
-    /// Protobuf (`servo.Loop`, schema a FileDescriptorSet): 101 bytes a sample, about 5 times
+    /// Protobuf (`servo.Loop`, schema a FileDescriptorSet): 110 bytes a sample, about 5 times
     /// cheaper to write.
     Protobuf,
 }

@@ -1,7 +1,9 @@
-//! What a run applies over time: a closed-loop position reference, or a sequence of segments
-//! (position references and open-loop voltages, e.g. from an experiment file).
+//! What a run applies over time: a closed-loop position reference, a sequence of segments
+//! (position references and open-loop voltages, e.g. from an experiment file), or a speed profile
+//! (the identification experiments' staircase and ramps, run by the speed controller).
 
-use servo_core::control::sequence::{self, PlacedSegment, Segment, Setpoint, Target};
+use servo_core::control::reference::TIME_EPS_S;
+use servo_core::control::sequence::{self, PlacedSegment, Segment, Target};
 use servo_core::control::{RefSample, Reference};
 
 /// The setpoint program of a run.
@@ -11,6 +13,33 @@ pub enum Program {
     Position(Reference),
     /// Segments one after the other (see [`servo_core::control::sequence`]).
     Segments(Vec<PlacedSegment>),
+    /// Closed loop on the load speed (the runner's speed controller,
+    /// [`crate::runner::RunConfig::speed_loop`]).
+    Speed(SpeedProfile),
+}
+
+/// What to apply at one instant of a [`Program`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Setpoint {
+    /// Closed loop (PID) on this load-angle reference.
+    Position(RefSample),
+    /// Open loop: apply this driver input [V].
+    Voltage { u_v: f64 },
+    /// Closed loop (speed controller) on this load speed [rad/s] and acceleration [rad/s^2].
+    /// Both zero is a rest: 0 V, the motor coasts.
+    Speed {
+        omega_l_rad_s: f64,
+        alpha_l_rad_s2: f64,
+    },
+}
+
+impl From<sequence::Setpoint> for Setpoint {
+    fn from(s: sequence::Setpoint) -> Setpoint {
+        match s {
+            sequence::Setpoint::Position(r) => Setpoint::Position(r),
+            sequence::Setpoint::Voltage { u_v } => Setpoint::Voltage { u_v },
+        }
+    }
 }
 
 impl Program {
@@ -27,7 +56,14 @@ impl Program {
     pub fn at(&self, t_s: f64) -> Setpoint {
         match self {
             Program::Position(r) => Setpoint::Position(r.at(t_s)),
-            Program::Segments(s) => sequence::setpoint_at(s, t_s),
+            Program::Segments(s) => sequence::setpoint_at(s, t_s).into(),
+            Program::Speed(p) => {
+                let (omega_l_rad_s, alpha_l_rad_s2) = p.at(t_s);
+                Setpoint::Speed {
+                    omega_l_rad_s,
+                    alpha_l_rad_s2,
+                }
+            }
         }
     }
 
@@ -36,23 +72,116 @@ impl Program {
         match self {
             Program::Position(_) => None,
             Program::Segments(s) => Some(sequence::duration_s(s)),
+            Program::Speed(p) => Some(p.duration_s()),
         }
     }
 
-    /// True when some part runs closed loop (a controller is needed).
+    /// True when some part runs closed loop on the position (a PID is needed).
     pub fn needs_controller(&self) -> bool {
         match self {
             Program::Position(_) => true,
             Program::Segments(s) => s.iter().any(|p| p.segment.target == Target::Position),
+            Program::Speed(_) => false,
         }
     }
 
-    /// The reference sample at `t_s`, if closed loop there.
+    /// True when some part runs closed loop on the speed (a speed controller is needed).
+    pub fn needs_speed_loop(&self) -> bool {
+        matches!(self, Program::Speed(_))
+    }
+
+    /// The reference sample at `t_s`, if closed loop on the position there.
     pub fn position_at(&self, t_s: f64) -> Option<RefSample> {
         match self.at(t_s) {
             Setpoint::Position(r) => Some(r),
-            Setpoint::Voltage { .. } => None,
+            _ => None,
         }
+    }
+}
+
+/// One piece of a [`SpeedProfile`]: the load speed starts at `omega_l_rad_s` and changes at the
+/// constant rate `alpha_l_rad_s2` for `duration_s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedPiece {
+    /// Start time [s] from the beginning of the profile.
+    pub start_s: f64,
+    /// Length [s] (> 0).
+    pub duration_s: f64,
+    /// Load speed at the start [rad/s].
+    pub omega_l_rad_s: f64,
+    /// Load acceleration during the piece [rad/s^2].
+    pub alpha_l_rad_s2: f64,
+}
+
+/// A piecewise-linear load-speed reference: holds (constant speed, zero acceleration) and ramps
+/// (constant acceleration) one after the other. Before its start and after its end the
+/// reference is a rest (speed and acceleration 0: 0 V, the motor coasts).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SpeedProfile {
+    pieces: Vec<SpeedPiece>,
+}
+
+impl SpeedProfile {
+    /// An empty profile.
+    pub fn new() -> SpeedProfile {
+        SpeedProfile::default()
+    }
+
+    /// Appends a hold at `omega_l_rad_s` [rad/s] for `duration_s` [s] (0 rad/s: a rest).
+    pub fn hold(&mut self, duration_s: f64, omega_l_rad_s: f64) -> anyhow::Result<()> {
+        self.push(duration_s, omega_l_rad_s, 0.0)
+    }
+
+    /// Appends a ramp from `from_rad_s` to `to_rad_s` [rad/s] over `duration_s` [s].
+    pub fn ramp(&mut self, duration_s: f64, from_rad_s: f64, to_rad_s: f64) -> anyhow::Result<()> {
+        self.push(duration_s, from_rad_s, (to_rad_s - from_rad_s) / duration_s)
+    }
+
+    fn push(&mut self, duration_s: f64, omega: f64, alpha: f64) -> anyhow::Result<()> {
+        if !(duration_s.is_finite() && duration_s > 0.0) {
+            anyhow::bail!(
+                "speed profile piece {}: duration must be > 0 s, got {duration_s}",
+                self.pieces.len()
+            );
+        }
+        if !(omega.is_finite() && alpha.is_finite()) {
+            anyhow::bail!(
+                "speed profile piece {}: non-finite speed {omega} rad/s or acceleration {alpha} rad/s^2",
+                self.pieces.len()
+            );
+        }
+        self.pieces.push(SpeedPiece {
+            start_s: self.duration_s(),
+            duration_s,
+            omega_l_rad_s: omega,
+            alpha_l_rad_s2: alpha,
+        });
+        Ok(())
+    }
+
+    /// The pieces in order.
+    pub fn pieces(&self) -> &[SpeedPiece] {
+        &self.pieces
+    }
+
+    /// Length [s].
+    pub fn duration_s(&self) -> f64 {
+        self.pieces.last().map_or(0.0, |p| p.start_s + p.duration_s)
+    }
+
+    /// (load speed [rad/s], load acceleration [rad/s^2]) at `t_s` [s]. Times within 1 ns of a
+    /// boundary count as at it, as in [`servo_core::control::sequence`].
+    pub fn at(&self, t_s: f64) -> (f64, f64) {
+        if t_s < -TIME_EPS_S || t_s >= self.duration_s() - TIME_EPS_S {
+            return (0.0, 0.0);
+        }
+        let i = self
+            .pieces
+            .partition_point(|p| p.start_s <= t_s + TIME_EPS_S)
+            .saturating_sub(1);
+        let p = &self.pieces[i];
+        let dt = (t_s - p.start_s).max(0.0);
+        (p.omega_l_rad_s + p.alpha_l_rad_s2 * dt, p.alpha_l_rad_s2)
     }
 }
 
@@ -70,5 +199,30 @@ mod tests {
         let p = Program::Position(Reference::parse("step:1.5").unwrap());
         assert_eq!(p.position_at(0.1).unwrap().pos_rad, 1.5);
         assert!(p.needs_controller());
+    }
+
+    #[test]
+    fn speed_profile_holds_and_ramps() {
+        let mut s = SpeedProfile::new();
+        s.hold(0.5, 0.0).unwrap();
+        s.ramp(1.0, 0.0, 10.0).unwrap();
+        s.hold(2.0, -4.0).unwrap();
+        assert_eq!(s.duration_s(), 3.5);
+        assert_eq!(s.at(0.25), (0.0, 0.0));
+        assert_eq!(s.at(1.0), (5.0, 10.0));
+        assert_eq!(s.at(1.5), (-4.0, 0.0)); // a boundary belongs to the next piece
+        assert_eq!(s.at(3.4), (-4.0, 0.0));
+        assert_eq!(s.at(3.5), (0.0, 0.0)); // after the end: rest
+        assert!(s.hold(0.0, 1.0).is_err() && s.ramp(1.0, f64::NAN, 0.0).is_err());
+        let p = Program::Speed(s);
+        assert!(p.needs_speed_loop() && !p.needs_controller());
+        assert_eq!(p.duration_s(), Some(3.5));
+        assert_eq!(
+            p.at(1.0),
+            Setpoint::Speed {
+                omega_l_rad_s: 5.0,
+                alpha_l_rad_s2: 10.0
+            }
+        );
     }
 }

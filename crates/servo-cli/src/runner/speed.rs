@@ -61,6 +61,137 @@ impl SpeedEstimator {
     }
 }
 
+/// Crossover of the speed loop [rad/s] (the identification experiments' default).
+pub const SPEED_LOOP_CROSSOVER_RAD_S: f64 = 50.0;
+
+/// The speed controller of the speed parts of a run (the identification staircase and ramps,
+/// [`crate::runner::Program::Speed`]): a PI on the load-speed estimate plus a back-EMF and
+/// inertia feedforward from nominal parameters,
+///
+/// ```text
+/// u = (k_e N omega_ref + R_eq J_eq N alpha_ref / k_t) / k_drv + K_P e + K_I int(e),  e = omega_ref - omega_hat
+/// ```
+///
+/// all at the load. [`SpeedLoopConfig::from_params`] places the PI zero on the pole of the
+/// reduced model omega_l / u = (k_m / N) / (T_m s + 1) (eqs. 29-30), so the open loop is
+/// omega_c / s with crossover omega_c. A zero reference (speed and acceleration 0) is a rest:
+/// 0 V and the integral cleared, so the motor coasts (braking from full speed against the
+/// back-EMF would draw more than a board's over-current trip).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedLoopConfig {
+    /// Proportional gain [V s/rad] on the load-speed error.
+    pub kp_v_s_rad: f64,
+    /// Integral gain [V/rad] on the load-speed error.
+    pub ki_v_rad: f64,
+    /// Back-EMF feedforward k_e N / k_drv [V s/rad] on the load-speed reference.
+    pub ff_speed_v_s_rad: f64,
+    /// Inertia feedforward R_eq J_eq N / (k_t k_drv) [V s^2/rad] on the load-acceleration
+    /// reference.
+    pub ff_accel_v_s2_rad: f64,
+}
+
+impl SpeedLoopConfig {
+    /// The speed loop for the nominal parameters `p` with crossover `omega_c_rad_s` [rad/s].
+    pub fn from_params(
+        p: &servo_core::PlantParams,
+        omega_c_rad_s: f64,
+    ) -> anyhow::Result<SpeedLoopConfig> {
+        p.validate()
+            .map_err(|e| anyhow::anyhow!("speed loop: parameters: {e}"))?;
+        if !(omega_c_rad_s.is_finite() && omega_c_rad_s > 0.0) {
+            anyhow::bail!("speed loop: crossover must be > 0 rad/s, got {omega_c_rad_s}");
+        }
+        let (k_m_load, t_m) = (p.k_m() / p.n, p.t_m());
+        let kp = omega_c_rad_s * t_m / k_m_load;
+        Ok(SpeedLoopConfig {
+            kp_v_s_rad: kp,
+            ki_v_rad: kp / t_m,
+            ff_speed_v_s_rad: p.k_e * p.n / p.k_drv,
+            ff_accel_v_s2_rad: p.r_eq() * p.j_eq() * p.n / (p.k_t * p.k_drv),
+        })
+    }
+}
+
+/// One output of [`SpeedLoop::update`] [V].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedLoopOutput {
+    /// Driver input after the limit.
+    pub u_v: f64,
+    pub ff_v: f64,
+    pub p_v: f64,
+    pub i_v: f64,
+    /// The output was clipped at the limit.
+    pub saturated: bool,
+}
+
+/// The running speed controller of [`SpeedLoopConfig`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedLoop {
+    cfg: SpeedLoopConfig,
+    ts_s: f64,
+    integral_v: f64,
+}
+
+impl SpeedLoop {
+    /// A controller at sample period `ts_s` [s], integral at 0.
+    pub fn new(cfg: SpeedLoopConfig, ts_s: f64) -> SpeedLoop {
+        SpeedLoop {
+            cfg,
+            ts_s,
+            integral_v: 0.0,
+        }
+    }
+
+    /// Clears the integral.
+    pub fn reset(&mut self) {
+        self.integral_v = 0.0;
+    }
+
+    /// One period: reference speed [rad/s] and acceleration [rad/s^2], speed estimate [rad/s],
+    /// output limited to +-`u_limit_v`. Conditional integration (the integral does not grow
+    /// while the output is clipped in the direction of the error).
+    #[inline]
+    pub fn update(
+        &mut self,
+        omega_ref_rad_s: f64,
+        alpha_ref_rad_s2: f64,
+        omega_rad_s: f64,
+        u_limit_v: f64,
+    ) -> SpeedLoopOutput {
+        if omega_ref_rad_s == 0.0 && alpha_ref_rad_s2 == 0.0 {
+            self.integral_v = 0.0;
+            return SpeedLoopOutput {
+                u_v: 0.0,
+                ff_v: 0.0,
+                p_v: 0.0,
+                i_v: 0.0,
+                saturated: false,
+            };
+        }
+        let c = &self.cfg;
+        let err = omega_ref_rad_s - omega_rad_s;
+        let ff = c.ff_speed_v_s_rad * omega_ref_rad_s + c.ff_accel_v_s2_rad * alpha_ref_rad_s2;
+        let p = c.kp_v_s_rad * err;
+        let u_unsat = ff + p + self.integral_v;
+        let u = if u_unsat.is_finite() {
+            u_unsat.clamp(-u_limit_v, u_limit_v)
+        } else {
+            0.0
+        };
+        let saturated = u != u_unsat;
+        if !saturated || err.signum() != u_unsat.signum() {
+            self.integral_v += c.ki_v_rad * err * self.ts_s;
+        }
+        SpeedLoopOutput {
+            u_v: u,
+            ff_v: ff,
+            p_v: p,
+            i_v: self.integral_v,
+            saturated,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -88,5 +219,29 @@ mod tests {
         for _ in 0..100 {
             assert_eq!(est.update(1.0), 0.0);
         }
+    }
+
+    #[test]
+    fn speed_loop_tracks_a_first_order_motor() {
+        // The reduced model omega_l' = ((k_m/N) u - omega_l) / T_m, Table 2, exact speed.
+        let p = servo_core::PlantParams::TABLE2;
+        let cfg = SpeedLoopConfig::from_params(&p, 50.0).unwrap();
+        let ts = 1e-3;
+        let mut c = SpeedLoop::new(cfg, ts);
+        let (km, tm) = (p.k_m() / p.n, p.t_m());
+        let mut w = 0.0;
+        for _ in 0..1000 {
+            let o = c.update(20.0, 0.0, w, 10.0);
+            w += ts * (km * o.u_v - w) / tm;
+        }
+        assert!((w - 20.0).abs() < 1e-3, "{w}");
+        // The feedforward alone holds the nominal motor at speed: the integral stays near 0.
+        assert!(c.update(20.0, 0.0, w, 10.0).i_v.abs() < 0.05);
+        // Rest: 0 V and the integral cleared.
+        let o = c.update(0.0, 0.0, w, 10.0);
+        assert_eq!((o.u_v, o.i_v), (0.0, 0.0));
+        // Clipped at the limit, the integral does not wind up.
+        let o = c.update(1e4, 0.0, 0.0, 10.0);
+        assert!(o.saturated && o.u_v == 10.0 && o.i_v == 0.0);
     }
 }
