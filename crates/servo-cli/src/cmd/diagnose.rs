@@ -96,6 +96,7 @@ impl Diagnose {
         let last = diags.last().unwrap_or(first);
         if self.json {
             let mut v = json!({
+                "schema": "servo.diagnose/1",
                 "status": last.status.name(),
                 "unexplained": last.unexplained.iter().map(balance_json).collect::<Vec<_>>(),
                 "balances": last.balances.iter().map(balance_json).collect::<Vec<_>>(),

@@ -19,6 +19,7 @@ pub mod mat_log;
 pub mod mat_path;
 pub mod mat_read;
 pub mod mcap_read;
+pub mod mcap_recover;
 pub mod mcap_write;
 pub mod units;
 
