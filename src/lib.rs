@@ -67,8 +67,9 @@ pub fn servo(args: &[&str]) -> (bool, String, String) {
         String::from_utf8_lossy(&out.stderr).into_owned(),
     );
     if ok && args.contains(&"--json") {
-        let v: serde_json::Value = serde_json::from_str(&stdout)
-            .unwrap_or_else(|e| panic!("servo {args:?} --json printed invalid JSON ({e}):\n{stdout}"));
+        let v: serde_json::Value = serde_json::from_str(&stdout).unwrap_or_else(|e| {
+            panic!("servo {args:?} --json printed invalid JSON ({e}):\n{stdout}")
+        });
         if let Err(errors) = validate_output(&v) {
             panic!("servo {args:?}: the --json output does not follow its schema:\n{errors}");
         }
@@ -98,8 +99,12 @@ pub fn validate_output(v: &serde_json::Value) -> Result<(), String> {
         .map_err(|e| format!("reading schema {}: {e}", path.display()))?;
     let schema: serde_json::Value = serde_json::from_str(&text)
         .map_err(|e| format!("schema {} is not JSON: {e}", path.display()))?;
-    let validator = jsonschema::draft202012::new(&schema)
-        .map_err(|e| format!("schema {} is not a valid 2020-12 schema: {e}", path.display()))?;
+    let validator = jsonschema::draft202012::new(&schema).map_err(|e| {
+        format!(
+            "schema {} is not a valid 2020-12 schema: {e}",
+            path.display()
+        )
+    })?;
     let errors: Vec<String> = validator
         .iter_errors(v)
         .map(|e| format!("  at {}: {e}", e.instance_path()))

@@ -627,8 +627,18 @@ fn cli_identify_reproduces_published_estimates_from_csv() {
         assert!(ok, "{dir}: {stderr}");
         let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
         eprintln!("== {dir} (cli)");
-        within("B_eq", v["b_eq_n_m_s_rad"]["value"].as_f64().unwrap(), b, 0.03);
-        within("tau_sf", v["tau_sf_n_m"]["value"].as_f64().unwrap(), tau, 0.03);
+        within(
+            "B_eq",
+            v["b_eq_n_m_s_rad"]["value"].as_f64().unwrap(),
+            b,
+            0.03,
+        );
+        within(
+            "tau_sf",
+            v["tau_sf_n_m"]["value"].as_f64().unwrap(),
+            tau,
+            0.03,
+        );
         let jv = v["j_eq_kg_m2"]["value"].as_f64().unwrap();
         within("J_eq", jv, j, 0.03);
         for k in ["b_eq_n_m_s_rad", "tau_sf_n_m", "j_eq_kg_m2"] {
@@ -640,11 +650,18 @@ fn cli_identify_reproduces_published_estimates_from_csv() {
         }
         if dir.contains("jacopisky") {
             within("k_drv", v["k_drv"]["value"].as_f64().unwrap(), 0.5989, 0.01);
-            within("R_eq", v["r_eq_ohm"]["value"].as_f64().unwrap(), 3.057, 0.02);
+            within(
+                "R_eq",
+                v["r_eq_ohm"]["value"].as_f64().unwrap(),
+                3.057,
+                0.02,
+            );
         }
         // The model file carries the identified overrides and its provenance, and loads back.
         let m = servo_cli::model_file::ModelFile::load(&out).unwrap();
-        assert!((m.params.b_eq.unwrap() - v["b_eq_n_m_s_rad"]["value"].as_f64().unwrap()).abs() < 1e-12);
+        assert!(
+            (m.params.b_eq.unwrap() - v["b_eq_n_m_s_rad"]["value"].as_f64().unwrap()).abs() < 1e-12
+        );
         assert!((m.params.j_eq.unwrap() - jv).abs() < 1e-15);
         let prov = m.provenance.unwrap();
         assert!(prov["method"].as_str().unwrap().contains("friction"));

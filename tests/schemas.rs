@@ -78,7 +78,15 @@ fn every_command_output_follows_its_schema() {
     let chirp_exp = Path::new(env!("CARGO_MANIFEST_DIR")).join("experiments/chirp.toml");
     for args in [
         vec![
-            "run", "--gains", &gains, "--ref", "step:1.5", "--duration", "3", "--log", &run,
+            "run",
+            "--gains",
+            &gains,
+            "--ref",
+            "step:1.5",
+            "--duration",
+            "3",
+            "--log",
+            &run,
         ],
         vec![
             "run",
@@ -127,7 +135,9 @@ fn every_command_output_follows_its_schema() {
     json(&[
         "diagnose", &run, &chirp, "--model", &model, "--auto", "--json",
     ]);
-    json(&["frf", &chirp, "--gains", &gains, "--model", &model, "--json"]);
+    json(&[
+        "frf", &chirp, "--gains", &gains, "--model", &model, "--json",
+    ]);
 }
 
 #[test]
@@ -148,4 +158,33 @@ fn an_output_breaking_the_convention_is_refused() {
     let mut untagged = good;
     untagged.as_object_mut().unwrap().remove("schema");
     assert!(validate_output(&untagged).is_err());
+}
+
+#[test]
+fn loop_message_schema_requires_only_the_time() {
+    let schema: serde_json::Value =
+        serde_json::from_str(&servo_cli::io::loop_msg::loop_schema()).unwrap();
+    jsonschema::meta::validate(&schema).unwrap();
+    let v = jsonschema::draft202012::new(&schema).unwrap();
+    // a foreign log's message: time and angle only, the current null
+    assert!(v.is_valid(&serde_json::json!({"time_s": 0.001, "theta_l_rad": 0.5, "i_a_a": null})));
+    assert!(!v.is_valid(&serde_json::json!({"theta_l_rad": 0.5})));
+    assert!(!v.is_valid(&serde_json::json!({"time_s": null})));
+    assert!(!v.is_valid(&serde_json::json!({"time_s": 0.0, "u_v": "1 V"})));
+    // what servo writes validates
+    let m = servo_cli::io::loop_msg::LoopMsg {
+        time_s: 0.5,
+        ref_rad: f64::NAN,
+        theta_l_rad: 0.1,
+        omega_l_rad_s: 2.0,
+        err_rad: f64::NAN,
+        u_v: 1.0,
+        ff_v: 0.0,
+        p_v: 1.0,
+        i_v: 0.0,
+        d_v: 0.0,
+        i_a_a: 0.2,
+        saturated: false,
+    };
+    assert!(v.is_valid(&serde_json::to_value(m).unwrap()));
 }

@@ -22,14 +22,14 @@ mod report_text;
 
 pub use plots::{compare_figures_svg, stack_svg};
 use report_json::*;
-pub use report_text::{controller_description, controller_words};
 use report_text::*;
+pub use report_text::{controller_description, controller_words};
 
-pub use servo_core::compare::{pooled, ModeChoice, ModelComparison, ReplayController};
 use servo_core::compare::{
     compare, replay, ClosedLoop, CompareOptions, CompareReport, Figures, Measured, ReplayMode,
     SignalKind,
 };
+pub use servo_core::compare::{pooled, ModeChoice, ModelComparison, ReplayController};
 
 /// The replay controller of `log` (None when the log's controller is unknown).
 pub fn replay_controller(log: &LogData) -> anyhow::Result<Option<ReplayController<'_>>> {
@@ -139,7 +139,6 @@ pub struct LogData {
 }
 
 impl Compare {
-
     fn compare_all(
         &self,
         plant: &Plant,

@@ -333,7 +333,6 @@ impl Design {
         }
         Ok(())
     }
-
 }
 
 /// A design and what it achieves on the loop that runs.
@@ -356,4 +355,3 @@ fn emit(text: &str) -> anyhow::Result<()> {
         r => r.context("writing to stdout"),
     }
 }
-

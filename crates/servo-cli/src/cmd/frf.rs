@@ -96,7 +96,7 @@ impl Frf {
             logs.push(Log {
                 name: p.display().to_string(),
                 gains: meta.gains()?,
-                logged: meta.controller()?,
+                logged: crate::io::logged_controller(&meta)?,
                 rec,
             });
         }
@@ -395,4 +395,3 @@ impl Frf {
         Ok(())
     }
 }
-

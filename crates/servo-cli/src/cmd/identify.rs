@@ -307,7 +307,6 @@ impl Identify {
         }
         Ok(())
     }
-
 }
 
 /// Parses `--phase-window FROM,TO` (fractions of a phase, 0 <= FROM < TO <= 1).

@@ -1,8 +1,8 @@
 //! `servo log recover`: salvages an unfinished MCAP log into a finished, indexed file (the
 //! recovery itself is [`crate::io::mcap_recover`]).
 
-use anyhow::bail;
 pub use crate::io::mcap_recover::{recover, recover_bytes, RecoveryReport};
+use anyhow::bail;
 use std::path::PathBuf;
 
 /// Log utilities.

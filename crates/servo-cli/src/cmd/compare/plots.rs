@@ -3,8 +3,6 @@
 
 use super::*;
 
-/// Mean of `y` in `bins` equal bins of `x` over [lo, hi]; bins with fewer than 3 samples are
-/// skipped. Returns (bin centres, means).
 /// One titled chart of a single series: (title, SVG).
 pub(super) fn one_series_chart(
     title: String,
@@ -26,7 +24,15 @@ pub(super) fn one_series_chart(
     Ok((title, svg))
 }
 
-pub(super) fn binned_mean(x: &[f64], y: &[f64], lo: f64, hi: f64, bins: usize) -> (Vec<f64>, Vec<f64>) {
+/// Mean of `y` in `bins` equal bins of `x` over [lo, hi]; bins with fewer than 3 samples are
+/// NaN (the chart leaves a gap there). Returns (bin centres, means).
+pub(super) fn binned_mean(
+    x: &[f64],
+    y: &[f64],
+    lo: f64,
+    hi: f64,
+    bins: usize,
+) -> (Vec<f64>, Vec<f64>) {
     let mut s = vec![0.0; bins];
     let mut n = vec![0usize; bins];
     let w = (hi - lo) / bins as f64;
@@ -43,10 +49,12 @@ pub(super) fn binned_mean(x: &[f64], y: &[f64], lo: f64, hi: f64, bins: usize) -
     }
     let (mut cx, mut cy) = (Vec::new(), Vec::new());
     for i in 0..bins {
-        if n[i] >= 3 {
-            cx.push(lo + (i as f64 + 0.5) * w);
-            cy.push(s[i] / n[i] as f64);
-        }
+        cx.push(lo + (i as f64 + 0.5) * w);
+        cy.push(if n[i] >= 3 {
+            s[i] / n[i] as f64
+        } else {
+            f64::NAN
+        });
     }
     (cx, cy)
 }
@@ -55,6 +63,11 @@ pub(super) fn binned_mean(x: &[f64], y: &[f64], lo: f64, hi: f64, bins: usize) -
 /// the headline signal, the residual over time, the residual against the measured speed and
 /// against the measured position (binned means). Used by `--plot` and the diagnose HTML report.
 pub fn compare_figures_svg(r: &CompareReport, name: &str) -> anyhow::Result<Vec<(String, String)>> {
+    // the file's name, not its whole path, in the titles
+    let name = std::path::Path::new(name)
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or(name);
     let h = r.headline_signal();
     let (k, unit) = (h.kind.name(), h.kind.unit());
     let mut out = Vec::new();
@@ -86,6 +99,45 @@ pub fn compare_figures_svg(r: &CompareReport, name: &str) -> anyhow::Result<Vec<
         ],
     )?;
     out.push((t1, svg));
+    // At a high fit the two traces hide each other: zoom on the window with the most error.
+    if let Some(w) = r
+        .worst_windows
+        .first()
+        .filter(|_| h.figures.fit_percent > 95.0)
+    {
+        let idx: Vec<usize> = (0..r.time_s.len())
+            .filter(|&i| r.time_s[i] >= w.t_start_s && r.time_s[i] <= w.t_end_s)
+            .collect();
+        if idx.len() >= 2 {
+            let pick = |v: &[f64]| idx.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+            let (t, m, y) = (pick(&r.time_s), pick(&h.measured), pick(&h.model));
+            let tz = format!(
+                "{name}: zoom on the worst window, {:.2}-{:.2} s ({:.0} % of the squared error)",
+                w.t_start_s, w.t_end_s, w.error_share_pct
+            );
+            let svg = line_chart_svg(
+                &Chart {
+                    title: &tz,
+                    x_label: "t [s]",
+                    y_label: &yl,
+                    ..Default::default()
+                },
+                &[
+                    Series {
+                        label: "measured",
+                        x: &t,
+                        y: &m,
+                    },
+                    Series {
+                        label: "model",
+                        x: &t,
+                        y: &y,
+                    },
+                ],
+            )?;
+            out.push((tz, svg));
+        }
+    }
     let t2 = format!(
         "{name}: residual (measured - model), RMSE {:.3e} {unit}",
         h.figures.rmse

@@ -92,7 +92,7 @@ impl super::Compare {
         meta: &LogMeta,
         given: Option<&GainsFile>,
     ) -> anyhow::Result<()> {
-        let logged = meta.controller()?;
+        let logged = crate::io::logged_controller(&meta)?;
         let log_gains = meta.gains()?;
         let given_name = self
             .gains
@@ -249,7 +249,8 @@ impl super::Compare {
             };
             let mut resolved = pid_config(&src, m.dt_s, log.u_limit.clone())?;
             resolved.parts.push(log.feedforward.clone());
-            let mut c = ReplayController::new(&resolved.config, ff).map_err(|e| anyhow!("controller: {e}"))?;
+            let mut c = ReplayController::new(&resolved.config, ff)
+                .map_err(|e| anyhow!("controller: {e}"))?;
             let fitted_check = check_controller(&mut c, r, th, &m.u_v, ff, limit, m.dt_s);
             log.controller = Some(resolved);
             log.check = Some(fitted_check);
@@ -281,8 +282,8 @@ impl super::Compare {
         let (Some(r), Some(th)) = (&m.ref_rad, &m.theta_l_rad) else {
             return Ok(());
         };
-        let mut c = replay_controller(log)?
-            .ok_or_else(|| anyhow!("{name}: no controller to rebuild u"))?;
+        let mut c =
+            replay_controller(log)?.ok_or_else(|| anyhow!("{name}: no controller to rebuild u"))?;
         let u: Vec<f64> = r
             .iter()
             .zip(th)

@@ -8,7 +8,7 @@
 //! chunk cut short is salvaged record by record as well; a compressed chunk cut short is lost
 //! (its messages are counted as "unreadable tail bytes").
 
-use anyhow::{bail, Context};
+use crate::error::{self as anyhow, bail, Context};
 use mcap::records::Record;
 use std::collections::BTreeSet;
 use std::io::BufWriter;
@@ -172,7 +172,7 @@ fn walk<W: std::io::Write + std::io::Seek>(
             pos = body_start + len as usize;
             continue;
         }
-        let rec = match crate::io::mcap_read::parse_record_checked(op, body) {
+        let rec = match crate::mcap_read::parse_record_checked(op, body) {
             Ok(r) => r,
             Err(e) => {
                 return (
@@ -198,7 +198,7 @@ fn chunk_records<W: std::io::Write + std::io::Seek>(
     chunk: &[u8],
     sink: &mut Sink<W>,
 ) -> anyhow::Result<()> {
-    for rec in crate::io::mcap_read::BoundedRecords::new(chunk, false, sink.limit) {
+    for rec in crate::mcap_read::BoundedRecords::new(chunk, false, sink.limit) {
         sink.record(rec?, 1)?;
     }
     Ok(())

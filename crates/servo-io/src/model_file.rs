@@ -14,7 +14,7 @@
 //! [provenance]        # optional, free-form: where identified values came from
 //! ```
 
-use anyhow::{anyhow, Context};
+use crate::error::{self as anyhow, anyhow, Context};
 use servo_core::effects::{Effect, EffectKind, Effects};
 use servo_core::sim::SensorConfig;
 use servo_core::{Plant, PlantParams};
@@ -218,6 +218,20 @@ mod tests {
         let text = ModelFile::default().to_toml_commented();
         let back = ModelFile::parse(&text).unwrap();
         assert_eq!(back, ModelFile::default());
+    }
+
+    #[test]
+    fn keys_with_unit_suffixes_of_the_json_outputs_are_read() {
+        let good = ModelFile::default().to_toml_commented();
+        let suffixed = good
+            .replace("r_a =", "r_a_ohm =")
+            .replace("# b_eq = ...", "b_eq_n_m_s_rad = 4.6e-6");
+        let m = ModelFile::parse(&suffixed).unwrap();
+        assert_eq!(m.params.r_a, ModelFile::default().params.r_a);
+        assert_eq!(m.params.b_eq, Some(4.6e-6));
+        // both spellings of one key are refused, not silently resolved
+        let both = good.replace("r_s =", "r_a_ohm = 2.6\nr_s =");
+        assert!(ModelFile::parse(&both).is_err());
     }
 
     #[test]
