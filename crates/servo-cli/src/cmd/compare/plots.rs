@@ -99,12 +99,23 @@ pub fn compare_figures_svg(r: &CompareReport, name: &str) -> anyhow::Result<Vec<
         ],
     )?;
     out.push((t1, svg));
-    // At a high fit the two traces hide each other: zoom on the window with the most error.
-    if let Some(w) = r
+    // At a high fit the two traces hide each other: zoom on the worst window where the error is
+    // largest against the signal's own swing (a hold, not a fast move), so the two part visibly.
+    let swing = |w: &servo_core::compare::windows::Window| {
+        let seg = &h.measured[w.start.min(h.measured.len())..w.end.min(h.measured.len())];
+        let (lo, hi) = seg
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(*v), b.max(*v))
+            });
+        w.rms / (hi - lo).max(1e-12)
+    };
+    let zoom = r
         .worst_windows
-        .first()
+        .iter()
         .filter(|_| h.figures.fit_percent > 95.0)
-    {
+        .max_by(|a, b| swing(a).total_cmp(&swing(b)));
+    if let Some(w) = zoom {
         let idx: Vec<usize> = (0..r.time_s.len())
             .filter(|&i| r.time_s[i] >= w.t_start_s && r.time_s[i] <= w.t_end_s)
             .collect();
@@ -112,7 +123,7 @@ pub fn compare_figures_svg(r: &CompareReport, name: &str) -> anyhow::Result<Vec<
             let pick = |v: &[f64]| idx.iter().map(|&i| v[i]).collect::<Vec<f64>>();
             let (t, m, y) = (pick(&r.time_s), pick(&h.measured), pick(&h.model));
             let tz = format!(
-                "{name}: zoom on the worst window, {:.2}-{:.2} s ({:.0} % of the squared error)",
+                "{name}: zoom on {:.2}-{:.2} s, where the model departs most ({:.0} % of the squared error)",
                 w.t_start_s, w.t_end_s, w.error_share_pct
             );
             let svg = line_chart_svg(

@@ -57,7 +57,12 @@ pub(super) fn residual_charts(
         "{} residual [{}] over time ({})",
         eq.name(),
         eq.unit(),
-        ds.recs[0].source
+        // the file's name: a long path is not a title
+        std::path::Path::new(&ds.recs[0].source)
+            .file_name()
+            .map_or(ds.recs[0].source.clone(), |n| n
+                .to_string_lossy()
+                .into_owned())
     );
     let mut html = line_chart_svg(
         &Chart {
@@ -177,11 +182,12 @@ pub(super) fn html_report(
             .map(|r| r.equations.first().map_or(f64::NAN, |e| e.1))
             .collect();
         let unit = ladder[0].equations.first().map_or("", |e| e.0.unit());
+        let y_label = format!("residual RMS [{unit}]");
         h.push_str(&line_chart_svg(
             &Chart {
                 title: "equation residual RMS as effects are added",
                 x_label: "effects added",
-                y_label: unit,
+                y_label: &y_label,
                 integer_x: true,
                 ..Chart::default()
             },
