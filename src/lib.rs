@@ -52,16 +52,68 @@ pub fn servo_bin() -> PathBuf {
 }
 
 /// Runs `servo` with `args`, returning (exit success, stdout, stderr).
+///
+/// When `args` hold `--json` and servo succeeds, the output is validated against the schema it
+/// names (`"schema": "servo.<command>/1"`, docs/schemas/<command>.json): every `--json` output
+/// that a test produces is checked, and a test fails on an output its schema does not describe.
 pub fn servo(args: &[&str]) -> (bool, String, String) {
     let out = std::process::Command::new(servo_bin())
         .args(args)
         .output()
         .expect("spawn servo");
-    (
+    let (ok, stdout, stderr) = (
         out.status.success(),
         String::from_utf8_lossy(&out.stdout).into_owned(),
         String::from_utf8_lossy(&out.stderr).into_owned(),
+    );
+    if ok && args.contains(&"--json") {
+        let v: serde_json::Value = serde_json::from_str(&stdout).unwrap_or_else(|e| {
+            panic!("servo {args:?} --json printed invalid JSON ({e}):\n{stdout}")
+        });
+        if let Err(errors) = validate_output(&v) {
+            panic!("servo {args:?}: the --json output does not follow its schema:\n{errors}");
+        }
+    }
+    (ok, stdout, stderr)
+}
+
+/// Path of the schema file of a schema id (`servo.design/1` -> docs/schemas/design.json).
+pub fn schema_path(id: &str) -> Option<PathBuf> {
+    let name = id.strip_prefix("servo.")?.strip_suffix("/1")?;
+    Some(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("docs/schemas")
+            .join(format!("{name}.json")),
     )
+}
+
+/// Validates one `--json` output against the schema named by its `schema` key. Err holds every
+/// violation, one per line, with its JSON pointer.
+pub fn validate_output(v: &serde_json::Value) -> Result<(), String> {
+    let id = v
+        .get("schema")
+        .and_then(|s| s.as_str())
+        .ok_or_else(|| "the output has no \"schema\" key".to_string())?;
+    let path = schema_path(id).ok_or_else(|| format!("unknown schema id {id:?}"))?;
+    let text = std::fs::read_to_string(&path)
+        .map_err(|e| format!("reading schema {}: {e}", path.display()))?;
+    let schema: serde_json::Value = serde_json::from_str(&text)
+        .map_err(|e| format!("schema {} is not JSON: {e}", path.display()))?;
+    let validator = jsonschema::draft202012::new(&schema).map_err(|e| {
+        format!(
+            "schema {} is not a valid 2020-12 schema: {e}",
+            path.display()
+        )
+    })?;
+    let errors: Vec<String> = validator
+        .iter_errors(v)
+        .map(|e| format!("  at {}: {e}", e.instance_path()))
+        .collect();
+    if errors.is_empty() {
+        Ok(())
+    } else {
+        Err(errors.join("\n"))
+    }
 }
 
 /// The QEMU board image and qemu-system-arm for the tests that run servo's firmware under

@@ -128,15 +128,15 @@ fn hidden_coulomb_friction_is_located_and_added() {
     assert_eq!(v["signal"], "theta_l");
     // The given gains are the ones that ran: the controller check passes.
     assert!(
-        v["controller"]["check_fit_percent"].as_f64().unwrap() > 99.0,
+        v["controller"]["check_fit_pct"].as_f64().unwrap() > 99.0,
         "{}",
         v["controller"]
     );
     let ladder = v["ladder"].as_array().unwrap();
     assert_eq!(ladder.len(), 2);
     let (before, after) = (
-        ladder[0]["fit_percent"].as_f64().unwrap(),
-        ladder[1]["fit_percent"].as_f64().unwrap(),
+        ladder[0]["fit_pct"].as_f64().unwrap(),
+        ladder[1]["fit_pct"].as_f64().unwrap(),
     );
     println!("fit without Coulomb {before:.2} %, after --add coulomb {after:.2} %");
     assert!(after > before + 1.0, "fit {before} -> {after}");
@@ -150,7 +150,7 @@ fn hidden_coulomb_friction_is_located_and_added() {
     let est = fitted["params"]["tau_sf"].as_f64().unwrap();
     assert!((est - tau_sf).abs() < 0.25 * tau_sf, "tau_sf {est}");
     // The final figures describe the extended model; the saved model has the effect.
-    assert!((v["fit_percent"].as_f64().unwrap() - after).abs() < 1e-9);
+    assert!((v["fit_pct"].as_f64().unwrap() - after).abs() < 1e-9);
     let back = ModelFile::load(&saved).unwrap().plant().unwrap();
     assert!((back.tau_sf() - est).abs() < 1e-12);
     let svg_text = std::fs::read_to_string(&svg).unwrap();
@@ -224,7 +224,7 @@ fn model_equal_to_truth_fits_within_noise() {
         "time=time_s,u=u_V,theta_l=theta_l_rad,ref=ref_rad",
         "--json",
     ]);
-    let fit = v["fit_percent"].as_f64().unwrap();
+    let fit = v["fit_pct"].as_f64().unwrap();
     let rmse = v["rmse"].as_f64().unwrap();
     let count = std::f64::consts::TAU / 4096.0;
     println!(
@@ -276,7 +276,7 @@ fn real_closed_loop_steps_show_friction() {
     };
     // The published gains do not reproduce the logged u: compare says so.
     let stated = with(&nominal, &["--gains", gains.to_str().unwrap()]);
-    let check = stated["controller"]["check_fit_percent"].as_f64().unwrap();
+    let check = stated["controller"]["check_fit_pct"].as_f64().unwrap();
     println!(
         "published gains reproduce the logged u with fit {check:.1} %; LS gains {}",
         stated["controller"]["ls_gains"]
@@ -287,8 +287,8 @@ fn real_closed_loop_steps_show_friction() {
     let nom = with(&nominal, &["--gains-from-log"]);
     let fr = with(&friction, &["--gains-from-log"]);
     let (f_nom, f_fr) = (
-        nom["fit_percent"].as_f64().unwrap(),
-        fr["fit_percent"].as_f64().unwrap(),
+        nom["fit_pct"].as_f64().unwrap(),
+        fr["fit_pct"].as_f64().unwrap(),
     );
     println!(
         "nominal {f_nom:.2} % (RMSE {}), friction {f_fr:.2} % (RMSE {})",
@@ -387,8 +387,8 @@ fn closed_loop_replay_uses_the_controller_the_run_used() {
             "{part}: {c}"
         );
     }
-    let (check, rms) = (f(&c["check_fit_percent"]), f(&c["check_rms_v"]));
-    let (fit, rmse) = (f(&v["fit_percent"]), f(&v["rmse"]));
+    let (check, rms) = (f(&c["check_fit_pct"]), f(&c["check_rms_v"]));
+    let (fit, rmse) = (f(&v["fit_pct"]), f(&v["rmse"]));
     println!(
         "same controller: check fit {check:.10} % (RMS {rms:.3e} V over {} samples), position fit {fit:.3} % (RMSE {rmse:.3e} rad)",
         c["check_samples"]
@@ -425,8 +425,8 @@ fn closed_loop_replay_uses_the_controller_the_run_used() {
         cw["derivative_on"], "measurement",
         "the rest still from the log"
     );
-    let (check_w, rms_w) = (f(&cw["check_fit_percent"]), f(&cw["check_rms_v"]));
-    let (fit_w, rmse_w) = (f(&w["fit_percent"]), f(&w["rmse"]));
+    let (check_w, rms_w) = (f(&cw["check_fit_pct"]), f(&cw["check_rms_v"]));
+    let (fit_w, rmse_w) = (f(&w["fit_pct"]), f(&w["rmse"]));
     println!(
         "backward Euler forced: check fit {check_w:.3} % (RMS {rms_w:.3e} V), position fit {fit_w:.3} % (RMSE {rmse_w:.3e} rad)"
     );
@@ -477,10 +477,10 @@ fn logs_without_a_controller_record_replay_through_gains_and_options() {
     let ce = &e["controller"];
     println!(
         "CSV + --gains: check fit {:.3} % with the default derivative on the error, {:.8} % (RMS {:.3e} V) with --derivative-on measurement; position fit {:.3} %",
-        f(&cd["check_fit_percent"]),
-        f(&ce["check_fit_percent"]),
+        f(&cd["check_fit_pct"]),
+        f(&ce["check_fit_pct"]),
         f(&ce["check_rms_v"]),
-        f(&e["fit_percent"])
+        f(&e["fit_pct"])
     );
     assert!(f(&cd["check_rms_v"]) > 0.1, "{cd}");
     assert!(f(&ce["check_rms_v"]) < 1e-9, "{ce}");
@@ -488,7 +488,7 @@ fn logs_without_a_controller_record_replay_through_gains_and_options() {
         ce["parts"]["derivative_on"]["source"],
         "given with --derivative-on"
     );
-    assert!(f(&e["fit_percent"]) > 99.5);
+    assert!(f(&e["fit_pct"]) > 99.5);
 
     // An MCAP of an older servo: the same log without the controller record. The gains and their
     // [design] come from the log's gains; compare says what is missing.
@@ -546,14 +546,14 @@ fn the_logged_feedforward_is_replayed() {
         "feedforward run: {}; check RMS {:.3e} V, position fit {:.3} %",
         c["parts"]["feedforward"]["text"],
         f(&c["check_rms_v"]),
-        f(&v["fit_percent"])
+        f(&v["fit_pct"])
     );
     assert!(
         c["feedforward"].as_str().unwrap().contains("inertia"),
         "{c}"
     );
     assert!(f(&c["check_rms_v"]) < 1e-9, "{c}");
-    assert!(f(&v["fit_percent"]) > 99.5);
+    assert!(f(&v["fit_pct"]) > 99.5);
     // The same samples without the logged feedforward (a CSV) and the same controller: the PID
     // alone does not make the logged u.
     let csv = dir.path().join("ff.csv");

@@ -31,19 +31,19 @@ fn reference_point_table2_and_json_shape() {
         ("kp", 7.0476),
         ("ki", 86.121),
         ("kd", 0.14418),
-        ("td", 0.020458),
-        ("ti", 0.081834),
+        ("td_s", 0.020458),
+        ("ti_s", 0.081834),
     ] {
         assert!(rel(f(&v, k), want) < 1e-4, "{k} = {} want {want}", f(&v, k));
     }
-    assert!(rel(f(&v, "tl"), 1.0 / 150.0) < 1e-12);
-    assert_eq!(f(&v, "wgc"), 30.0);
+    assert!(rel(f(&v, "tl_s"), 1.0 / 150.0) < 1e-12);
+    assert_eq!(f(&v, "wgc_rad_s"), 30.0);
     assert!((f(&v, "pm_deg") - 60.0).abs() < 1e-12);
     for model in ["reduced", "full", "discrete"] {
         let a = &v["achieved"][model];
         for k in [
             "pm_deg",
-            "wgc",
+            "wgc_rad_s",
             "overshoot_pct",
             "rise_time_s",
             "settling_time_5pct_s",
@@ -87,15 +87,15 @@ fn published_savian_design_is_reproduced() {
     for (k, want) in [
         ("delta", 0.59116),
         ("pm_rad", 1.02264),
-        ("wgc", 33.8321),
+        ("wgc_rad_s", 33.8321),
         ("delta_k", 8.61899),
         ("delta_phi_rad", 0.239117),
         ("kp", 8.3738),
         ("ki", 86.1707),
         ("kd", 0.1356),
-        ("td", 0.016196),
-        ("ti", 0.097176),
-        ("tl", 0.0073894),
+        ("td_s", 0.016196),
+        ("ti_s", 0.097176),
+        ("tl_s", 0.0073894),
     ] {
         assert!(
             rel(f(&v, k), want) < 1e-3,
@@ -146,7 +146,7 @@ fn exact_achieves_the_spec_measured_independently() {
             "tustin",
             "--exact",
         ]);
-        let (kp, ki, kd, tl) = (f(&v, "kp"), f(&v, "ki"), f(&v, "kd"), f(&v, "tl"));
+        let (kp, ki, kd, tl) = (f(&v, "kp"), f(&v, "ki"), f(&v, "kd"), f(&v, "tl_s"));
         assert!(rel(ki, kp / (alpha * kd / kp)) < 1e-9, "T_I = alpha T_D");
         type C = (f64, f64);
         let mul = |a: C, b: C| (a.0 * b.0 - a.1 * b.1, a.0 * b.1 + a.1 * b.0);
@@ -192,7 +192,7 @@ fn exact_achieves_the_spec_measured_independently() {
         assert!((pmx - pm).abs() < 0.1, "achieved pm {pmx} vs {pm}");
         let d = &v["achieved"]["discrete"];
         assert!(
-            (f(d, "pm_deg") - pmx).abs() < 0.01 && rel(f(d, "wgc"), wgc) < 1e-4,
+            (f(d, "pm_deg") - pmx).abs() < 0.01 && rel(f(d, "wgc_rad_s"), wgc) < 1e-4,
             "report agrees: {d}"
         );
     }
@@ -205,13 +205,13 @@ fn exact_on_the_default_full_discrete_loop() {
     let d = &v["achieved"]["discrete"];
     assert_eq!(d["plant"], "full");
     assert!(
-        (f(d, "pm_deg") - 60.0).abs() < 0.1 && rel(f(d, "wgc"), 30.0) < 0.005,
+        (f(d, "pm_deg") - 60.0).abs() < 0.1 && rel(f(d, "wgc_rad_s"), 30.0) < 0.005,
         "{d}"
     );
     // the handout gains miss the spec on the same loop by more than the tolerance
     let hd = &h["achieved"]["discrete"];
     assert!(
-        (f(hd, "pm_deg") - 60.0).abs() > 0.5 || rel(f(hd, "wgc"), 30.0) > 0.02,
+        (f(hd, "pm_deg") - 60.0).abs() > 0.5 || rel(f(hd, "wgc_rad_s"), 30.0) > 0.02,
         "{hd}"
     );
     assert!(rel(f(&v, "kp"), f(&h, "kp")) > 0.01);
@@ -221,13 +221,13 @@ fn exact_on_the_default_full_discrete_loop() {
 fn time_domain_specs() {
     // rise time: w_gc = 1.8 / t_r (eq. 39)
     let v = json(&["--rise-time", "0.06", "--pm", "60"]);
-    assert!(rel(f(&v, "wgc"), 30.0) < 1e-12);
+    assert!(rel(f(&v, "wgc_rad_s"), 30.0) < 1e-12);
     // 1 % settling: w_gc = 4.6 / (delta t_s) with delta from M_p (eq. 36)
     let v = json(&["--overshoot", "0.05", "--settling-time-1pct", "0.3"]);
     let l = (1.0f64 / 0.05).ln();
     let delta = l / (PI * PI + l * l).sqrt();
     assert!(rel(f(&v, "delta"), delta) < 1e-12);
-    assert!(rel(f(&v, "wgc"), 4.6 / (delta * 0.3)) < 1e-12);
+    assert!(rel(f(&v, "wgc_rad_s"), 4.6 / (delta * 0.3)) < 1e-12);
 }
 
 #[test]
@@ -305,7 +305,7 @@ fn writes_gains_file_and_plots() {
             && rel(g.pid.ki, f(&v, "ki")) < 1e-12
             && rel(g.pid.kd, f(&v, "kd")) < 1e-12
     );
-    assert!(rel(g.pid.tl_s, f(&v, "tl")) < 1e-12);
+    assert!(rel(g.pid.tl_s, f(&v, "tl_s")) < 1e-12);
     assert_eq!(g.pid.ts_s, 0.002);
     for p in [&bode, &step] {
         let s = std::fs::read_to_string(p).unwrap();
@@ -561,8 +561,8 @@ fn transfer_functions_in_json() {
         f(&v, "kp"),
         f(&v, "ki"),
         f(&v, "kd"),
-        f(&v, "tl"),
-        f(&v, "ts"),
+        f(&v, "tl_s"),
+        f(&v, "ts_s"),
     );
     let close = |a: C, b: C| {
         let d = ((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt();

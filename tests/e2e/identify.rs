@@ -630,11 +630,21 @@ fn cli_identify_reproduces_published_estimates_from_csv() {
         assert!(ok, "{dir}: {stderr}");
         let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
         eprintln!("== {dir} (cli)");
-        within("B_eq", v["B_eq"]["value"].as_f64().unwrap(), b, 0.03);
-        within("tau_sf", v["tau_sf"]["value"].as_f64().unwrap(), tau, 0.03);
-        let jv = v["J_eq"]["value"].as_f64().unwrap();
+        within(
+            "B_eq",
+            v["b_eq_n_m_s_rad"]["value"].as_f64().unwrap(),
+            b,
+            0.03,
+        );
+        within(
+            "tau_sf",
+            v["tau_sf_n_m"]["value"].as_f64().unwrap(),
+            tau,
+            0.03,
+        );
+        let jv = v["j_eq_kg_m2"]["value"].as_f64().unwrap();
         within("J_eq", jv, j, 0.03);
-        for k in ["B_eq", "tau_sf", "J_eq"] {
+        for k in ["b_eq_n_m_s_rad", "tau_sf_n_m", "j_eq_kg_m2"] {
             let ci = &v[k]["ci95"];
             assert!(
                 ci[0].as_f64().unwrap() < v[k]["value"].as_f64().unwrap()
@@ -643,11 +653,18 @@ fn cli_identify_reproduces_published_estimates_from_csv() {
         }
         if dir.contains("jacopisky") {
             within("k_drv", v["k_drv"]["value"].as_f64().unwrap(), 0.5989, 0.01);
-            within("R_eq", v["R_eq"]["value"].as_f64().unwrap(), 3.057, 0.02);
+            within(
+                "R_eq",
+                v["r_eq_ohm"]["value"].as_f64().unwrap(),
+                3.057,
+                0.02,
+            );
         }
         // The model file carries the identified overrides and its provenance, and loads back.
         let m = servo_cli::model_file::ModelFile::load(&out).unwrap();
-        assert!((m.params.b_eq.unwrap() - v["B_eq"]["value"].as_f64().unwrap()).abs() < 1e-12);
+        assert!(
+            (m.params.b_eq.unwrap() - v["b_eq_n_m_s_rad"]["value"].as_f64().unwrap()).abs() < 1e-12
+        );
         assert!((m.params.j_eq.unwrap() - jv).abs() < 1e-15);
         let prov = m.provenance.unwrap();
         assert!(prov["method"].as_str().unwrap().contains("friction"));
@@ -739,9 +756,9 @@ fn cli_identify_ramp_runs_the_experiments_on_the_simulator() {
         assert!((w_max - top).abs() < 0.01 * top, "{log}: {w_max} vs {top}");
     }
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
-    let b = v["B_eq"]["value"].as_f64().unwrap();
-    let t = v["tau_sf"]["value"].as_f64().unwrap();
-    let j = v["J_eq"]["value"].as_f64().unwrap();
+    let b = v["b_eq_n_m_s_rad"]["value"].as_f64().unwrap();
+    let t = v["tau_sf_n_m"]["value"].as_f64().unwrap();
+    let j = v["j_eq_kg_m2"]["value"].as_f64().unwrap();
     assert!((b / 1.1e-6 - 1.0).abs() < 0.01, "{v}");
     assert!((t / 8e-3 - 1.0).abs() < 0.01, "{v}");
     assert!((j / 7e-7 - 1.0).abs() < 0.015, "{v}"); // see sim_j_ok
@@ -758,7 +775,7 @@ fn cli_identify_ramp_runs_the_experiments_on_the_simulator() {
     ]);
     assert!(ok, "{stderr}");
     let v2: serde_json::Value = serde_json::from_str(&stdout2).unwrap();
-    assert_eq!(v2["B_eq"]["value"], v["B_eq"]["value"]);
+    assert_eq!(v2["b_eq_n_m_s_rad"]["value"], v["b_eq_n_m_s_rad"]["value"]);
 }
 
 fn truth_params_for_cli() -> PlantParams {

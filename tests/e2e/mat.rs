@@ -379,7 +379,7 @@ fn identify(args: &[&str]) -> [f64; 3] {
     let (ok, out, err) = servo_e2e::servo(args);
     assert!(ok, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
-    ["B_eq", "tau_sf", "J_eq"].map(|k| v[k]["value"].as_f64().unwrap())
+    ["b_eq_n_m_s_rad", "tau_sf_n_m", "j_eq_kg_m2"].map(|k| v[k]["value"].as_f64().unwrap())
 }
 
 #[test]
@@ -552,7 +552,7 @@ fn compare_runs_on_tester_pid_mat_files() {
             "--gains-from-log",
             "--json",
         ]);
-        let fit = v["fit_percent"].as_f64().unwrap();
+        let fit = v["fit_pct"].as_f64().unwrap();
         println!(
             "{file}: mode {}, fit {fit:.2} %, rmse {}",
             v["mode"], v["rmse"]
@@ -561,7 +561,7 @@ fn compare_runs_on_tester_pid_mat_files() {
         assert!(fit > 80.0, "{file}: fit {fit}");
         if file == "testerPIDBode.mat" {
             // The same data as the CSV conversion: the same figures.
-            let f_csv = csv_v["fit_percent"].as_f64().unwrap();
+            let f_csv = csv_v["fit_pct"].as_f64().unwrap();
             assert!((fit - f_csv).abs() < 0.05, "mat {fit} vs csv {f_csv}");
         }
     }
@@ -593,7 +593,7 @@ fn compare_replays_step_without_u_from_gains_and_reference() {
     let mut args = base.to_vec();
     args.extend(["--gains", gains.to_str().unwrap(), "--json"]);
     let v = compare_json(&args);
-    let fit = v["fit_percent"].as_f64().unwrap();
+    let fit = v["fit_pct"].as_f64().unwrap();
     println!(
         "pid_aw_step360 without u: mode {}, fit {fit:.2} %, rmse {} rad; notes {}",
         v["mode"], v["rmse"], v["logs"][0]["controller"]["notes"]

@@ -208,10 +208,10 @@ struct Tee {
 impl LogSink for Tee {
     fn write_loop(&mut self, msg: &LoopMsg) -> anyhow::Result<()> {
         self.written.push(*msg);
-        self.log.write_loop(msg)
+        Ok(self.log.write_loop(msg)?)
     }
     fn flush(&mut self) -> anyhow::Result<()> {
-        self.log.flush()
+        Ok(self.log.flush()?)
     }
 }
 

@@ -1213,9 +1213,9 @@ mod qemu_cli {
         let v: serde_json::Value = serde_json::from_str(&out).expect("JSON report");
         let truth = servo_core::PlantParams::LAB;
         for (key, want) in [
-            ("B_eq", truth.b_eq()),
-            ("tau_sf", truth.tau_sf()),
-            ("J_eq", truth.j_eq()),
+            ("b_eq_n_m_s_rad", truth.b_eq()),
+            ("tau_sf_n_m", truth.tau_sf()),
+            ("j_eq_kg_m2", truth.j_eq()),
         ] {
             let got = v[key]["value"].as_f64().unwrap_or(f64::NAN);
             let rel = (got - want) / want;

@@ -24,13 +24,12 @@ macro_rules! out {
 
 pub mod cmd;
 pub mod fuzz;
-pub mod gains_file;
 pub mod io;
-pub mod model_file;
 pub mod plant_args;
 pub mod plot;
-pub mod reference_file;
 pub mod runner;
+
+pub use servo_io::{gains_file, model_file, reference_file};
 
 use clap::Parser;
 

@@ -17,6 +17,8 @@ pub struct Chart<'a> {
     pub y_label: &'a str,
     /// Logarithmic x axis (Bode plots).
     pub log_x: bool,
+    /// Ticks on whole numbers of x only (counts: "effects added").
+    pub integer_x: bool,
     pub width: u32,
     pub height: u32,
 }
@@ -28,6 +30,7 @@ impl Default for Chart<'_> {
             x_label: "",
             y_label: "",
             log_x: false,
+            integer_x: false,
             width: 900,
             height: 400,
         }
@@ -71,6 +74,40 @@ fn bounds(series: &[Series], log_x: bool) -> ((f64, f64), (f64, f64)) {
     ((x0, x1), (y0 - pad, y1 + pad))
 }
 
+/// The points of `s` cut into runs that a line may join: a non-finite value (an empty bin, a
+/// missing sample) ends a run, and so does a step in x more than 5 times the median step (a
+/// time gap between records or segments).
+fn runs(s: &Series) -> Vec<Vec<(f64, f64)>> {
+    let mut steps: Vec<f64> =
+        s.x.windows(2)
+            .map(|w| (w[1] - w[0]).abs())
+            .filter(|d| d.is_finite() && *d > 0.0)
+            .collect();
+    let gap = if steps.len() >= 8 {
+        steps.sort_by(f64::total_cmp);
+        5.0 * steps[steps.len() / 2]
+    } else {
+        f64::INFINITY
+    };
+    let mut out: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+    let mut last: Option<f64> = None;
+    for (&x, &y) in s.x.iter().zip(s.y) {
+        let valid = x.is_finite() && y.is_finite();
+        let jump = last.is_some_and(|l| (x - l).abs() > gap);
+        if (!valid || jump) && out.last().is_some_and(|r| !r.is_empty()) {
+            out.push(Vec::new());
+        }
+        if valid {
+            if let Some(r) = out.last_mut() {
+                r.push((x, y));
+            }
+            last = Some(x);
+        }
+    }
+    out.retain(|r| !r.is_empty());
+    out
+}
+
 /// Renders a line chart to an SVG string.
 pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String> {
     let mut svg = String::new();
@@ -88,22 +125,33 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
         macro_rules! draw {
             ($ctx:expr) => {{
                 let mut ctx = $ctx;
-                ctx.configure_mesh()
-                    .x_desc(chart.x_label)
-                    .y_desc(chart.y_label)
-                    .draw()
-                    .map_err(|e| anyhow!("plot: {e}"))?;
+                let integer_ticks = |x: &f64| {
+                    if (x - x.round()).abs() < 1e-6 {
+                        format!("{:.0}", x)
+                    } else {
+                        String::new()
+                    }
+                };
+                let mut mesh = ctx.configure_mesh();
+                mesh.x_desc(chart.x_label).y_desc(chart.y_label);
+                if chart.integer_x {
+                    mesh.x_labels(((x1 - x0).round() as usize + 1).clamp(2, 12))
+                        .x_label_formatter(&integer_ticks);
+                }
+                mesh.draw().map_err(|e| anyhow!("plot: {e}"))?;
                 for (i, s) in series.iter().enumerate() {
                     let color = COLORS[i % COLORS.len()];
-                    let pts =
-                        s.x.iter()
-                            .zip(s.y)
-                            .filter(|(x, y)| x.is_finite() && y.is_finite())
-                            .map(|(&x, &y)| (x, y));
-                    ctx.draw_series(LineSeries::new(pts, color.stroke_width(1)))
-                        .map_err(|e| anyhow!("plot: {e}"))?
-                        .label(s.label)
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], color));
+                    // one line per run of valid points: no line across a gap
+                    for (j, run) in runs(s).into_iter().enumerate() {
+                        let line = ctx
+                            .draw_series(LineSeries::new(run, color.stroke_width(1)))
+                            .map_err(|e| anyhow!("plot: {e}"))?;
+                        if j == 0 {
+                            line.label(s.label).legend(move |(x, y)| {
+                                PathElement::new(vec![(x, y), (x + 15, y)], color)
+                            });
+                        }
+                    }
                 }
                 if series.len() > 1 {
                     ctx.configure_series_labels()

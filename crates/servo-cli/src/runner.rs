@@ -43,10 +43,10 @@ pub trait LogSink {
 
 impl LogSink for McapLog {
     fn write_loop(&mut self, msg: &LoopMsg) -> anyhow::Result<()> {
-        McapLog::write_loop(self, msg)
+        Ok(McapLog::write_loop(self, msg)?)
     }
     fn flush(&mut self) -> anyhow::Result<()> {
-        McapLog::flush(self)
+        Ok(McapLog::flush(self)?)
     }
 }
 

@@ -62,52 +62,70 @@ pub const SENSIBLE_RANGES: [(&str, &str, f64, f64); 16] = [
 /// The derived quantities (R_eq, J_l, J_eq, B_eq, k_m, T_m) are methods, so they cannot go stale.
 /// `j_eq`, `b_eq` and `tau_sf` are optional *identified overrides*: when set they replace the value
 /// derived from the datasheet (J_eq, B_eq) or the default (tau_sf = 0).
+///
+/// Model files name the fields by these short keys; readers also accept the keys of servo's JSON
+/// outputs, with the SI unit as a suffix (`b_eq_n_m_s_rad`, `r_a_ohm`; docs/schemas/README.md).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct PlantParams {
     /// Armature resistance R_a [ohm].
+    #[cfg_attr(feature = "serde", serde(alias = "r_a_ohm"))]
     pub r_a: f64,
     /// Armature inductance L_a [H].
+    #[cfg_attr(feature = "serde", serde(alias = "l_a_h"))]
     pub l_a: f64,
     /// Electric (BEMF) constant k_e [V s/rad].
+    #[cfg_attr(feature = "serde", serde(alias = "k_e_v_s_rad"))]
     pub k_e: f64,
     /// Torque constant k_t [N m/A].
+    #[cfg_attr(feature = "serde", serde(alias = "k_t_n_m_a"))]
     pub k_t: f64,
     /// Rotor moment of inertia J_m [kg m^2].
+    #[cfg_attr(feature = "serde", serde(alias = "j_m_kg_m2"))]
     pub j_m: f64,
     /// Rotor viscous friction coefficient B_m [N m s/rad] (not in the datasheet; default 0).
+    #[cfg_attr(feature = "serde", serde(alias = "b_m_n_m_s_rad"))]
     pub b_m: f64,
     /// Gearbox reduction ratio N [-] (omega_l = omega_m / N).
     pub n: f64,
     /// Moment of inertia of one external 72-tooth gear J_72 [kg m^2] (three are fitted).
+    #[cfg_attr(feature = "serde", serde(alias = "j_72_kg_m2"))]
     pub j_72: f64,
     /// Moment of inertia of the extra disc J_d [kg m^2].
+    #[cfg_attr(feature = "serde", serde(alias = "j_d_kg_m2"))]
     pub j_d: f64,
     /// Load viscous friction coefficient B_l [N m s/rad] (to be estimated; default 0).
+    #[cfg_attr(feature = "serde", serde(alias = "b_l_n_m_s_rad"))]
     pub b_l: f64,
     /// Voltage driver static gain k_drv [V/V].
     pub k_drv: f64,
     /// Voltage driver cut-off frequency f_c,drv [Hz]; T_drv = 1 / (2 pi f_c,drv).
+    #[cfg_attr(feature = "serde", serde(alias = "f_c_drv_hz"))]
     pub f_c_drv: f64,
     /// Shunt resistance R_s [ohm].
+    #[cfg_attr(feature = "serde", serde(alias = "r_s_ohm"))]
     pub r_s: f64,
     /// Identified total inertia at motor side J_eq [kg m^2]; overrides eq. 10 when set.
     #[cfg_attr(
         feature = "serde",
-        serde(default, skip_serializing_if = "Option::is_none")
+        serde(default, skip_serializing_if = "Option::is_none", alias = "j_eq_kg_m2")
     )]
     pub j_eq: Option<f64>,
     /// Identified total viscous friction at motor side B_eq [N m s/rad]; overrides eq. 10 when set.
     #[cfg_attr(
         feature = "serde",
-        serde(default, skip_serializing_if = "Option::is_none")
+        serde(
+            default,
+            skip_serializing_if = "Option::is_none",
+            alias = "b_eq_n_m_s_rad"
+        )
     )]
     pub b_eq: Option<f64>,
     /// Identified Coulomb friction at load side tau_sf [N m] (eq. 8); 0 when not set.
     #[cfg_attr(
         feature = "serde",
-        serde(default, skip_serializing_if = "Option::is_none")
+        serde(default, skip_serializing_if = "Option::is_none", alias = "tau_sf_n_m")
     )]
     pub tau_sf: Option<f64>,
 }

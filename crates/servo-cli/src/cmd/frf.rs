@@ -1,6 +1,12 @@
 //! `servo frf`: the measured frequency response (plant, loop, complementary sensitivity) from
 //! logs, the margins the loop achieved, and where the model fails in frequency.
 
+mod plot;
+mod report;
+
+use plot::*;
+use report::*;
+
 use crate::cmd::compare::stack_svg;
 use crate::gains_file::GainsFile;
 use crate::io::read_log_with_meta;
@@ -18,8 +24,7 @@ use servo_core::frf::against::{
     against_model, amplitude_dependence, low_coherence_ranges, AtAmplitude, Comparison,
 };
 use servo_core::frf::{
-    achieved_margins, closed_loop, loop_from_t, open_loop, AchievedMargins, ClosedLoopRecord,
-    Frf as Estimate, Interval, OpenLoopRecord, WelchOptions,
+    achieved_margins, loop_from_t, AchievedMargins, Frf as Estimate, Interval, WelchOptions,
 };
 use servo_core::record::Record;
 use std::path::PathBuf;
@@ -63,46 +68,13 @@ pub struct Frf {
 }
 
 /// One log's signals: the varying reference (closed loop), u [V] and theta_l [rad].
-type Signals<'a> = (Option<&'a [f64]>, &'a [f64], &'a [f64]);
+use servo_core::frf::Signals;
 
 struct Log {
     name: String,
     rec: Record,
     gains: Option<GainsFile>,
     logged: Option<crate::runner::controller::LoggedController>,
-}
-
-fn std_dev(x: &[f64]) -> f64 {
-    let m = x.iter().sum::<f64>() / x.len().max(1) as f64;
-    (x.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / x.len().max(1) as f64).sqrt()
-}
-
-fn interval(i: &Option<Interval>) -> Value {
-    match i {
-        Some(i) => json!({"value": i.value, "lo": i.lo, "hi": i.hi}),
-        None => Value::Null,
-    }
-}
-
-fn points(e: &Estimate, start_deg: f64) -> Value {
-    let ph = e.phase_deg(start_deg);
-    Value::Array(
-        (0..e.len())
-            .map(|i| {
-                let (lo, hi) = e.mag_bounds(i);
-                json!({"freq_hz": e.freq_hz[i], "mag": e.mag(i), "phase_deg": ph[i],
-                       "coherence": e.coherence[i], "mag_lo": lo, "mag_hi": hi,
-                       "phase_bound_deg": e.phase_bound_deg(i)})
-            })
-            .collect(),
-    )
-}
-
-fn fmt_i(i: &Option<Interval>, unit: &str, what: &str) -> String {
-    match i {
-        Some(i) => format!("{what} {:.2} {unit} [{:.2}, {:.2}]", i.value, i.lo, i.hi),
-        None => format!("{what} not measured"),
-    }
 }
 
 impl Frf {
@@ -124,7 +96,7 @@ impl Frf {
             logs.push(Log {
                 name: p.display().to_string(),
                 gains: meta.gains()?,
-                logged: meta.controller()?,
+                logged: crate::io::logged_controller(&meta)?,
                 rec,
             });
         }
@@ -156,34 +128,7 @@ impl Frf {
         let total: usize = recs.iter().map(|r| r.1.len()).sum();
         let longest = recs.iter().map(|r| r.1.len()).max().unwrap_or(0);
         opts.segment_len = Some(opts.segment_for(total, longest));
-        let estimate = |rs: &[Signals]| -> anyhow::Result<(
-            Estimate,
-            Option<Estimate>,
-            servo_core::frf::CrossSpectra,
-        )> {
-            Ok(if closed {
-                let cl: Vec<ClosedLoopRecord> = rs
-                    .iter()
-                    .map(|r| ClosedLoopRecord {
-                        ref_rad: r.0.unwrap_or(&[]),
-                        u_v: r.1,
-                        theta_l_rad: r.2,
-                    })
-                    .collect();
-                let e = closed_loop(&cl, ts, &opts)?;
-                (e.plant, Some(e.t), e.spectra)
-            } else {
-                let ol: Vec<OpenLoopRecord> = rs
-                    .iter()
-                    .map(|r| OpenLoopRecord {
-                        u_v: r.1,
-                        theta_l_rad: r.2,
-                    })
-                    .collect();
-                let (p, sp) = open_loop(&ol, ts, &opts)?;
-                (p, None, sp)
-            })
-        };
+        let estimate = |rs: &[Signals]| servo_core::frf::estimate(rs, closed, ts, &opts);
         let (plant, t, spectra) = estimate(&recs).context("estimating the frequency response")?;
         // The controller: --gains, else the log's record.
         let gains_src = given
@@ -345,6 +290,7 @@ impl Frf {
             }
             let a = achieved.as_ref();
             let out = json!({
+                "schema": "servo.frf/1",
                 "mode": if closed { "closed-loop" } else { "open-loop" },
                 "logs": logs.iter().map(|l| l.name.clone()).collect::<Vec<_>>(),
                 "method": method,
@@ -448,103 +394,4 @@ impl Frf {
         }
         Ok(())
     }
-}
-
-/// Bode plot of the plant estimate (bins with coherence >= 0.5) with its bounds and the model,
-/// and the coherence.
-fn plot(p: &Estimate, model: Option<&[Complex<f64>]>) -> anyhow::Result<String> {
-    let keep: Vec<usize> = p.coherent(0.5).collect();
-    let w: Vec<f64> = keep.iter().map(|&i| p.omega(i)).collect();
-    let db = |x: f64| 20.0 * x.log10();
-    let ph = p.phase_deg(-90.0);
-    let mag: Vec<f64> = keep.iter().map(|&i| db(p.mag(i))).collect();
-    let lo: Vec<f64> = keep.iter().map(|&i| db(p.mag_bounds(i).0)).collect();
-    let hi: Vec<f64> = keep.iter().map(|&i| db(p.mag_bounds(i).1)).collect();
-    let phm: Vec<f64> = keep.iter().map(|&i| ph[i]).collect();
-    let phl: Vec<f64> = keep.iter().map(|&i| ph[i] - p.phase_bound_deg(i)).collect();
-    let phh: Vec<f64> = keep.iter().map(|&i| ph[i] + p.phase_bound_deg(i)).collect();
-    let (mm, mp): (Vec<f64>, Vec<f64>) = match model {
-        Some(m) => keep
-            .iter()
-            .zip(&phm)
-            .map(|(&i, meas)| {
-                let v = m[i];
-                let a = v.im.atan2(v.re).to_degrees();
-                (db(v.norm()), a - 360.0 * ((a - meas) / 360.0).round())
-            })
-            .unzip(),
-        None => (Vec::new(), Vec::new()),
-    };
-    let mut s1 = vec![
-        Series {
-            label: "measured",
-            x: &w,
-            y: &mag,
-        },
-        Series {
-            label: "lower bound",
-            x: &w,
-            y: &lo,
-        },
-        Series {
-            label: "upper bound",
-            x: &w,
-            y: &hi,
-        },
-    ];
-    let mut s2 = vec![
-        Series {
-            label: "measured",
-            x: &w,
-            y: &phm,
-        },
-        Series {
-            label: "lower bound",
-            x: &w,
-            y: &phl,
-        },
-        Series {
-            label: "upper bound",
-            x: &w,
-            y: &phh,
-        },
-    ];
-    if model.is_some() {
-        s1.push(Series {
-            label: "model",
-            x: &w,
-            y: &mm,
-        });
-        s2.push(Series {
-            label: "model",
-            x: &w,
-            y: &mp,
-        });
-    }
-    let wa: Vec<f64> = (0..p.len()).map(|i| p.omega(i)).collect();
-    let chart = |title, y_label| Chart {
-        title,
-        x_label: "omega [rad/s]",
-        y_label,
-        log_x: true,
-        ..Chart::default()
-    };
-    Ok(stack_svg(&[
-        line_chart_svg(
-            &chart(
-                "plant u -> theta_l: magnitude (coherence >= 0.5)",
-                "|P| [dB rad/V]",
-            ),
-            &s1,
-        )?,
-        line_chart_svg(&chart("plant u -> theta_l: phase", "phase [deg]"), &s2)?,
-        line_chart_svg(
-            &chart("coherence", "gamma^2 [-]"),
-            &[Series {
-                label: "coherence",
-                x: &wa,
-                y: &p.coherence,
-            }],
-        )?,
-    ]))
 }

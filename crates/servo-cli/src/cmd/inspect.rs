@@ -93,7 +93,7 @@ impl Inspect {
     }
 }
 
-fn guessed(map: anyhow::Result<String>) {
+fn guessed(map: crate::io::Result<String>) {
     match map {
         Ok(m) => outln!("guessed map: --columns {m}"),
         Err(e) => outln!("no guessed map: {e:#}"),

@@ -18,6 +18,7 @@
 pub mod chi2;
 pub mod controller_check;
 pub mod figures;
+pub mod ladder;
 pub mod measured;
 pub mod periodic;
 pub mod quantum;
@@ -28,6 +29,7 @@ pub mod whiteness;
 pub mod windows;
 
 pub use figures::{fit_percent, rmse, Figures};
+pub use ladder::{pooled, ModeChoice, ModelComparison, ReplayController};
 pub use measured::Measured;
 pub use regimes::{Regime, RegimeOptions, RegimeStats};
 pub use replay::{replay, ClosedLoop, Controller, Replay, ReplayMode};

@@ -198,6 +198,33 @@ fn finish(
 }
 
 /// Designs and verifies.
+///
+/// A PID for the Table 2 plant at 30 rad/s crossover and 60 deg phase margin (handout eqs.
+/// 44-53), verified on the reduced, full and discrete loops:
+///
+/// ```
+/// use servo_core::design::bode::DerivativeFilter;
+/// use servo_core::design::controller::Discretization;
+/// use servo_core::design::verify::{design, DesignRequest};
+/// use servo_core::design::{ControllerKind, LoopSpec, PlantModel};
+/// use servo_core::PlantParams;
+/// let p = PlantParams::TABLE2;
+/// let report = design(&DesignRequest {
+///     kind: ControllerKind::Pid,
+///     spec: LoopSpec { omega_gc: 30.0, phase_margin: 60f64.to_radians() },
+///     alpha: 4.0,
+///     filter: DerivativeFilter::Factor(5.0),
+///     ts_s: 1e-3,
+///     discretization: Discretization::Tustin,
+///     reduced: PlantModel::reduced(&p),
+///     full: Some(PlantModel::full(&p)),
+///     design_on_full: false,
+///     exact: false,
+/// })?;
+/// assert!(report.gains.kp > 0.0 && report.gains.ki > 0.0 && report.gains.kd > 0.0);
+/// assert!((report.reduced.margins.phase_margin_deg - 60.0).abs() < 1.0);
+/// # Ok::<(), servo_core::design::DesignError>(())
+/// ```
 pub fn design(req: &DesignRequest) -> Result<DesignReport, DesignError> {
     req.spec.validate()?;
     if !(req.ts_s.is_finite() && req.ts_s > 0.0) {

@@ -174,6 +174,34 @@ impl Diagnosis {
 }
 
 /// Diagnoses `model` against `records`.
+///
+/// The winner is the catalogue effect that explains the residual best, when it is significant:
+///
+/// ```
+/// # use servo_core::{record::Record, sim::{PlantSim, SensorConfig, Sensors}, Plant, PlantParams};
+/// # fn simulate(plant: &Plant, seconds: f64) -> Record {
+/// #     let (mut sim, mut sensors) = (PlantSim::new(plant, 1e-3).unwrap(), Sensors::new(SensorConfig::default()));
+/// #     let mut rec = Record::default();
+/// #     let (mut th, mut ia, mut uv) = (Vec::new(), Vec::new(), Vec::new());
+/// #     for k in 0..(seconds * 1e3) as usize {
+/// #         let u = [6.0, -3.0, 2.0, -7.0, 4.0][(k / 300) % 5];
+/// #         let m = sensors.measure(sim.state());
+/// #         rec.time_s.push(k as f64 * 1e-3);
+/// #         th.push(m.theta_l_rad); ia.push(m.i_a_a); uv.push(u);
+/// #         sim.step(u);
+/// #     }
+/// #     (rec.theta_l_rad, rec.i_a_a, rec.u_v) = (Some(th), Some(ia), Some(uv));
+/// #     rec
+/// # }
+/// use servo_core::diagnose::{diagnose, DiagnoseOptions};
+/// use servo_core::effects::{Effect, EffectKind};
+/// let mut truth = Plant::from_params(PlantParams::TABLE2)?;
+/// truth.effects.insert(Effect::new(EffectKind::Imbalance, &[0.01, 0.5])?);
+/// let logs = [simulate(&truth, 6.0)];
+/// let d = diagnose(&logs, &Plant::from_params(PlantParams::TABLE2)?, &DiagnoseOptions::default())?;
+/// assert_eq!(d.winner().map(|c| c.effect), Some(EffectKind::Imbalance));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn diagnose(
     records: &[Record],
     model: &Plant,

@@ -213,6 +213,33 @@ pub struct FitResult {
 /// (with the base parameters, unless `opts.refit_base` is false); `effects` are added (or replace
 /// the base's effect of the same kind) with the parameters marked in [`EffectToFit::fit`]
 /// estimated.
+///
+/// The base model is identified with no effects to add (J_eq, B_eq, tau_sf and the electrical
+/// constants by least squares on the mechanical and electrical balances, handout 4.3):
+///
+/// ```
+/// # use servo_core::{record::Record, sim::{PlantSim, SensorConfig, Sensors}, Plant, PlantParams};
+/// # fn simulate(plant: &Plant, seconds: f64) -> Record {
+/// #     let (mut sim, mut sensors) = (PlantSim::new(plant, 1e-3).unwrap(), Sensors::new(SensorConfig::default()));
+/// #     let mut rec = Record::default();
+/// #     let (mut th, mut ia, mut uv) = (Vec::new(), Vec::new(), Vec::new());
+/// #     for k in 0..(seconds * 1e3) as usize {
+/// #         let u = [6.0, -3.0, 2.0, -7.0, 4.0][(k / 300) % 5];
+/// #         let m = sensors.measure(sim.state());
+/// #         rec.time_s.push(k as f64 * 1e-3);
+/// #         th.push(m.theta_l_rad); ia.push(m.i_a_a); uv.push(u);
+/// #         sim.step(u);
+/// #     }
+/// #     (rec.theta_l_rad, rec.i_a_a, rec.u_v) = (Some(th), Some(ia), Some(uv));
+/// #     rec
+/// # }
+/// use servo_core::fit::{fit_model, FitOptions};
+/// let truth = Plant::from_params(PlantParams { b_eq: Some(2e-6), ..PlantParams::TABLE2 })?;
+/// let log = simulate(&truth, 3.0);
+/// let fit = fit_model(&[log], &Plant::from_params(PlantParams::TABLE2)?, &[], &FitOptions::default())?;
+/// assert!((fit.plant.b_eq() / 2e-6 - 1.0).abs() < 0.2, "B_eq = {}", fit.plant.b_eq());
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn fit_model(
     records: &[Record],
     base: &Plant,

@@ -335,3 +335,40 @@ mod tests {
         assert!((full.rel_radius[3] - 0.21).abs() < 1e-12);
     }
 }
+
+/// One log's signals for [`estimate`]: the position reference [rad] (`None` open loop), the
+/// driver input u [V] and the load angle theta_l [rad].
+pub type Signals<'a> = (Option<&'a [f64]>, &'a [f64], &'a [f64]);
+
+/// The plant estimate of `records` pooled, and the complementary sensitivity T in closed loop:
+/// with `closed`, the joint input-output estimate of [`closed_loop`] (every record must carry
+/// its reference), otherwise H1(u -> theta_l) of [`open_loop`]. `ts_s` is the sample period [s].
+pub fn estimate(
+    records: &[Signals],
+    closed: bool,
+    ts_s: f64,
+    opts: &WelchOptions,
+) -> Result<(Frf, Option<Frf>, CrossSpectra), FrfError> {
+    Ok(if closed {
+        let cl: Vec<ClosedLoopRecord> = records
+            .iter()
+            .map(|r| ClosedLoopRecord {
+                ref_rad: r.0.unwrap_or(&[]),
+                u_v: r.1,
+                theta_l_rad: r.2,
+            })
+            .collect();
+        let e = closed_loop(&cl, ts_s, opts)?;
+        (e.plant, Some(e.t), e.spectra)
+    } else {
+        let ol: Vec<OpenLoopRecord> = records
+            .iter()
+            .map(|r| OpenLoopRecord {
+                u_v: r.1,
+                theta_l_rad: r.2,
+            })
+            .collect();
+        let (p, sp) = open_loop(&ol, ts_s, opts)?;
+        (p, None, sp)
+    })
+}

@@ -227,6 +227,16 @@ pub struct PlantSim {
 
 impl PlantSim {
     /// A simulator at rest at the origin, with control period `dt_s` [s].
+    ///
+    /// ```
+    /// use servo_core::{sim::PlantSim, Plant, PlantParams};
+    /// let mut sim = PlantSim::new(&Plant::from_params(PlantParams::TABLE2)?, 1e-3)?;
+    /// for _ in 0..1000 {
+    ///     sim.step(5.0); // 5 V for 1 s
+    /// }
+    /// assert!(sim.state().omega_l_rad_s > 10.0);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     pub fn new(plant: &Plant, dt_s: f64) -> Result<PlantSim, SimError> {
         Self::with_max_substep(plant, dt_s, MAX_SUBSTEP_S)
     }

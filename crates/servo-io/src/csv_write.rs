@@ -3,7 +3,7 @@
 //! number format.
 
 use super::units::Signal;
-use anyhow::{bail, Context};
+use crate::error::{self as anyhow, bail, Context};
 use servo_core::record::Record;
 use std::io::Write;
 use std::path::Path;

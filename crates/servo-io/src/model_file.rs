@@ -14,7 +14,7 @@
 //! [provenance]        # optional, free-form: where identified values came from
 //! ```
 
-use anyhow::{anyhow, Context};
+use crate::error::{self as anyhow, anyhow, Context};
 use servo_core::effects::{Effect, EffectKind, Effects};
 use servo_core::sim::SensorConfig;
 use servo_core::{Plant, PlantParams};
@@ -33,8 +33,10 @@ struct Raw {
     provenance: Option<toml::Table>,
 }
 
-/// A parsed and validated model file.
-#[derive(Debug, Clone, PartialEq)]
+/// A parsed and validated model file. With serde it (de)serialises as the file's tables
+/// (`[params]`, `[effects.<name>]`, ...), validated on the way in as [`ModelFile::parse`] does.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "Raw", into = "Raw")]
 pub struct ModelFile {
     pub params: PlantParams,
     /// Effects listed in the file (in addition to the friction implied by the params).
@@ -42,6 +44,19 @@ pub struct ModelFile {
     pub sensors: Option<SensorConfig>,
     /// Free-form provenance (log, method, date, ...).
     pub provenance: Option<toml::Table>,
+}
+
+impl TryFrom<Raw> for ModelFile {
+    type Error = crate::Error;
+    fn try_from(raw: Raw) -> crate::Result<ModelFile> {
+        ModelFile::from_raw(raw)
+    }
+}
+
+impl From<ModelFile> for Raw {
+    fn from(m: ModelFile) -> Raw {
+        m.to_raw()
+    }
 }
 
 impl Default for ModelFile {
@@ -67,6 +82,11 @@ impl ModelFile {
     /// Parses and validates TOML text.
     pub fn parse(text: &str) -> anyhow::Result<ModelFile> {
         let raw: Raw = toml::from_str(text).map_err(|e| anyhow!("{}", e.to_string().trim_end()))?;
+        Self::from_raw(raw)
+    }
+
+    /// Validates the deserialised file: parameters, effect names and keys, complete effects.
+    fn from_raw(raw: Raw) -> anyhow::Result<ModelFile> {
         raw.params
             .validate()
             .map_err(|e| anyhow!("[params]: {e}"))?;
@@ -117,18 +137,22 @@ impl ModelFile {
 
     /// Serialises to TOML (machine form).
     pub fn to_toml(&self) -> anyhow::Result<String> {
+        Ok(toml::to_string(&self.to_raw())?)
+    }
+
+    /// The serialisable form: effects as tables of catalogue keys.
+    fn to_raw(&self) -> Raw {
         let mut effects = BTreeMap::new();
         for e in self.effects.iter() {
             let kv: BTreeMap<String, f64> = e.iter().map(|(p, v)| (p.key.to_string(), v)).collect();
             effects.insert(e.kind.name().to_string(), kv);
         }
-        let raw = Raw {
+        Raw {
             params: self.params,
             effects,
             sensors: self.sensors,
             provenance: self.provenance.clone(),
-        };
-        Ok(toml::to_string(&raw)?)
+        }
     }
 
     /// Writes the file.
@@ -218,6 +242,33 @@ mod tests {
         let text = ModelFile::default().to_toml_commented();
         let back = ModelFile::parse(&text).unwrap();
         assert_eq!(back, ModelFile::default());
+    }
+
+    #[test]
+    fn serde_round_trip_validates() {
+        let mut m = ModelFile::default();
+        m.effects
+            .insert(Effect::new(EffectKind::Imbalance, &[0.01, 0.5]).unwrap());
+        let json = serde_json::to_string(&m).unwrap();
+        // (effects compare by their TOML: unused parameter slots hold NaN)
+        let back: ModelFile = serde_json::from_str(&json).unwrap();
+        assert_eq!(back.to_toml().unwrap(), m.to_toml().unwrap());
+        let bad = json.replace("\"r_a\":2.6", "\"r_a\":-2.6");
+        assert!(serde_json::from_str::<ModelFile>(&bad).is_err(), "{bad}");
+    }
+
+    #[test]
+    fn keys_with_unit_suffixes_of_the_json_outputs_are_read() {
+        let good = ModelFile::default().to_toml_commented();
+        let suffixed = good
+            .replace("r_a =", "r_a_ohm =")
+            .replace("# b_eq = ...", "b_eq_n_m_s_rad = 4.6e-6");
+        let m = ModelFile::parse(&suffixed).unwrap();
+        assert_eq!(m.params.r_a, ModelFile::default().params.r_a);
+        assert_eq!(m.params.b_eq, Some(4.6e-6));
+        // both spellings of one key are refused, not silently resolved
+        let both = good.replace("r_s =", "r_a_ohm = 2.6\nr_s =");
+        assert!(ModelFile::parse(&both).is_err());
     }
 
     #[test]

@@ -1,4 +1,8 @@
-//! Reading and writing logs: servo's MCAP, servo's CSV and foreign CSVs through a column map.
+//! servo's files: the model and gains files (TOML), reference programs, and logs: servo's MCAP,
+//! servo's CSV, foreign CSVs through a column map, MATLAB MAT-files.
+//!
+//! * [`model_file`], [`gains_file`], [`reference_file`]: the TOML files servo reads and writes.
+//! * [`error`]: the typed [`Error`] every function here returns.
 //!
 //! Every command that reads a log calls [`read_log`] (or [`read_log_with_meta`] for the run's
 //! metadata: gains, plant, reference).
@@ -14,12 +18,17 @@
 pub mod columns;
 pub mod csv_read;
 pub mod csv_write;
+pub mod error;
+pub mod gains_file;
 pub mod loop_msg;
 pub mod mat_log;
 pub mod mat_path;
 pub mod mat_read;
 pub mod mcap_read;
+pub mod mcap_recover;
 pub mod mcap_write;
+pub mod model_file;
+pub mod reference_file;
 pub mod units;
 
 pub use loop_msg::LoopMsg;
@@ -27,9 +36,10 @@ pub use mcap_write::{LogEncoding, McapLog, McapLogOptions};
 
 pub use columns::ColumnMap;
 pub use csv_write::write_csv;
+pub use error::{Context, Error, Result};
 pub use units::{Signal, Unit};
 
-use anyhow::{bail, Context};
+use crate::error::{self as anyhow, bail};
 use servo_core::record::Record;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -94,7 +104,7 @@ pub mod meta_keys {
     pub const REFERENCE: &str = "reference";
     /// The controller, as a gains file (TOML, `[pid]`).
     pub const GAINS_TOML: &str = "gains_toml";
-    /// The controller exactly as it ran (TOML, [`crate::runner::controller::LoggedController`]):
+    /// The controller exactly as it ran (TOML, servo-cli's `LoggedController`):
     /// gains, period, discretisation, derivative input, anti-windup, limit, feedforward.
     pub const CONTROLLER_TOML: &str = "controller_toml";
     /// The simulated plant (truth), as a model file (TOML); simulator runs only.
@@ -124,18 +134,6 @@ impl LogMeta {
     pub fn gains(&self) -> anyhow::Result<Option<crate::gains_file::GainsFile>> {
         self.get(meta_keys::GAINS_TOML)
             .map(|t| crate::gains_file::GainsFile::parse(t).context("in the log's gains metadata"))
-            .transpose()
-    }
-    /// The record of the controller as it ran (`None` for logs without one: CSV, open loop, or
-    /// written before servo recorded it).
-    pub fn controller(
-        &self,
-    ) -> anyhow::Result<Option<crate::runner::controller::LoggedController>> {
-        self.get(meta_keys::CONTROLLER_TOML)
-            .map(|t| {
-                crate::runner::controller::LoggedController::parse(t)
-                    .context("in the log's controller metadata")
-            })
             .transpose()
     }
     /// The simulated plant (truth) of a simulator run.

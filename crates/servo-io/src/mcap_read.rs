@@ -4,7 +4,7 @@
 
 use super::loop_msg::{LoopMsg, LOOP_TOPIC};
 use super::mcap_write::{RUN_METADATA, SUMMARY_METADATA};
-use anyhow::{anyhow, bail, Context};
+use crate::error::{self as anyhow, anyhow, bail, Context};
 use mcap::records::Record as McapRecord;
 use servo_core::record::Record;
 use std::collections::{BTreeMap, HashMap};
@@ -510,7 +510,7 @@ mod tests {
             &p,
             &BTreeMap::new(),
             McapLogOptions {
-                encoding: crate::io::LogEncoding::Protobuf,
+                encoding: crate::LogEncoding::Protobuf,
                 fast_compression: true,
                 ..McapLogOptions::default()
             },

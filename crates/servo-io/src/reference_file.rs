@@ -27,7 +27,7 @@
 //! its final value and a voltage is 0 V. The segment semantics are those of
 //! [`servo_core::control::sequence`], shared with the allocation-free sequences of the core.
 
-use anyhow::{anyhow, bail, Context};
+use crate::error::{self as anyhow, anyhow, bail, Context};
 use servo_core::control::sequence::{duration_s, setpoint_at, PlacedSegment};
 use servo_core::control::{Reference, Segment, SegmentMode, Setpoint, Target};
 use std::path::Path;

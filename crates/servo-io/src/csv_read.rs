@@ -2,7 +2,7 @@
 
 use super::columns::ColumnMap;
 use super::units::Signal;
-use anyhow::{anyhow, bail, Context};
+use crate::error::{self as anyhow, anyhow, bail, Context};
 use servo_core::record::Record;
 use std::path::Path;
 

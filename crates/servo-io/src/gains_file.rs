@@ -14,7 +14,7 @@
 //! [design]         # optional, informational (spec the gains were designed for)
 //! ```
 
-use anyhow::{anyhow, bail, Context};
+use crate::error::{self as anyhow, anyhow, bail, Context};
 use std::path::Path;
 
 /// PID gains in parallel form C(s) = K_P + K_I/s + K_D s/(T_L s + 1).

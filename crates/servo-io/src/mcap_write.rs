@@ -6,7 +6,7 @@
 use super::loop_msg::{
     loop_descriptor_set, loop_schema, LoopMsg, LOOP_PROTO_NAME, LOOP_SCHEMA_NAME, LOOP_TOPIC,
 };
-use anyhow::{anyhow, Context};
+use crate::error::{self as anyhow, anyhow, Context};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
@@ -44,7 +44,8 @@ pub struct McapLogOptions {
 
 /// Message encoding of the `/servo/loop` channel. Both open in Foxglove and PlotJuggler and in
 /// every servo command.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum LogEncoding {
     /// JSON text with a JSON schema (`jsonschema`): readable anywhere, ~360 bytes a sample.
     #[default]

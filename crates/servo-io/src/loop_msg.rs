@@ -282,7 +282,7 @@ pub fn loop_schema() -> String {
         "description": "servo position loop, one message per control sample: measurements taken at time_s, u_v applied from then until the next sample",
         "type": "object",
         "properties": {
-            "time_s": num("run time of the sample [s]"),
+            "time_s": { "type": "number", "description": "run time of the sample [s]" },
             "ref_rad": num("position reference at the load [rad] (null in open loop)"),
             "theta_l_rad": num("measured load angle theta_l [rad]"),
             "omega_l_rad_s": num("load speed estimate omega_l [rad/s]"),
@@ -296,7 +296,9 @@ pub fn loop_schema() -> String {
             "saturated": { "type": "boolean", "description": "controller output clipped at the voltage limit" },
             "ref_omega_l_rad_s": num("speed reference at the load [rad/s] of a speed-controlled run (identification staircase and ramps; null otherwise)")
         },
-        "required": ["time_s", "theta_l_rad", "u_v", "i_a_a"]
+        // Only the time is required: every other field may be null or left out (a foreign log
+        // without a current sensor, an open-loop run), and the reader takes it as missing.
+        "required": ["time_s"]
     })
     .to_string()
 }

@@ -6,7 +6,7 @@ use super::columns::{ColumnMap, ColumnSpec};
 use super::mat_path::{resolve, MatPath, Series};
 use super::mat_read::{dims_text, numel, read_mat_file, MatFile, MatValue};
 use super::units::Signal;
-use anyhow::{anyhow, bail, Context};
+use crate::error::{self as anyhow, anyhow, bail, Context};
 use servo_core::record::Record;
 use std::path::Path;
 

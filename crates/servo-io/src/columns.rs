@@ -5,7 +5,7 @@
 //! from common header suffixes (`_deg`, `_rad`, `_rpm`, `_deg_per_s`, `_A`, `_V`, ...).
 
 use super::units::{Signal, Unit};
-use anyhow::{anyhow, bail};
+use crate::error::{self as anyhow, anyhow, bail};
 use std::fmt;
 
 /// One entry: the column `column` holds `signal` in `unit`.

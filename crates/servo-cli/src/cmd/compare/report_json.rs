@@ -1,0 +1,235 @@
+//! `servo compare --json`: the report as one object of schema `servo.compare/1`
+//! (docs/schemas/compare.json).
+
+use super::*;
+
+pub(super) fn figures_json(kind: SignalKind, f: &Figures) -> Value {
+    json!({
+        "signal": kind.name(), "unit": kind.unit(),
+        "fit_pct": finite(f.fit_percent), "rmse": finite(f.rmse), "max_error": finite(f.max_abs_error),
+        "mean_error": finite(f.mean_error), "samples": f.samples,
+    })
+}
+
+pub(super) fn finite(v: f64) -> Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        Value::Null
+    }
+}
+
+/// Regime statistics pooled over the logs whose headline is `kind`.
+pub(super) fn pooled_regimes(c: &ModelComparison, kind: SignalKind) -> Vec<Value> {
+    let mut per: Vec<(Regime, usize, f64, f64)> =
+        Regime::ALL.iter().map(|r| (*r, 0, 0.0, 0.0)).collect();
+    let (mut total_n, mut total_se) = (0usize, 0.0);
+    for r in c
+        .reports
+        .iter()
+        .filter(|r| r.headline_signal().kind == kind)
+    {
+        for (e, g) in r.residual.iter().zip(&r.classification.regime) {
+            let i = Regime::ALL.iter().position(|x| x == g).unwrap_or(0);
+            per[i].1 += 1;
+            per[i].2 += e * e;
+            per[i].3 += e;
+            total_n += 1;
+            total_se += e * e;
+        }
+    }
+    let first = c.reports.iter().find(|r| r.headline_signal().kind == kind);
+    per.iter()
+        .map(|(g, n, se, s)| {
+            let time = 100.0 * *n as f64 / total_n.max(1) as f64;
+            let err = if total_se > 0.0 {
+                100.0 * se / total_se
+            } else {
+                0.0
+            };
+            json!({
+                "regime": g.name(),
+                "where": first.map(|r| regime_phrase(*g, &r.classification, &Default::default())),
+                "samples": n,
+                "time_share_pct": time,
+                "error_share_pct": err,
+                "rms": if *n > 0 { (se / *n as f64).sqrt() } else { 0.0 },
+                "mean": if *n > 0 { s / *n as f64 } else { 0.0 },
+                "concentration": if time > 0.0 { err / time } else { 0.0 },
+                "suspects": g.suspects(),
+            })
+        })
+        .collect()
+}
+
+pub(super) fn to_json(
+    logs: &[LogData],
+    modes: &[ModeChoice],
+    c: &ModelComparison,
+    ladder: &[LadderStep],
+    opts: &CompareOptions,
+) -> Value {
+    let pooled_figs = pooled(c);
+    let (hk, hf) = pooled_figs[0];
+    let effects: Vec<Value> = c
+        .plant
+        .effects
+        .iter()
+        .map(|e| {
+            let params: serde_json::Map<String, Value> = e
+                .iter()
+                .map(|(p, v)| (p.key.to_string(), json!(v)))
+                .collect();
+            let units: serde_json::Map<String, Value> = e
+                .iter()
+                .map(|(p, _)| (p.key.to_string(), json!(p.unit)))
+                .collect();
+            json!({ "effect": e.kind.name(), "params": params, "units": units })
+        })
+        .collect();
+    let p = c.plant.params;
+    let base = json!({
+        "j_eq_kg_m2": p.j_eq(), "b_eq_n_m_s_rad": c.plant.b_eq(), "tau_sf_n_m": c.plant.tau_sf(),
+        "r_eq_ohm": p.r_eq(), "k_e_v_s_rad": p.k_e, "k_t_n_m_a": p.k_t, "k_drv": p.k_drv, "n": p.n,
+    });
+    let ladder_json: Vec<Value> = ladder
+        .iter()
+        .map(|s| {
+            let (k, f) = s.cmp_fit[0];
+            json!({
+                "step": s.label, "effect": s.effect, "signal": k.name(), "unit": k.unit(),
+                "fit_pct": finite(f.fit_percent), "rmse": finite(f.rmse), "max_error": finite(f.max_abs_error),
+                "signals": s.cmp_fit.iter().map(|(k, f)| figures_json(*k, f)).collect::<Vec<_>>(),
+                "fitted_params": s.fitted,
+            })
+        })
+        .collect();
+    let mut windows: Vec<(f64, Value)> = Vec::new();
+    let total_se: f64 = c
+        .reports
+        .iter()
+        .filter(|r| r.headline_signal().kind == hk)
+        .map(|r| r.residual.iter().map(|e| e * e).sum::<f64>())
+        .sum();
+    for (log, r) in logs
+        .iter()
+        .zip(&c.reports)
+        .filter(|(_, r)| r.headline_signal().kind == hk)
+    {
+        let se_log: f64 = r.residual.iter().map(|e| e * e).sum();
+        for w in &r.worst_windows {
+            let share = if total_se > 0.0 {
+                w.error_share_pct * se_log / total_se
+            } else {
+                0.0
+            };
+            windows.push((
+                share,
+                json!({
+                    "log": log.path.display().to_string(),
+                    "t_start_s": w.t_start_s, "t_end_s": w.t_end_s,
+                    "error_share_pct": share, "rms": w.rms, "mean": w.mean,
+                    "regime": w.regime.name(),
+                    "omega_min_rad_s": w.omega_min_rad_s, "omega_max_rad_s": w.omega_max_rad_s,
+                    "u_abs_max_v": w.u_abs_max_v,
+                    "description": describe_window(w, r, opts),
+                }),
+            ));
+        }
+    }
+    windows.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let r0 = &c.reports[0];
+    let x = &r0.input_xcorr;
+    let per_log: Vec<Value> = logs
+        .iter()
+        .zip(c.reports.iter().zip(modes))
+        .map(|(l, (r, mc))| {
+            json!({
+                "log": l.path.display().to_string(),
+                "mode": r.mode.name(), "mode_reason": mc.reason,
+                "samples": r.time_s.len(), "dt_s": r.dt_s,
+                "speed_derived_from_position": l.measured.speed_derived,
+                "controller": controller_json(l),
+                "signal": r.headline_signal().kind.name(),
+                "signals": r.signals.iter().map(|s| figures_json(s.kind, &s.figures)).collect::<Vec<_>>(),
+                "whiteness": whiteness_json(r),
+                "periodic": r.periodic.iter().map(|p| json!({
+                    "angle": p.source.name(), "harmonic": p.harmonic, "share_pct": p.share_pct,
+                    "amplitude": p.amplitude, "phase_rad": p.phase_rad, "p_value": p.p_value, "significant": p.significant,
+                })).collect::<Vec<_>>(),
+                "findings": r.findings,
+            })
+        })
+        .collect();
+    json!({
+        "schema": "servo.compare/1",
+        "mode": r0.mode.name(),
+        "mode_reason": modes[0].reason,
+        "controller": controller_json(&logs[0]),
+        "signal": hk.name(),
+        "unit": hk.unit(),
+        "fit_pct": finite(hf.fit_percent),
+        "rmse": finite(hf.rmse),
+        "max_error": finite(hf.max_abs_error),
+        "signals": pooled_figs.iter().map(|(k, f)| figures_json(*k, f)).collect::<Vec<_>>(),
+        "effects": effects,
+        "base": base,
+        "ladder": ladder_json,
+        "regimes": pooled_regimes(c, hk),
+        "worst_windows": windows.into_iter().take(opts.worst_count).map(|(_, v)| v).collect::<Vec<_>>(),
+        "whiteness": whiteness_json(r0),
+        "input_xcorr": json!({
+            "input": r0.input_name, "max_lag": x.max_lag, "bound99": x.bound99, "lags_outside": x.lags_outside,
+            "peak_lag": x.peak_lag, "peak": x.peak, "xcorr": x.xcorr,
+        }),
+        "findings": r0.findings,
+        "logs": per_log,
+    })
+}
+
+pub(super) fn controller_json(log: &LogData) -> Value {
+    let Some(r) = &log.controller else {
+        return Value::Null;
+    };
+    let g = &r.config;
+    let c = log.check.as_ref();
+    let value = |part: &str| r.part(part).map(|p| p.value.clone());
+    let parts: serde_json::Map<String, Value> = r
+        .parts
+        .iter()
+        .map(|p| {
+            (
+                p.part.to_string(),
+                json!({ "value": p.value, "text": p.words, "source": p.source }),
+            )
+        })
+        .collect();
+    json!({
+        "source": r.part("gains").map(|p| p.source.clone()),
+        "kp": g.kp, "ki": g.ki, "kd": g.kd, "tl_s": g.tl_s, "ts_s": g.ts_s,
+        "discretization": value("discretization"),
+        "derivative_on": value("derivative_on"),
+        "anti_windup": value("anti_windup"),
+        "kw": match g.anti_windup { AntiWindup::BackCalculation { kw } => json!(kw), _ => Value::Null },
+        "u_limit_v": log.u_limit.as_ref().map(|l| l.0),
+        "feedforward": value("feedforward"),
+        "parts": parts,
+        "description": r.describe(),
+        "notes": log.notes,
+        "check_fit_pct": c.map(|c| finite(c.fit_percent)),
+        "check_rms_v": c.map(|c| finite(c.rms_v)),
+        "check_samples": c.map(|c| c.samples),
+        "ls_gains": c.and_then(|c| c.ls_gains).map(|[kp, ki, kd]| json!({"kp": kp, "ki": ki, "kd": kd})),
+        "ls_fit_pct": c.map(|c| finite(c.ls_fit_percent)),
+    })
+}
+
+pub(super) fn whiteness_json(r: &CompareReport) -> Value {
+    let w = &r.whiteness;
+    json!({
+        "signal": r.headline_signal().kind.name(),
+        "ljung_box_q": finite(w.ljung_box_q), "dof": w.ljung_box_dof, "p_value": finite(w.ljung_box_p), "white": w.white,
+        "bound99": w.bound99, "lags_outside": w.lags_outside, "correlation_lags": w.correlation_lags,
+        "autocorr": w.autocorr,
+    })
+}

@@ -1,0 +1,156 @@
+//! `servo compare`: the text report.
+
+use super::*;
+
+pub(super) fn print_text(
+    logs: &[LogData],
+    modes: &[ModeChoice],
+    c: &ModelComparison,
+    ladder: &[LadderStep],
+    opts: &CompareOptions,
+    save: Option<&Path>,
+    plot: Option<&Path>,
+) {
+    for ((log, r), mc) in logs.iter().zip(&c.reports).zip(modes) {
+        outln!(
+            "== {} ({} samples, {:.3} s, dt = {:.4} s)",
+            log.path.display(),
+            r.time_s.len(),
+            r.time_s.len() as f64 * r.dt_s,
+            r.dt_s
+        );
+        outln!("mode: {} -- {}", r.mode.name(), mc.reason);
+        if let Some(line) = controller_description(log) {
+            outln!("{line}");
+        }
+        if let Some(line) = controller_words(log) {
+            outln!("{line}");
+        }
+        if log.measured.speed_derived {
+            let model_side = if matches!(r.mode, ReplayMode::ClosedLoop | ReplayMode::Speed) {
+                "the model's speed is derived from its position the same way"
+            } else {
+                "the model's speed is its state at the end of each prediction"
+            };
+            outln!(
+                "speed: derived from position (zero-phase {:.0} Hz low-pass + central differences); {model_side}",
+                opts.speed_filter_hz
+            );
+        }
+        outln!(
+            "{:<10} {:>9} {:>14} {:>14} {:>14}",
+            "signal",
+            "fit [%]",
+            "RMSE",
+            "max error",
+            "mean error"
+        );
+        for s in &r.signals {
+            let f = &s.figures;
+            outln!(
+                "{:<10} {:>9.2} {:>14} {:>14} {:>14}",
+                format!("{} [{}]", s.kind.name(), s.kind.unit()),
+                f.fit_percent,
+                format!("{:.4e}", f.rmse),
+                format!("{:.4e}", f.max_abs_error),
+                format!("{:.3e}", f.mean_error)
+            );
+        }
+        outln!("where the {} error sits:", r.headline_signal().kind.words());
+        outln!(
+            "  {:<16} {:>8} {:>9} {:>12}",
+            "regime",
+            "time %",
+            "error %",
+            "rms"
+        );
+        for s in r.regimes.iter().filter(|s| s.samples > 0) {
+            outln!(
+                "  {:<16} {:>8.1} {:>9.1} {:>12.4e}",
+                s.regime.name(),
+                s.time_share_pct,
+                s.error_share_pct,
+                s.rms
+            );
+        }
+        outln!("findings:");
+        for f in &r.findings {
+            outln!("  - {f}");
+        }
+        if !r.worst_windows.is_empty() {
+            outln!("worst windows:");
+            for (i, w) in r.worst_windows.iter().enumerate() {
+                outln!("  {}. {}", i + 1, describe_window(w, r, opts));
+            }
+        }
+        outln!();
+    }
+    if ladder.len() > 1 || logs.len() > 1 {
+        let k = ladder[0].cmp_fit[0].0;
+        outln!("error ladder ({} over all logs):", k.words());
+        let mut prev: Option<f64> = None;
+        for s in ladder {
+            let f = s.cmp_fit[0].1;
+            let change = prev
+                .map(|p| format!(" ({:+.1} % RMSE)", 100.0 * (f.rmse - p) / p))
+                .unwrap_or_default();
+            outln!(
+                "  {:<24} fit {:>7.2} %   RMSE {}{}",
+                s.label,
+                f.fit_percent,
+                with_unit(f.rmse, k),
+                change
+            );
+            prev = Some(f.rmse);
+        }
+    }
+    if ladder.len() > 1 {
+        outln!("model after the added effects:");
+        for e in c.plant.effects.iter() {
+            let kv: Vec<String> = e
+                .iter()
+                .map(|(p, v)| format!("{} = {:.4e} {}", p.key, v, p.unit))
+                .collect();
+            outln!("  {:<11} {}", e.kind.name(), kv.join(", "));
+        }
+        outln!(
+            "  base        J_eq = {:.4e} kg m^2, R_eq = {:.4} ohm, k_drv = {:.4}",
+            c.plant.params.j_eq(),
+            c.plant.params.r_eq(),
+            c.plant.params.k_drv
+        );
+    }
+    if let Some(p) = save {
+        outln!("model written to {}", p.display());
+    }
+    if let Some(p) = plot {
+        outln!("figures written to {}", p.display());
+    }
+}
+
+/// The controller check in words (None without a controller).
+pub fn controller_words(log: &LogData) -> Option<String> {
+    let c = log.check.as_ref()?;
+    let mut s = format!(
+        "controller check: this controller reproduces the logged u with fit {:.2} % (RMS {:.3e} V over {} samples inside the output limit)",
+        c.fit_percent, c.rms_v, c.samples
+    );
+    // The logged u carries the encoder's quantisation through K_D, which no PID reproduces: judge
+    // the given gains against the best PID on the same samples, not against 100 %.
+    if c.fit_percent < c.ls_fit_percent - 10.0 {
+        if let Some([kp, ki, kd]) = c.ls_gains {
+            s.push_str(&format!(
+                "\nWARNING: these gains do not reproduce the logged u, so the replay will differ for reasons unrelated to the plant. The PID that best reproduces it is kp = {kp:.4} V/rad, ki = {ki:.4} V/(rad s), kd = {kd:.4} V s/rad (fit {:.1} %): try --gains-from-log.",
+                c.ls_fit_percent
+            ));
+        }
+    }
+    Some(s)
+}
+
+/// The controller of the replay in words: every part with where it came from.
+pub fn controller_description(log: &LogData) -> Option<String> {
+    log.controller
+        .as_ref()
+        .map(|c| format!("controller: {}", c.describe()))
+}

@@ -1,0 +1,89 @@
+//! `servo diagnose --json`: the report as one object of schema `servo.diagnose/1`
+//! (docs/schemas/diagnose.json).
+
+use super::*;
+
+pub(super) fn f(v: f64) -> Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        Value::Null
+    }
+}
+
+pub(super) fn candidate_json(c: &Candidate) -> Value {
+    let mut params = serde_json::Map::new();
+    for p in &c.params {
+        params.insert(
+            p.key.to_string(),
+            json!({ "value": f(p.value), "unit": p.unit, "std_err": p.std_err.map(f), "fitted": p.fitted }),
+        );
+    }
+    json!({
+        "effect": c.effect.name(),
+        "significant": c.significant,
+        "resolvable": c.resolvable,
+        "error_reduction_pct": f(c.error_reduction_pct),
+        "oe_reduction_pct": c.oe_reduction_pct.map(f),
+        "bic_gain": f(c.bic_gain),
+        "equation": c.equation.name(),
+        "params": params,
+        "evidence": c.evidence,
+        "experiment": c.experiment,
+        "noise_ratio": f(c.noise_ratio),
+        "structured_share": f(c.structured_share),
+        "checks": c.checks.iter().map(|k| json!({ "check": k.name, "passed": k.passed, "detail": k.detail })).collect::<Vec<_>>(),
+    })
+}
+
+pub(super) fn balance_json(b: &BalanceReport) -> Value {
+    json!({
+        "balance": b.balance.name(),
+        "equation": b.equation.name(),
+        "unit": b.equation.unit(),
+        "rms": f(b.rms),
+        "noise_floor": f(b.floor),
+        "ratio_to_noise": f(b.ratio_to_noise),
+        "above_noise": b.above_noise,
+        "signatures": b.signatures.iter().map(|s| json!({
+            "kind": s.kind,
+            "description": s.description,
+            "share_of_heldout_residual": f(s.share),
+            "explained_rms": f(s.explained_rms),
+        })).collect::<Vec<_>>(),
+        "experiment": b.experiment,
+    })
+}
+
+pub(super) fn thresholds_json(t: &Thresholds) -> Value {
+    json!({
+        "min_noise_ratio": f(t.min_noise_ratio),
+        "min_structured_share": f(t.min_structured_share),
+        "unexplained_ratio": f(t.unexplained_ratio),
+        "min_signature_share": f(t.min_signature_share),
+        "consistency_tol": f(t.consistency_tol),
+        "electrical_block_ratio": f(t.electrical_block_ratio),
+    })
+}
+
+pub(super) fn base_json(d: &Diagnosis) -> Value {
+    json!({
+        "equations": d.base.equations.iter().map(|(eq, rms, share, occ)| {
+            let regimes: serde_json::Map<String, Value> = Regime::ALL.iter().enumerate().map(|(i, r)| {
+                (r.name().to_string(), json!({ "share_of_squared_error": f(share[i]), "share_of_samples": f(occ[i]) }))
+            }).collect();
+            json!({ "equation": eq.name(), "unit": eq.unit(), "rms": f(*rms), "regimes": regimes })
+        }).collect::<Vec<_>>(),
+        "oe_cost_rad": d.base.oe_cost_rad.map(f),
+        "current_noise_a": d.base.current_noise_a.map(f),
+    })
+}
+
+pub(super) fn rung_json(r: &Rung) -> Value {
+    json!({
+        "added": r.added.map(|k| k.name()),
+        "equations": r.equations.iter().map(|(e, rms)| json!({ "equation": e.name(), "unit": e.unit(), "rms": f(*rms) })).collect::<Vec<_>>(),
+        "oe_cost_rad": r.oe_cost_rad.map(f),
+        "effects": r.plant.effects.iter().map(|e| e.to_string()).collect::<Vec<_>>(),
+    })
+}

@@ -1,0 +1,131 @@
+//! `servo diagnose`: the text report (also the core of the HTML one).
+
+use super::*;
+
+/// The headline of the text and HTML outputs: the final status and, after `--auto`, what was
+/// added on the way.
+pub(super) fn headline(ladder: &[Rung], last: &Diagnosis) -> String {
+    let added: Vec<String> = ladder
+        .iter()
+        .filter_map(|r| r.added.map(|k| k.name().to_string()))
+        .collect();
+    let status = match last.status {
+        servo_core::diagnose::Status::Complete => "complete: nothing material is left",
+        servo_core::diagnose::Status::Missing => "missing: a catalogue effect is still missing",
+        servo_core::diagnose::Status::Unexplained => {
+            "unexplained: structured error above the noise floor that no catalogue effect explains"
+        }
+    };
+    if added.is_empty() {
+        format!("Status: {status}")
+    } else {
+        format!("Added {}; status after them: {status}", added.join(", "))
+    }
+}
+
+pub(super) fn where_it_fails(d: &Diagnosis) -> String {
+    let mut s = String::new();
+    for (eq, rms, share, occ) in &d.base.equations {
+        let _ = writeln!(s, "  {}: residual {:.3e} {} RMS", eq.name(), rms, eq.unit());
+        let mut idx: Vec<usize> = (0..5).filter(|&i| occ[i] > 0.0).collect();
+        idx.sort_by(|&a, &b| (share[b] / occ[b]).total_cmp(&(share[a] / occ[a])));
+        for &i in idx.iter().take(2) {
+            if share[i] / occ[i] > 1.2 {
+                let _ = writeln!(
+                    s,
+                    "    {:.0} % of the squared error sits {} ({:.0} % of the samples)",
+                    100.0 * share[i],
+                    Regime::ALL[i].phrase(),
+                    100.0 * occ[i]
+                );
+            }
+        }
+    }
+    s
+}
+
+pub(super) fn text_report(
+    first: &Diagnosis,
+    ladder: &[Rung],
+    diags: &[Diagnosis],
+    auto: bool,
+) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "Model residual (base parameters refitted):");
+    s.push_str(&where_it_fails(first));
+    for b in &first.balances {
+        let _ = writeln!(
+            s,
+            "  {}: noise floor {:.3e} {}, residual {:.1} x the floor{}",
+            b.equation.name(),
+            b.floor,
+            b.equation.unit(),
+            b.ratio_to_noise,
+            b.signatures.first().map_or(String::new(), |g| format!(
+                "; strongest shape: {} ({:.0} % of the held-out residual)",
+                g.description,
+                100.0 * g.share
+            ))
+        );
+    }
+    for (step, d) in diags.iter().enumerate() {
+        if auto {
+            let _ = writeln!(s, "\nStep {}:", step + 1);
+        }
+        let _ = writeln!(s, "\nCandidates, best first:");
+        let _ = writeln!(
+            s,
+            "  {:<11} {:>11} {:>10} {:>10} {:>9}",
+            "effect", "significant", "eq. drop", "sim. drop", "BIC gain"
+        );
+        for c in &d.ranking {
+            let _ = writeln!(
+                s,
+                "  {:<11} {:>11} {:>9.1}% {:>10} {:>9.1}",
+                c.effect.name(),
+                if c.significant {
+                    "YES"
+                } else if c.resolvable {
+                    "no"
+                } else {
+                    "unresolved"
+                },
+                c.error_reduction_pct,
+                c.oe_reduction_pct
+                    .map_or("-".to_string(), |v| format!("{v:.1}%")),
+                c.bic_gain
+            );
+        }
+        if let Some(w) = d.ranking.first() {
+            let _ = writeln!(s, "\nBest candidate: {}", w.evidence);
+        }
+        let _ = writeln!(s, "\nVerdict: {}", d.verdict);
+    }
+    if auto {
+        let _ = writeln!(s, "\nError ladder:");
+        s.push_str(&ladder_text(ladder));
+    }
+    if let Some(last) = diags.last() {
+        let _ = writeln!(s, "\n{}", headline(ladder, last));
+    }
+    s
+}
+
+pub(super) fn ladder_text(ladder: &[Rung]) -> String {
+    let mut s = String::new();
+    for r in ladder {
+        let name = r
+            .added
+            .map_or("starting model".to_string(), |k| format!("+ {k}"));
+        let eqs: Vec<String> = r
+            .equations
+            .iter()
+            .map(|(e, v)| format!("{} {:.3e} {}", e.name(), v, e.unit()))
+            .collect();
+        let oe = r
+            .oe_cost_rad
+            .map_or(String::new(), |v| format!(", prediction error {v:.3e} rad"));
+        let _ = writeln!(s, "  {name:<16} {}{oe}", eqs.join(", "));
+    }
+    s
+}
