@@ -12,5 +12,6 @@ mod fuzz;
 mod identify;
 mod mat;
 mod run_log;
+mod schemas;
 mod serial;
 mod sim;
