@@ -4,7 +4,6 @@
 
 use std::io::Write;
 
-
 /// One element: tag, data, padding to 8 bytes.
 pub fn element(ty: u32, data: &[u8]) -> Vec<u8> {
     let mut v = Vec::new();

@@ -300,7 +300,9 @@ fn mat_seeds() -> Vec<Vec<u8>> {
         "data",
         &[doubles("", 2, 2, &[1.0, 2.0, 3.0, 4.0]), text("", "note")],
     );
-    let ints: Vec<u8> = (0..8i16).flat_map(|x| (x * 300 - 900).to_le_bytes()).collect();
+    let ints: Vec<u8> = (0..8i16)
+        .flat_map(|x| (x * 300 - 900).to_le_bytes())
+        .collect();
     let int16 = matrix(10, &[8, 1], "counts", &[element(3, &ints)]);
     let mut complex = matrix(6, &[1, 1], "z", &[element(9, &1.5f64.to_le_bytes())]);
     // The complex flag (0x0800) and the imaginary part.
@@ -368,7 +370,9 @@ fn fuzz_matlab_path_columns() {
     .iter()
     .map(|s| s.as_bytes().to_vec())
     .collect();
-    fuzz("matlab path", &paths, 5000, |b| MatPath::parse(text(b)?).map_err(anyhow::Error::msg));
+    fuzz("matlab path", &paths, 5000, |b| {
+        MatPath::parse(text(b)?).map_err(anyhow::Error::msg)
+    });
     let maps = vec![MAT_MAP.as_bytes().to_vec()];
     fuzz("--columns with MATLAB paths", &maps, 5000, |b| {
         ColumnMap::parse(text(b)?)

@@ -15,8 +15,8 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use servo_cli::io::mcap_read::{read_mcap, read_mcap_signals};
 use servo_cli::io::{LogEncoding, LoopMsg, McapLog, McapLogOptions, Signal};
 use servo_cli::runner::{self, LogSink, Program, RunConfig};
-use servo_core::control::{PidConfig, PidGains};
 use servo_core::control::Reference;
+use servo_core::control::{PidConfig, PidGains};
 use std::collections::BTreeMap;
 use std::time::Duration;
 
@@ -91,7 +91,7 @@ fn closed_loop_10min(log: Option<(&std::path::Path, LogEncoding)>) -> usize {
         mcap.as_mut().map(|l| l as &mut dyn LogSink),
     )
     .unwrap();
-    if let Some(l) = mcap {
+    if let Some(mut l) = mcap {
         l.finish().unwrap();
     }
     out.samples
@@ -129,7 +129,10 @@ fn bench(c: &mut Criterion) {
             b.iter(|| write(&path, compress, encoding))
         });
     }
-    for (name, encoding) in [("json", LogEncoding::Json), ("protobuf", LogEncoding::Protobuf)] {
+    for (name, encoding) in [
+        ("json", LogEncoding::Json),
+        ("protobuf", LogEncoding::Protobuf),
+    ] {
         write(&path, true, encoding);
         g.bench_function(format!("read_back_{name}_20k_msgs"), |b| {
             b.iter(|| read_mcap(&path).unwrap().loop_msgs.len())

@@ -110,7 +110,7 @@ impl Frf {
                 self.columns.as_deref(),
                 Some(&[Signal::Time, Signal::U, Signal::ThetaL, Signal::Ref]),
             )
-                .with_context(|| format!("reading {}", p.display()))?;
+            .with_context(|| format!("reading {}", p.display()))?;
             if !self.json {
                 for n in &meta.notes {
                     eprintln!("note: {n}");
