@@ -6,6 +6,8 @@
 
 use std::path::PathBuf;
 
+pub mod mat_writer;
+
 /// Path of `../shared/realdata` relative to the workspace root, if it exists.
 ///
 /// The environment variable `SERVO_REALDATA` overrides the location.

@@ -38,8 +38,26 @@ fn fuzz<T, E: Display>(
     );
 }
 
-fn text(b: &[u8]) -> anyhow::Result<&str> {
-    std::str::from_utf8(b).map_err(|e| anyhow::anyhow!("not UTF-8 text: {e}"))
+/// Input that is not UTF-8 text; converts into both anyhow's error and servo-io's.
+#[derive(Debug)]
+struct NotText(std::str::Utf8Error);
+
+impl std::fmt::Display for NotText {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "not UTF-8 text: {}", self.0)
+    }
+}
+
+impl std::error::Error for NotText {}
+
+impl From<NotText> for servo_cli::io::Error {
+    fn from(e: NotText) -> Self {
+        servo_cli::io::Error::Invalid(e.to_string())
+    }
+}
+
+fn text(b: &[u8]) -> Result<&str, NotText> {
+    std::str::from_utf8(b).map_err(NotText)
 }
 
 fn msg(k: usize) -> LoopMsg {
@@ -275,4 +293,107 @@ fn absurd_plant_constants_are_refused_not_hung_on() {
         let e = format!("{:#}", ModelFile::parse(&bad).unwrap_err());
         assert!(e.contains(key) && e.contains("physically sensible"), "{e}");
     }
+}
+
+/// Small MAT-files (Level 5) written here, not the lab files: a Simulink Scope "structure with
+/// time" with two signals (one a two-column matrix), a cell, an int16 vector, a char array and
+/// a complex scalar; each uncompressed and with every variable zlib-compressed (-v7), plus a
+/// compressed file whose first element is cut.
+fn mat_seeds() -> Vec<Vec<u8>> {
+    use servo_e2e::mat_writer::{doubles, element, mat_file, matrix, scope, text};
+    let t: Vec<f64> = (0..40).map(|k| k as f64 * 1e-3).collect();
+    let th: Vec<f64> = t.iter().map(|t| 90.0 * t).collect();
+    let r = vec![30.0; t.len()];
+    let u: Vec<f64> = t.iter().map(|t| 5.0 - t).collect();
+    let scope_var = scope(
+        "thl_u",
+        &t,
+        &[
+            (vec![th, r], "theta_l [deg] / ref [deg]"),
+            (vec![u], "u [V]"),
+        ],
+    );
+    let cell = matrix(
+        1,
+        &[1, 2],
+        "data",
+        &[doubles("", 2, 2, &[1.0, 2.0, 3.0, 4.0]), text("", "note")],
+    );
+    let ints: Vec<u8> = (0..8i16)
+        .flat_map(|x| (x * 300 - 900).to_le_bytes())
+        .collect();
+    let int16 = matrix(10, &[8, 1], "counts", &[element(3, &ints)]);
+    let mut complex = matrix(6, &[1, 1], "z", &[element(9, &1.5f64.to_le_bytes())]);
+    // The complex flag (0x0800) and the imaginary part.
+    complex[16 + 1] |= 0x08;
+    let imag = element(9, &(-0.5f64).to_le_bytes());
+    complex.extend_from_slice(&imag);
+    let n = (complex.len() - 8) as u32;
+    complex[4..8].copy_from_slice(&n.to_le_bytes());
+    let vars = vec![scope_var, cell, int16, complex, text("label", "servo fuzz")];
+    let plain = mat_file(&vars, false);
+    let packed = mat_file(&vars, true);
+    let cut = packed[..packed.len() - 40].to_vec();
+    vec![plain, packed, cut]
+}
+
+/// The MATLAB-path column map that imports [`mat_seeds`].
+const MAT_MAP: &str = "time=thl_u.time,theta_l=thl_u.signals(1).values(:,1):deg,ref=thl_u.signals(1).values(:,end):deg,u=thl_u.signals(2).values";
+
+#[test]
+fn fuzz_mat_reader() {
+    use servo_cli::io::mat_log;
+    use servo_cli::io::mat_read::parse_mat;
+    let seeds = mat_seeds();
+    for (i, s) in seeds.iter().take(2).enumerate() {
+        let f = parse_mat(s).unwrap_or_else(|e| panic!("seed {i}: {e}"));
+        let imp = mat_log::import(&f, "seed.mat", Some(MAT_MAP))
+            .unwrap_or_else(|e| panic!("seed {i}: {e:#}"));
+        assert_eq!(imp.record.len(), 40, "seed {i}");
+        assert_eq!(f.variables.len(), 5, "seed {i}");
+    }
+    // Whatever parses is also listed (`servo inspect`), guessed and imported through the map.
+    let read = |b: &[u8]| -> anyhow::Result<usize> {
+        let f = parse_mat(b)?;
+        let _ = mat_log::describe(&f);
+        let _ = mat_log::guess(&f);
+        let imp = mat_log::import(&f, "fuzz.mat", Some(MAT_MAP))?;
+        Ok(imp.record.len())
+    };
+    // Allocation bound tighter than the other readers': 64 x the file + 1 MiB (the inflated data
+    // of a small file are small; a zlib stream inflates at most ~1032 times).
+    let cfg = FuzzConfig {
+        alloc_base: 1 << 20,
+        ..FuzzConfig::new(8000, SEED)
+    };
+    let rep = check_reader("mat", &seeds, cfg, read);
+    eprintln!("{rep}");
+    for e in &rep.sample_errors {
+        eprintln!("  e.g. {e}");
+    }
+    assert!(rep.failures.is_empty(), "{rep}");
+    assert!(rep.refused > 0 && rep.accepted > 0, "{rep}");
+}
+
+#[test]
+fn fuzz_matlab_path_columns() {
+    use servo_cli::io::mat_path::MatPath;
+    use servo_cli::io::ColumnMap;
+    let paths: Vec<Vec<u8>> = [
+        "thl_u.signals(1).values(:,1)",
+        "thl_u.time",
+        "data{2}(:,3)",
+        "ia_best.signals.values(end,:)",
+        "x(1,2,3)",
+    ]
+    .iter()
+    .map(|s| s.as_bytes().to_vec())
+    .collect();
+    fuzz("matlab path", &paths, 5000, |b| {
+        MatPath::parse(text(b)?).map_err(anyhow::Error::msg)
+    });
+    let maps = vec![MAT_MAP.as_bytes().to_vec()];
+    fuzz("--columns with MATLAB paths", &maps, 5000, |b| {
+        ColumnMap::parse(text(b)?)
+    });
 }

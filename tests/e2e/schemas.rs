@@ -185,6 +185,7 @@ fn loop_message_schema_requires_only_the_time() {
         d_v: 0.0,
         i_a_a: 0.2,
         saturated: false,
+        ref_omega_l_rad_s: f64::NAN,
     };
     assert!(v.is_valid(&serde_json::to_value(m).unwrap()));
 }

@@ -45,8 +45,8 @@ impl Record {
             return f64::NAN;
         }
         let mut d: Vec<f64> = self.time_s.windows(2).map(|w| w[1] - w[0]).collect();
-        d.sort_by(|a, b| a.total_cmp(b));
-        d[d.len() / 2]
+        let mid = d.len() / 2;
+        *d.select_nth_unstable_by(mid, f64::total_cmp).1
     }
     /// Names of the signals present, in the names users type (`u`, `theta_l`, ...).
     pub fn signals(&self) -> Vec<&'static str> {

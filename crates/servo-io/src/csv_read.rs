@@ -35,17 +35,43 @@ fn sniff_delimiter(text: &str) -> u8 {
 /// Reads `path`. `columns` is the user's `--columns` map; `None` means servo's own header or a
 /// guess from the header's unit suffixes (stated in the notes).
 pub fn read_csv(path: &Path, columns: Option<&str>) -> anyhow::Result<CsvImport> {
+    read_csv_signals(path, columns, None)
+}
+
+/// [`read_csv`] building only the signals in `want` (time always; `None`: all mapped signals);
+/// the other mapped columns must exist but are not parsed.
+pub fn read_csv_signals(
+    path: &Path,
+    columns: Option<&str>,
+    want: Option<&[Signal]>,
+) -> anyhow::Result<CsvImport> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("reading CSV log {}", path.display()))?;
-    parse_csv(&text, &path.display().to_string(), columns)
+    parse_csv_signals(&text, &path.display().to_string(), columns, want)
 }
 
 /// Parses CSV `text`; `source` names the file in messages.
 pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Result<CsvImport> {
+    parse_csv_signals(text, source, columns, None)
+}
+
+/// A field without the spaces around it.
+fn trim_field(b: &[u8]) -> &[u8] {
+    b.trim_ascii()
+}
+
+/// [`parse_csv`] building only the signals in `want` (see [`read_csv_signals`]). Rows are read
+/// into one reused byte record and numbers parsed in place: no allocation per row.
+pub fn parse_csv_signals(
+    text: &str,
+    source: &str,
+    columns: Option<&str>,
+    want: Option<&[Signal]>,
+) -> anyhow::Result<CsvImport> {
     let mut rdr = csv::ReaderBuilder::new()
         .delimiter(sniff_delimiter(text))
         .comment(Some(b'#'))
-        .trim(csv::Trim::All)
+        .trim(csv::Trim::Headers)
         .has_headers(true)
         .from_reader(text.as_bytes());
     let header: Vec<String> = rdr
@@ -88,12 +114,18 @@ pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Res
         })?;
         idx.push(i);
     }
-    let mut data: Vec<Vec<f64>> = vec![Vec::new(); map.entries.len()];
-    let mut nan_counts = vec![0usize; map.entries.len()];
+    // The mapped columns read: (entry, column index, values, non-finite count).
+    let mut cols: Vec<(&super::columns::ColumnSpec, usize, Vec<f64>, usize)> = map
+        .entries
+        .iter()
+        .zip(&idx)
+        .filter(|(e, _)| e.signal == Signal::Time || want.is_none_or(|w| w.contains(&e.signal)))
+        .map(|(e, &i)| (e, i, Vec::new(), 0usize))
+        .collect();
     let mut last_t = f64::NEG_INFINITY;
-    let mut row = csv::StringRecord::new();
+    let mut row = csv::ByteRecord::new();
     loop {
-        match rdr.read_record(&mut row) {
+        match rdr.read_byte_record(&mut row) {
             Ok(true) => {}
             Ok(false) => break,
             Err(e) => {
@@ -101,53 +133,59 @@ pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Res
                 bail!("{source}: line {line}: {}", csv_error_text(&e));
             }
         }
-        let line = row.position().map(|p| p.line()).unwrap_or(0);
-        for (k, (e, &i)) in map.entries.iter().zip(&idx).enumerate() {
-            let cell = row.get(i).unwrap_or("");
-            let v = if cell.is_empty() || cell.eq_ignore_ascii_case("nan") {
+        for (e, i, col, nans) in cols.iter_mut() {
+            let i = *i;
+            let cell = trim_field(row.get(i).unwrap_or(b""));
+            let v = if cell.is_empty() || cell.eq_ignore_ascii_case(b"nan") {
                 f64::NAN
             } else {
-                cell.parse::<f64>().map_err(|_| {
-                    anyhow!(
-                        "{source}: line {line}, column {} (`{}`, signal `{}`): expected a number in {}, got `{cell}`",
+                match std::str::from_utf8(cell).ok().and_then(|c| c.parse::<f64>().ok()) {
+                    Some(v) => v,
+                    None => bail!(
+                        "{source}: line {}, column {} (`{}`, signal `{}`): expected a number in {}, got `{}`",
+                        line_of(&row),
                         i + 1,
                         e.column,
                         e.signal,
-                        e.unit
-                    )
-                })?
+                        e.unit,
+                        String::from_utf8_lossy(cell)
+                    ),
+                }
             };
             if e.signal == Signal::Time {
                 let t = e.unit.to_si(v);
                 if !t.is_finite() {
-                    bail!("{source}: line {line}, column {} (`{}`): time must be a finite number, got `{cell}`", i + 1, e.column);
+                    bail!("{source}: line {}, column {} (`{}`): time must be a finite number, got `{}`", line_of(&row), i + 1, e.column, String::from_utf8_lossy(cell));
                 }
                 if t <= last_t {
                     bail!(
-                        "{source}: line {line}, column {} (`{}`): time must increase strictly, got {t} s after {last_t} s",
+                        "{source}: line {}, column {} (`{}`): time must increase strictly, got {t} s after {last_t} s",
+                        line_of(&row),
                         i + 1,
                         e.column
                     );
                 }
                 last_t = t;
-                data[k].push(t);
+                col.push(t);
             } else {
                 let si = e.unit.to_si(v);
                 if !v.is_finite() {
-                    nan_counts[k] += 1;
+                    *nans += 1;
                 } else if !si.is_finite() || si.abs() > plausible_limit(e.signal) {
                     bail!(
-                        "{source}: line {line}, column {} (`{}`, signal `{}`): {cell} {} is {si:e} in SI units, \
+                        "{source}: line {}, column {} (`{}`, signal `{}`): {} {} is {si:e} in SI units, \
                          beyond any DC servomotor (|{}| <= {:e}); wrong column or unit?",
+                        line_of(&row),
                         i + 1,
                         e.column,
                         e.signal,
+                        String::from_utf8_lossy(cell),
                         e.unit,
                         e.signal,
                         plausible_limit(e.signal)
                     );
                 }
-                data[k].push(si);
+                col.push(si);
             }
         }
     }
@@ -155,7 +193,7 @@ pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Res
         source: source.to_string(),
         ..Record::default()
     };
-    for ((e, col), nans) in map.entries.iter().zip(data).zip(nan_counts) {
+    for (e, _, col, nans) in cols {
         if nans > 0 {
             notes.push(format!(
                 "{source}: column `{}` has {nans} empty or non-finite values (kept as NaN)",
@@ -202,8 +240,8 @@ fn check_sample_period(time_s: &[f64], map: &ColumnMap, source: &str) -> anyhow:
         return Ok(());
     }
     let mut d: Vec<f64> = time_s.windows(2).map(|w| w[1] - w[0]).collect();
-    d.sort_by(f64::total_cmp);
-    let dt = d[d.len() / 2];
+    let mid = d.len() / 2;
+    let dt = *d.select_nth_unstable_by(mid, f64::total_cmp).1;
     let (lo, hi) = SAMPLE_PERIOD_RANGE_S;
     if dt >= lo && dt <= hi {
         return Ok(());
@@ -236,6 +274,11 @@ fn check_sample_period(time_s: &[f64], map: &ColumnMap, source: &str) -> anyhow:
             format!(" If it is {}, give {}", if guesses.len() > 1 { "one of these" } else { "this" }, guesses.join(" or "))
         }
     )
+}
+
+/// The file line of a record, for messages.
+fn line_of(row: &csv::ByteRecord) -> u64 {
+    row.position().map(|p| p.line()).unwrap_or(0)
 }
 
 fn csv_error_text(e: &csv::Error) -> String {

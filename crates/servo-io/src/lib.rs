@@ -172,9 +172,21 @@ pub fn read_log(path: &Path, columns: Option<&str>) -> anyhow::Result<Record> {
 
 /// Like [`read_log`], returning the metadata and notes instead of printing them.
 pub fn read_log_with_meta(path: &Path, columns: Option<&str>) -> anyhow::Result<(Record, LogMeta)> {
+    read_log_signals(path, columns, None)
+}
+
+/// Like [`read_log_with_meta`], building only the signals in `want` (time always; `None`: every
+/// signal and, from an MCAP, the feedforward): a command that needs three signals of a long log
+/// does not parse or store the others. A CSV's mapped columns that are not wanted are not
+/// parsed (nor checked).
+pub fn read_log_signals(
+    path: &Path,
+    columns: Option<&str>,
+    want: Option<&[Signal]>,
+) -> anyhow::Result<(Record, LogMeta)> {
     match LogFormat::of(path)? {
         LogFormat::Csv => {
-            let imp = csv_read::read_csv(path, columns)?;
+            let imp = csv_read::read_csv_signals(path, columns, want)?;
             Ok((
                 imp.record,
                 LogMeta {
@@ -202,14 +214,13 @@ pub fn read_log_with_meta(path: &Path, columns: Option<&str>) -> anyhow::Result<
                     path.display()
                 );
             }
-            let run = mcap_read::read_mcap(path)?;
-            let ff: Vec<f64> = run.loop_msgs.iter().map(|m| m.ff_v).collect();
+            let run = mcap_read::read_mcap_signals(path, want)?;
             let meta = LogMeta {
                 columns: None,
                 entries: run.metadata,
                 summary: run.summary,
                 notes: run.notes,
-                feedforward_v: ff.iter().any(|v| v.is_finite()).then_some(ff),
+                feedforward_v: run.feedforward_v,
             };
             Ok((run.record, meta))
         }

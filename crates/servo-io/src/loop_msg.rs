@@ -206,10 +206,57 @@ impl LoopMsg {
         out.extend_from_slice(&self.ref_omega_l_rad_s.to_le_bytes());
     }
 
+    /// The message exactly as [`LoopMsg::write_protobuf`] lays it out (the fast path of the
+    /// reader); `None` for any other layout, which the general parser reads.
+    fn from_protobuf_as_written(b: &[u8]) -> Option<LoopMsg> {
+        // 101 bytes: fields 1-12 (logs written before field 13 existed); 110: with field 13.
+        if !(b.len() == 101 || b.len() == 110) || b[99] != 12 << 3 || b[100] > 1 {
+            return None;
+        }
+        let ref_omega_l_rad_s = if b.len() == 110 {
+            if b[101] != (13 << 3) | 1 {
+                return None;
+            }
+            let mut a = [0u8; 8];
+            a.copy_from_slice(&b[102..110]);
+            f64::from_le_bytes(a)
+        } else {
+            f64::NAN
+        };
+        let mut v = [0.0f64; 11];
+        for (i, x) in v.iter_mut().enumerate() {
+            let at = 9 * i;
+            if b[at] != ((i as u8 + 1) << 3) | 1 {
+                return None;
+            }
+            let mut a = [0u8; 8];
+            a.copy_from_slice(&b[at + 1..at + 9]);
+            *x = f64::from_le_bytes(a);
+        }
+        Some(LoopMsg {
+            time_s: v[0],
+            ref_rad: v[1],
+            theta_l_rad: v[2],
+            omega_l_rad_s: v[3],
+            err_rad: v[4],
+            u_v: v[5],
+            ff_v: v[6],
+            p_v: v[7],
+            i_v: v[8],
+            d_v: v[9],
+            i_a_a: v[10],
+            saturated: b[100] == 1,
+            ref_omega_l_rad_s,
+        })
+    }
+
     /// Parses a protobuf `servo.Loop` message (fields absent from the bytes take proto3's
     /// default, 0, except `ref_omega_l_rad_s`, which logs written before it existed lack: null;
     /// unknown fields are skipped).
     pub fn from_protobuf(b: &[u8]) -> Result<LoopMsg, String> {
+        if let Some(m) = Self::from_protobuf_as_written(b) {
+            return Ok(m);
+        }
         let mut v = [0.0f64; 11];
         let mut ref_omega = f64::NAN;
         let mut saturated = false;
@@ -396,6 +443,15 @@ mod tests {
             .ref_omega_l_rad_s
             .is_nan());
         assert!(LoopMsg::from_protobuf(&pb[..50]).is_err());
+        // The same message with its fields in another order takes the general path.
+        let mut shuffled = pb[9..99].to_vec();
+        shuffled.extend_from_slice(&pb[..9]);
+        shuffled.extend_from_slice(&pb[99..]);
+        let back2 = LoopMsg::from_protobuf(&shuffled).unwrap();
+        assert_eq!(
+            back2.f64_fields().map(f64::to_bits),
+            m.f64_fields().map(f64::to_bits)
+        );
         let d = loop_descriptor_set();
         assert!(d.windows(4).any(|w| w == b"Loop"));
         let schema: serde_json::Value = serde_json::from_str(&loop_schema()).unwrap();
@@ -408,6 +464,86 @@ mod tests {
         {
             assert!(props.contains_key(k), "schema lacks {k}");
         }
+    }
+
+    /// The MCAP schema of a protobuf log is what Foxglove and PlotJuggler decode: a serialized
+    /// `google.protobuf.FileDescriptorSet` (decoded here by prost-types, an independent
+    /// implementation) holding `servo/loop.proto`, package `servo`, message `Loop` with the
+    /// JSON log's field names, 1-11 and 13 double, 12 bool; a message written by servo decodes
+    /// against it field by field.
+    #[test]
+    fn protobuf_schema_is_a_file_descriptor_set() {
+        use prost::Message;
+        use prost_types::field_descriptor_proto::{Label, Type};
+        let set = prost_types::FileDescriptorSet::decode(loop_descriptor_set().as_slice())
+            .expect("a valid FileDescriptorSet");
+        assert_eq!(set.file.len(), 1);
+        let file = &set.file[0];
+        assert_eq!(file.name(), "servo/loop.proto");
+        assert_eq!(file.package(), "servo");
+        assert_eq!(file.syntax(), "proto3");
+        assert_eq!(file.message_type.len(), 1);
+        let msg = &file.message_type[0];
+        assert_eq!(
+            format!("{}.{}", file.package(), msg.name()),
+            LOOP_PROTO_NAME
+        );
+        let names: Vec<&str> = msg.field.iter().map(|f| f.name()).collect();
+        let mut expected: Vec<&str> = PROTO_F64_FIELDS.to_vec();
+        expected.push("saturated");
+        expected.push("ref_omega_l_rad_s");
+        assert_eq!(names, expected);
+        for (i, f) in msg.field.iter().enumerate() {
+            assert_eq!(f.number(), i as i32 + 1, "{}", f.name());
+            assert_eq!(f.label(), Label::Optional, "{}", f.name());
+            assert_eq!(f.json_name(), f.name());
+            let ty = if i == 11 { Type::Bool } else { Type::Double };
+            assert_eq!(f.r#type(), ty, "{}", f.name());
+        }
+        // The JSON log names the same fields.
+        let schema: serde_json::Value = serde_json::from_str(&loop_schema()).unwrap();
+        for n in &names {
+            assert!(schema["properties"].get(*n).is_some(), "{n}");
+        }
+        // A message as servo writes it, decoded by prost as the generic wire format: field k
+        // holds the k-th value.
+        #[derive(Clone, PartialEq, prost::Message)]
+        struct Loop {
+            #[prost(double, tag = "1")]
+            time_s: f64,
+            #[prost(double, tag = "3")]
+            theta_l_rad: f64,
+            #[prost(double, tag = "6")]
+            u_v: f64,
+            #[prost(double, tag = "11")]
+            i_a_a: f64,
+            #[prost(bool, tag = "12")]
+            saturated: bool,
+            #[prost(double, tag = "13")]
+            ref_omega_l_rad_s: f64,
+        }
+        let m = LoopMsg {
+            time_s: 1.25,
+            ref_rad: 0.5,
+            theta_l_rad: -0.125,
+            omega_l_rad_s: 3.0,
+            err_rad: 0.625,
+            u_v: 9.5,
+            ff_v: 0.0,
+            p_v: 1.0,
+            i_v: 2.0,
+            d_v: 3.0,
+            i_a_a: 0.0625,
+            saturated: true,
+            ref_omega_l_rad_s: 12.5,
+        };
+        let mut pb = Vec::new();
+        m.write_protobuf(&mut pb);
+        let d = Loop::decode(pb.as_slice()).unwrap();
+        assert_eq!(
+            (d.time_s, d.theta_l_rad, d.u_v, d.i_a_a, d.saturated, d.ref_omega_l_rad_s),
+            (1.25, -0.125, 9.5, 0.0625, true, 12.5)
+        );
     }
 
     #[test]

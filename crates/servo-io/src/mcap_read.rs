@@ -4,6 +4,7 @@
 
 use super::loop_msg::{LoopMsg, LOOP_TOPIC};
 use super::mcap_write::{RUN_METADATA, SUMMARY_METADATA};
+use super::units::Signal;
 use crate::error::{self as anyhow, anyhow, bail, Context};
 use mcap::records::Record as McapRecord;
 use servo_core::record::Record;
@@ -25,6 +26,9 @@ pub struct McapRun {
     pub finished: bool,
     /// What was lost and why, for a truncated or damaged file.
     pub notes: Vec<String>,
+    /// The feedforward part of u per sample [V] (`ff_v`; `None` when no sample has one or it
+    /// was not asked for).
+    pub feedforward_v: Option<Vec<f64>>,
 }
 
 /// The records of MCAP bytes, chunks flattened, read incrementally by the library's streaming
@@ -182,89 +186,173 @@ pub fn read_mcap(path: &Path) -> anyhow::Result<McapRun> {
     parse_mcap(&bytes, &path.display().to_string())
 }
 
-/// Parses MCAP `bytes`; `source` names the file in messages.
+/// Parses MCAP `bytes`; `source` names the file in messages. Every loop message is kept in
+/// [`McapRun::loop_msgs`] and every signal in the record.
 pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
+    let mut msgs = Vec::new();
+    let mut run = walk_mcap(bytes, source, &mut |m: &LoopMsg| msgs.push(*m))?;
+    run.record = record_of(&msgs, source);
+    run.feedforward_v = column_if_any(msgs.iter().map(|m| m.ff_v).collect());
+    run.loop_msgs = msgs;
+    Ok(run)
+}
+
+/// Reads the MCAP file `path`, building only the signals in `want` (time always; `None`: every
+/// signal and the feedforward). [`McapRun::loop_msgs`] stays empty: the fast path of the
+/// commands that read a log (`servo frf` reads 10 minutes at 1 kHz in about 0.1 s).
+pub fn read_mcap_signals(path: &Path, want: Option<&[Signal]>) -> anyhow::Result<McapRun> {
+    let bytes =
+        std::fs::read(path).with_context(|| format!("reading MCAP log {}", path.display()))?;
+    parse_mcap_signals(&bytes, &path.display().to_string(), want)
+}
+
+/// [`read_mcap_signals`] on bytes; `source` names the file in messages.
+pub fn parse_mcap_signals(
+    bytes: &[u8],
+    source: &str,
+    want: Option<&[Signal]>,
+) -> anyhow::Result<McapRun> {
+    let wants = |s: Signal| want.is_none_or(|w| w.contains(&s));
+    // (signal, field of the message, column).
+    type Getter = fn(&LoopMsg) -> f64;
+    let mut cols: Vec<(Signal, Getter, Vec<f64>)> = [
+        (Signal::U, (|m: &LoopMsg| m.u_v) as Getter),
+        (Signal::ThetaL, |m| m.theta_l_rad),
+        (Signal::OmegaL, |m| m.omega_l_rad_s),
+        (Signal::IA, |m| m.i_a_a),
+        (Signal::Ref, |m| m.ref_rad),
+    ]
+    .into_iter()
+    .filter(|(s, _)| wants(*s))
+    .map(|(s, f)| (s, f, Vec::new()))
+    .collect();
+    let mut time = Vec::new();
+    let mut ff = Vec::new();
+    let keep_ff = want.is_none();
+    let mut run = walk_mcap(bytes, source, &mut |m: &LoopMsg| {
+        time.push(m.time_s);
+        for (_, f, c) in cols.iter_mut() {
+            c.push(f(m));
+        }
+        if keep_ff {
+            ff.push(m.ff_v);
+        }
+    })?;
+    run.record = Record {
+        source: source.to_string(),
+        time_s: time,
+        ..Record::default()
+    };
+    for (s, _, c) in cols {
+        if let Some(c) = column_if_any(c) {
+            s.store(&mut run.record, c);
+        }
+    }
+    run.feedforward_v = column_if_any(ff);
+    Ok(run)
+}
+
+/// A column, or `None` when no sample has a value.
+fn column_if_any(v: Vec<f64>) -> Option<Vec<f64>> {
+    v.iter().any(|x| x.is_finite()).then_some(v)
+}
+
+/// Largest factor by which a chunk may inflate relative to the whole file: a declared
+/// `uncompressed_size` beyond `MAX_INFLATION x` the file's size is refused (servo's logs inflate
+/// 1.5-2 times; the bound stops a decompression bomb or a corrupted size field).
+pub const MAX_INFLATION: usize = 64;
+
+/// Why reading stopped early.
+enum Stop {
+    /// The file is cut short or damaged at a record: keep what was read, with a note.
+    Damage(String),
+    /// A record is readable but its content is wrong (a loop message that does not decode).
+    Fatal(anyhow::Error),
+}
+use Stop::{Damage, Fatal};
+
+/// State of one pass over a file by [`walk_mcap`].
+struct Walk<'a, 'f> {
+    source: &'a str,
+    /// Bound of a chunk's decompressed size [bytes].
+    inflate_limit: usize,
+    /// Channel id -> (topic, is the loop topic, protobuf encoding).
+    channels: HashMap<u16, (String, bool, bool)>,
+    run: McapRun,
+    data_end: bool,
+    other_topics: BTreeMap<String, u64>,
+    count: usize,
+    last_time_s: Option<f64>,
+    /// Decompression buffer, reused across chunks.
+    inflated: Vec<u8>,
+    on_loop: &'f mut dyn FnMut(&LoopMsg),
+}
+
+/// Reads the records of a whole file `bytes` in place (no copy, no allocation per message):
+/// channels, metadata, and every `/servo/loop` message, decoded and passed to `on_loop`. A file
+/// cut short or damaged keeps what was read before the damage, with a note measuring what was
+/// lost; a message that is not a servo loop message is an error.
+fn walk_mcap(
+    bytes: &[u8],
+    source: &str,
+    on_loop: &mut dyn FnMut(&LoopMsg),
+) -> anyhow::Result<McapRun> {
     if bytes.len() < mcap::MAGIC.len() || &bytes[..mcap::MAGIC.len()] != mcap::MAGIC {
         bail!("{source}: not an MCAP file (bad magic bytes at the start)");
     }
-    let reader = BoundedRecords::new(bytes, true, bytes.len());
-    // Channel id -> (topic, message encoding).
-    let mut topics: HashMap<u16, (String, String)> = HashMap::new();
-    let mut run = McapRun::default();
-    let mut data_end = false;
-    let mut other_topics: BTreeMap<String, u64> = BTreeMap::new();
-    for item in reader {
-        let rec = match item {
-            Ok(r) => r,
-            Err(e) => {
-                if !data_end {
-                    let last_s = run.loop_msgs.last().map(|m| m.time_s);
-                    let upto = last_s
-                        .map(|t| format!("{t} s"))
-                        .unwrap_or_else(|| "the start".into());
-                    let start_ns = run
-                        .metadata
-                        .get(super::mcap_write::START_TIME_KEY)
-                        .and_then(|v| v.parse::<u64>().ok())
-                        .unwrap_or(0);
-                    // Measured, not assumed: the chunk headers left in the file say up to which
-                    // log time messages were written.
-                    let lost = match (last_chunk_end_ns(bytes), last_s) {
-                        (Some(end_ns), Some(t)) => {
-                            let end_s = end_ns.saturating_sub(start_ns) as f64 * 1e-9;
-                            if end_s > t {
-                                format!(
-                                    "the damaged part held samples up to {end_s} s: {:.3} s of the run are lost",
-                                    end_s - t
-                                )
-                            } else {
-                                "no whole chunk after it is lost".into()
-                            }
-                        }
-                        _ => "how much is lost cannot be told from the file".into(),
-                    };
-                    run.notes.push(format!(
-                        "{source}: the log is truncated or damaged ({e}); read {} samples up to {upto}; {lost}",
-                        run.loop_msgs.len()
-                    ));
-                }
-                break;
-            }
-        };
-        match rec {
-            McapRecord::Channel(c) => {
-                topics.insert(c.id, (c.topic, c.message_encoding));
-            }
-            McapRecord::Message { header, data } if !data_end => {
-                let (topic, encoding) = topics
-                    .get(&header.channel_id)
-                    .map(|(t, e)| (t.as_str(), e.as_str()))
-                    .unwrap_or(("", ""));
-                if topic == LOOP_TOPIC {
-                    let m: LoopMsg = match encoding {
-                        "protobuf" => LoopMsg::from_protobuf(&data).map_err(|e| e.to_string()),
-                        _ => serde_json::from_slice(&data).map_err(|e| e.to_string()),
-                    }
-                    .map_err(|e| {
-                        anyhow!(
-                            "{source}: message {} on {LOOP_TOPIC} ({encoding}) is not a servo loop message: {e}",
-                            header.sequence
+    let mut w = Walk {
+        source,
+        inflate_limit: bytes.len().saturating_mul(MAX_INFLATION),
+        channels: HashMap::new(),
+        run: McapRun::default(),
+        data_end: false,
+        other_topics: BTreeMap::new(),
+        count: 0,
+        last_time_s: None,
+        inflated: Vec::new(),
+        on_loop,
+    };
+    let body = &bytes[mcap::MAGIC.len()..];
+    match w.records(body, 0, mcap::MAGIC.len()) {
+        Ok(()) => {}
+        Err(Fatal(e)) => return Err(e),
+        Err(Damage(_)) if w.data_end => {}
+        Err(Damage(e)) => {
+            let upto = w
+                .last_time_s
+                .map(|t| format!("{t} s"))
+                .unwrap_or_else(|| "the start".into());
+            let start_ns = w
+                .run
+                .metadata
+                .get(super::mcap_write::START_TIME_KEY)
+                .and_then(|v| v.parse::<u64>().ok())
+                .unwrap_or(0);
+            // Measured, not assumed: the chunk headers left in the file say up to which log time
+            // messages were written.
+            let lost = match (last_chunk_end_ns(bytes), w.last_time_s) {
+                (Some(end_ns), Some(t)) => {
+                    let end_s = end_ns.saturating_sub(start_ns) as f64 * 1e-9;
+                    if end_s > t {
+                        format!(
+                            "the damaged part held samples up to {end_s} s: {:.3} s of the run are lost",
+                            end_s - t
                         )
-                    })?;
-                    run.loop_msgs.push(m);
-                } else {
-                    *other_topics.entry(topic.to_string()).or_default() += 1;
+                    } else {
+                        "no whole chunk after it is lost".into()
+                    }
                 }
-            }
-            McapRecord::Metadata(m) if m.name == RUN_METADATA => run.metadata = m.metadata,
-            McapRecord::Metadata(m) if m.name == SUMMARY_METADATA => run.summary = m.metadata,
-            McapRecord::DataEnd(_) => data_end = true,
-            McapRecord::Footer(_) => run.finished = true,
-            _ => {}
+                _ => "how much is lost cannot be told from the file".into(),
+            };
+            w.run.notes.push(format!(
+                "{source}: the log is truncated or damaged ({e}); read {} samples up to {upto}; {lost}",
+                w.count
+            ));
         }
     }
+    let mut run = w.run;
     if !run.finished && run.notes.is_empty() {
-        let t = run.loop_msgs.last().map(|m| m.time_s).unwrap_or(0.0);
+        let t = w.last_time_s.unwrap_or(0.0);
         let planned = run
             .metadata
             .get(super::meta_keys::DURATION_S)
@@ -272,7 +360,7 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
             .filter(|d| *d > t);
         run.notes.push(format!(
             "{source}: the log was not finished (run killed?); read {} samples up to {t} s{}",
-            run.loop_msgs.len(),
+            w.count,
             match planned {
                 Some(d) => format!(
                     "; the run was planned for {d} s: samples after the last flush were never written (up to {:.3} s if it ran on)",
@@ -282,8 +370,9 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
             }
         ));
     }
-    if run.loop_msgs.is_empty() {
-        let others: Vec<String> = other_topics
+    if w.count == 0 {
+        let others: Vec<String> = w
+            .other_topics
             .iter()
             .map(|(t, n)| format!("{t} ({n})"))
             .collect();
@@ -300,8 +389,226 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
                 .unwrap_or_default()
         );
     }
-    run.record = record_of(&run.loop_msgs, source);
     Ok(run)
+}
+fn u64_at(b: &[u8], at: usize) -> u64 {
+    let mut x = [0u8; 8];
+    x.copy_from_slice(&b[at..at + 8]);
+    u64::from_le_bytes(x)
+}
+
+fn u32_at(b: &[u8], at: usize) -> u32 {
+    let mut x = [0u8; 4];
+    x.copy_from_slice(&b[at..at + 4]);
+    u32::from_le_bytes(x)
+}
+
+const OP_HEADER: u8 = 0x01;
+const OP_FOOTER: u8 = 0x02;
+const OP_CHANNEL: u8 = 0x04;
+const OP_MESSAGE: u8 = 0x05;
+const OP_CHUNK: u8 = 0x06;
+const OP_METADATA: u8 = 0x0C;
+const OP_DATA_END: u8 = 0x0F;
+
+impl Walk<'_, '_> {
+    /// The records of `buf` (top level at `depth` 0, a chunk's records at 1); `offset` is the
+    /// position of `buf` in the file, for messages.
+    fn records(&mut self, buf: &[u8], depth: u8, offset: usize) -> Result<(), Stop> {
+        let mut pos = 0usize;
+        while pos < buf.len() {
+            let at = offset + pos;
+            if buf.len() - pos < 9 {
+                return Err(Damage(format!(
+                    "record header at byte {at} cut short ({} bytes left)",
+                    buf.len() - pos
+                )));
+            }
+            let op = buf[pos];
+            let len = u64_at(buf, pos + 1);
+            let start = pos + 9;
+            let avail = buf.len() - start;
+            let len = match usize::try_from(len) {
+                Ok(l) if l <= avail => l,
+                _ => {
+                    return Err(Damage(format!(
+                        "record 0x{op:02X} at byte {at} declares {len} bytes, only {avail} follow"
+                    )))
+                }
+            };
+            let body = &buf[start..start + len];
+            pos = start + len;
+            match op {
+                OP_MESSAGE => self.message(body, at)?,
+                OP_CHUNK if depth == 0 => self.chunk(body, at)?,
+                OP_HEADER | OP_CHANNEL | OP_METADATA | OP_FOOTER | OP_DATA_END => {
+                    let rec = parse_record_checked(op, body).map_err(|e| {
+                        Damage(format!("unreadable record 0x{op:02X} at byte {at}: {e}"))
+                    })?;
+                    match rec {
+                        McapRecord::Channel(c) => {
+                            let is_loop = c.topic == LOOP_TOPIC;
+                            let pb = c.message_encoding == "protobuf";
+                            self.channels.insert(c.id, (c.topic, is_loop, pb));
+                        }
+                        McapRecord::Metadata(m) if m.name == RUN_METADATA => {
+                            self.run.metadata = m.metadata
+                        }
+                        McapRecord::Metadata(m) if m.name == SUMMARY_METADATA => {
+                            self.run.summary = m.metadata
+                        }
+                        McapRecord::DataEnd(_) => self.data_end = true,
+                        McapRecord::Footer(_) => {
+                            self.run.finished = true;
+                            // The end magic follows; nothing after the footer is read.
+                            return Ok(());
+                        }
+                        _ => {}
+                    }
+                }
+                // Schemas, indexes, statistics, attachments: not needed to read the run.
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    /// One message record (channel id u16, sequence u32, log and publish times u64, data).
+    fn message(&mut self, body: &[u8], at: usize) -> Result<(), Stop> {
+        if self.data_end {
+            return Ok(());
+        }
+        if body.len() < 22 {
+            return Err(Damage(format!(
+                "message record at byte {at} of {} bytes, shorter than its 22-byte header",
+                body.len()
+            )));
+        }
+        let channel = u16::from_le_bytes([body[0], body[1]]);
+        let data = &body[22..];
+        match self.channels.get(&channel) {
+            Some((_, true, pb)) => {
+                let m = if *pb {
+                    LoopMsg::from_protobuf(data)
+                } else {
+                    serde_json::from_slice(data).map_err(|e| e.to_string())
+                }
+                .map_err(|e| {
+                    Fatal(anyhow!(
+                        "{}: message {} on {LOOP_TOPIC} ({}) is not a servo loop message: {e}",
+                        self.source,
+                        u32_at(body, 2),
+                        if *pb { "protobuf" } else { "json" }
+                    ))
+                })?;
+                self.count += 1;
+                self.last_time_s = Some(m.time_s);
+                (self.on_loop)(&m);
+            }
+            Some((topic, false, _)) => {
+                if let Some(n) = self.other_topics.get_mut(topic) {
+                    *n += 1;
+                } else {
+                    self.other_topics.insert(topic.clone(), 1);
+                }
+            }
+            None => *self.other_topics.entry(String::new()).or_default() += 1,
+        }
+        Ok(())
+    }
+
+    /// One chunk: message_start_time u64, message_end_time u64, uncompressed_size u64,
+    /// uncompressed_crc u32, compression (u32 length + string), records (u64 length + bytes).
+    /// The records are decompressed whole into a reused buffer that grows with the output
+    /// actually produced (never beyond the declared size, itself bounded by
+    /// [`MAX_INFLATION`] x the file), and their CRC is checked.
+    fn chunk(&mut self, body: &[u8], at: usize) -> Result<(), Stop> {
+        let cut = || Damage(format!("chunk at byte {at}: header cut short"));
+        if body.len() < 32 {
+            return Err(cut());
+        }
+        let declared = u64_at(body, 16);
+        let crc = u32_at(body, 24);
+        let clen = u32_at(body, 28) as usize;
+        let comp_end = 32usize.checked_add(clen).filter(|e| *e + 8 <= body.len());
+        let Some(comp_end) = comp_end else {
+            return Err(cut());
+        };
+        let compression = &body[32..comp_end];
+        let rlen = u64_at(body, comp_end);
+        let records = &body[comp_end + 8..];
+        if rlen != records.len() as u64 {
+            return Err(Damage(format!(
+                "chunk at byte {at}: its records declare {rlen} bytes, the chunk holds {}",
+                records.len()
+            )));
+        }
+        let declared = match usize::try_from(declared) {
+            Ok(d) if d <= self.inflate_limit => d,
+            _ => {
+                return Err(Damage(format!(
+                    "chunk at byte {at} declares {declared} bytes uncompressed, more than {MAX_INFLATION} times the file's size"
+                )))
+            }
+        };
+        let inflate = |e: String| Damage(format!("chunk at byte {at}: {e}"));
+        let mut inflated = std::mem::take(&mut self.inflated);
+        inflated.clear();
+        let data: &[u8] = match compression {
+            b"" => records,
+            b"zstd" => {
+                let d = zstd::stream::read::Decoder::with_buffer(records)
+                    .map_err(|e| inflate(format!("zstd: {e}")))?;
+                inflate_into(d, declared, records.len(), &mut inflated).map_err(inflate)?;
+                &inflated
+            }
+            b"lz4" => {
+                let d = lz4::Decoder::new(records).map_err(|e| inflate(format!("lz4: {e}")))?;
+                inflate_into(d, declared, records.len(), &mut inflated).map_err(inflate)?;
+                &inflated
+            }
+            other => {
+                return Err(inflate(format!(
+                    "unsupported compression `{}`",
+                    String::from_utf8_lossy(other)
+                )))
+            }
+        };
+        if data.len() != declared {
+            return Err(inflate(format!(
+                "{} bytes of records where the header declares {declared}",
+                data.len()
+            )));
+        }
+        if crc != 0 && crc32fast::hash(data) != crc {
+            return Err(inflate("records fail their CRC check".into()));
+        }
+        let r = self.records(data, 1, at);
+        self.inflated = inflated;
+        r
+    }
+}
+
+/// Decompresses `reader` into `out` (cleared): at most `declared` bytes (more is an error); the
+/// buffer starts at a few times the compressed size and grows with the output.
+fn inflate_into(
+    reader: impl std::io::Read,
+    declared: usize,
+    compressed: usize,
+    out: &mut Vec<u8>,
+) -> Result<(), String> {
+    use std::io::Read;
+    out.reserve(declared.min(compressed.saturating_mul(4).saturating_add(4096)));
+    let n = reader
+        .take(declared as u64 + 1)
+        .read_to_end(out)
+        .map_err(|e| format!("cannot decompress: {e}"))?;
+    if n > declared {
+        return Err(format!(
+            "decompresses to more than the {declared} bytes its header declares"
+        ));
+    }
+    Ok(())
 }
 
 /// The latest `message_end_time` [ns] of the chunk headers found walking the top-level records

@@ -6,10 +6,13 @@ mod report;
 
 use plot::*;
 use report::*;
+mod json;
+
+use json::{points, Doc};
 
 use crate::cmd::compare::stack_svg;
 use crate::gains_file::GainsFile;
-use crate::io::read_log_with_meta;
+use crate::io::{read_log_signals, Signal};
 use crate::model_file::ModelFile;
 use crate::plot::{line_chart_svg, Chart, Series};
 use crate::runner::controller::{pid_config, PidOptions, PidSources};
@@ -86,8 +89,13 @@ impl Frf {
             .transpose()?;
         let mut logs = Vec::new();
         for p in &self.logs {
-            let (rec, meta) = read_log_with_meta(p, self.columns.as_deref())
-                .with_context(|| format!("reading {}", p.display()))?;
+            // Only the signals the estimate uses are read.
+            let (rec, meta) = read_log_signals(
+                p,
+                self.columns.as_deref(),
+                Some(&[Signal::Time, Signal::U, Signal::ThetaL, Signal::Ref]),
+            )
+            .with_context(|| format!("reading {}", p.display()))?;
             if !self.json {
                 for n in &meta.notes {
                     eprintln!("note: {n}");
@@ -280,13 +288,12 @@ impl Frf {
             "open loop: P = H1(u -> theta_l)"
         };
         if self.json {
-            let mut frf = serde_json::Map::new();
-            frf.insert("plant".into(), points(&plant, -90.0));
+            let mut frf = vec![("plant", points(&plant, -90.0))];
             if let Some(l) = &l {
-                frf.insert("loop".into(), points(l, -180.0));
+                frf.push(("loop", points(l, -180.0)));
             }
             if let Some(t) = &t {
-                frf.insert("complementary_sensitivity".into(), points(t, 0.0));
+                frf.push(("complementary_sensitivity", points(t, 0.0)));
             }
             let a = achieved.as_ref();
             let out = json!({
@@ -316,10 +323,13 @@ impl Frf {
                     "resonance_rad_s": c.resonance.map(|r| json!({"value": r.omega_rad_s, "peak_db": r.peak_db})),
                 })),
                 "amplitude": amplitude.as_ref().map(|a| json!({"gain_change_db": a.gain_change_db, "bound_db": a.bound_db, "significant": a.significant, "sentence": a.sentence, "u_rms_v": u_rms})),
-                "frf": frf,
                 "notes": notes,
             });
-            outln!("{}", serde_json::to_string_pretty(&out)?);
+            let Value::Object(rest) = &out else {
+                bail!("internal error: the JSON document is not an object");
+            };
+            let doc = serde_json::to_string_pretty(&Doc { rest, frf })?;
+            outln!("{doc}");
         } else {
             outln!(
                 "servo frf: {} log(s), {} at {:.0} Hz",

@@ -10,20 +10,6 @@ pub(super) fn interval(i: &Option<Interval>) -> Value {
     }
 }
 
-pub(super) fn points(e: &Estimate, start_deg: f64) -> Value {
-    let ph = e.phase_deg(start_deg);
-    Value::Array(
-        (0..e.len())
-            .map(|i| {
-                let (lo, hi) = e.mag_bounds(i);
-                json!({"freq_hz": e.freq_hz[i], "mag": e.mag(i), "phase_deg": ph[i],
-                       "coherence": e.coherence[i], "mag_lo": lo, "mag_hi": hi,
-                       "phase_bound_deg": e.phase_bound_deg(i)})
-            })
-            .collect(),
-    )
-}
-
 pub(super) fn fmt_i(i: &Option<Interval>, unit: &str, what: &str) -> String {
     match i {
         Some(i) => format!("{what} {:.2} {unit} [{:.2}, {:.2}]", i.value, i.lo, i.hi),
