@@ -377,7 +377,7 @@ fn periodic_pair_raw(r: &RecData, cog: bool, h: f64, n: f64, fc_hz: f64) -> (Vec
     let len = r.theta_m_rad.len();
     let (mut sin_col, mut cos_col) = (alloc::vec![0.0; len], alloc::vec![0.0; len]);
     let scale = if cog { 1.0 } else { 1.0 / n };
-    let integer = cog && h >= 1.0 && h <= 64.0 && h == math::floor(h);
+    let integer = cog && (1.0..=64.0).contains(&h) && h == math::floor(h);
     for k in 0..len {
         let w = if cog {
             r.omega_raw[k]
