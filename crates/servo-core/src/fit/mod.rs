@@ -505,10 +505,11 @@ impl Dataset {
                 let integer = kind == EffectKind::Cogging;
                 let log_scale = kind == EffectKind::Stribeck;
                 let mut trial = cfg.clone();
+                let on = self.search_set();
                 let mut f = |x: f64| {
                     let x = if log_scale { math::exp(x) } else { x };
                     trial.slots[i].set(key, x);
-                    self.cost(&trial, kind)
+                    on.cost(&trial, kind)
                 };
                 let g: Vec<f64> = if log_scale {
                     grid.iter().map(|v| math::ln(*v)).collect()
@@ -551,18 +552,19 @@ impl Dataset {
                 .fold(f64::INFINITY, f64::min);
             if self.has_current && d0 > 0.0 && dt.is_finite() {
                 let base = self.solve_config(&cfg)?;
-                let mut f = |d: f64| {
+                let segs = oe::segments(self, oe::Part::Fit);
+                let h = self.opts.oe_horizon_s;
+                let mut f = |d: f64, bound: f64| {
                     let mut c = base.cfg.clone();
                     c.slots[i].set("delay", d);
                     match to_plant(&c, &base.mech, base.elec.as_ref()) {
-                        Ok(p) => {
-                            oe::prediction_cost(self, &p, oe::Part::Fit).unwrap_or(f64::INFINITY)
-                        }
+                        Ok(p) => oe::prediction_cost_bounded(self, &p, &segs, h, bound)
+                            .unwrap_or(f64::INFINITY),
                         Err(_) => f64::INFINITY,
                     }
                 };
                 let grid = search::linspace((d0 - dt).max(0.0), d0 + dt, 9);
-                if let Some((d, _)) = search::grid_then_golden(&grid, &mut f, 10) {
+                if let Some((d, _)) = search::grid_then_golden_bounded(&grid, &mut f, 10) {
                     cfg.slots[i].set("delay", d);
                 }
             }
@@ -618,17 +620,19 @@ impl Dataset {
                     p.effects.get_mut(kind)?.set(key, x).ok()?;
                     Some(p)
                 };
-                let cost = |x: f64| -> f64 {
+                let segs = oe::segments(self, oe::Part::Fit);
+                let h = self.opts.oe_horizon_s;
+                let cost = |x: f64, bound: f64| -> f64 {
                     with(x)
-                        .and_then(|p| oe::prediction_cost(self, &p, oe::Part::Fit))
+                        .and_then(|p| oe::prediction_cost_bounded(self, &p, &segs, h, bound))
                         .unwrap_or(f64::INFINITY)
                 };
                 let grid = match span {
                     Span::Add(d) => search::linspace(x0 - d, x0 + d, 9),
                     Span::Scale(f) => search::linspace(x0 / f, x0 * f, 9),
                 };
-                let c0 = cost(x0);
-                if let Some((x, c)) = search::grid_then_golden(&grid, cost, 10) {
+                let c0 = cost(x0, f64::INFINITY);
+                if let Some((x, c)) = search::grid_then_golden_bounded(&grid, cost, 10) {
                     if c < c0 {
                         if let Some(p) = with(x) {
                             solved.plant = p;
@@ -688,9 +692,9 @@ impl Dataset {
             Some(p)
         };
         let tau_cell = core::cell::Cell::new(tau0);
-        let cost = |segs: &[(usize, usize)], h: f64, gap: f64, j_eq: f64| -> f64 {
+        let cost = |segs: &[(usize, usize)], h: f64, gap: f64, j_eq: f64, bound: f64| -> f64 {
             plant_with(gap, j_eq, tau_cell.get())
-                .and_then(|p| oe::prediction_cost_over(self, &p, segs, h))
+                .and_then(|p| oe::prediction_cost_bounded(self, &p, segs, h, bound))
                 .unwrap_or(f64::INFINITY)
         };
         let h0 = self.opts.oe_horizon_s;
@@ -699,11 +703,11 @@ impl Dataset {
         // later, which looks like a wider gap), so each gap of the grid gets its own J_eq.
         let best_j = |gap: f64| -> (f64, f64) {
             if !fit_j {
-                return (j0, cost(&short, h0, gap, j0));
+                return (j0, cost(&short, h0, gap, j0, f64::INFINITY));
             }
-            search::grid_then_golden(
+            search::grid_then_golden_bounded(
                 &search::linspace(0.85, 1.15, 4),
-                |s| cost(&short, h0, gap, j0 * s),
+                |s, bound| cost(&short, h0, gap, j0 * s, bound),
                 5,
             )
             .map_or((j0, f64::INFINITY), |(s, c)| (j0 * s, c))
@@ -733,9 +737,11 @@ impl Dataset {
             if fit_j {
                 let grid = search::linspace(1.0 - j_span, 1.0 + j_span, 5);
                 let jc = j_eq;
-                if let Some((s, _)) =
-                    search::grid_then_golden(&grid, |s| cost(segs, h, gap, jc * s), iters)
-                {
+                if let Some((s, _)) = search::grid_then_golden_bounded(
+                    &grid,
+                    |s, bound| cost(segs, h, gap, jc * s, bound),
+                    iters,
+                ) {
                     j_eq = jc * s;
                 }
             }
@@ -743,21 +749,23 @@ impl Dataset {
                 // The Coulomb level decides how far the load coasts once the motor leaves it.
                 let tc = tau_cell.get();
                 let grid = search::linspace(0.9, 1.1, 5);
-                let f = |s: f64| {
+                let f = |s: f64, bound: f64| {
                     tau_cell.set(tc * s);
-                    let c = cost(segs, h, gap, j_eq);
+                    let c = cost(segs, h, gap, j_eq, bound);
                     tau_cell.set(tc);
                     c
                 };
-                if let Some((s, _)) = search::grid_then_golden(&grid, f, iters) {
+                if let Some((s, _)) = search::grid_then_golden_bounded(&grid, f, iters) {
                     tau_cell.set(tc * s);
                 }
             }
             if fit_gap {
                 let grid = search::linspace((gap - step).max(0.0), gap + step, 5);
-                if let Some((g, _)) =
-                    search::grid_then_golden(&grid, |g| cost(segs, h, g, j_eq), iters)
-                {
+                if let Some((g, _)) = search::grid_then_golden_bounded(
+                    &grid,
+                    |g, bound| cost(segs, h, g, j_eq, bound),
+                    iters,
+                ) {
                     gap = g;
                 }
             }
@@ -779,7 +787,9 @@ impl Dataset {
     pub fn refine_rigid_on_simulation(&self, plant: &Plant) -> Plant {
         let segs = oe::segments(self, oe::Part::Fit);
         let h = self.opts.oe_horizon_s;
-        let cost = |p: &Plant| oe::prediction_cost_over(self, p, &segs, h).unwrap_or(f64::INFINITY);
+        let cost = |p: &Plant, bound: f64| {
+            oe::prediction_cost_bounded(self, p, &segs, h, bound).unwrap_or(f64::INFINITY)
+        };
         let mut best = *plant;
         let j0 = plant.params.j_eq();
         let with_j = |p: &Plant, j: f64| {
@@ -787,9 +797,9 @@ impl Dataset {
             q.params.j_eq = Some(j);
             q
         };
-        if let Some((s, _)) = search::grid_then_golden(
+        if let Some((s, _)) = search::grid_then_golden_bounded(
             &search::linspace(0.85, 1.15, 5),
-            |s| cost(&with_j(&best, j0 * s)),
+            |s, bound| cost(&with_j(&best, j0 * s), bound),
             8,
         ) {
             best = with_j(&best, j0 * s);
@@ -802,9 +812,9 @@ impl Dataset {
                 set(&mut q, EffectKind::Coulomb, &[t]).ok()?;
                 Some(q)
             };
-            if let Some((s, _)) = search::grid_then_golden(
+            if let Some((s, _)) = search::grid_then_golden_bounded(
                 &search::linspace(0.9, 1.1, 5),
-                |s| with_tau(&best, t0 * s).map_or(f64::INFINITY, |p| cost(&p)),
+                |s, bound| with_tau(&best, t0 * s).map_or(f64::INFINITY, |p| cost(&p, bound)),
                 8,
             ) {
                 if let Some(p) = with_tau(&best, t0 * s) {
@@ -812,7 +822,7 @@ impl Dataset {
                 }
             }
         }
-        if cost(&best) <= cost(plant) {
+        if cost(&best, f64::INFINITY) <= cost(plant, f64::INFINITY) {
             best
         } else {
             *plant

@@ -310,36 +310,9 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
                 if !h.is_finite() {
                     continue;
                 }
-                let scale = if cog { 1.0 } else { 1.0 / n };
-                let angle = move |r: &RecData, k: usize| {
-                    if cog {
-                        r.theta_m_rad[k]
-                    } else {
-                        r.theta_m_rad[k] / n
-                    }
-                };
-                // Above about twice the filter cut-off the sampled sin/cos alias into the band
-                // the fit sees, while the measured response holds none of it: taper them out.
                 let fc = ds.opts.filter_hz;
-                let taper = move |r: &RecData, k: usize| {
-                    let w = if cog {
-                        r.omega_raw[k]
-                    } else {
-                        r.omega_raw[k] / n
-                    };
-                    let f = h * w.abs() / math::TAU;
-                    ((4.0 * fc - f) / (2.0 * fc)).clamp(0.0, 1.0)
-                };
-                let sin_col = ds.column(rows, |r: &RecData| {
-                    (0..r.theta_m_rad.len())
-                        .map(|k| shapes::cogging_pair(angle(r, k), h).0 * scale * taper(r, k))
-                        .collect()
-                });
-                let cos_col = ds.column(rows, |r: &RecData| {
-                    (0..r.theta_m_rad.len())
-                        .map(|k| shapes::cogging_pair(angle(r, k), h).1 * scale * taper(r, k))
-                        .collect()
-                });
+                let (sin_col, cos_col) =
+                    ds.column_pair(rows, |r: &RecData| periodic_pair_raw(r, cog, h, n, fc));
                 let fit_amp = s.fits("amplitude") || s.fits("phase");
                 let (a, ph) = (s.get("amplitude"), s.get("phase"));
                 terms.push(Term {
@@ -389,6 +362,61 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
         (Equation::Combined, y)
     };
     solve_terms(equation, rows, y, terms)
+}
+
+/// The unfiltered (sin, cos) regressor pair of a periodic torque over one record, per unit
+/// amplitude: cogging (`cog`: `h` cycles per motor turn, motor side) or imbalance (one cycle
+/// per load turn, seen at the motor divided by `n`).
+///
+/// Above about twice the filter cut-off `fc_hz` the sampled sin/cos alias into the band the fit
+/// sees, while the measured response holds none of it: they are tapered out (zero beyond four
+/// times the cut-off, where nothing is computed). An integer harmonic is computed from the
+/// record's unit phasor of the motor angle by complex powers (a few products instead of two
+/// trigonometric calls per sample: the harmonic scan evaluates every harmonic up to 40).
+fn periodic_pair_raw(r: &RecData, cog: bool, h: f64, n: f64, fc_hz: f64) -> (Vec<f64>, Vec<f64>) {
+    let len = r.theta_m_rad.len();
+    let (mut sin_col, mut cos_col) = (alloc::vec![0.0; len], alloc::vec![0.0; len]);
+    let scale = if cog { 1.0 } else { 1.0 / n };
+    let integer = cog && (1.0..=64.0).contains(&h) && h == math::floor(h);
+    for k in 0..len {
+        let w = if cog {
+            r.omega_raw[k]
+        } else {
+            r.omega_raw[k] / n
+        };
+        let f = h * w.abs() / math::TAU;
+        let taper = ((4.0 * fc_hz - f) / (2.0 * fc_hz)).clamp(0.0, 1.0);
+        if taper == 0.0 {
+            continue;
+        }
+        let (sv, cv) = if integer {
+            let [c1, s1] = r.motor_phasor[k];
+            phasor_pow(c1, s1, h as u32)
+        } else if cog {
+            shapes::cogging_pair(r.theta_m_rad[k], h)
+        } else {
+            shapes::imbalance_pair(r.theta_m_rad[k] / n)
+        };
+        sin_col[k] = sv * scale * taper;
+        cos_col[k] = cv * scale * taper;
+    }
+    (sin_col, cos_col)
+}
+
+/// (sin(m x), cos(m x)) from (cos x, sin x) by binary exponentiation of the unit phasor.
+#[inline]
+fn phasor_pow(c1: f64, s1: f64, m: u32) -> (f64, f64) {
+    let (mut rc, mut rs) = (1.0, 0.0);
+    let (mut bc, mut bs) = (c1, s1);
+    let mut e = m;
+    while e > 0 {
+        if e & 1 == 1 {
+            (rc, rs) = (rc * bc - rs * bs, rc * bs + rs * bc);
+        }
+        (bc, bs) = (bc * bc - bs * bs, 2.0 * bc * bs);
+        e >>= 1;
+    }
+    (rs, rc)
 }
 
 fn cfg_tau_sf(cfg: &Config) -> f64 {
