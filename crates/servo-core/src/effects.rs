@@ -797,6 +797,49 @@ impl fmt::Display for RegisteredNames {
     }
 }
 
+/// Displays every registered effect with its parameters and units, `;`-separated (for help
+/// texts): `viscous b_eq [N m s/rad]; coulomb tau_sf [N m]; ...`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ParamsSummary;
+impl fmt::Display for ParamsSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, k) in EffectKind::registered().enumerate() {
+            if i > 0 {
+                f.write_str("; ")?;
+            }
+            write!(f, "{} ({})", k.name(), k.acts_on().describe())?;
+            for (j, p) in k.params().iter().enumerate() {
+                write!(f, "{} {} [{}]", if j == 0 { ":" } else { "," }, p.key, p.unit)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Displays the registry as a Markdown table (effect, where it acts, parameters with units and
+/// meaning, the experiment that resolves it): the table of README.md.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CatalogueTable;
+impl fmt::Display for CatalogueTable {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("| effect | acts on | parameters | resolved by |\n|---|---|---|---|\n")?;
+        for k in EffectKind::registered() {
+            write!(f, "| `{}` | {} | ", k.name(), k.acts_on().describe())?;
+            for (j, p) in k.params().iter().enumerate() {
+                if j > 0 {
+                    f.write_str("; ")?;
+                }
+                write!(f, "`{}` {}: {}", p.key, p.unit, p.doc)?;
+                if let Some(d) = p.default {
+                    write!(f, " (default {d})")?;
+                }
+            }
+            writeln!(f, " | {} |", k.model().experiment())?;
+        }
+        Ok(())
+    }
+}
+
 /// One effect with its parameter values (in the order of [`EffectKind::params`]).
 #[derive(Clone, Copy)]
 pub struct Effect {

@@ -408,7 +408,7 @@ fn findings(r: &CompareReport, opts: &CompareOptions) -> Vec<String> {
 }
 
 /// The registered effects a residual periodic in the angle of `side` suggests (smooth torques
-/// that depend on that angle only), in words: e.g. "cogging" for the motor angle.
+/// that depend on that angle only), in words.
 fn periodic_suspects(side: crate::effects::ActsOn) -> String {
     let names: Vec<&str> = crate::effects::EffectKind::registered()
         .filter(|k| {

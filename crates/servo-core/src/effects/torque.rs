@@ -75,7 +75,7 @@ impl InputNonlinearity {
     }
 }
 
-/// A breakaway level and its decay with speed (e.g. Stribeck friction), load side.
+/// A breakaway level and its decay with speed (stiction), load side.
 #[derive(Debug, Clone, Copy)]
 pub struct Breakaway {
     /// Breakaway torque tau_s [N m].

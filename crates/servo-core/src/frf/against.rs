@@ -8,7 +8,7 @@
 //!   against its look-alike, one unmodelled real pole, e = -atan(w/p).
 //! * Resonance: a local peak of |measured/model| of more than 3 dB beyond its bounds.
 //! * Amplitude dependence: two estimates taken at different amplitudes whose gains differ beyond
-//!   their bounds: a linear plant has one gain, friction and backlash do not.
+//!   their bounds: a linear plant has one gain, friction and gear play do not.
 //! * No information: the frequency ranges where the coherence is below 0.5.
 
 use super::Frf;
