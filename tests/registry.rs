@@ -195,8 +195,14 @@ fn run_time_effect_is_simulated_fitted_and_diagnosed() {
         logs[0].theta_l_rad.as_ref().unwrap(),
         without.theta_l_rad.as_ref().unwrap(),
     );
-    let diff = a.iter().zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
-    assert!(diff > 0.1, "the spring changes the motion by {diff} rad only");
+    let diff = a
+        .iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    assert!(
+        diff > 0.1,
+        "the spring changes the motion by {diff} rad only"
+    );
 
     let start = Plant::from_params(PlantParams {
         tau_sf: Some(0.005),
@@ -206,12 +212,24 @@ fn run_time_effect_is_simulated_fitted_and_diagnosed() {
     let model = fit::fit_model(&logs, &start, &[], &FitOptions::default())
         .unwrap()
         .plant;
-    let r = fit::fit_model(&logs, &model, &[EffectToFit::all(k)], &FitOptions::default()).unwrap();
+    let r = fit::fit_model(
+        &logs,
+        &model,
+        &[EffectToFit::all(k)],
+        &FitOptions::default(),
+    )
+    .unwrap();
     let got = r.plant.effects.value(k, "k").unwrap();
     let theta0 = r.plant.effects.value(k, "theta0").unwrap();
     eprintln!("fitted k = {got} N m/rad, theta0 = {theta0} rad");
-    assert!((got / 0.003 - 1.0).abs() < 0.15, "k fitted {got}, true 0.003");
-    assert!((theta0 - 0.3).abs() < 0.1, "theta0 fitted {theta0}, true 0.3");
+    assert!(
+        (got / 0.003 - 1.0).abs() < 0.15,
+        "k fitted {got}, true 0.003"
+    );
+    assert!(
+        (theta0 - 0.3).abs() < 0.1,
+        "theta0 fitted {theta0}, true 0.3"
+    );
     assert!(r.equations[0].rms_after < 0.8 * r.equations[0].rms_before);
 
     let opts = DiagnoseOptions {

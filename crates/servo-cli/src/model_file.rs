@@ -74,8 +74,8 @@ impl ModelFile {
         for (name, kv) in &raw.effects {
             let kind = EffectKind::from_name(name).ok_or_else(|| {
                 anyhow!(
-                    "[effects.{name}]: unknown effect; the catalogue has {}",
-                    EffectKind::ALL.map(|k| k.name()).join(", ")
+                    "[effects.{name}]: unknown effect; the registry has {}",
+                    servo_core::effects::RegisteredNames
                 )
             })?;
             let mut e = Effect::unset(kind);

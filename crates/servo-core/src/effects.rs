@@ -33,6 +33,7 @@
 //! defined at run time (user-defined effects from a model file) implement the same trait and
 //! join the registry through [`register`] (feature `std`).
 
+pub mod periodic;
 pub mod torque;
 
 use core::fmt;
@@ -592,7 +593,9 @@ static USER: std::sync::RwLock<[Option<&'static dyn EffectModel>; MAX_USER_EFFEC
 pub enum RegistryError {
     #[error("`{0}` is a catalogue effect; give a user-defined effect another name")]
     CatalogueName(EffectName),
-    #[error("effect name `{0}`: use ASCII lowercase letters, digits and `_`, starting with a letter")]
+    #[error(
+        "effect name `{0}`: use ASCII lowercase letters, digits and `_`, starting with a letter"
+    )]
     BadName(EffectName),
     #[error("effect `{name}` has {count} parameters; at most {max} are supported")]
     TooManyParams {
@@ -610,7 +613,13 @@ pub enum RegistryError {
 
 /// Registers a run-time effect (e.g. a user-defined effect from a model file) and returns its
 /// kind. Registering a name again replaces its model and keeps its kind (handles taken before
-/// then see the new model). The model lives for the rest of the process.
+/// then see the new model). The model lives for the rest of the process (it is leaked, like the
+/// `&'static str` keys of its [`ParamSpec`]s, which a run-time model may get with `Box::leak`):
+/// register once per effect definition, not in a loop.
+///
+/// Run-time kinds are not diagnosis candidates by default (the registry is process-wide, and a
+/// diagnosis must not depend on what another part of the process registered): pass them in
+/// `DiagnoseOptions::extra_candidates` or `candidates`.
 #[cfg(feature = "std")]
 pub fn register(model: alloc::boxed::Box<dyn EffectModel>) -> Result<EffectKind, RegistryError> {
     let name = model.name();
@@ -729,7 +738,9 @@ impl EffectKind {
                 }
             }
         }
-        EffectKind::ALL.into_iter().chain(user.into_iter().flatten())
+        EffectKind::ALL
+            .into_iter()
+            .chain(user.into_iter().flatten())
     }
 
     /// One-line physical description.
@@ -809,7 +820,13 @@ impl fmt::Display for ParamsSummary {
             }
             write!(f, "{} ({})", k.name(), k.acts_on().describe())?;
             for (j, p) in k.params().iter().enumerate() {
-                write!(f, "{} {} [{}]", if j == 0 { ":" } else { "," }, p.key, p.unit)?;
+                write!(
+                    f,
+                    "{} {} [{}]",
+                    if j == 0 { ":" } else { "," },
+                    p.key,
+                    p.unit
+                )?;
             }
         }
         Ok(())

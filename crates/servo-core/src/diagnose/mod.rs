@@ -199,7 +199,10 @@ pub fn candidate_kinds(model: &Plant, opts: &DiagnoseOptions) -> Vec<EffectKind>
             .chain(opts.extra_candidates.iter().copied())
             .collect()
     } else {
-        opts.candidates.clone()
+        // In registry order, whatever order they were given in.
+        let mut c = opts.candidates.clone();
+        c.sort();
+        c
     };
     let mut out: Vec<EffectKind> = Vec::new();
     for k in pool {

@@ -8,6 +8,7 @@ use super::{
     spec, ActsOn, CoefSign, EffectModel, ParamSpec, Regime, Sample, Search, SearchScale, Signals,
     SimRole, Span,
 };
+use super::periodic::{amplitude_phase, amplitude_std_err, pair, periodic_regressor};
 use crate::math;
 
 /// The `cogging` effect.
@@ -47,51 +48,6 @@ const PARAMS: [ParamSpec; 3] = [
 #[inline]
 pub fn torque_m(amplitude: f64, harmonic: f64, phase: f64, theta_m: f64) -> f64 {
     amplitude * math::sin(harmonic * theta_m + phase)
-}
-
-/// A periodic torque per unit amplitude: the (sin, cos) pair of `harmonic` x `angle`
-/// (amplitude sin(h theta + phase) = A cos(phase) sin(h theta) + A sin(phase) cos(h theta)).
-#[inline]
-pub fn pair(angle: f64, harmonic: f64) -> (f64, f64) {
-    (
-        torque_m(1.0, harmonic, 0.0, angle),
-        torque_m(1.0, harmonic, core::f64::consts::FRAC_PI_2, angle),
-    )
-}
-
-/// Regressor `j` (0: sin, 1: cos) of a periodic torque of `harmonic` x `angle` whose angle turns
-/// at `speed` [rad/s], scaled to the motor by `scale`. Above about twice the filter cut-off the
-/// sampled sin/cos alias into the band the fit sees, while the measured response holds none of
-/// it: the regressor is tapered out there.
-#[inline]
-pub fn periodic_regressor(
-    angle: f64,
-    speed: f64,
-    harmonic: f64,
-    scale: f64,
-    filter_hz: f64,
-    j: usize,
-) -> f64 {
-    let f = harmonic * speed.abs() / math::TAU;
-    let taper = ((4.0 * filter_hz - f) / (2.0 * filter_hz)).clamp(0.0, 1.0);
-    let p = pair(angle, harmonic);
-    (if j == 0 { p.0 } else { p.1 }) * scale * taper
-}
-
-/// Amplitude and phase from the fitted (A cos(phase), A sin(phase)) pair.
-#[inline]
-pub fn amplitude_phase(c: &[f64]) -> (f64, f64) {
-    let a = c.first().copied().unwrap_or(0.0);
-    let b = c.get(1).copied().unwrap_or(0.0);
-    (math::hypot(a, b), math::atan2(b, a))
-}
-
-/// Standard error of the amplitude from those of the pair.
-#[inline]
-pub fn amplitude_std_err(se: &[f64]) -> f64 {
-    let a = se.first().copied().unwrap_or(0.0);
-    let b = se.get(1).copied().unwrap_or(0.0);
-    math::sqrt(0.5 * (a * a + b * b))
 }
 
 impl EffectModel for Cogging {

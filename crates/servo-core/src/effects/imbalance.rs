@@ -4,7 +4,7 @@
 //! Linear in (amplitude cos(phase), amplitude sin(phase)): the fit estimates the pair by least
 //! squares (no search).
 
-use super::cogging::{amplitude_phase, amplitude_std_err, periodic_regressor};
+use super::periodic::{amplitude_phase, amplitude_std_err, periodic_regressor};
 use super::{spec, ActsOn, CoefSign, EffectModel, ParamSpec, Sample, Signals, SimRole, Span};
 use crate::math;
 

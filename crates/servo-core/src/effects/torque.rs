@@ -121,7 +121,9 @@ impl Friction {
 
     /// True when there is any dry friction (then the shaft can stick).
     pub fn is_active(&self) -> bool {
-        self.tau_c_pos > 0.0 || self.tau_c_neg > 0.0 || self.breakaway.is_some_and(|b| b.tau_s > 0.0)
+        self.tau_c_pos > 0.0
+            || self.tau_c_neg > 0.0
+            || self.breakaway.is_some_and(|b| b.tau_s > 0.0)
     }
 
     /// Breakaway torque [N m], load side, for starting in direction `dir` (> 0 or < 0): the

@@ -168,8 +168,10 @@ impl Config {
             })
             .collect();
         maps.sort_by_key(|m| m.0);
-        let maps: Vec<(&'static dyn crate::effects::EffectModel, Slot)> =
-            maps.into_iter().map(|(_, s)| (s.kind.model(), *s)).collect();
+        let maps: Vec<(&'static dyn crate::effects::EffectModel, Slot)> = maps
+            .into_iter()
+            .map(|(_, s)| (s.kind.model(), *s))
+            .collect();
         move |u| {
             maps.iter()
                 .fold(u, |u, (m, s)| m.input_v(s.param_values(), u))
@@ -356,7 +358,11 @@ fn push_effect_terms(
                         omega_m_rad_s: r.omega_raw[k],
                         theta_m_rad: r.theta_m_rad[k],
                         u_v: u,
-                        u_prev_v: k.checked_sub(1).and_then(|i| r.u_v.get(i)).copied().unwrap_or(u),
+                        u_prev_v: k
+                            .checked_sub(1)
+                            .and_then(|i| r.u_v.get(i))
+                            .copied()
+                            .unwrap_or(u),
                         n,
                         filter_hz,
                     };
@@ -413,7 +419,11 @@ pub fn solve_elec(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
         },
     ];
     let (mut y, mut terms) = (y, terms);
-    if cfg.slots.iter().any(|s| s.kind.sim_role() == SimRole::Contact) {
+    if cfg
+        .slots
+        .iter()
+        .any(|s| s.kind.sim_role() == SimRole::Contact)
+    {
         // The motor speed is not the measured one while it crosses the gap: no weight there.
         for (i, &u) in rows.torque_reversal.iter().enumerate() {
             if u {
