@@ -183,6 +183,9 @@ pub struct Sample {
     pub omega_m_rad_s: f64,
     /// Motor angle theta_m [rad].
     pub theta_m_rad: f64,
+    /// (cos theta_m, sin theta_m), precomputed: integer harmonics may be taken from it by complex
+    /// powers instead of trigonometric calls ([`periodic::phasor_pow`]).
+    pub motor_phasor: [f64; 2],
     /// Driver input u [V] at this sample.
     pub u_v: f64,
     /// Driver input u [V] at the previous sample (equal to `u_v` at the first sample).
@@ -401,6 +404,14 @@ pub trait EffectModel: Sync + Send {
         let _ = (v, j, x);
         0.0
     }
+    /// Every regressor at sample `x` into `out` (length [`EffectModel::linear_coefs`]), in one
+    /// call (an effect whose regressors share work overrides this). Default:
+    /// [`EffectModel::regressor`] for each coefficient.
+    fn regressors(&self, v: &[f64], x: &Sample, out: &mut [f64]) {
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = self.regressor(v, j, x);
+        }
+    }
     /// Are the linear coefficients estimated, given which parameters are fitted (`fit`, in
     /// parameter order)? Default: any linear parameter fitted.
     fn coefs_fitted(&self, fit: &[bool]) -> bool {
@@ -470,6 +481,11 @@ pub trait EffectModel: Sync + Send {
     fn applicable(&self, has: &dyn Fn(&str) -> bool) -> bool {
         let _ = has;
         true
+    }
+    /// Order in which the diagnosis starts candidate fits (0 first): the costliest (most
+    /// simulations) first, so that two threads end together. A scheduling hint only; default 6.
+    fn schedule_rank(&self) -> u8 {
+        6
     }
     /// Hooks of the fit and the diagnosis that need the data (alloc): see [`FitHooks`].
     #[cfg(feature = "alloc")]

@@ -58,6 +58,7 @@ fn signature(
                         let x = Sample {
                             omega_m_rad_s: r.omega_raw[k],
                             theta_m_rad: r.theta_m_rad[k],
+                            motor_phasor: r.motor_phasor[k],
                             u_v: r.u_v[k],
                             u_prev_v: r.u_v[k.saturating_sub(1)],
                             n,

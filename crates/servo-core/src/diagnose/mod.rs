@@ -26,7 +26,7 @@ pub mod structure;
 pub use structure::{BalanceKind, BalanceReport, Signature, Thresholds};
 
 use crate::effects::{EffectKind, SimRole};
-use crate::fit::model::Equation;
+use crate::fit::model::{EqSolution, Equation};
 use crate::fit::oe::{self, Part};
 use crate::fit::{self, Dataset, EffectToFit, FitError, FitOptions, ParamEstimate, Solved};
 use crate::math;
@@ -226,21 +226,14 @@ pub fn diagnose_dataset(
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, FitError> {
     let base = ds.fit_config(model, &[])?;
-    // The simulation reference every candidate is judged against: the model without it, its
-    // inertia and Coulomb level tuned on the simulation (fit blocks). Candidates that refine
-    // parameters on the simulation (a gear play with J_eq and tau_sf) would otherwise win on the
-    // tuning alone, and the ranking would compare drops from different references.
-    let rigid = ds.refine_rigid_on_simulation(&base.plant);
-    let reference = Reference {
-        oe_holdout: oe::prediction_cost(ds, &rigid, Part::Holdout),
-        plant: rigid,
-    };
-    let base_oe = reference.oe_holdout;
     let noise = current_noise(ds);
     let th = opts.thresholds;
-    // Every balance of the base model: its noise floor and what structure is left.
-    let floors: Vec<(Equation, f64)> = core::iter::once(&base.mech)
+    let sols: Vec<&EqSolution> = core::iter::once(&base.mech)
         .chain(base.elec.as_ref())
+        .collect();
+    // Every balance of the base model: its noise floor (and, below, what structure is left).
+    let floors: Vec<(Equation, f64)> = sols
+        .iter()
         .map(|sol| {
             (
                 sol.equation,
@@ -254,10 +247,56 @@ pub fn diagnose_dataset(
             .find(|(e, _)| *e == eq)
             .map_or(0.0, |(_, f)| *f)
     };
-    let balances: Vec<BalanceReport> = core::iter::once(&base.mech)
-        .chain(base.elec.as_ref())
-        .map(|sol| structure::analyse(ds, sol, floor_of(sol.equation), &th, ds.gear_ratio))
-        .collect();
+    let mut kinds = candidate_kinds(model, opts);
+    if !ds.has_input {
+        // Without a logged input the data say nothing of the drive (input effects), and nothing
+        // can be simulated (effects judged on the simulation are left out).
+        kinds.retain(|k| k.is_mechanical() && !on_simulation(*k));
+    }
+    // The independent work, costliest first (a shared queue on two threads then ends together):
+    // the candidates' fits, the simulation reference and the analyses of the balances.
+    let mut tasks: Vec<Task> = kinds.iter().map(|&k| Task::Fit(k)).collect();
+    tasks.sort_by_key(|t| match t {
+        Task::Fit(k) => cost_rank(*k),
+        _ => 0,
+    });
+    let at = tasks.len().min(1);
+    tasks.insert(at, Task::Reference);
+    for i in 0..sols.len() {
+        tasks.insert(at + 1 + i, Task::Balance(i));
+    }
+    let mut fits: Vec<(EffectKind, Result<Solved, FitError>)> = Vec::new();
+    let mut rigid = base.plant;
+    let mut balances: Vec<BalanceReport> = Vec::new();
+    let mut analysed: Vec<(usize, BalanceReport)> = Vec::new();
+    for done in par_map(&tasks, opts.parallel, |t| match *t {
+        Task::Fit(k) => Done::Fit(k, ds.fit_config(model, &[EffectToFit::all(k)])),
+        // The simulation reference every candidate is judged against: the model without it,
+        // its inertia and Coulomb level tuned on the simulation (fit blocks). Candidates that
+        // refine parameters on the simulation (a gear play with J_eq and tau_sf) would otherwise
+        // win on the tuning alone, and the ranking would compare drops from different
+        // references.
+        Task::Reference => Done::Reference(ds.refine_rigid_on_simulation(&base.plant)),
+        Task::Balance(i) => Done::Balance(
+            i,
+            structure::analyse(ds, sols[i], floor_of(sols[i].equation), &th, ds.gear_ratio),
+        ),
+    }) {
+        match done {
+            Done::Fit(k, r) => fits.push((k, r)),
+            Done::Reference(p) => rigid = p,
+            Done::Balance(i, b) => analysed.push((i, b)),
+        }
+    }
+    analysed.sort_by_key(|(i, _)| *i);
+    balances.extend(analysed.into_iter().map(|(_, b)| b));
+    // Candidates in catalogue order (the ranking's ties keep it).
+    fits.sort_by_key(|(k, _)| kinds.iter().position(|x| x == k));
+    let reference = Reference {
+        oe_holdout: oe::prediction_cost(ds, &rigid, Part::Holdout),
+        plant: rigid,
+    };
+    let base_oe = reference.oe_holdout;
     // The electrical balance holds no mechanical effect: when it is itself unexplained, the
     // current or the speed measurement is inconsistent and the torque balance (which uses
     // both) cannot be trusted to name a torque.
@@ -266,67 +305,58 @@ pub fn diagnose_dataset(
             && b.above_noise
             && b.ratio_to_noise >= th.electrical_block_ratio
     });
-    let mut kinds = candidate_kinds(model, opts);
-    if !ds.has_input {
-        // Without a logged input the data say nothing of the drive (input effects), and nothing
-        // can be simulated (effects judged on the simulation are left out).
-        kinds.retain(|k| k.is_mechanical() && !on_simulation(*k));
-    }
-    let results = run_candidates(ds, model, &kinds, opts.parallel);
-    let mut ranking = Vec::new();
-    for (kind, res) in kinds.iter().zip(results) {
-        match res {
-            Ok(solved) => {
-                let eq = fit::model::Config::equation_of(*kind, ds.has_current);
-                let bal = balances.iter().find(|b| b.equation == eq);
-                let mut c = judge(
-                    ds,
-                    &base,
-                    &reference,
-                    noise,
-                    floor_of(eq),
-                    bal.map_or(0.0, |b| b.rms),
-                    *kind,
-                    &solved,
-                    opts,
-                );
-                // A mimic leaves the structure it was meant to explain: the shape that carried
-                // the balance's residual is still there, above the noise floor, after adding it.
-                if c.significant && !on_simulation(*kind) && *kind != EffectKind::Coulomb {
-                    if let (Some(b), Some(sol)) = (bal, solved.equation(eq)) {
-                        if let Some(top) = b.signatures.first().filter(|_| b.above_noise) {
-                            let after =
-                                structure::analyse(ds, sol, floor_of(eq), &th, ds.gear_ratio);
-                            let left = after.signatures.iter().find(|s| s.kind == top.kind);
-                            let still = after.above_noise
-                                && left.is_some_and(|s| {
-                                    s.explained_rms >= th.min_noise_ratio * floor_of(eq)
-                                });
-                            c.checks.push(checks::Check {
-                                name: "explains the structure it fits",
-                                passed: !still,
-                                detail: alloc::format!(
-                                    "before it, the {} residual was {:.1} times its noise floor, carried by a shape that {}; with it, {:.1} times, and that shape still carries {:.0} % of it",
-                                    eq.name(),
-                                    b.ratio_to_noise,
-                                    top.description,
-                                    after.ratio_to_noise,
-                                    100.0 * left.map_or(0.0, |s| s.share)
-                                ),
-                            });
-                            if still {
-                                c.significant = false;
-                                c.experiment = Some(String::from(evidence::experiment(c.effect)));
-                                evidence::append_failed(&mut c);
-                            }
-                        }
+    let judged = par_map(&fits, opts.parallel, |(kind, res)| {
+        let kind = *kind;
+        let solved = match res {
+            Ok(s) => s,
+            Err(e) => return failed(&base, kind, e),
+        };
+        let eq = fit::model::Config::equation_of(kind, ds.has_current);
+        let bal = balances.iter().find(|b| b.equation == eq);
+        let mut c = judge(
+            ds,
+            &base,
+            &reference,
+            noise,
+            floor_of(eq),
+            bal.map_or(0.0, |b| b.rms),
+            kind,
+            solved,
+            opts,
+        );
+        // A mimic leaves the structure it was meant to explain: the shape that carried the
+        // balance's residual is still there, above the noise floor, after adding it.
+        if c.significant && !on_simulation(kind) && kind != EffectKind::Coulomb {
+            if let (Some(b), Some(sol)) = (bal, solved.equation(eq)) {
+                if let Some(top) = b.signatures.first().filter(|_| b.above_noise) {
+                    let after = structure::analyse(ds, sol, floor_of(eq), &th, ds.gear_ratio);
+                    let left = after.signatures.iter().find(|s| s.kind == top.kind);
+                    let still = after.above_noise
+                        && left
+                            .is_some_and(|s| s.explained_rms >= th.min_noise_ratio * floor_of(eq));
+                    c.checks.push(checks::Check {
+                        name: "explains the structure it fits",
+                        passed: !still,
+                        detail: alloc::format!(
+                            "before it, the {} residual was {:.1} times its noise floor, carried by a shape that {}; with it, {:.1} times, and that shape still carries {:.0} % of it",
+                            eq.name(),
+                            b.ratio_to_noise,
+                            top.description,
+                            after.ratio_to_noise,
+                            100.0 * left.map_or(0.0, |s| s.share)
+                        ),
+                    });
+                    if still {
+                        c.significant = false;
+                        c.experiment = Some(String::from(evidence::experiment(c.effect)));
+                        evidence::append_failed(&mut c);
                     }
                 }
-                ranking.push(c);
             }
-            Err(e) => ranking.push(failed(&base, *kind, &e)),
         }
-    }
+        c
+    });
+    let mut ranking = judged;
     // A drive-side effect that explains most of the electrical residual (an input delay, a dead
     // zone) accounts for it: the measurements are then not suspect.
     let drive_explains = ranking
@@ -438,55 +468,74 @@ pub fn diagnose_dataset(
     })
 }
 
-fn run_candidates(
-    ds: &Dataset,
-    model: &Plant,
-    kinds: &[EffectKind],
-    parallel: bool,
-) -> Vec<Result<Solved, FitError>> {
-    let one = |k: EffectKind| ds.fit_config(model, &[EffectToFit::all(k)]);
+/// Independent work of a diagnosis, run in parallel.
+enum Task {
+    /// Fit a candidate kind.
+    Fit(EffectKind),
+    /// The simulation reference (J_eq and tau_sf tuned on the simulation).
+    Reference,
+    /// Analyse the residual of the base model's i-th balance.
+    Balance(usize),
+}
+
+enum Done {
+    Fit(EffectKind, Result<Solved, FitError>),
+    Reference(Plant),
+    Balance(usize, BalanceReport),
+}
+
+/// Order in which candidates are started: the costliest (most simulations) first
+/// ([`crate::effects::EffectModel::schedule_rank`]).
+fn cost_rank(kind: EffectKind) -> usize {
+    usize::from(kind.model().schedule_rank())
+}
+
+/// `f` over `items`, on up to four threads (std builds, `parallel`) taking items from a shared
+/// queue in order, else in turn; results in the order of `items`.
+fn par_map<T: Sync, R: Send>(items: &[T], parallel: bool, f: impl Fn(&T) -> R + Sync) -> Vec<R> {
     #[cfg(feature = "std")]
-    if parallel && kinds.len() > 1 {
+    if parallel && items.len() > 1 {
         let threads = std::thread::available_parallelism()
             .map_or(2, |n| n.get())
-            .clamp(1, 4);
-        let mut out: Vec<Option<Result<Solved, FitError>>> = kinds.iter().map(|_| None).collect();
-        // A shared queue, not a fixed split: candidates differ tenfold in cost.
+            .clamp(1, 4)
+            .min(items.len());
         let next = core::sync::atomic::AtomicUsize::new(0);
+        let mut out: Vec<Option<R>> = items.iter().map(|_| None).collect();
+        let mut panicked = None;
         std::thread::scope(|s| {
             let handles: Vec<_> = (0..threads)
                 .map(|_| {
-                    let (one, next) = (&one, &next);
+                    let (f, next) = (&f, &next);
                     s.spawn(move || {
                         let mut done = Vec::new();
                         loop {
                             let i = next.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
-                            let Some(&k) = kinds.get(i) else { break };
-                            done.push((i, one(k)));
+                            let Some(item) = items.get(i) else { break };
+                            done.push((i, f(item)));
                         }
                         done
                     })
                 })
                 .collect();
             for h in handles {
-                if let Ok(v) = h.join() {
-                    for (i, r) in v {
-                        out[i] = Some(r);
+                match h.join() {
+                    Ok(v) => {
+                        for (i, r) in v {
+                            out[i] = Some(r);
+                        }
                     }
+                    Err(e) => panicked = Some(e),
                 }
             }
         });
-        return out
-            .into_iter()
-            .map(|r| {
-                r.unwrap_or_else(|| {
-                    Err(FitError::BadModel(String::from("candidate thread failed")))
-                })
-            })
-            .collect();
+        if let Some(e) = panicked {
+            // A bug, not a data problem: surface it as the serial run would.
+            std::panic::resume_unwind(e);
+        }
+        return out.into_iter().flatten().collect();
     }
     let _ = parallel;
-    kinds.iter().map(|&k| one(k)).collect()
+    items.iter().map(f).collect()
 }
 
 /// Robust estimate of the white current-sensor noise [A]: MAD of first differences / sqrt(2).

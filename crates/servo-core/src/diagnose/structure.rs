@@ -316,16 +316,32 @@ fn held_out_raw(v: &View, cols: &[Vec<f64>]) -> f64 {
 /// Periodogram peak of `r` (mean removed) against phase `x * c` over the grid of `c`; returns
 /// the c with the largest power.
 fn peak(r: &[f64], x: &[f64], grid: impl Iterator<Item = f64>) -> Option<f64> {
-    let n = r.len();
-    if n < 10 {
-        return None;
+    peaks(core::slice::from_ref(&r), x, grid)
+        .into_iter()
+        .next()
+        .flatten()
+}
+
+/// [`peak`] of several signals sampled at the same `x`, in one scan (the phasors, which cost
+/// most, are shared).
+fn peaks(rs: &[&[f64]], x: &[f64], grid: impl Iterator<Item = f64>) -> Vec<Option<f64>> {
+    let n = x.len();
+    let none = || rs.iter().map(|_| None).collect();
+    if n < 10 || rs.iter().any(|r| r.len() != n) {
+        return none();
     }
-    let m = r.iter().sum::<f64>() / n as f64;
-    let mut best: Option<(f64, f64)> = None;
     let cs: Vec<f64> = grid.collect();
     if cs.is_empty() {
-        return None;
+        return none();
     }
+    let centred: Vec<Vec<f64>> = rs
+        .iter()
+        .map(|r| {
+            let m = r.iter().sum::<f64>() / n as f64;
+            r.iter().map(|v| v - m).collect()
+        })
+        .collect();
+    let mut best: Vec<Option<(f64, f64)>> = rs.iter().map(|_| None).collect();
     let dc = if cs.len() > 1 { cs[1] - cs[0] } else { 0.0 };
     // Phasors advanced by rotation along the uniform grid of c.
     let mut re: Vec<f64> = x.iter().map(|&t| math::cos(cs[0] * t)).collect();
@@ -340,18 +356,19 @@ fn peak(r: &[f64], x: &[f64], grid: impl Iterator<Item = f64>) -> Option<f64> {
                 im[i] = a * rot_s[i] + b * rot_c[i];
             }
         }
-        let (mut sc, mut ss) = (0.0, 0.0);
-        for i in 0..n {
-            let d = r[i] - m;
-            sc += d * re[i];
-            ss += d * im[i];
-        }
-        let p = sc * sc + ss * ss;
-        if best.is_none_or(|(_, bp)| p > bp) {
-            best = Some((c, p));
+        for (d, best) in centred.iter().zip(best.iter_mut()) {
+            let (mut sc, mut ss) = (0.0, 0.0);
+            for i in 0..n {
+                sc += d[i] * re[i];
+                ss += d[i] * im[i];
+            }
+            let p = sc * sc + ss * ss;
+            if best.is_none_or(|(_, bp)| p > bp) {
+                *best = Some((c, p));
+            }
         }
     }
-    best.map(|(c, _)| c)
+    best.into_iter().map(|b| b.map(|(c, _)| c)).collect()
 }
 
 fn grid(lo: f64, hi: f64, step: f64) -> impl Iterator<Item = f64> {
@@ -524,18 +541,25 @@ pub fn analyse(
             .step_by(v.fit.len().div_ceil(4000).max(1))
             .collect();
         let fit_x: Vec<f64> = scan_idx.iter().map(|&i| v.theta_m[i] / n).collect();
+        let w_max = v
+            .omega_m
+            .iter()
+            .fold(0.0f64, |a, w| a.max(w.abs()))
+            .max(1e-9);
+        let fit_rs: Vec<Vec<f64>> = mods
+            .iter()
+            .map(|(_, m)| {
+                scan_idx
+                    .iter()
+                    .map(|&i| v.r[i] * m(v.omega_m[i] / w_max))
+                    .collect()
+            })
+            .collect();
+        let refs: Vec<&[f64]> = fit_rs.iter().map(|r| r.as_slice()).collect();
+        let found = peaks(&refs, &fit_x, grid(0.5, n * 45.0, 0.1));
         let mut best: Option<(f64, usize, (f64, f64))> = None;
-        for (mi, (_, m)) in mods.iter().enumerate() {
-            let w_max = v
-                .omega_m
-                .iter()
-                .fold(0.0f64, |a, w| a.max(w.abs()))
-                .max(1e-9);
-            let fit_r: Vec<f64> = scan_idx
-                .iter()
-                .map(|&i| v.r[i] * m(v.omega_m[i] / w_max))
-                .collect();
-            let Some(c) = peak(&fit_r, &fit_x, grid(0.5, n * 45.0, 0.1)) else {
+        for (mi, ((_, m), c)) in mods.iter().zip(found).enumerate() {
+            let Some(c) = c else {
                 continue;
             };
             let cols = filtered_pair(ds, rows, &v, c / n, *m);

@@ -125,6 +125,9 @@ impl EffectModel for Backlash {
     fn search_grid(&self, _key: &str, _ctx: &super::GridContext) -> Option<alloc::vec::Vec<f64>> {
         Some(crate::fit::search::linspace(0.0, GAP_MAX_RAD, 16))
     }
+    fn schedule_rank(&self) -> u8 {
+        0
+    }
     fn experiment(&self) -> &str {
         "run small position reversals (a 1-2 Hz sine of a few degrees) and log both motor and load angles"
     }
@@ -242,9 +245,9 @@ mod fit {
             Some(p)
         };
         let tau_cell = core::cell::Cell::new(tau0);
-        let cost = |segs: &[(usize, usize)], h: f64, gap: f64, j_eq: f64| -> f64 {
+        let cost = |segs: &[(usize, usize)], h: f64, gap: f64, j_eq: f64, bound: f64| -> f64 {
             plant_with(gap, j_eq, tau_cell.get())
-                .and_then(|p| oe::prediction_cost_over(ds, &p, segs, h))
+                .and_then(|p| oe::prediction_cost_bounded(ds, &p, segs, h, bound))
                 .unwrap_or(f64::INFINITY)
         };
         let h0 = ds.opts.oe_horizon_s;
@@ -253,11 +256,11 @@ mod fit {
         // later, which looks like a wider gap), so each gap of the grid gets its own J_eq.
         let best_j = |gap: f64| -> (f64, f64) {
             if !fit_j {
-                return (j0, cost(&short, h0, gap, j0));
+                return (j0, cost(&short, h0, gap, j0, f64::INFINITY));
             }
-            search::grid_then_golden(
+            search::grid_then_golden_bounded(
                 &search::linspace(0.85, 1.15, 4),
-                |s| cost(&short, h0, gap, j0 * s),
+                |s, bound| cost(&short, h0, gap, j0 * s, bound),
                 5,
             )
             .map_or((j0, f64::INFINITY), |(s, c)| (j0 * s, c))
@@ -287,9 +290,11 @@ mod fit {
             if fit_j {
                 let grid = search::linspace(1.0 - j_span, 1.0 + j_span, 5);
                 let jc = j_eq;
-                if let Some((s, _)) =
-                    search::grid_then_golden(&grid, |s| cost(segs, h, gap, jc * s), iters)
-                {
+                if let Some((s, _)) = search::grid_then_golden_bounded(
+                    &grid,
+                    |s, bound| cost(segs, h, gap, jc * s, bound),
+                    iters,
+                ) {
                     j_eq = jc * s;
                 }
             }
@@ -297,21 +302,23 @@ mod fit {
                 // The Coulomb level decides how far the load coasts once the motor leaves it.
                 let tc = tau_cell.get();
                 let grid = search::linspace(0.9, 1.1, 5);
-                let f = |s: f64| {
+                let f = |s: f64, bound: f64| {
                     tau_cell.set(tc * s);
-                    let c = cost(segs, h, gap, j_eq);
+                    let c = cost(segs, h, gap, j_eq, bound);
                     tau_cell.set(tc);
                     c
                 };
-                if let Some((s, _)) = search::grid_then_golden(&grid, f, iters) {
+                if let Some((s, _)) = search::grid_then_golden_bounded(&grid, f, iters) {
                     tau_cell.set(tc * s);
                 }
             }
             if fit_gap {
                 let grid = search::linspace((gap - step).max(0.0), gap + step, 5);
-                if let Some((g, _)) =
-                    search::grid_then_golden(&grid, |g| cost(segs, h, g, j_eq), iters)
-                {
+                if let Some((g, _)) = search::grid_then_golden_bounded(
+                    &grid,
+                    |g, bound| cost(segs, h, g, j_eq, bound),
+                    iters,
+                ) {
                     gap = g;
                 }
             }

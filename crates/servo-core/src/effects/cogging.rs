@@ -8,7 +8,9 @@ use super::{
     spec, ActsOn, CoefSign, EffectModel, ParamSpec, Regime, Sample, Search, SearchScale, Signals,
     SimRole, Span,
 };
-use super::periodic::{amplitude_phase, amplitude_std_err, pair, periodic_regressor};
+use super::periodic::{
+    amplitude_phase, amplitude_std_err, pair, periodic_regressor, phasor_pow, taper,
+};
 use crate::math;
 
 /// The `cogging` effect.
@@ -72,6 +74,9 @@ impl EffectModel for Cogging {
     fn depends_on_angle_only(&self) -> bool {
         true
     }
+    fn schedule_rank(&self) -> u8 {
+        3
+    }
     fn search(&self, _key: &str) -> Search {
         Search {
             scale: SearchScale::Integer,
@@ -93,6 +98,29 @@ impl EffectModel for Cogging {
     }
     fn regressor(&self, v: &[f64], j: usize, x: &Sample) -> f64 {
         periodic_regressor(x.theta_m_rad, x.omega_m_rad_s, v[1], 1.0, x.filter_hz, j)
+    }
+    fn regressors(&self, v: &[f64], x: &Sample, out: &mut [f64]) {
+        // An integer harmonic from the motor phasor by complex powers (the harmonic scan
+        // evaluates every harmonic up to 40), else [`periodic_regressor`].
+        let h = v[1];
+        let integer = (1.0..=64.0).contains(&h) && h == math::floor(h);
+        if !integer {
+            for (j, o) in out.iter_mut().enumerate() {
+                *o = self.regressor(v, j, x);
+            }
+            return;
+        }
+        let taper = taper(x.omega_m_rad_s, h, x.filter_hz);
+        let (sv, cv) = if taper == 0.0 {
+            (0.0, 0.0)
+        } else {
+            let [c1, s1] = x.motor_phasor;
+            let (sv, cv) = phasor_pow(c1, s1, h as u32);
+            (sv * taper, cv * taper)
+        };
+        if let [a, b, ..] = out {
+            (*a, *b) = (sv, cv);
+        }
     }
     fn coef_from_values(&self, v: &[f64], j: usize, _tau_sf: f64) -> f64 {
         if j == 0 {

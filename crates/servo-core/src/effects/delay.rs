@@ -46,6 +46,9 @@ impl EffectModel for Delay {
         let n = (libm::ceil(ctx.max_delay_s / (0.5 * ctx.dt_s)) as usize).clamp(2, 200);
         Some(crate::fit::search::linspace(0.0, ctx.max_delay_s, n + 1))
     }
+    fn schedule_rank(&self) -> u8 {
+        5
+    }
     fn experiment(&self) -> &str {
         "apply a fast voltage excitation (PRBS or chirp up to 100 Hz) and log the current"
     }

@@ -93,6 +93,9 @@ impl EffectModel for Imbalance {
     fn std_err(&self, key: &str, se: &[f64]) -> Option<f64> {
         (key == "amplitude").then(|| amplitude_std_err(se))
     }
+    fn schedule_rank(&self) -> u8 {
+        4
+    }
     fn experiment(&self) -> &str {
         "turn the load slowly over full revolutions in both directions and log the current"
     }

@@ -30,6 +30,9 @@ pub fn periodic_regressor(
 ) -> f64 {
     let f = harmonic * speed.abs() / math::TAU;
     let taper = ((4.0 * filter_hz - f) / (2.0 * filter_hz)).clamp(0.0, 1.0);
+    if taper == 0.0 {
+        return 0.0;
+    }
     let p = pair(angle, harmonic);
     (if j == 0 { p.0 } else { p.1 }) * scale * taper
 }
@@ -48,4 +51,29 @@ pub fn amplitude_std_err(se: &[f64]) -> f64 {
     let a = se.first().copied().unwrap_or(0.0);
     let b = se.get(1).copied().unwrap_or(0.0);
     math::sqrt(0.5 * (a * a + b * b))
+}
+
+/// The taper of a periodic regressor turning at `speed` [rad/s] with `harmonic` cycles per turn
+/// (see [`periodic_regressor`]): 1 below twice the filter cut-off, 0 beyond four times.
+#[inline]
+pub fn taper(speed: f64, harmonic: f64, filter_hz: f64) -> f64 {
+    let f = harmonic * speed.abs() / math::TAU;
+    ((4.0 * filter_hz - f) / (2.0 * filter_hz)).clamp(0.0, 1.0)
+}
+
+/// (sin(m x), cos(m x)) from (cos x, sin x) by binary exponentiation of the unit phasor (a few
+/// products instead of two trigonometric calls).
+#[inline]
+pub fn phasor_pow(c1: f64, s1: f64, m: u32) -> (f64, f64) {
+    let (mut rc, mut rs) = (1.0, 0.0);
+    let (mut bc, mut bs) = (c1, s1);
+    let mut e = m;
+    while e > 0 {
+        if e & 1 == 1 {
+            (rc, rs) = (rc * bc - rs * bs, rc * bs + rs * bc);
+        }
+        (bc, bs) = (bc * bc - bs * bs, 2.0 * bc * bs);
+        e >>= 1;
+    }
+    (rs, rc)
 }

@@ -125,6 +125,9 @@ impl EffectModel for Stribeck {
     fn std_err(&self, key: &str, se: &[f64]) -> Option<f64> {
         (key == "tau_s").then(|| se.first().copied()).flatten()
     }
+    fn schedule_rank(&self) -> u8 {
+        2
+    }
     fn experiment(&self) -> &str {
         "run slow speed ramps through zero (below 1 rad/s at the load) and log the current"
     }

@@ -29,6 +29,9 @@ pub struct RecData {
     pub theta_m_rad: Vec<f64>,
     /// True when the angle measured is the load's (theta_m_rad = N theta_l).
     pub angle_is_load: bool,
+    /// Unit phasor [cos, sin] of the motor angle at every row (harmonic regressors by complex
+    /// powers).
+    pub motor_phasor: Vec<[f64; 2]>,
     /// Motor speed [rad/s] from a lightly filtered position (for nonlinear regressors).
     pub omega_raw: Vec<f64>,
     /// Motor speed [rad/s], zero-phase filtered.
@@ -159,11 +162,35 @@ pub struct Dataset {
     /// The Coulomb regressor sign(omega)/N, filtered, at the torque-balance rows (cached).
     pub coulomb_col: Vec<f64>,
     pub opts: FitOptions,
+    /// On long logs: windows of the records, spread evenly over them, for the searches over
+    /// nonlinear parameters ([`Dataset::search_set`]); `None` when the logs are short enough to
+    /// search on everything.
+    pub search: Option<alloc::boxed::Box<Dataset>>,
 }
+
+/// Most samples (over all records) the searches over nonlinear parameters run on: longer logs
+/// are searched on windows of [`SEARCH_WINDOW_S`] spread evenly over them (2 minutes at 1 kHz).
+pub const SEARCH_MAX_SAMPLES: usize = 120_000;
+
+/// Length of each search window [s].
+pub const SEARCH_WINDOW_S: f64 = 10.0;
 
 impl Dataset {
     /// Prepares `records` (gear ratio from `params`).
     pub fn new(
+        records: &[Record],
+        params: &PlantParams,
+        opts: &FitOptions,
+    ) -> Result<Dataset, FitError> {
+        let mut ds = Self::prepared(records, params, opts)?;
+        ds.search = search_windows(records, ds.recs.iter().map(|r| r.dt_s))
+            .and_then(|w| Self::prepared(&w, params, opts).ok())
+            .map(alloc::boxed::Box::new);
+        Ok(ds)
+    }
+
+    /// [`Dataset::new`] without search windows.
+    fn prepared(
         records: &[Record],
         params: &PlantParams,
         opts: &FitOptions,
@@ -217,6 +244,7 @@ impl Dataset {
             gear_ratio: params.n,
             coulomb_col: Vec::new(),
             opts: opts.clone(),
+            search: None,
         };
         let n = params.n;
         ds.coulomb_col = ds.column(&ds.mech_rows, |r: &RecData| {
@@ -226,6 +254,18 @@ impl Dataset {
                 .collect()
         });
         Ok(ds)
+    }
+
+    /// The data the searches over nonlinear parameters run on: the search windows on long logs,
+    /// everything otherwise.
+    ///
+    /// The cost of a search is the number of trial values times the samples each trial filters
+    /// and solves (every regressor of a trial is built and zero-phase filtered at full rate); a
+    /// nonlinear parameter (a harmonic, a speed scale, a limit, a delay) is located as well on
+    /// two minutes of data spread over a long log as on all of it. The linear parameters, the
+    /// residuals and every judgement are then computed on all the data.
+    pub fn search_set(&self) -> &Dataset {
+        self.search.as_deref().unwrap_or(self)
     }
 
     /// Samples a filtered full-rate signal of each record at `rows`.
@@ -261,6 +301,86 @@ impl Dataset {
             }
         }
         out
+    }
+}
+
+impl Dataset {
+    /// As [`Dataset::column`] for two signals built together by `raw` (one pass over each
+    /// record, e.g. a sin/cos pair).
+    pub fn column_pair(
+        &self,
+        rows: &Rows,
+        raw: impl Fn(&RecData) -> (Vec<f64>, Vec<f64>),
+    ) -> (Vec<f64>, Vec<f64>) {
+        let mut a = Vec::with_capacity(rows.len());
+        let mut b = Vec::with_capacity(rows.len());
+        let mut cur: Option<(usize, Vec<f64>, Vec<f64>)> = None;
+        for (&ri, &k) in rows.rec.iter().zip(&rows.k) {
+            if cur.as_ref().map(|c| c.0) != Some(ri) {
+                let r = &self.recs[ri];
+                let (x, y) = raw(r);
+                cur = Some((ri, r.filt(&x), r.filt(&y)));
+            }
+            if let Some((_, x, y)) = &cur {
+                a.push(x[k]);
+                b.push(y[k]);
+            }
+        }
+        (a, b)
+    }
+}
+
+/// Windows of `records` for the searches ([`Dataset::search_set`]), `None` when the records hold
+/// at most [`SEARCH_MAX_SAMPLES`]: every record is cut in windows of [`SEARCH_WINDOW_S`] (at its
+/// sample period `dt_s`), and as many windows as fit in the budget are taken, spread evenly over
+/// all of them (over the records and along each).
+fn search_windows(records: &[Record], dt_s: impl Iterator<Item = f64>) -> Option<Vec<Record>> {
+    let total: usize = records.iter().map(Record::len).sum();
+    if total <= SEARCH_MAX_SAMPLES {
+        return None;
+    }
+    let mut tiles: Vec<(usize, usize, usize)> = Vec::new();
+    for (ri, (r, dt)) in records.iter().zip(dt_s).enumerate() {
+        let n = r.len();
+        let w = ((SEARCH_WINDOW_S / dt) as usize).max(200);
+        let mut a = 0;
+        while a < n {
+            let b = (a + w).min(n);
+            // A short tail joins nothing: it holds too few rows past the filter's edges.
+            if b - a >= w / 2 || (a == 0 && b - a >= 50) {
+                tiles.push((ri, a, b));
+            }
+            a = b;
+        }
+    }
+    let longest = tiles.iter().map(|t| t.2 - t.1).max()?;
+    let take = (SEARCH_MAX_SAMPLES / longest).max(1);
+    if take >= tiles.len() {
+        return None;
+    }
+    Some(
+        (0..take)
+            .map(|j| {
+                let (ri, a, b) = tiles[j * tiles.len() / take + tiles.len() / (2 * take)];
+                slice(&records[ri], a, b)
+            })
+            .collect(),
+    )
+}
+
+/// Rows `a..b` of a record.
+fn slice(r: &Record, a: usize, b: usize) -> Record {
+    let cut = |v: &Option<Vec<f64>>| v.as_ref().map(|v| v[a..b].to_vec());
+    Record {
+        source: r.source.clone(),
+        time_s: r.time_s[a..b].to_vec(),
+        u_v: cut(&r.u_v),
+        theta_l_rad: cut(&r.theta_l_rad),
+        theta_m_rad: cut(&r.theta_m_rad),
+        omega_l_rad_s: cut(&r.omega_l_rad_s),
+        omega_m_rad_s: cut(&r.omega_m_rad_s),
+        i_a_a: cut(&r.i_a_a),
+        ref_rad: cut(&r.ref_rad),
     }
 }
 
@@ -354,6 +474,10 @@ fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecDat
         time_s: r.time_s.clone(),
         u_v: u,
         has_u,
+        motor_phasor: theta_m
+            .iter()
+            .map(|&t| [math::cos(t), math::sin(t)])
+            .collect(),
         theta_m_rad: theta_m,
         angle_is_load,
         omega_raw,

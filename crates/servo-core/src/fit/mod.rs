@@ -472,10 +472,11 @@ impl Dataset {
                 let integer = search.scale == SearchScale::Integer;
                 let log_scale = search.scale == SearchScale::Log;
                 let mut trial = cfg.clone();
+                let on = self.search_set();
                 let mut f = |x: f64| {
                     let x = if log_scale { math::exp(x) } else { x };
                     trial.slots[i].set(key, x);
-                    self.cost(&trial, kind)
+                    on.cost(&trial, kind)
                 };
                 let g: Vec<f64> = if log_scale {
                     grid.iter().map(|v| math::ln(*v)).collect()
@@ -518,18 +519,19 @@ impl Dataset {
                 .fold(f64::INFINITY, f64::min);
             if self.has_current && d0 > 0.0 && dt.is_finite() {
                 let base = self.solve_config(&cfg)?;
-                let mut f = |d: f64| {
+                let segs = oe::segments(self, oe::Part::Fit);
+                let h = self.opts.oe_horizon_s;
+                let mut f = |d: f64, bound: f64| {
                     let mut c = base.cfg.clone();
                     c.slots[i].set("delay", d);
                     match to_plant(&c, &base.mech, base.elec.as_ref()) {
-                        Ok(p) => {
-                            oe::prediction_cost(self, &p, oe::Part::Fit).unwrap_or(f64::INFINITY)
-                        }
+                        Ok(p) => oe::prediction_cost_bounded(self, &p, &segs, h, bound)
+                            .unwrap_or(f64::INFINITY),
                         Err(_) => f64::INFINITY,
                     }
                 };
                 let grid = search::linspace((d0 - dt).max(0.0), d0 + dt, 9);
-                if let Some((d, _)) = search::grid_then_golden(&grid, &mut f, 10) {
+                if let Some((d, _)) = search::grid_then_golden_bounded(&grid, &mut f, 10) {
                     cfg.slots[i].set("delay", d);
                 }
             }
@@ -588,17 +590,19 @@ impl Dataset {
                     p.effects.get_mut(kind)?.set(key, x).ok()?;
                     Some(p)
                 };
-                let cost = |x: f64| -> f64 {
+                let segs = oe::segments(self, oe::Part::Fit);
+                let h = self.opts.oe_horizon_s;
+                let cost = |x: f64, bound: f64| -> f64 {
                     with(x)
-                        .and_then(|p| oe::prediction_cost(self, &p, oe::Part::Fit))
+                        .and_then(|p| oe::prediction_cost_bounded(self, &p, &segs, h, bound))
                         .unwrap_or(f64::INFINITY)
                 };
                 let grid = match span {
                     crate::effects::Span::Add(d) => search::linspace(x0 - d, x0 + d, 9),
                     crate::effects::Span::Scale(f) => search::linspace(x0 / f, x0 * f, 9),
                 };
-                let c0 = cost(x0);
-                if let Some((x, c)) = search::grid_then_golden(&grid, cost, 10) {
+                let c0 = cost(x0, f64::INFINITY);
+                if let Some((x, c)) = search::grid_then_golden_bounded(&grid, cost, 10) {
                     if c < c0 {
                         if let Some(p) = with(x) {
                             solved.plant = p;
@@ -620,7 +624,9 @@ impl Dataset {
     pub fn refine_rigid_on_simulation(&self, plant: &Plant) -> Plant {
         let segs = oe::segments(self, oe::Part::Fit);
         let h = self.opts.oe_horizon_s;
-        let cost = |p: &Plant| oe::prediction_cost_over(self, p, &segs, h).unwrap_or(f64::INFINITY);
+        let cost = |p: &Plant, bound: f64| {
+            oe::prediction_cost_bounded(self, p, &segs, h, bound).unwrap_or(f64::INFINITY)
+        };
         let mut best = *plant;
         let j0 = plant.params.j_eq();
         let with_j = |p: &Plant, j: f64| {
@@ -628,9 +634,9 @@ impl Dataset {
             q.params.j_eq = Some(j);
             q
         };
-        if let Some((s, _)) = search::grid_then_golden(
+        if let Some((s, _)) = search::grid_then_golden_bounded(
             &search::linspace(0.85, 1.15, 5),
-            |s| cost(&with_j(&best, j0 * s)),
+            |s, bound| cost(&with_j(&best, j0 * s), bound),
             8,
         ) {
             best = with_j(&best, j0 * s);
@@ -643,9 +649,9 @@ impl Dataset {
                 set_effect(&mut q, EffectKind::Coulomb, &[t]).ok()?;
                 Some(q)
             };
-            if let Some((s, _)) = search::grid_then_golden(
+            if let Some((s, _)) = search::grid_then_golden_bounded(
                 &search::linspace(0.9, 1.1, 5),
-                |s| with_tau(&best, t0 * s).map_or(f64::INFINITY, |p| cost(&p)),
+                |s, bound| with_tau(&best, t0 * s).map_or(f64::INFINITY, |p| cost(&p, bound)),
                 8,
             ) {
                 if let Some(p) = with_tau(&best, t0 * s) {
@@ -653,7 +659,7 @@ impl Dataset {
                 }
             }
         }
-        if cost(&best) <= cost(plant) {
+        if cost(&best, f64::INFINITY) <= cost(plant, f64::INFINITY) {
             best
         } else {
             *plant

@@ -330,7 +330,8 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
 }
 
 /// The regressors of the linear coefficients of slot `si` ([`crate::effects::EffectModel`]:
-/// `linear_coefs`, `regressor`, `coefs_fitted`, `coef_from_values`).
+/// `linear_coefs`, `regressors`, `coefs_fitted`, `coef_from_values`), all built in one pass over
+/// each record and filtered like every column.
 fn push_effect_terms(
     ds: &Dataset,
     rows: &Rows,
@@ -349,27 +350,33 @@ fn push_effect_terms(
     let n = cfg.base.params.n;
     let filter_hz = ds.opts.filter_hz;
     let tau_sf = cfg_tau_sf(cfg);
-    for j in 0..nc {
-        let col = ds.column(rows, |r: &RecData| {
-            (0..r.theta_m_rad.len())
-                .map(|k| {
-                    let u = r.u_v.get(k).copied().unwrap_or(0.0);
-                    let x = Sample {
-                        omega_m_rad_s: r.omega_raw[k],
-                        theta_m_rad: r.theta_m_rad[k],
-                        u_v: u,
-                        u_prev_v: k
-                            .checked_sub(1)
-                            .and_then(|i| r.u_v.get(i))
-                            .copied()
-                            .unwrap_or(u),
-                        n,
-                        filter_hz,
-                    };
-                    m.regressor(v, j, &x)
-                })
-                .collect()
-        });
+    let cols = columns(ds, rows, nc, |r: &RecData| {
+        let len = r.theta_m_rad.len();
+        let mut raw = alloc::vec![alloc::vec![0.0; len]; nc];
+        let mut out = alloc::vec![0.0; nc];
+        for k in 0..len {
+            let u = r.u_v.get(k).copied().unwrap_or(0.0);
+            let x = Sample {
+                omega_m_rad_s: r.omega_raw[k],
+                theta_m_rad: r.theta_m_rad[k],
+                motor_phasor: r.motor_phasor[k],
+                u_v: u,
+                u_prev_v: k
+                    .checked_sub(1)
+                    .and_then(|i| r.u_v.get(i))
+                    .copied()
+                    .unwrap_or(u),
+                n,
+                filter_hz,
+            };
+            m.regressors(v, &x, &mut out);
+            for (col, o) in raw.iter_mut().zip(&out) {
+                col[k] = *o;
+            }
+        }
+        raw
+    });
+    for (j, col) in cols.into_iter().enumerate() {
         terms.push(Term {
             col,
             coef: Coef::Effect(si, j),
@@ -384,6 +391,29 @@ fn push_effect_terms(
             },
         });
     }
+}
+
+/// As [`Dataset::column`] for `nc` signals built together by `raw` (one pass over each record).
+fn columns(
+    ds: &Dataset,
+    rows: &Rows,
+    nc: usize,
+    raw: impl Fn(&RecData) -> Vec<Vec<f64>>,
+) -> Vec<Vec<f64>> {
+    let mut out: Vec<Vec<f64>> = (0..nc).map(|_| Vec::with_capacity(rows.len())).collect();
+    let mut cur: Option<(usize, Vec<Vec<f64>>)> = None;
+    for (&ri, &k) in rows.rec.iter().zip(&rows.k) {
+        if cur.as_ref().map(|c| c.0) != Some(ri) {
+            let r = &ds.recs[ri];
+            cur = Some((ri, raw(r).iter().map(|c| r.filt(c)).collect()));
+        }
+        if let Some((_, cs)) = &cur {
+            for (o, c) in out.iter_mut().zip(cs) {
+                o.push(c[k]);
+            }
+        }
+    }
+    out
 }
 
 fn cfg_tau_sf(cfg: &Config) -> f64 {

@@ -89,15 +89,40 @@ pub fn prediction_cost_over(
     segs: &[(usize, usize)],
     horizon_s: f64,
 ) -> Option<f64> {
+    prediction_cost_bounded(ds, plant, segs, horizon_s, f64::INFINITY)
+}
+
+/// As [`prediction_cost_over`], stopping early with `Some(f64::INFINITY)` once the cost is
+/// certain to exceed `bound_rad` (the squared errors summed so far already exceed `bound_rad`^2
+/// times the number of samples): the searches only compare costs (see
+/// [`super::search::grid_then_golden_bounded`]).
+pub fn prediction_cost_bounded(
+    ds: &Dataset,
+    plant: &Plant,
+    segs: &[(usize, usize)],
+    horizon_s: f64,
+    bound_rad: f64,
+) -> Option<f64> {
     if segs.is_empty() {
         return None;
     }
     let p = &plant.params;
+    let total: usize = segs
+        .iter()
+        .map(|&(ri, _)| ((horizon_s / ds.recs[ri].dt_s) as usize).max(2))
+        .sum();
+    let limit = bound_rad * bound_rad * total as f64;
     let (mut sum, mut count) = (0.0, 0usize);
+    // One simulator per sample period, reset at every segment: building one discretises every
+    // contact mode (matrix exponentials), which costs as much as a segment's steps.
+    let mut sim: Option<PlantSim> = None;
     for &(ri, k0) in segs {
         let r = &ds.recs[ri];
         let h = ((horizon_s / r.dt_s) as usize).max(2);
-        let mut sim = PlantSim::new(plant, r.dt_s).ok()?;
+        if sim.as_ref().is_none_or(|s| s.dt_s() != r.dt_s) {
+            sim = Some(PlantSim::new(plant, r.dt_s).ok()?);
+        }
+        let sim = sim.as_mut()?;
         let w = r.omega_f[k0];
         let u_prev = r.u_v[k0.saturating_sub(1)];
         let i = match &r.i_f {
@@ -147,6 +172,9 @@ pub fn prediction_cost_over(
             }
             sum += e * e;
             count += 1;
+        }
+        if sum > limit {
+            return Some(f64::INFINITY);
         }
     }
     Some(math::sqrt(sum / count.max(1) as f64))

@@ -10,13 +10,28 @@ pub fn grid_then_golden(
     mut f: impl FnMut(f64) -> f64,
     iters: usize,
 ) -> Option<(f64, f64)> {
-    let vals: Vec<f64> = grid.iter().map(|&x| f(x)).collect();
-    let (ib, fb) = vals
-        .iter()
-        .enumerate()
-        .filter(|(_, v)| v.is_finite())
-        .min_by(|a, b| a.1.total_cmp(b.1))
-        .map(|(i, v)| (i, *v))?;
+    grid_then_golden_bounded(grid, |x, _| f(x), iters)
+}
+
+/// As [`grid_then_golden`] for a costly `f(x, bound)` that may stop early: when it can tell that
+/// its value exceeds `bound`, it may return any value above `bound` (e.g. infinity). Every
+/// comparison the search makes is against such a bound (the best grid value so far; in the
+/// golden section, the other interior point), so the result is the one of the full evaluations.
+pub fn grid_then_golden_bounded(
+    grid: &[f64],
+    mut f: impl FnMut(f64, f64) -> f64,
+    iters: usize,
+) -> Option<(f64, f64)> {
+    let mut best: Option<(usize, f64)> = None;
+    for (i, &x) in grid.iter().enumerate() {
+        let bound = best.map_or(f64::INFINITY, |b| b.1);
+        let v = f(x, bound);
+        // Strictly lower: the first of equal values wins, as a scan of every value would.
+        if v.is_finite() && best.is_none_or(|b| v < b.1) {
+            best = Some((i, v));
+        }
+    }
+    let (ib, fb) = best?;
     let lo = grid[ib.saturating_sub(1)];
     let hi = grid[(ib + 1).min(grid.len() - 1)];
     let (mut best_x, mut best_f) = (grid[ib], fb);
@@ -25,20 +40,22 @@ pub fn grid_then_golden(
         let (mut a, mut b) = (lo, hi);
         let mut c = b - g * (b - a);
         let mut d = a + g * (b - a);
-        let (mut fc, mut fd) = (f(c), f(d));
+        let mut fc = f(c, f64::INFINITY);
+        let mut fd = f(d, fc);
         for _ in 0..iters {
             if fc < fd {
                 b = d;
                 d = c;
                 fd = fc;
                 c = b - g * (b - a);
-                fc = f(c);
+                // Compared with fd next (fc < fd): only its exceeding fd matters.
+                fc = f(c, fd);
             } else {
                 a = c;
                 c = d;
                 fc = fd;
                 d = a + g * (b - a);
-                fd = f(d);
+                fd = f(d, fc);
             }
         }
         for (x, v) in [(c, fc), (d, fd)] {
@@ -82,5 +99,30 @@ mod tests {
         )
         .unwrap();
         assert!((x - 3.3).abs() < 1e-6 && (f - 1.0).abs() < 1e-9);
+    }
+
+    /// Stopping early above the bound changes nothing.
+    #[test]
+    fn bounded_search_matches_the_full_one() {
+        let f = |x: f64| (x - 2.71).powi(2) + 0.1 * (7.0 * x).sin() + 1.0;
+        let grid = linspace(0.0, 10.0, 16);
+        let full = grid_then_golden(&grid, f, 20).unwrap();
+        let mut calls_cut = 0;
+        let bounded = grid_then_golden_bounded(
+            &grid,
+            |x, bound| {
+                let v = f(x);
+                if v > bound {
+                    calls_cut += 1;
+                    f64::INFINITY
+                } else {
+                    v
+                }
+            },
+            20,
+        )
+        .unwrap();
+        assert_eq!(full, bounded);
+        assert!(calls_cut > 10, "{calls_cut}");
     }
 }
