@@ -270,7 +270,7 @@ pub fn diagnose_dataset(
     let mut balances: Vec<BalanceReport> = Vec::new();
     let mut analysed: Vec<(usize, BalanceReport)> = Vec::new();
     for done in par_map(&tasks, opts.parallel, |t| match *t {
-        Task::Fit(k) => Done::Fit(k, ds.fit_config(model, &[EffectToFit::all(k)])),
+        Task::Fit(k) => Done::Fit(k, Box::new(ds.fit_config(model, &[EffectToFit::all(k)]))),
         // The simulation reference every candidate is judged against: the model without it,
         // its inertia and Coulomb level tuned on the simulation (fit blocks). Candidates that
         // refine parameters on the simulation (a gear play with J_eq and tau_sf) would otherwise
@@ -283,7 +283,7 @@ pub fn diagnose_dataset(
         ),
     }) {
         match done {
-            Done::Fit(k, r) => fits.push((k, r)),
+            Done::Fit(k, r) => fits.push((k, *r)),
             Done::Reference(p) => rigid = p,
             Done::Balance(i, b) => analysed.push((i, b)),
         }
@@ -479,7 +479,7 @@ enum Task {
 }
 
 enum Done {
-    Fit(EffectKind, Result<Solved, FitError>),
+    Fit(EffectKind, Box<Result<Solved, FitError>>),
     Reference(Plant),
     Balance(usize, BalanceReport),
 }
