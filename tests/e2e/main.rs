@@ -11,6 +11,7 @@ mod frf;
 mod fuzz;
 mod identify;
 mod mat;
+mod registry;
 mod run_log;
 mod schemas;
 mod serial;

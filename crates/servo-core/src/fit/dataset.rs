@@ -128,7 +128,7 @@ pub struct Rows {
     pub k: Vec<usize>,
     pub fit: Vec<bool>,
     /// Electrical rows only: within 50 ms of a reversal of the motor torque (current) while the
-    /// angle measured is the load's. With backlash in the model the motor may be crossing the
+    /// angle measured is the load's. With a gear play in the model the motor may be crossing the
     /// gap there, its speed unknown: such rows get no weight in the electrical balance.
     pub torque_reversal: Vec<bool>,
 }
@@ -250,7 +250,7 @@ impl Dataset {
         ds.coulomb_col = ds.column(&ds.mech_rows, |r: &RecData| {
             r.omega_raw
                 .iter()
-                .map(|&w| super::shapes::coulomb_dir(w) / n)
+                .map(|&w| crate::effects::coulomb::direction(w) / n)
                 .collect()
         });
         Ok(ds)
@@ -261,7 +261,7 @@ impl Dataset {
     ///
     /// The cost of a search is the number of trial values times the samples each trial filters
     /// and solves (every regressor of a trial is built and zero-phase filtered at full rate); a
-    /// nonlinear parameter (a harmonic, a Stribeck speed, a limit, a delay) is located as well on
+    /// nonlinear parameter (a harmonic, a speed scale, a limit, a delay) is located as well on
     /// two minutes of data spread over a long log as on all of it. The linear parameters, the
     /// residuals and every judgement are then computed on all the data.
     pub fn search_set(&self) -> &Dataset {
@@ -429,7 +429,7 @@ fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecDat
     };
     // An encoder reads floor(theta / q) q: during motion its reading lies q/2 below the angle on
     // average. The centre of the count cell is the unbiased estimate; without it a position-
-    // periodic torque (cogging, h = 12, 4096 counts/rev, N = 14) is fitted 0.13 rad out of
+    // periodic torque (a magnetic detent, h = 12, 4096 counts/rev, N = 14) is fitted 0.13 rad out of
     // phase and a simulation started from a reading starts half a count behind.
     let angle_logged = r.theta_m_rad.is_some() || r.theta_l_rad.is_some();
     let mut theta_m = theta_m;

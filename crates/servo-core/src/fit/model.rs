@@ -4,8 +4,7 @@
 
 use super::dataset::{Dataset, RecData, Rows};
 use super::lsq::{self, Sign};
-use super::shapes;
-use crate::effects::{EffectKind, MAX_PARAMS};
+use crate::effects::{CoefSign, EffectKind, Sample, SimRole, MAX_PARAMS};
 use crate::math;
 use crate::plant::Plant;
 use alloc::vec::Vec;
@@ -13,7 +12,8 @@ use alloc::vec::Vec;
 /// The equations servo fits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Equation {
-    /// k_t i_a = J_eq dw_m/dt + B_eq w_m + friction/N + cogging + imbalance/N (current logged) [N m].
+    /// k_t i_a = J_eq dw_m/dt + B_eq w_m + friction/N + tau_motor_side + tau_load_side/N (current
+    /// logged) [N m].
     Torque,
     /// k_drv u_in = R_eq i_a + k_e w_m with u_in seen through the driver and armature lags,
     /// written per unit k_drv (current logged) [V].
@@ -60,6 +60,22 @@ impl Slot {
             self.values[i] = v;
         }
     }
+    /// The values in parameter order.
+    pub fn param_values(&self) -> &[f64] {
+        &self.values[..self.kind.params().len()]
+    }
+    /// True when every value is set (not NaN).
+    pub fn values_set(&self) -> bool {
+        self.param_values().iter().all(|v| !v.is_nan())
+    }
+    /// True when every nonlinear parameter is finite (the regressors can be built).
+    pub fn nonlinear_set(&self) -> bool {
+        self.kind
+            .params()
+            .iter()
+            .zip(self.param_values())
+            .all(|(p, v)| !p.nonlinear || v.is_finite())
+    }
     pub fn fits(&self, key: &str) -> bool {
         self.kind
             .params()
@@ -75,13 +91,10 @@ pub enum Coef {
     JEq,
     BEq,
     TauSf,
-    /// Stribeck excess tau_s - tau_sf of slot i.
-    StribeckExcess(usize),
     AsymPos(usize),
     AsymNeg(usize),
-    /// amplitude * cos(phase) and amplitude * sin(phase) of a periodic effect (slot i).
-    PairSin(usize),
-    PairCos(usize),
+    /// Linear coefficient j of the effect of slot i ([`crate::effects::EffectModel::regressor`]).
+    Effect(usize, usize),
     /// R_eq / k_drv.
     ROverK,
     /// k_e / k_drv.
@@ -143,25 +156,32 @@ impl Config {
     pub fn has(&self, kind: EffectKind) -> bool {
         self.slot(kind).is_some()
     }
-    /// Input transformation (saturation, then dead zone) of the configuration.
+    /// Input transformation of the configuration: its input maps (effects of role
+    /// [`SimRole::InputMap`] whose values are all set) in increasing order.
     fn input_transform(&self) -> impl Fn(f64) -> f64 {
-        let lim = self
-            .slot(EffectKind::Saturation)
-            .map(|s| s.get("limit"))
-            .filter(|v| v.is_finite());
-        let dz = self
-            .slot(EffectKind::Deadzone)
-            .map(|s| s.get("width"))
-            .filter(|v| v.is_finite());
+        let mut maps: Vec<(u8, &Slot)> = self
+            .slots
+            .iter()
+            .filter_map(|s| match s.kind.sim_role() {
+                SimRole::InputMap { order } if s.values_set() => Some((order, s)),
+                _ => None,
+            })
+            .collect();
+        maps.sort_by_key(|m| m.0);
+        let maps: Vec<(&'static dyn crate::effects::EffectModel, Slot)> = maps
+            .into_iter()
+            .map(|(_, s)| (s.kind.model(), *s))
+            .collect();
         move |u| {
-            // Dead zone first, then saturation (as the simulator: |u_in| <= limit always).
-            let u = dz.map_or(u, |w| shapes::deadzone(u, w));
-            lim.map_or(u, |l| shapes::saturation(u, l))
+            maps.iter()
+                .fold(u, |u, (m, s)| m.input_v(s.param_values(), u))
         }
     }
     fn delay_s(&self) -> f64 {
-        self.slot(EffectKind::Delay)
-            .map(|s| s.get("delay"))
+        self.slots
+            .iter()
+            .find(|s| s.kind.sim_role() == SimRole::InputDelay)
+            .map(|s| s.kind.model().input_delay_s(s.param_values()))
             .filter(|v| v.is_finite())
             .unwrap_or(0.0)
     }
@@ -255,29 +275,6 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
                     fixed,
                 });
             }
-            EffectKind::Stribeck => {
-                let ws = s.get("omega_s");
-                if !ws.is_finite() {
-                    continue;
-                }
-                let col = ds.column(rows, |r: &RecData| {
-                    r.omega_raw
-                        .iter()
-                        .map(|&w| shapes::coulomb_dir(w) * shapes::stribeck_decay(w / n, ws) / n)
-                        .collect()
-                });
-                let fixed = if s.fits("tau_s") {
-                    None
-                } else {
-                    Some(s.get("tau_s") - cfg_tau_sf(cfg))
-                };
-                terms.push(Term {
-                    col,
-                    coef: Coef::StribeckExcess(si),
-                    sign: Sign::NonNegative,
-                    fixed,
-                });
-            }
             EffectKind::Asymmetry => {
                 let pos = ds.column(rows, |r: &RecData| {
                     r.omega_raw
@@ -304,39 +301,7 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
                     fixed: if s.fit[1] { None } else { Some(s.values[1]) },
                 });
             }
-            EffectKind::Cogging | EffectKind::Imbalance => {
-                let cog = s.kind == EffectKind::Cogging;
-                let h = if cog { s.get("harmonic") } else { 1.0 };
-                if !h.is_finite() {
-                    continue;
-                }
-                let fc = ds.opts.filter_hz;
-                let (sin_col, cos_col) =
-                    ds.column_pair(rows, |r: &RecData| periodic_pair_raw(r, cog, h, n, fc));
-                let fit_amp = s.fits("amplitude") || s.fits("phase");
-                let (a, ph) = (s.get("amplitude"), s.get("phase"));
-                terms.push(Term {
-                    col: sin_col,
-                    coef: Coef::PairSin(si),
-                    sign: Sign::Free,
-                    fixed: if fit_amp {
-                        None
-                    } else {
-                        Some(a * math::cos(ph))
-                    },
-                });
-                terms.push(Term {
-                    col: cos_col,
-                    coef: Coef::PairCos(si),
-                    sign: Sign::Free,
-                    fixed: if fit_amp {
-                        None
-                    } else {
-                        Some(a * math::sin(ph))
-                    },
-                });
-            }
-            _ => {}
+            _ => push_effect_terms(ds, rows, cfg, si, s, &mut terms),
         }
     }
     let (equation, y) = if ds.has_current {
@@ -364,59 +329,91 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
     solve_terms(equation, rows, y, terms)
 }
 
-/// The unfiltered (sin, cos) regressor pair of a periodic torque over one record, per unit
-/// amplitude: cogging (`cog`: `h` cycles per motor turn, motor side) or imbalance (one cycle
-/// per load turn, seen at the motor divided by `n`).
-///
-/// Above about twice the filter cut-off `fc_hz` the sampled sin/cos alias into the band the fit
-/// sees, while the measured response holds none of it: they are tapered out (zero beyond four
-/// times the cut-off, where nothing is computed). An integer harmonic is computed from the
-/// record's unit phasor of the motor angle by complex powers (a few products instead of two
-/// trigonometric calls per sample: the harmonic scan evaluates every harmonic up to 40).
-fn periodic_pair_raw(r: &RecData, cog: bool, h: f64, n: f64, fc_hz: f64) -> (Vec<f64>, Vec<f64>) {
-    let len = r.theta_m_rad.len();
-    let (mut sin_col, mut cos_col) = (alloc::vec![0.0; len], alloc::vec![0.0; len]);
-    let scale = if cog { 1.0 } else { 1.0 / n };
-    let integer = cog && (1.0..=64.0).contains(&h) && h == math::floor(h);
-    for k in 0..len {
-        let w = if cog {
-            r.omega_raw[k]
-        } else {
-            r.omega_raw[k] / n
-        };
-        let f = h * w.abs() / math::TAU;
-        let taper = ((4.0 * fc_hz - f) / (2.0 * fc_hz)).clamp(0.0, 1.0);
-        if taper == 0.0 {
-            continue;
-        }
-        let (sv, cv) = if integer {
-            let [c1, s1] = r.motor_phasor[k];
-            phasor_pow(c1, s1, h as u32)
-        } else if cog {
-            shapes::cogging_pair(r.theta_m_rad[k], h)
-        } else {
-            shapes::imbalance_pair(r.theta_m_rad[k] / n)
-        };
-        sin_col[k] = sv * scale * taper;
-        cos_col[k] = cv * scale * taper;
+/// The regressors of the linear coefficients of slot `si` ([`crate::effects::EffectModel`]:
+/// `linear_coefs`, `regressors`, `coefs_fitted`, `coef_from_values`), all built in one pass over
+/// each record and filtered like every column.
+fn push_effect_terms(
+    ds: &Dataset,
+    rows: &Rows,
+    cfg: &Config,
+    si: usize,
+    s: &Slot,
+    terms: &mut Vec<Term>,
+) {
+    let m = s.kind.model();
+    let nc = m.linear_coefs();
+    if nc == 0 || !s.nonlinear_set() {
+        return;
     }
-    (sin_col, cos_col)
+    let v = s.param_values();
+    let fitted = m.coefs_fitted(&s.fit[..v.len()]);
+    let n = cfg.base.params.n;
+    let filter_hz = ds.opts.filter_hz;
+    let tau_sf = cfg_tau_sf(cfg);
+    let cols = columns(ds, rows, nc, |r: &RecData| {
+        let len = r.theta_m_rad.len();
+        let mut raw = alloc::vec![alloc::vec![0.0; len]; nc];
+        let mut out = alloc::vec![0.0; nc];
+        for k in 0..len {
+            let u = r.u_v.get(k).copied().unwrap_or(0.0);
+            let x = Sample {
+                omega_m_rad_s: r.omega_raw[k],
+                theta_m_rad: r.theta_m_rad[k],
+                motor_phasor: r.motor_phasor[k],
+                u_v: u,
+                u_prev_v: k
+                    .checked_sub(1)
+                    .and_then(|i| r.u_v.get(i))
+                    .copied()
+                    .unwrap_or(u),
+                n,
+                filter_hz,
+            };
+            m.regressors(v, &x, &mut out);
+            for (col, o) in raw.iter_mut().zip(&out) {
+                col[k] = *o;
+            }
+        }
+        raw
+    });
+    for (j, col) in cols.into_iter().enumerate() {
+        terms.push(Term {
+            col,
+            coef: Coef::Effect(si, j),
+            sign: match m.coef_sign(j) {
+                CoefSign::NonNegative => Sign::NonNegative,
+                CoefSign::Free => Sign::Free,
+            },
+            fixed: if fitted {
+                None
+            } else {
+                Some(m.coef_from_values(v, j, tau_sf))
+            },
+        });
+    }
 }
 
-/// (sin(m x), cos(m x)) from (cos x, sin x) by binary exponentiation of the unit phasor.
-#[inline]
-fn phasor_pow(c1: f64, s1: f64, m: u32) -> (f64, f64) {
-    let (mut rc, mut rs) = (1.0, 0.0);
-    let (mut bc, mut bs) = (c1, s1);
-    let mut e = m;
-    while e > 0 {
-        if e & 1 == 1 {
-            (rc, rs) = (rc * bc - rs * bs, rc * bs + rs * bc);
+/// As [`Dataset::column`] for `nc` signals built together by `raw` (one pass over each record).
+fn columns(
+    ds: &Dataset,
+    rows: &Rows,
+    nc: usize,
+    raw: impl Fn(&RecData) -> Vec<Vec<f64>>,
+) -> Vec<Vec<f64>> {
+    let mut out: Vec<Vec<f64>> = (0..nc).map(|_| Vec::with_capacity(rows.len())).collect();
+    let mut cur: Option<(usize, Vec<Vec<f64>>)> = None;
+    for (&ri, &k) in rows.rec.iter().zip(&rows.k) {
+        if cur.as_ref().map(|c| c.0) != Some(ri) {
+            let r = &ds.recs[ri];
+            cur = Some((ri, raw(r).iter().map(|c| r.filt(c)).collect()));
         }
-        (bc, bs) = (bc * bc - bs * bs, 2.0 * bc * bs);
-        e >>= 1;
+        if let Some((_, cs)) = &cur {
+            for (o, c) in out.iter_mut().zip(cs) {
+                o.push(c[k]);
+            }
+        }
     }
-    (rs, rc)
+    out
 }
 
 fn cfg_tau_sf(cfg: &Config) -> f64 {
@@ -452,7 +449,11 @@ pub fn solve_elec(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
         },
     ];
     let (mut y, mut terms) = (y, terms);
-    if cfg.slots.iter().any(|s| s.kind == EffectKind::Backlash) {
+    if cfg
+        .slots
+        .iter()
+        .any(|s| s.kind.sim_role() == SimRole::Contact)
+    {
         // The motor speed is not the measured one while it crosses the gap: no weight there.
         for (i, &u) in rows.torque_reversal.iter().enumerate() {
             if u {
