@@ -23,6 +23,7 @@ macro_rules! out {
 }
 
 pub mod cmd;
+pub mod effects_file;
 pub mod fuzz;
 pub mod gains_file;
 pub mod io;

@@ -80,10 +80,15 @@ pub struct Compare {
     /// +/-10 V of the DAC).
     #[arg(long, value_name = "V")]
     pub u_limit_v: Option<f64>,
-    /// Add a catalogue effect: `name[:key=value,...]`; given values are kept, the others fitted
-    /// together with the base parameters. Repeat to add several, in order.
+    /// Add a catalogue effect, or a user-defined one from --effects: `name[:key=value,...]`;
+    /// given values are kept, the others fitted together with the base parameters. Repeat to add
+    /// several, in order.
     #[arg(long = "add", value_name = "EFFECT")]
     pub add: Vec<String>,
+    /// Effects file with user-defined effects (`[custom.NAME]` sections, docs/custom-effects.md)
+    /// that --add can name. Repeat for several files.
+    #[arg(long = "effects", value_name = "effects.toml")]
+    pub effects: Vec<PathBuf>,
     /// Write the (extended) model to this file.
     #[arg(long, value_name = "model.toml")]
     pub save: Option<PathBuf>,
@@ -540,14 +545,11 @@ impl Compare {
         if !(self.segment_s.is_finite() && self.segment_s > 0.0) {
             bail!("--segment-s must be > 0 s, got {}", self.segment_s);
         }
-        let adds: Vec<(String, EffectToFit)> = self
+        let library = crate::effects_file::load_many(&self.effects)?;
+        let adds: Vec<(String, Added)> = self
             .add
             .iter()
-            .map(|s| {
-                EffectToFit::parse(s)
-                    .map(|e| (s.clone(), e))
-                    .map_err(|e| anyhow!("--add {s}: {e}"))
-            })
+            .map(|s| Added::parse(s, &library).map(|e| (s.clone(), e)))
             .collect::<anyhow::Result<_>>()?;
         let opts = CompareOptions::default();
         let mut logs = Vec::new();
@@ -614,13 +616,19 @@ impl Compare {
         let mut current = first;
         let records: Vec<Record> = logs.iter().map(|l| l.record.clone()).collect();
         for (spec, eff) in &adds {
-            let fit = fit_model(
-                &records,
-                &plant,
-                std::slice::from_ref(eff),
-                &FitOptions::default(),
-            )
-            .map_err(|e| anyhow!("--add {spec}: fitting the effect to the logs failed: {e}"))?;
+            let mut start = plant;
+            let catalogue: Vec<EffectToFit> = match eff {
+                Added::Catalogue(e) => vec![*e],
+                Added::Custom(c) => {
+                    start
+                        .custom
+                        .insert(*c)
+                        .map_err(|e| anyhow!("--add {spec}: {e}"))?;
+                    Vec::new()
+                }
+            };
+            let fit = fit_model(&records, &start, &catalogue, &FitOptions::default())
+                .map_err(|e| anyhow!("--add {spec}: fitting the effect to the logs failed: {e}"))?;
             plant = fit.plant;
             let cmp = self.compare_all(&plant, &logs, &modes, &opts)?;
             let fitted = fit
@@ -633,10 +641,17 @@ impl Compare {
                         "std_err": p.std_err, "fitted": p.fitted,
                     })
                 })
+                .chain(fit.custom.iter().map(|p| {
+                    json!({
+                        "effect": p.effect,
+                        "key": p.key, "unit": p.unit, "value": p.value,
+                        "std_err": p.std_err, "fitted": p.fitted,
+                    })
+                }))
                 .collect();
             ladder.push(LadderStep {
-                label: format!("+ {}", eff.effect.kind.name()),
-                effect: Some(eff.effect.kind.name()),
+                label: format!("+ {}", eff.name()),
+                effect: Some(eff.name()),
                 cmp_fit: pooled(&cmp),
                 fitted,
             });
@@ -704,6 +719,61 @@ impl Compare {
             );
         }
         Ok((ladder, current))
+    }
+}
+
+/// An effect given to `--add`: from the catalogue, or user-defined (from `--effects`) with its
+/// unknown parameters NaN.
+#[derive(Debug, Clone, Copy)]
+pub enum Added {
+    Catalogue(EffectToFit),
+    Custom(servo_core::custom::CustomActive),
+}
+
+impl Added {
+    /// Parses `name[:key=value,...]`: a user effect of `library` when the name is one, else a
+    /// catalogue effect.
+    pub fn parse(spec: &str, library: &crate::effects_file::EffectsFile) -> anyhow::Result<Added> {
+        let (name, rest) = match spec.split_once(':') {
+            Some((n, r)) => (n.trim(), Some(r)),
+            None => (spec.trim(), None),
+        };
+        let Some(def) = library.get(name) else {
+            return EffectToFit::parse(spec).map(Added::Catalogue).map_err(|e| {
+                if library.defs.is_empty() {
+                    anyhow!("--add {spec}: {e}")
+                } else {
+                    anyhow!("--add {spec}: {e}; the effects files define {}", library.names())
+                }
+            });
+        };
+        let mut active = def.active();
+        for v in active.values.iter_mut() {
+            *v = f64::NAN;
+        }
+        for item in rest.into_iter().flat_map(|r| r.split(',')).map(str::trim) {
+            if item.is_empty() {
+                continue;
+            }
+            let (k, v) = item
+                .split_once('=')
+                .ok_or_else(|| anyhow!("--add {spec}: expected key=value, got `{item}`"))?;
+            let x: f64 = v.trim().parse().map_err(|_| {
+                anyhow!("--add {spec}: `{}` needs a number, got `{}`", k.trim(), v.trim())
+            })?;
+            active
+                .set(k.trim(), x)
+                .map_err(|e| anyhow!("--add {spec}: {e}"))?;
+        }
+        Ok(Added::Custom(active))
+    }
+
+    /// The effect's name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Added::Catalogue(e) => e.effect.kind.name(),
+            Added::Custom(c) => c.name(),
+        }
     }
 }
 
@@ -915,6 +985,22 @@ fn to_json(
         "max_error": finite(hf.max_abs_error),
         "signals": pooled_figs.iter().map(|(k, f)| figures_json(*k, f)).collect::<Vec<_>>(),
         "effects": effects,
+        "custom": c.plant.custom.iter().map(|e| {
+            let params: serde_json::Map<String, Value> = e
+                .def
+                .params()
+                .iter()
+                .zip(e.values())
+                .map(|(p, v)| (p.key.to_string(), json!(v)))
+                .collect();
+            let units: serde_json::Map<String, Value> = e
+                .def
+                .params()
+                .iter()
+                .map(|p| (p.key.to_string(), json!(p.unit)))
+                .collect();
+            json!({"effect": e.name(), "acts_on": e.def.acts_on().name(), "expr": e.def.expr(), "params": params, "units": units})
+        }).collect::<Vec<_>>(),
         "base": base,
         "ladder": ladder_json,
         "regimes": pooled_regimes(c, hk),
@@ -1113,6 +1199,23 @@ fn print_text(
                 .map(|(p, v)| format!("{} = {:.4e} {}", p.key, v, p.unit))
                 .collect();
             outln!("  {:<11} {}", e.kind.name(), kv.join(", "));
+        }
+        for e in c.plant.custom.iter() {
+            let kv: Vec<String> = e
+                .def
+                .params()
+                .iter()
+                .zip(e.values())
+                .map(|(p, v)| format!("{} = {:.4e} {}", p.key, v, p.unit))
+                .collect();
+            outln!(
+                "  {:<11} {} = {}: {} (user-defined, {})",
+                e.name(),
+                e.def.acts_on().name(),
+                e.def.expr(),
+                kv.join(", "),
+                e.def.acts_on().unit()
+            );
         }
         outln!(
             "  base        J_eq = {:.4e} kg m^2, R_eq = {:.4} ohm, k_drv = {:.4}",

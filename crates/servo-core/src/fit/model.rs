@@ -86,6 +86,8 @@ pub enum Coef {
     ROverK,
     /// k_e / k_drv.
     KeOverK,
+    /// Parameter `.1` of user effect `.0` (index among the plant's user effects).
+    Custom(usize, usize),
 }
 
 /// The fit of one equation.
@@ -153,10 +155,18 @@ impl Config {
             .slot(EffectKind::Deadzone)
             .map(|s| s.get("width"))
             .filter(|v| v.is_finite());
+        let custom = self.base.custom;
+        let input = custom.has(crate::custom::ActsOn::Input);
         move |u| {
-            // Dead zone first, then saturation (as the simulator: |u_in| <= limit always).
+            // Dead zone first, then saturation (as the simulator: |u_in| <= limit always), then
+            // the user's input effects (which see u only here; see crate::custom::fit).
             let u = dz.map_or(u, |w| shapes::deadzone(u, w));
-            lim.map_or(u, |l| shapes::saturation(u, l))
+            let u = lim.map_or(u, |l| shapes::saturation(u, l));
+            if input {
+                custom.input(&[0.0, 0.0, 0.0, 0.0, 0.0, u, 0.0])
+            } else {
+                u
+            }
         }
     }
     fn delay_s(&self) -> f64 {
@@ -365,6 +375,18 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
             }
             _ => {}
         }
+    }
+    for c in crate::custom::fit::torque_columns(ds, &cfg.base, rows) {
+        terms.push(Term {
+            col: c.col,
+            coef: Coef::Custom(c.slot, c.param.unwrap_or(usize::MAX)),
+            sign: if c.non_negative {
+                Sign::NonNegative
+            } else {
+                Sign::Free
+            },
+            fixed: if c.param.is_none() { Some(1.0) } else { None },
+        });
     }
     let (equation, y) = if ds.has_current {
         (

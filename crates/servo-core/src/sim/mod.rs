@@ -56,6 +56,7 @@
 pub mod sensors;
 
 use crate::effects::torque::{self, Friction, InputNonlinearity};
+use crate::custom::{ActsOn, CustomSlots};
 use crate::effects::EffectKind;
 use crate::linalg::expm;
 use crate::math;
@@ -94,6 +95,8 @@ pub enum SimError {
         value: f64,
         why: &'static str,
     },
+    #[error("user effect `{effect}`: a parameter has no value")]
+    CustomIncomplete { effect: &'static str },
     #[error("sample period {dt_s} s needs more than {max} internal sub-steps of {h_s} s")]
     TooManySubsteps { dt_s: f64, h_s: f64, max: usize },
     /// The simulated state left any physical range (non-finite, or absurd angle or speed): the
@@ -148,6 +151,10 @@ pub struct Torques {
     pub imbalance_l_nm: f64,
     /// Backlash contact torque transmitted to the load [N m], load side (0 inside the gap).
     pub backlash_l_nm: f64,
+    /// User-defined motor torques ([`crate::custom`]) [N m], motor side.
+    pub custom_m_nm: f64,
+    /// User-defined load torques [N m], load side.
+    pub custom_l_nm: f64,
 }
 
 const NS: usize = 6; // u_drv, i_a, omega_m, theta_m, omega_l, theta_l
@@ -223,6 +230,13 @@ pub struct PlantSim {
     /// Last (angle, torque) of cogging and imbalance, reused while the angle is unchanged.
     cache_cog: (f64, f64),
     cache_imb: (f64, f64),
+    /// User-defined effects, and whether any acts as a torque.
+    custom: CustomSlots,
+    custom_torque: bool,
+    /// Time at the start of the current sub-step [s] and the driver input held over it [V] (the
+    /// signals `t` and `u` of user-defined torques).
+    t_sub: f64,
+    u_held: f64,
 }
 
 impl PlantSim {
@@ -299,7 +313,18 @@ impl PlantSim {
             }
             None => None,
         };
-        let nonlinear = dry || cogging.is_some() || imbalance.is_some() || backlash.is_some();
+        for c in plant.custom.iter() {
+            if !c.is_complete() {
+                return Err(SimError::CustomIncomplete { effect: c.name() });
+            }
+        }
+        let custom_torque =
+            plant.custom.has(ActsOn::LoadTorque) || plant.custom.has(ActsOn::MotorTorque);
+        let nonlinear = dry
+            || cogging.is_some()
+            || imbalance.is_some()
+            || backlash.is_some()
+            || custom_torque;
         let substeps = if nonlinear {
             (math::floor(dt_s / max_substep_s - 1e-9) as usize).saturating_add(1)
         } else {
@@ -365,7 +390,7 @@ impl PlantSim {
                 disc[li][mode] = discretise(plant, frac, backlash.as_ref(), mode, len);
             }
         }
-        let coarse_stuck = (dry && backlash.is_none() && substeps > 1)
+        let coarse_stuck = (dry && backlash.is_none() && substeps > 1 && !custom_torque)
             .then(|| discretise(plant, frac, None, STUCK, dt_s));
         let state = PlantState {
             stuck: dry,
@@ -399,6 +424,10 @@ impl PlantSim {
             state,
             cache_cog: (f64::NAN, 0.0),
             cache_imb: (f64::NAN, 0.0),
+            custom: plant.custom,
+            custom_torque,
+            t_sub: 0.0,
+            u_held: 0.0,
         })
     }
 
@@ -433,6 +462,16 @@ impl PlantSim {
             state.omega_l_rad_s,
             state.theta_l_rad,
         ];
+        if self.custom.has(ActsOn::Sensor) {
+            // The state given holds the angle as measured: start from the true one.
+            let sig = self.signals(&self.x, state.u_in_v, state.time_s);
+            let th = self.custom.sensor_inverse(state.theta_l_rad, &sig);
+            if self.backlash.is_some() {
+                self.x[5] = th;
+            } else {
+                self.x[3] = th * self.n;
+            }
+        }
         if self.backlash.is_none() {
             self.x[4] = self.x[2] / self.n;
             self.x[5] = self.x[3] / self.n;
@@ -458,11 +497,20 @@ impl PlantSim {
     /// Applies driver input `u_v` [V] for one control period (zero-order hold) and returns the
     /// state at the end of it. A non-finite `u_v` is treated as 0 V.
     pub fn step(&mut self, u_v: f64) -> &PlantState {
-        let u = if u_v.is_finite() {
+        let mut u = if u_v.is_finite() {
             self.input.apply(u_v)
         } else {
             0.0
         };
+        let t0 = self.steps as f64 * self.dt_s;
+        if self.custom.has(ActsOn::Input) {
+            let sig = self.signals(&self.x, u, t0);
+            u = self.custom.input(&sig);
+            if !u.is_finite() {
+                u = 0.0;
+            }
+        }
+        self.t_sub = t0;
         // Delay line: history[head] is the newest input.
         self.head = (self.head + 1) % DELAY_CAPACITY;
         self.history[self.head] = u;
@@ -470,6 +518,7 @@ impl PlantSim {
         let old = self.history[(self.head + DELAY_CAPACITY - self.delay_k - 1) % DELAY_CAPACITY];
         let mut carry = None;
         let switch_at = self.switch_at;
+        self.u_held = new;
         let held = switch_at.is_none() && self.stuck && self.stays_stuck_over_period(new);
         match switch_at {
             None if held => {}
@@ -481,10 +530,13 @@ impl PlantSim {
             Some((j, split)) => {
                 for i in 0..self.substeps {
                     if i == j && split {
+                        self.u_held = old;
                         carry = self.substep(1, old, carry);
+                        self.u_held = new;
                         carry = self.substep(2, new, carry);
                     } else {
-                        carry = self.substep(0, if i < j { old } else { new }, carry);
+                        self.u_held = if i < j { old } else { new };
+                        carry = self.substep(0, self.u_held, carry);
                     }
                 }
             }
@@ -534,6 +586,9 @@ impl PlantSim {
             .cogging
             .map_or(0.0, |(a, h, ph)| torque::cogging_torque_m(a, h, ph, x[3]));
         let backlash = self.contact_torque_l(x);
+        let sig = self.signals(x, self.u_in_v, self.state.time_s);
+        let custom_m = self.custom.torque(ActsOn::MotorTorque, &sig);
+        let custom_l = self.custom.torque(ActsOn::LoadTorque, &sig);
         let friction = if !self.dry {
             0.0
         } else if self.stuck {
@@ -559,15 +614,21 @@ impl PlantSim {
             cogging_m_nm: cogging,
             imbalance_l_nm: imbalance,
             backlash_l_nm: backlash,
+            custom_m_nm: custom_m,
+            custom_l_nm: custom_l,
         }
     }
 
     fn publish(&mut self, time_s: f64) {
         let x = &self.x;
-        let (omega_l, theta_l) = match self.backlash {
+        let (omega_l, mut theta_l) = match self.backlash {
             Some(_) => (x[4], x[5]),
             None => (x[2] / self.n, x[3] / self.n),
         };
+        if self.custom.has(ActsOn::Sensor) {
+            let sig = self.signals(x, self.u_in_v, time_s);
+            theta_l = self.custom.sensor(&sig);
+        }
         self.state = PlantState {
             time_s,
             u_in_v: self.u_in_v,
@@ -637,7 +698,8 @@ impl PlantSim {
             Some((a, h, ph)) => torque::cogging_torque_m(a, h, ph, x[3]),
             None => 0.0,
         };
-        self.drive_torque_l_with(x, cogging, imbalance)
+        let (cm, cl) = self.custom_torques(x, self.t_sub);
+        self.drive_torque_l_with(x, cogging + cm, imbalance + cl)
     }
 
     /// [`Self::drive_torque_l`] with the cogging [N m, motor side] and imbalance [N m, load side]
@@ -679,11 +741,36 @@ impl PlantSim {
         }
     }
 
-    /// Nonlinear input torques (tau_m motor side, tau_l load side) at state `x`.
+    /// The signals of user-defined effects ([`crate::custom::SIGNALS`] order) at state `x`,
+    /// driver input `u` [V] and time `t` [s] (true angles).
     #[inline]
-    fn nonlinear_torques(&mut self, x: &[f64; NS]) -> (f64, f64) {
-        let mut tau_m = self.cogging_cached(x[3]);
-        let mut tau_l = self.imbalance_cached(self.theta_l(x));
+    fn signals(&self, x: &[f64; NS], u: f64, t: f64) -> [f64; 7] {
+        let (omega_l, theta_l) = match self.backlash {
+            Some(_) => (x[4], x[5]),
+            None => (x[2] / self.n, x[3] / self.n),
+        };
+        [theta_l, x[3], omega_l, x[2], x[1], u, t]
+    }
+
+    /// User-defined (motor, load) torques at state `x` and time `t` [N m].
+    #[inline]
+    fn custom_torques(&self, x: &[f64; NS], t: f64) -> (f64, f64) {
+        if !self.custom_torque {
+            return (0.0, 0.0);
+        }
+        let sig = self.signals(x, self.u_held, t);
+        (
+            self.custom.torque(ActsOn::MotorTorque, &sig),
+            self.custom.torque(ActsOn::LoadTorque, &sig),
+        )
+    }
+
+    /// Nonlinear input torques (tau_m motor side, tau_l load side) at state `x` and time `t`.
+    #[inline]
+    fn nonlinear_torques(&mut self, x: &[f64; NS], t: f64) -> (f64, f64) {
+        let (cm, cl) = self.custom_torques(x, t);
+        let mut tau_m = self.cogging_cached(x[3]) + cm;
+        let mut tau_l = self.imbalance_cached(self.theta_l(x)) + cl;
         if self.dry && !self.stuck {
             // Friction of the current slip direction; a predicted reversal is held at zero speed
             // (the reversal itself is an event).
@@ -706,8 +793,9 @@ impl PlantSim {
         // Breakaway.
         if self.stuck {
             let x = self.x;
-            let cogging = self.cogging_cached(x[3]);
-            let imbalance = self.imbalance_cached(self.theta_l(&x));
+            let (cm, cl) = self.custom_torques(&x, self.t_sub);
+            let cogging = self.cogging_cached(x[3]) + cm;
+            let imbalance = self.imbalance_cached(self.theta_l(&x)) + cl;
             let drive = self.drive_torque_l_with(&x, cogging, imbalance);
             let dir = math::sign(drive);
             if dir != 0.0 && dir * drive > self.friction.breakaway_l(dir) {
@@ -737,7 +825,7 @@ impl PlantSim {
             Some(t) => t,
             None => {
                 let x = self.x;
-                self.nonlinear_torques(&x)
+                self.nonlinear_torques(&x, self.t_sub)
             }
         };
         let d = &self.disc[li][mode];
@@ -748,7 +836,8 @@ impl PlantSim {
         } else {
             advance::<6>(d, &x0, &inp)
         };
-        let (tm1, tl1) = self.nonlinear_torques(&xp);
+        let t1 = self.t_sub + self.sub_len[li];
+        let (tm1, tl1) = self.nonlinear_torques(&xp, t1);
         let (dm, dl) = (tm1 - tm0, tl1 - tl0);
         let d = &self.disc[li][mode];
         for i in 0..self.ns {
@@ -781,6 +870,7 @@ impl PlantSim {
                 self.dir = math::sign(w1);
             }
         }
+        self.t_sub = t1;
         if let Some(b) = &self.backlash {
             if mode & CONTACT == 0 {
                 // Entering contact during a free sub-step: put the motor side back on the flank
