@@ -1,7 +1,6 @@
 //! End-to-end tests of the simulated gearmotor: accuracy against an exact ZOH solution and a fine
 //! reference integration, and the visible signature of every catalogue effect.
 
-use servo_core::effects::torque;
 use servo_core::effects::Effect;
 use servo_core::sim::{PlantSim, PlantState, SensorConfig, Sensors};
 use servo_core::{Plant, PlantParams};
@@ -633,7 +632,7 @@ fn imbalance_ripple_has_the_load_period_and_holds_against_friction() {
     let rest =
         (end + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
     assert!(rest.abs() < 1e-2, "{end}");
-    assert!(torque::imbalance_torque_l(0.02, 0.0, end).abs() < 1e-3);
+    assert!(servo_core::effects::imbalance::torque_l(0.02, 0.0, end).abs() < 1e-3);
 }
 
 #[test]
@@ -765,5 +764,98 @@ fn cogging_and_imbalance_torques_have_their_stated_amplitude() {
             (tau_m / want - 1.0).abs() < 0.01,
             "{spec}: {tau_m} vs {want}"
         );
+    }
+}
+
+/// Moved from the simulator's unit tests (they name catalogue effects, which live in the
+/// registry only).
+mod sim_effects {
+    use servo_core::effects::Effect;
+    use servo_core::sim::{PlantSim, SimError};
+    use servo_core::Plant;
+
+    fn plant_with(specs: &[&str]) -> Plant {
+        let mut p = Plant::nominal();
+        p.effects
+            .insert(Effect::parse("viscous:b_eq=1e-6").unwrap());
+        for s in specs {
+            p.effects.insert(Effect::parse(s).unwrap());
+        }
+        p
+    }
+
+    #[test]
+    fn every_effect_together_stays_finite_and_deterministic() {
+        let p = plant_with(&[
+            "coulomb:tau_sf=0.005",
+            "stribeck:tau_s=0.008,omega_s=0.3",
+            "asymmetry:tau_sf_pos=0.004,tau_sf_neg=0.006",
+            "backlash:gap=0.03,stiffness=1e6,damping=0.5",
+            "cogging:amplitude=2e-4,harmonic=12,phase=0.3",
+            "imbalance:amplitude=0.01,phase=1",
+            "saturation:limit=8",
+            "deadzone:width=0.3",
+            "delay:delay=0.0025",
+        ]);
+        let run = || {
+            let mut sim = PlantSim::new(&p, 1e-3).unwrap();
+            let mut out = [0.0; 3000];
+            for (k, o) in out.iter_mut().enumerate() {
+                let u = 10.0 * (k as f64 * 0.01).sin() + if k % 7 == 0 { 3.0 } else { -1.0 };
+                let s = sim.step(u);
+                assert!(
+                    s.theta_l_rad.is_finite() && s.i_a_a.is_finite() && s.omega_l_rad_s.is_finite()
+                );
+                assert!(s.theta_l_rad.abs() < 1e4);
+                *o = s.theta_l_rad;
+            }
+            out
+        };
+        assert_eq!(run(), run());
+    }
+
+    #[test]
+    fn extreme_contact_stiffness_stays_bounded() {
+        for spec in [
+            "backlash:gap=0.02,stiffness=1e12,damping=0",
+            "backlash:gap=0,stiffness=1e9,damping=10",
+        ] {
+            let p = plant_with(&[spec, "coulomb:tau_sf=0.003"]);
+            let mut sim = PlantSim::new(&p, 1e-3).unwrap();
+            for k in 0..3000 {
+                let u = if (k / 200) & 1 == 0 { 10.0 } else { -10.0 };
+                let s = sim.step(u);
+                assert!(
+                    s.theta_l_rad.is_finite() && s.omega_l_rad_s.abs() < 200.0,
+                    "{spec}: {s:?}"
+                );
+                assert!(
+                    (s.theta_m_rad / 14.0 - s.theta_l_rad).abs() < 0.011 + 1e-3,
+                    "{spec}: {s:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn rejects_unusable_effects() {
+        let p = plant_with(&["delay:delay=2"]);
+        assert!(matches!(
+            PlantSim::new(&p, 1e-3),
+            Err(SimError::DelayTooLong { .. })
+        ));
+        let p = plant_with(&["backlash:gap=0.01,load_inertia_fraction=0"]);
+        assert!(matches!(
+            PlantSim::new(&p, 1e-3),
+            Err(SimError::InertiaFraction(_))
+        ));
+        assert!(matches!(
+            PlantSim::new(&Plant::nominal(), 0.0),
+            Err(SimError::BadPeriod(_))
+        ));
+        let mut p = Plant::nominal();
+        p.effects
+            .insert(Effect::parse("cogging:amplitude=1e-3").unwrap());
+        assert!(matches!(PlantSim::new(&p, 1e-3), Err(SimError::Effect(_))));
     }
 }

@@ -7,7 +7,7 @@
 //! [params]            # every Table 2 key is required; j_eq, b_eq, tau_sf are optional overrides
 //! r_a = 2.6           # ohm
 //! ...
-//! [effects.backlash]  # catalogue effects, keys as in the catalogue (SI units)
+//! [effects.<name>]    # registered effects, keys as in the registry (SI units)
 //! gap = 0.04
 //! [sensors]           # optional, simulator only
 //! counts_per_rev = 4096
@@ -80,8 +80,8 @@ impl ModelFile {
         for (name, kv) in &raw.effects {
             let kind = EffectKind::from_name(name).ok_or_else(|| {
                 anyhow!(
-                    "[effects.{name}]: unknown effect; the catalogue has {}",
-                    EffectKind::ALL.map(|k| k.name()).join(", ")
+                    "[effects.{name}]: unknown effect; the registry has {}",
+                    servo_core::effects::RegisteredNames
                 )
             })?;
             let mut e = Effect::unset(kind);
@@ -269,8 +269,8 @@ mod tests {
         let wrong_type = good.replace("n = 1.4e1", "n = \"fourteen\"");
         let e = format!("{:#}", ModelFile::parse(&wrong_type).unwrap_err());
         assert!(e.contains('n'), "{e}");
-        let bad_effect = format!("{good}\n[effects.backlash]\ngapp = 0.1\n");
+        let bad_effect = format!("{good}\n[effects.delay]\ndelayy = 0.1\n");
         let e = format!("{:#}", ModelFile::parse(&bad_effect).unwrap_err());
-        assert!(e.contains("gapp") && e.contains("gap [rad]"), "{e}");
+        assert!(e.contains("delayy") && e.contains("delay [s]"), "{e}");
     }
 }

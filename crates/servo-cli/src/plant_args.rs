@@ -4,7 +4,7 @@
 //!
 //! ```text
 //! --plant truth.toml                          model file: [params], [effects.<name>], [sensors]
-//! --plant-effect backlash:gap=0.04            repeatable; catalogue syntax name:key=value,...
+//! --plant-effect NAME:KEY=VALUE,...           repeatable; registry syntax (see --help)
 //! --seed 7 --counts-per-rev 4096 --current-noise-a 2e-3
 //! ```
 //!
@@ -25,14 +25,14 @@ pub struct PlantArgs {
     #[arg(long = "plant", value_name = "FILE")]
     pub plant: Option<PathBuf>,
 
-    /// Activate or replace a physical effect of the simulated plant, e.g. `backlash:gap=0.04`,
-    /// `coulomb:tau_sf=0.006`, `cogging:amplitude=2e-4,harmonic=12`. Repeatable. Effects:
-    /// viscous b_eq [N m s/rad]; coulomb tau_sf [N m]; stribeck tau_s [N m], omega_s [rad/s];
-    /// asymmetry tau_sf_pos, tau_sf_neg [N m]; backlash gap [rad], stiffness [N m/rad],
-    /// damping [N m s/rad], load_inertia_fraction [-]; cogging amplitude [N m], harmonic
-    /// [1/rev], phase [rad]; imbalance amplitude [N m], phase [rad]; saturation limit [V];
-    /// deadzone width [V]; delay delay [s].
-    #[arg(long = "plant-effect", value_name = "NAME[:KEY=VALUE,...]", value_parser = parse_plant_effect)]
+    /// Activate or replace a physical effect of the simulated plant, e.g.
+    /// `coulomb:tau_sf=0.006`. Repeatable; `--help` lists every effect and its parameters.
+    #[arg(
+        long = "plant-effect",
+        value_name = "NAME[:KEY=VALUE,...]",
+        value_parser = parse_plant_effect,
+        long_help = plant_effect_help()
+    )]
     pub plant_effect: Vec<Effect>,
 
     /// Seed of the simulated sensor noise (overrides [sensors] seed).
@@ -46,6 +46,14 @@ pub struct PlantArgs {
     /// Standard deviation of the simulated current-sensor noise [A] (default 2e-3).
     #[arg(long = "current-noise-a", value_name = "AMPS")]
     pub current_noise_a: Option<f64>,
+}
+
+/// The long help of `--plant-effect`: every registered effect with its parameters and units.
+fn plant_effect_help() -> String {
+    format!(
+        "Activate or replace a physical effect of the simulated plant, e.g. `coulomb:tau_sf=0.006`. Repeatable. Effects: {}.",
+        servo_core::effects::ParamsSummary
+    )
 }
 
 /// Parses one `--plant-effect` value; every parameter must end up set (given or defaulted).
@@ -88,7 +96,7 @@ impl PlantArgs {
             .validate()
             .context("simulated sensors ([sensors] or sensor flags)")?;
         // Build a simulator once so that every effect combination is checked here (e.g. a delay
-        // longer than the delay line, a backlash inertia fraction outside (0, 1)).
+        // longer than the delay line, a contact's inertia fraction outside (0, 1)).
         servo_core::sim::PlantSim::new(&plant, 1e-3).context("simulated plant")?;
         Ok((plant, sensors))
     }

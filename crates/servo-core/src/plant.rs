@@ -6,8 +6,8 @@ use crate::params::{ParamError, PlantParams};
 
 /// The model of one gearmotor: Table-2-style linear parameters and the active effects.
 ///
-/// Friction is defined by the effects alone (`viscous`, `coulomb`, `stribeck`, `asymmetry`);
-/// [`Plant::from_params`] turns the parameters' B_eq and tau_sf into those effects, so that the
+/// Friction is defined by the effects alone (`viscous` and the dry-friction effects of the
+/// registry); [`Plant::from_params`] turns the parameters' B_eq and tau_sf into those effects, so that the
 /// simulator, the model fit and the diagnosis read friction from one place.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Plant {

@@ -163,30 +163,14 @@ fn hidden_effect(truth: &Plant) -> Option<Effect> {
         .copied()
 }
 
-/// The parameter that sizes an effect (the one quoted in the headlines).
+/// The parameter that sizes an effect (the one quoted in the headlines), from the registry.
 fn main_param(kind: EffectKind) -> Option<&'static str> {
-    match kind {
-        EffectKind::Viscous => Some("b_eq"),
-        EffectKind::Coulomb => Some("tau_sf"),
-        EffectKind::Stribeck => Some("tau_s"),
-        EffectKind::Asymmetry => Some("tau_sf_pos"),
-        EffectKind::Backlash => Some("gap"),
-        EffectKind::Cogging | EffectKind::Imbalance => Some("amplitude"),
-        EffectKind::Saturation => Some("limit"),
-        EffectKind::Deadzone => Some("width"),
-        EffectKind::Delay => Some("delay"),
-    }
+    kind.main_param().map(|p| p.key)
 }
 
 /// Unit of an effect's main parameter.
 fn main_unit(kind: EffectKind) -> &'static str {
-    match kind {
-        EffectKind::Viscous => "N m s/rad",
-        EffectKind::Backlash => "rad",
-        EffectKind::Saturation | EffectKind::Deadzone => "V",
-        EffectKind::Delay => "s",
-        _ => "N m",
-    }
+    kind.main_param().map_or("", |p| p.unit)
 }
 
 /// Prints the command line a user would type for a stage, and parses it with the command's own
@@ -743,8 +727,20 @@ mod tests {
         let key = main_param(h.kind).unwrap();
         assert_eq!(h.get(key), want.get(key));
         assert!((t.tau_sf() - DEMO_TAU_SF).abs() < 1e-12);
-        let t = demo_truth("deadzone:width=0.4").unwrap();
-        assert_eq!(hidden_effect(&t).unwrap().kind, EffectKind::Deadzone);
+        // Any other registered effect can be hidden instead.
+        for k in EffectKind::ALL
+            .into_iter()
+            .filter(|k| !matches!(*k, EffectKind::Viscous | EffectKind::Coulomb))
+        {
+            let mut e = Effect::unset(k);
+            for p in k.params() {
+                if e.get(p.key).is_some_and(f64::is_nan) {
+                    e.set(p.key, p.min.max(0.0) + 1.0).unwrap();
+                }
+            }
+            let t = demo_truth(&e.to_string()).unwrap();
+            assert_eq!(hidden_effect(&t).unwrap().kind, k, "{e}");
+        }
     }
 
     #[test]

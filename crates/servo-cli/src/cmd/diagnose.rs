@@ -96,8 +96,8 @@ impl Diagnose {
         for name in &self.only {
             let k = EffectKind::from_name(name.trim()).ok_or_else(|| {
                 anyhow!(
-                    "--only: unknown effect `{name}`; the catalogue has {}",
-                    EffectKind::ALL.map(|k| k.name()).join(", ")
+                    "--only: unknown effect `{name}`; the registry has {}",
+                    servo_core::effects::RegisteredNames
                 )
             })?;
             opts.candidates.push(k);

@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! servo run --gains gains.toml --ref step:1.5 --duration 5 --log run.mcap
-//! servo run --gains gains.toml --ref step:90deg --plant-effect backlash:gap=0.04 --csv run.csv
+//! servo run --gains gains.toml --ref step:90deg --plant-effect saturation:limit=6 --csv run.csv
 //! servo run --voltage step:3 --duration 2 --log open_loop.mcap        (open loop, no gains)
 //! servo run --experiment experiments/steps.toml --gains gains.toml --log steps.mcap
 //! ```

@@ -1,6 +1,6 @@
 //! Position-periodic residual: how much of the residual follows sin/cos of a harmonic of the motor
-//! angle (cogging: several cycles per motor revolution) or of the load angle (imbalance: one cycle
-//! per load revolution).
+//! angle (e.g. magnetic detents: several cycles per motor revolution) or of the load angle (e.g. an
+//! eccentric load: one cycle per load revolution).
 //!
 //! For every harmonic h the residual is regressed on sin(h theta) and cos(h theta); the share of
 //! variance explained (R^2) is tested against chance with the effective number of independent
@@ -14,9 +14,9 @@ use alloc::vec::Vec;
 /// Which angle the residual follows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum AngleSource {
-    /// Motor angle theta_m = N theta_l (cogging).
+    /// Motor angle theta_m = N theta_l (magnetic detents).
     Motor,
-    /// Load angle theta_l (imbalance).
+    /// Load angle theta_l (an eccentric load).
     Load,
 }
 
@@ -160,7 +160,7 @@ mod tests {
     use crate::sim::sensors::SplitMix64;
 
     #[test]
-    fn finds_cogging_like_component() {
+    fn finds_motor_periodic_component() {
         let mut rng = SplitMix64(11);
         // Motor turns at constant speed through 20 revolutions; residual has 7 cycles per rev.
         let n = 4000;

@@ -3,27 +3,16 @@
 //! Every sample gets one regime from the *measured* motion, by priority: velocity reversal
 //! (within `reversal_window_s` of a change of direction), standstill, voltage near its limit,
 //! acceleration, constant speed. Missing physics leaves fingerprints in specific regimes:
-//! friction and backlash at reversals and standstill, saturation at the voltage limit, an inertia
-//! error during acceleration, a viscous error at constant speed. The figure that matters is the
+//! friction and gear play at reversals and standstill, a driver limit at the voltage limit, an
+//! inertia error during acceleration, a viscous error at constant speed (each effect declares its
+//! regimes: [`crate::effects::EffectModel::regimes`]). The figure that matters is the
 //! share of squared error of a regime against its share of time.
 
 use crate::signal::ZeroPhase;
+use alloc::string::String;
 use alloc::vec::Vec;
 
-/// An operating regime.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Regime {
-    /// Within the reversal window of a change of direction of the load speed.
-    Reversal,
-    /// |omega_l| below the standstill threshold (not near a reversal).
-    Standstill,
-    /// |u| at 95 % of its limit or more.
-    VoltageLimit,
-    /// Moving with a large |d omega_l / dt|.
-    Acceleration,
-    /// Moving at roughly constant speed.
-    ConstantSpeed,
-}
+pub use crate::effects::Regime;
 
 impl Regime {
     pub const ALL: [Regime; 5] = [
@@ -45,19 +34,26 @@ impl Regime {
         }
     }
 
-    /// The physical effects whose error shows up mostly in this regime.
-    pub fn suspects(self) -> &'static str {
-        match self {
-            Regime::Reversal => "Coulomb/Stribeck friction, backlash (gear play)",
-            Regime::Standstill => "stiction (Stribeck), Coulomb friction, dead zone, cogging",
+    /// The parameters and the registered effects whose error shows up mostly in this regime
+    /// (the effects from the registry: [`crate::effects::EffectModel::regimes`]).
+    pub fn suspects(self) -> String {
+        let mut parts: Vec<String> = Vec::new();
+        let base = match self {
+            Regime::Reversal | Regime::Standstill => None,
             Regime::VoltageLimit => {
-                "the top speed at full voltage (k_drv, k_e, R_eq and the friction level), saturation of the driver"
+                Some("the top speed at full voltage (k_drv, k_e, R_eq and the friction level)")
             }
-            Regime::Acceleration => "the inertia J_eq, delay, backlash",
-            Regime::ConstantSpeed => {
-                "viscous friction B_eq, k_e/k_drv/R_eq, Coulomb friction level"
+            Regime::Acceleration => Some("the inertia J_eq"),
+            Regime::ConstantSpeed => Some("k_e/k_drv/R_eq"),
+        };
+        parts.extend(base.map(String::from));
+        for k in crate::effects::EffectKind::registered() {
+            let m = k.model();
+            if m.regimes().contains(&self) {
+                parts.push(String::from(m.suspect_phrase()));
             }
         }
+        parts.join(", ")
     }
 }
 

@@ -73,9 +73,9 @@ pub struct CompareOptions {
     pub worst_count: usize,
     /// Voltage limit for the regime "voltage near its limit" [V]; `None`: detected from the log.
     pub u_limit_v: Option<f64>,
-    /// Largest harmonic of the motor angle searched (cogging).
+    /// Largest harmonic of the motor angle searched (magnetic detents).
     pub max_motor_harmonic: u32,
-    /// Largest harmonic of the load angle searched (imbalance).
+    /// Largest harmonic of the load angle searched (an eccentric load).
     pub max_load_harmonic: u32,
 }
 
@@ -362,10 +362,10 @@ fn findings(r: &CompareReport, opts: &CompareOptions) -> Vec<String> {
         ));
     }
     for p in r.periodic.iter().filter(|p| p.significant) {
-        let what = match p.source {
-            AngleSource::Motor => "cogging",
-            AngleSource::Load => "an imbalance of the load",
-        };
+        let what = periodic_suspects(match p.source {
+            AngleSource::Motor => crate::effects::ActsOn::MotorTorque,
+            AngleSource::Load => crate::effects::ActsOn::LoadTorque,
+        });
         out.push(format!(
             "{:.0} % of the residual variance follows the {} angle with {} cycle(s) per revolution (amplitude {}): a sign of {}.",
             p.share_pct,
@@ -405,4 +405,22 @@ fn findings(r: &CompareReport, opts: &CompareOptions) -> Vec<String> {
         ));
     }
     out
+}
+
+/// The registered effects a residual periodic in the angle of `side` suggests (smooth torques
+/// that depend on that angle only), in words.
+fn periodic_suspects(side: crate::effects::ActsOn) -> String {
+    let names: Vec<&str> = crate::effects::EffectKind::registered()
+        .filter(|k| {
+            k.sim_role() == crate::effects::SimRole::Smooth
+                && k.acts_on() == side
+                && k.model().depends_on_angle_only()
+        })
+        .map(|k| k.name())
+        .collect();
+    if names.is_empty() {
+        String::from("a torque periodic in that angle")
+    } else {
+        format!("a torque periodic in that angle ({})", names.join(" or "))
+    }
 }

@@ -4,125 +4,72 @@
 use super::regimes::{self, Regime};
 use super::structure::{self, BalanceReport, Thresholds};
 use super::{Candidate, Status};
-use crate::effects::EffectKind;
+use crate::effects::{EffectKind, Sample};
 use crate::fit::dataset::{Dataset, RecData};
 use crate::fit::model::{EqSolution, Equation};
-use crate::fit::{shapes, ParamEstimate};
+use crate::fit::ParamEstimate;
 use crate::math;
 use alloc::string::String;
 use alloc::vec::Vec;
 use core::fmt::Write;
 
-/// The experiment that best exposes `kind`.
+/// The experiment that best exposes `kind` ([`crate::effects::EffectModel::experiment`]).
 pub fn experiment(kind: EffectKind) -> &'static str {
-    match kind {
-        EffectKind::Viscous | EffectKind::Coulomb => {
-            "run a friction staircase (constant speeds in both directions) and log the current"
-        }
-        EffectKind::Stribeck => "run slow speed ramps through zero (below 1 rad/s at the load) and log the current",
-        EffectKind::Asymmetry => "run the same constant-speed staircase in both directions and log the current",
-        EffectKind::Backlash => {
-            "run small position reversals (a 1-2 Hz sine of a few degrees) and log both motor and load angles"
-        }
-        EffectKind::Cogging => "turn the motor slowly at constant speed over several revolutions and log the current",
-        EffectKind::Imbalance => "turn the load slowly over full revolutions in both directions and log the current",
-        EffectKind::Saturation => "apply steps large enough to drive the command to its limit",
-        EffectKind::Deadzone => "apply slow voltage ramps through zero and log the current",
-        EffectKind::Delay => "apply a fast voltage excitation (PRBS or chirp up to 100 Hz) and log the current",
-    }
+    kind.model().experiment()
 }
 
-/// The signal whose correlation with the residual an effect removes: (name, values at rows).
+/// The signal whose correlation with the residual an effect removes: (name, values at rows)
+/// ([`crate::effects::EffectModel::signature`]); `None` for an effect without one (a gear play,
+/// judged on the simulation).
 fn signature(
     ds: &Dataset,
     kind: EffectKind,
     eq: Equation,
     params: &[ParamEstimate],
 ) -> Option<(String, Vec<Vec<f64>>)> {
+    let m = kind.model();
+    let len = m.signature_len();
+    if len == 0 {
+        return None;
+    }
     let rows = if eq == Equation::Electrical {
         &ds.elec_rows
     } else {
         &ds.mech_rows
     };
-    let get = |k: &str| {
-        params
-            .iter()
-            .find(|p| p.key == k)
-            .map(|p| p.value)
-            .unwrap_or(f64::NAN)
-    };
-    let n = ds.gear_ratio;
-    let col = |f: &dyn Fn(&RecData, usize) -> f64| {
-        ds.column(rows, |r: &RecData| {
-            (0..r.u_v.len()).map(|k| f(r, k)).collect()
+    let v: Vec<f64> = kind
+        .params()
+        .iter()
+        .map(|p| {
+            params
+                .iter()
+                .find(|e| e.key == p.key)
+                .map(|e| e.value)
+                .unwrap_or(f64::NAN)
         })
-    };
-    Some(match kind {
-        EffectKind::Coulomb => (
-            String::from("sign(omega)"),
-            alloc::vec![col(&|r, k| shapes::coulomb_dir(r.omega_raw[k]))],
-        ),
-        EffectKind::Stribeck => {
-            let ws = get("omega_s");
-            (
-                String::from("the low-speed friction excess sign(omega) exp(-(omega_l/omega_s)^2)"),
-                alloc::vec![col(&|r, k| shapes::coulomb_dir(r.omega_raw[k])
-                    * shapes::stribeck_decay(r.omega_raw[k] / n, ws))],
-            )
-        }
-        EffectKind::Asymmetry => (
-            String::from("the direction of motion (omega > 0)"),
-            alloc::vec![col(&|r, k| if r.omega_raw[k] > 0.0 { 1.0 } else { 0.0 })],
-        ),
-        EffectKind::Cogging => {
-            let h = get("harmonic");
-            (
-                alloc::format!("sin/cos of {h:.0} x motor angle"),
-                alloc::vec![
-                    col(&|r, k| shapes::cogging_pair(r.theta_m_rad[k], h).0),
-                    col(&|r, k| shapes::cogging_pair(r.theta_m_rad[k], h).1)
-                ],
-            )
-        }
-        EffectKind::Imbalance => (
-            String::from("sin/cos of the load angle"),
-            alloc::vec![
-                col(&|r, k| shapes::imbalance_pair(r.theta_m_rad[k] / n).0),
-                col(&|r, k| shapes::imbalance_pair(r.theta_m_rad[k] / n).1)
-            ],
-        ),
-        EffectKind::Saturation => {
-            let l = get("limit");
-            (
-                String::from("the command beyond the limit"),
-                alloc::vec![col(&|r, k| {
-                    let u = r.u_v[k];
-                    u - shapes::saturation(u, l)
-                })],
-            )
-        }
-        EffectKind::Deadzone => {
-            let w = get("width");
-            (
-                String::from("the command inside the dead band"),
-                alloc::vec![col(&|r, k| {
-                    let u = r.u_v[k];
-                    u - shapes::deadzone(u, w)
-                })],
-            )
-        }
-        EffectKind::Delay => (
-            String::from("the rate of change of the command"),
-            alloc::vec![col(&|r, k| if k > 0 {
-                r.u_v[k] - r.u_v[k - 1]
-            } else {
-                0.0
-            })],
-        ),
-        // Backlash has no regressor of its own (it is judged on the simulation): no signal to
-        // correlate with; its evidence is the simulation drop and the regimes where it acts.
-        EffectKind::Viscous | EffectKind::Backlash => return None,
-    })
+        .collect();
+    let n = ds.gear_ratio;
+    let filter_hz = ds.opts.filter_hz;
+    let cols = (0..len)
+        .map(|j| {
+            ds.column(rows, |r: &RecData| {
+                (0..r.u_v.len())
+                    .map(|k| {
+                        let x = Sample {
+                            omega_m_rad_s: r.omega_raw[k],
+                            theta_m_rad: r.theta_m_rad[k],
+                            u_v: r.u_v[k],
+                            u_prev_v: r.u_v[k.saturating_sub(1)],
+                            n,
+                            filter_hz,
+                        };
+                        m.signature(&v, j, &x)
+                    })
+                    .collect()
+            })
+        })
+        .collect();
+    Some((m.signature_name(&v), cols))
 }
 
 fn corr(a: &[f64], b: &[f64]) -> f64 {
@@ -187,7 +134,7 @@ pub fn describe(
     let mut s = String::new();
     let _ = write!(s, "{}: fitted {}. ", kind.description(), fmt_params(params));
     let rms_pct = 100.0 * (1.0 - math::sqrt((1.0 - eq_drop).max(0.0)));
-    if kind == EffectKind::Backlash {
+    if super::on_simulation(kind) {
         let _ = write!(
             s,
             "It lowers the held-out simulation error by {:.1} %",

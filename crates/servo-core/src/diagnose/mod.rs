@@ -11,7 +11,7 @@
 //! 3. a minimum drop of the output-error (simulation) cost on the held-out blocks, against the
 //!    model without the effect with its J_eq and tau_sf tuned on the simulation (the same
 //!    reference for every candidate, so that drops compare and a candidate that tunes base
-//!    parameters on the simulation, as backlash does, is not credited for the tuning).
+//!    parameters on the simulation, as a gear play does, is not credited for the tuning).
 //!
 //! Candidates are ranked significant first, then by error reduction. One effect is accepted at a
 //! time ([`diagnose_loop`]): accepting several at once produces false effects. A candidate whose
@@ -25,7 +25,7 @@ pub mod structure;
 
 pub use structure::{BalanceKind, BalanceReport, Signature, Thresholds};
 
-use crate::effects::EffectKind;
+use crate::effects::{EffectKind, SimRole};
 use crate::fit::model::Equation;
 use crate::fit::oe::{self, Part};
 use crate::fit::{self, Dataset, EffectToFit, FitError, FitOptions, ParamEstimate, Solved};
@@ -47,10 +47,15 @@ pub struct DiagnoseOptions {
     pub min_eq_drop: f64,
     /// Minimum relative drop of the held-out output-error cost (0.01 = 1 %).
     pub min_oe_drop: f64,
-    /// Minimum held-out output-error drop for backlash, judged on simulation alone (0.08 = 8 %).
-    pub min_backlash_oe_drop: f64,
-    /// Kinds to try; empty: every kind the model lacks.
+    /// Minimum held-out output-error drop for an effect judged on the simulation alone (a gear
+    /// play, [`crate::effects::FitHooks::judged_on_simulation`]) (0.08 = 8 %).
+    pub min_simulation_oe_drop: f64,
+    /// Kinds to try (catalogue or run-time); empty: every catalogue kind the model lacks, plus
+    /// `extra_candidates`.
     pub candidates: Vec<EffectKind>,
+    /// Run-time effects (e.g. user-defined ones) tried besides the catalogue when `candidates`
+    /// is empty.
+    pub extra_candidates: Vec<EffectKind>,
     /// Run candidates on two threads (std builds).
     pub parallel: bool,
     /// Practical-significance and "unexplained" thresholds.
@@ -67,8 +72,9 @@ impl Default for DiagnoseOptions {
             min_bic_gain: 10.0,
             min_eq_drop: 0.02,
             min_oe_drop: 0.01,
-            min_backlash_oe_drop: 0.08,
+            min_simulation_oe_drop: 0.08,
             candidates: Vec::new(),
+            extra_candidates: Vec::new(),
             parallel: true,
             thresholds: Thresholds::default(),
         }
@@ -186,16 +192,31 @@ pub fn diagnose(
 /// Kinds worth trying on `model`.
 pub fn candidate_kinds(model: &Plant, opts: &DiagnoseOptions) -> Vec<EffectKind> {
     let has = |k| model.effects.contains(k);
-    EffectKind::ALL
-        .into_iter()
-        .filter(|&k| k != EffectKind::Viscous && !has(k))
-        .filter(|&k| opts.candidates.is_empty() || opts.candidates.contains(&k))
-        // Stribeck decays to the Coulomb level: it needs Coulomb friction in the model; asymmetry
-        // replaces Coulomb, which must be found first.
-        .filter(|&k| {
-            !matches!(k, EffectKind::Stribeck | EffectKind::Asymmetry) || has(EffectKind::Coulomb)
-        })
-        .collect()
+    let has_name = |name: &str| EffectKind::from_name(name).is_some_and(has);
+    let pool: Vec<EffectKind> = if opts.candidates.is_empty() {
+        EffectKind::ALL
+            .into_iter()
+            .chain(opts.extra_candidates.iter().copied())
+            .collect()
+    } else {
+        // In registry order, whatever order they were given in.
+        let mut c = opts.candidates.clone();
+        c.sort();
+        c
+    };
+    let mut out: Vec<EffectKind> = Vec::new();
+    for k in pool {
+        // Part of the linear base model (viscous friction) or already in the model: nothing
+        // to try. Some effects need another one first (e.g. a breakaway decays to the Coulomb
+        // level): [`crate::effects::EffectModel::applicable`].
+        if k.sim_role() == SimRole::Linear || has(k) || out.contains(&k) {
+            continue;
+        }
+        if k.model().applicable(&has_name) {
+            out.push(k);
+        }
+    }
+    out
 }
 
 /// Diagnoses on a prepared dataset (reuse it across the loop).
@@ -207,7 +228,7 @@ pub fn diagnose_dataset(
     let base = ds.fit_config(model, &[])?;
     // The simulation reference every candidate is judged against: the model without it, its
     // inertia and Coulomb level tuned on the simulation (fit blocks). Candidates that refine
-    // parameters on the simulation (backlash with J_eq and tau_sf) would otherwise win on the
+    // parameters on the simulation (a gear play with J_eq and tau_sf) would otherwise win on the
     // tuning alone, and the ranking would compare drops from different references.
     let rigid = ds.refine_rigid_on_simulation(&base.plant);
     let reference = Reference {
@@ -247,9 +268,9 @@ pub fn diagnose_dataset(
     });
     let mut kinds = candidate_kinds(model, opts);
     if !ds.has_input {
-        // Without a logged input the data say nothing of the drive (saturation, dead zone,
-        // delay), and nothing can be simulated (backlash is judged on the simulation).
-        kinds.retain(|k| k.is_mechanical() && *k != EffectKind::Backlash);
+        // Without a logged input the data say nothing of the drive (input effects), and nothing
+        // can be simulated (effects judged on the simulation are left out).
+        kinds.retain(|k| k.is_mechanical() && !on_simulation(*k));
     }
     let results = run_candidates(ds, model, &kinds, opts.parallel);
     let mut ranking = Vec::new();
@@ -271,7 +292,7 @@ pub fn diagnose_dataset(
                 );
                 // A mimic leaves the structure it was meant to explain: the shape that carried
                 // the balance's residual is still there, above the noise floor, after adding it.
-                if c.significant && !matches!(*kind, EffectKind::Backlash | EffectKind::Coulomb) {
+                if c.significant && !on_simulation(*kind) && *kind != EffectKind::Coulomb {
                     if let (Some(b), Some(sol)) = (bal, solved.equation(eq)) {
                         if let Some(top) = b.signatures.first().filter(|_| b.above_noise) {
                             let after =
@@ -315,7 +336,7 @@ pub fn diagnose_dataset(
     for c in ranking.iter_mut() {
         if let (true, true, Some(e)) = (
             c.significant,
-            c.effect.is_mechanical() && c.effect != EffectKind::Backlash,
+            c.effect.is_mechanical() && !on_simulation(c.effect),
             electrical_broken,
         ) {
             c.checks.push(checks::Check {
@@ -339,8 +360,13 @@ pub fn diagnose_dataset(
             c.significant = false;
         }
         c.checks.extend(cons);
-        if c.significant && c.effect == EffectKind::Backlash {
-            if let Some(note) = checks::backlash_stiffness(ds, model, c) {
+        if c.significant {
+            let note = c
+                .effect
+                .model()
+                .fit_hooks()
+                .and_then(|h| h.candidate_note(ds, model, c));
+            if let Some(note) = note {
                 c.evidence.push_str(&note);
             }
         }
@@ -352,7 +378,7 @@ pub fn diagnose_dataset(
     ranking.sort_by(|a, b| {
         // Significant first; then by the held-out simulation error reduction, the one figure
         // comparable across equations, plus a tenth of the equation residual reduction: a
-        // near tie in simulation (Coulomb friction and an input dead zone both brake a
+        // near tie in simulation (Coulomb friction and an input dead band both brake a
         // voltage-driven log, 74.2 % vs 74.4 % on the real jacopisky steps at 250 Hz) goes to
         // the effect that also explains its equation better (56.9 % vs 48.0 %).
         let score = |c: &Candidate| {
@@ -400,7 +426,7 @@ pub fn diagnose_dataset(
     };
     let mut verdict = evidence::verdict(status, &ranking, &unexplained, &th);
     if !ds.has_input {
-        verdict.push_str(" No log records the input voltage u: judged on the torque balance alone (information criterion and held-out residual), without a simulation check; saturation, dead zone, delay and backlash were not tried.");
+        verdict.push_str(" No log records the input voltage u: judged on the torque balance alone (information criterion and held-out residual), without a simulation check; input effects and effects judged on the simulation were not tried.");
     }
     Ok(Diagnosis {
         ranking,
@@ -496,13 +522,15 @@ fn lag1(r: &[f64]) -> f64 {
 fn nonlinear_searched(kind: EffectKind) -> usize {
     kind.params()
         .iter()
-        .filter(|p| {
-            p.nonlinear
-                && p.key != "stiffness"
-                && p.key != "damping"
-                && p.key != "load_inertia_fraction"
-        })
+        .filter(|p| p.nonlinear && kind.model().fittable(p.key))
         .count()
+}
+
+/// Is `kind` judged on the simulation alone (no regressors; a gear play)?
+pub(crate) fn on_simulation(kind: EffectKind) -> bool {
+    kind.model()
+        .fit_hooks()
+        .is_some_and(|h| h.judged_on_simulation())
 }
 
 /// The simulation reference of a diagnosis (see [`diagnose_dataset`]).
@@ -531,7 +559,7 @@ fn judge(
         .into_iter()
         .filter(|p| p.effect == Some(kind) || (kind == EffectKind::Coulomb && p.key == "tau_sf"))
         .collect();
-    let backlash = kind == EffectKind::Backlash;
+    let sim_only = on_simulation(kind);
     let base_oe = reference.oe_holdout;
     let cand_oe = oe::prediction_cost(ds, &cand.plant, Part::Holdout);
     let oe_drop = match (base_oe, cand_oe) {
@@ -553,8 +581,8 @@ fn judge(
     let n_eff = (b.n_fit as f64 * (1.0 - rho) / (1.0 + rho)).max(1.0);
     let q_lin = c.p.saturating_sub(b.p) as f64;
     let q_nl = nonlinear_searched(kind) as f64;
-    let bic_gain = if backlash {
-        // Backlash lives outside the equation-error regressors: judged on the simulation cost.
+    let bic_gain = if sim_only {
+        // No equation-error regressors (a gear play): judged on the simulation cost.
         let fit_b = oe::prediction_cost(ds, &reference.plant, Part::Fit);
         let fit_c = oe::prediction_cost(ds, &cand.plant, Part::Fit);
         match (fit_b, fit_c) {
@@ -571,7 +599,7 @@ fn judge(
     } else {
         (b.rss_fit, c.rss_fit)
     };
-    let eq_drop = if backlash {
+    let eq_drop = if sim_only {
         oe_drop.unwrap_or(0.0)
     } else {
         1.0 - rss1 / rss0.max(1e-300)
@@ -582,10 +610,10 @@ fn judge(
         Some(d) => d >= opts.min_oe_drop,
         None => !ds.has_input,
     };
-    // Backlash is judged on the simulation alone, which is less specific than an equation
-    // residual (initial contact state, stick-slip transients): ask for a clear drop.
-    let min_drop = if backlash {
-        opts.min_backlash_oe_drop
+    // An effect judged on the simulation alone is judged on something less specific than an
+    // equation residual (initial contact state, stick-slip transients): ask for a clear drop.
+    let min_drop = if sim_only {
+        opts.min_simulation_oe_drop
     } else {
         opts.min_eq_drop
     };
@@ -607,8 +635,8 @@ fn judge(
     let resolvable = floor.is_none_or(|f| explained >= f);
     // Practical significance: what it explains against the noise floor of its balance (sensor
     // noise and quantisation through the equation's filter and derivatives), and against the
-    // structured error of that balance (the squared residual above the floor). Backlash, judged
-    // on the simulation, is held to its simulation drop.
+    // structured error of that balance (the squared residual above the floor). An effect judged
+    // on the simulation is held to its simulation drop.
     let th = &opts.thresholds;
     let noise_ratio = if balance_floor > 0.0 {
         explained / balance_floor
@@ -624,7 +652,7 @@ fn judge(
     let mut found: Vec<checks::Check> = Vec::new();
     if statistically {
         let unit = eq.unit();
-        if !backlash {
+        if !sim_only {
             found.push(checks::Check {
                 name: "above the noise floor",
                 passed: noise_ratio >= th.min_noise_ratio,
@@ -784,7 +812,8 @@ mod tests {
     }
 
     /// A log without the input voltage (current and motion only): the torque balance alone
-    /// names the missing Coulomb friction; drive-side effects and backlash are not tried.
+    /// names the missing Coulomb friction; drive-side effects and effects judged on the
+    /// simulation are not tried.
     #[test]
     fn logs_without_voltage_are_judged_on_the_torque_balance() {
         let truth = truth();
@@ -806,7 +835,7 @@ mod tests {
         assert!(d
             .ranking
             .iter()
-            .all(|c| c.effect.is_mechanical() && c.effect != EffectKind::Backlash));
+            .all(|c| c.effect.is_mechanical() && !on_simulation(c.effect)));
         assert!(d.verdict.contains("No log records the input voltage u"));
         // Nothing left on the complete model.
         let d = diagnose(&[log.clone()], &truth, &DiagnoseOptions::default()).unwrap();

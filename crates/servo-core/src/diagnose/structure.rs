@@ -32,7 +32,7 @@ pub struct Thresholds {
     /// Parameters fitted on independent halves of the data agree within this relative difference
     /// (or 3 combined standard errors).
     pub consistency_tol: f64,
-    /// No torque (mechanical effect other than backlash, which breaks the angle-speed relation
+    /// No torque (mechanical effect other than a gear play, which breaks the angle-speed relation
     /// itself) is named while the electrical balance, which holds no torque, is this many times
     /// its noise floor: the current or speed measurement is then inconsistent.
     pub electrical_block_ratio: f64,

@@ -125,7 +125,7 @@ pub struct Rows {
     pub k: Vec<usize>,
     pub fit: Vec<bool>,
     /// Electrical rows only: within 50 ms of a reversal of the motor torque (current) while the
-    /// angle measured is the load's. With backlash in the model the motor may be crossing the
+    /// angle measured is the load's. With a gear play in the model the motor may be crossing the
     /// gap there, its speed unknown: such rows get no weight in the electrical balance.
     pub torque_reversal: Vec<bool>,
 }
@@ -222,7 +222,7 @@ impl Dataset {
         ds.coulomb_col = ds.column(&ds.mech_rows, |r: &RecData| {
             r.omega_raw
                 .iter()
-                .map(|&w| super::shapes::coulomb_dir(w) / n)
+                .map(|&w| crate::effects::coulomb::direction(w) / n)
                 .collect()
         });
         Ok(ds)
@@ -309,7 +309,7 @@ fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecDat
     };
     // An encoder reads floor(theta / q) q: during motion its reading lies q/2 below the angle on
     // average. The centre of the count cell is the unbiased estimate; without it a position-
-    // periodic torque (cogging, h = 12, 4096 counts/rev, N = 14) is fitted 0.13 rad out of
+    // periodic torque (a magnetic detent, h = 12, 4096 counts/rev, N = 14) is fitted 0.13 rad out of
     // phase and a simulation started from a reading starts half a count behind.
     let angle_logged = r.theta_m_rad.is_some() || r.theta_l_rad.is_some();
     let mut theta_m = theta_m;

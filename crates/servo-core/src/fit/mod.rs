@@ -5,11 +5,13 @@
 //! logged, otherwise the u-driven combined equation. Position is filtered once with a zero-phase
 //! filter before being differentiated twice, and every regressor goes through the same filter.
 //! Linear parameters are estimated by least squares (QR) with their physical signs, nonlinear ones
-//! (Stribeck speed, cogging harmonic, dead-zone width, saturation limit, delay) by a grid search
-//! plus golden-section refinement, always refitting the base parameters (J_eq, B_eq, tau_sf, and
-//! R_eq, k_drv where the electrical balance is used) together with the effect. The backlash gap is
-//! fitted on the output error of a short simulation ([`oe`]), which sizes it where regressors
-//! cannot.
+//! (a speed scale, a harmonic, a dead band, a limit, a delay) by a grid search plus golden-section
+//! refinement, always refitting the base parameters (J_eq, B_eq, tau_sf, and R_eq, k_drv where
+//! the electrical balance is used) together with the effect. Everything effect-specific (the
+//! regressors, the grids, the search hints, what is refined on the simulation) comes from the
+//! effect's [`crate::effects::EffectModel`]; an effect without regressors (a gear play) is sized on
+//! the output error of short simulations ([`oe`]) by its
+//! [`crate::effects::FitHooks::refine_on_simulation`].
 //!
 //! Entry point: [`fit_model`]. For repeated fits on the same data (diagnosis), prepare a
 //! [`Dataset`] once and call [`Dataset::fit`].
@@ -19,39 +21,19 @@ pub mod lsq;
 pub mod model;
 pub mod oe;
 pub mod search;
-pub mod shapes;
 
 pub use dataset::Dataset;
 pub use model::Equation;
 
-use crate::effects::{Effect, EffectError, EffectKind, MAX_PARAMS};
+use crate::effects::{
+    Effect, EffectError, EffectKind, GridContext, NoEffectAt, SearchScale, MAX_PARAMS,
+};
 use crate::math;
 use crate::plant::Plant;
 use crate::record::Record;
 use alloc::string::String;
 use alloc::vec::Vec;
 use model::{Coef, Config, EqSolution, Slot};
-
-/// How far a polished parameter may move from its least-squares value.
-#[derive(Debug, Clone, Copy)]
-enum Span {
-    /// Plus or minus this much (same unit as the parameter).
-    Add(f64),
-    /// Divided or multiplied by up to this factor.
-    Scale(f64),
-}
-
-/// The parameters refined on the simulation after the least-squares fit, per effect.
-fn polished(kind: EffectKind) -> &'static [(&'static str, Span)] {
-    match kind {
-        EffectKind::Cogging | EffectKind::Imbalance => &[("phase", Span::Add(0.5))],
-        EffectKind::Stribeck => &[("tau_s", Span::Scale(1.2)), ("omega_s", Span::Scale(1.5))],
-        _ => &[],
-    }
-}
-
-/// Horizon of the long prediction segments that size a backlash gap [s].
-const BACKLASH_HORIZON_S: f64 = 0.75;
 
 /// Options of the fit.
 #[derive(Debug, Clone, PartialEq)]
@@ -66,8 +48,8 @@ pub struct FitOptions {
     pub refit_base: bool,
     /// Largest input delay searched [s].
     pub max_delay_s: f64,
-    /// Largest cogging harmonic searched [cycles per motor revolution].
-    pub max_cogging_harmonic: u32,
+    /// Largest harmonic of a periodic torque searched [cycles per revolution of its shaft].
+    pub max_harmonic: u32,
     /// Length of the blocks of the fit / held-out split [s].
     pub holdout_block_s: f64,
     /// Every `holdout_every`-th block is held out (0: none; fit on everything).
@@ -86,7 +68,7 @@ impl Default for FitOptions {
             margin_s: 0.01,
             refit_base: true,
             max_delay_s: 0.02,
-            max_cogging_harmonic: 40,
+            max_harmonic: 40,
             holdout_block_s: 1.0,
             holdout_every: 0,
             oe_horizon_s: 0.25,
@@ -117,10 +99,10 @@ pub struct EffectToFit {
     pub fit: [bool; MAX_PARAMS],
 }
 
-/// Parameters that the fit never estimates unless asked explicitly (they keep their default):
-/// the contact stiffness, damping and inertia split of backlash.
+/// Parameters that the fit never estimates unless asked explicitly keep their default
+/// ([`crate::effects::EffectModel::fittable`]).
 fn fittable(kind: EffectKind, key: &str) -> bool {
-    !(kind == EffectKind::Backlash && key != "gap")
+    kind.model().fittable(key)
 }
 
 impl EffectToFit {
@@ -477,17 +459,29 @@ impl Dataset {
             cfg.slots[i].set(key, v);
         }
         let passes = if searched.len() > 1 { 2 } else { 1 };
-        let mut backlash_gap: Option<usize> = None;
+        // Effects judged on the simulation size their parameters there, after the regression.
+        let on_simulation = |i: usize| {
+            cfg.slots[i]
+                .kind
+                .model()
+                .fit_hooks()
+                .is_some_and(|h| h.judged_on_simulation())
+        };
+        let sim_searched: Vec<usize> = searched
+            .iter()
+            .map(|&(i, _)| i)
+            .filter(|&i| on_simulation(i))
+            .collect();
         for _ in 0..passes {
             for &(i, key) in &searched {
-                if cfg.slots[i].kind == EffectKind::Backlash {
-                    backlash_gap = Some(i);
+                if sim_searched.contains(&i) {
                     continue;
                 }
                 let kind = cfg.slots[i].kind;
                 let grid = self.grid(&cfg.slots[i], key);
-                let integer = kind == EffectKind::Cogging;
-                let log_scale = kind == EffectKind::Stribeck;
+                let search = kind.model().search(key);
+                let integer = search.scale == SearchScale::Integer;
+                let log_scale = search.scale == SearchScale::Log;
                 let mut trial = cfg.clone();
                 let mut f = |x: f64| {
                     let x = if log_scale { math::exp(x) } else { x };
@@ -508,10 +502,10 @@ impl Dataset {
                 let mut x = if log_scale { math::exp(x) } else { x };
                 // Ties go to the "no effect" end (a saturation limit above every logged input, a
                 // zero dead band or delay): data that do not reach an effect cannot size it.
-                let none = match kind {
-                    EffectKind::Saturation => grid.last().copied(),
-                    EffectKind::Deadzone | EffectKind::Delay => grid.first().copied(),
-                    _ => None,
+                let none = match search.no_effect_at {
+                    NoEffectAt::Last => grid.last().copied(),
+                    NoEffectAt::First => grid.first().copied(),
+                    NoEffectAt::Nowhere => None,
                 };
                 if let Some(none) = none {
                     if f(none) <= fx * (1.0 + 1e-4) {
@@ -552,16 +546,19 @@ impl Dataset {
             }
         }
         let mut solved = self.solve_config(&cfg)?;
-        // With backlash in the model, the gap (when asked) and J_eq (when the base is refitted)
-        // are sized on the simulation: the torque balance cannot see the gap, and it biases J_eq.
-        if let Some(i) = cfg
-            .slots
-            .iter()
-            .position(|s| s.kind == EffectKind::Backlash)
-        {
-            let fit_gap = backlash_gap.is_some();
-            if fit_gap || cfg.refit_base {
-                self.fit_backlash(&mut solved, i, fit_gap, cfg.refit_base)?;
+        // With an effect judged on the simulation in the model (a gear play), its parameters
+        // (when asked) and J_eq (when the base is refitted) are sized on the simulation: the
+        // torque balance cannot see them, and they bias J_eq.
+        for i in 0..cfg.slots.len() {
+            let Some(hooks) = cfg.slots[i].kind.model().fit_hooks() else {
+                continue;
+            };
+            if !hooks.judged_on_simulation() {
+                continue;
+            }
+            let fit_main = sim_searched.contains(&i);
+            if fit_main || cfg.refit_base {
+                hooks.refine_on_simulation(self, &mut solved, i, fit_main, cfg.refit_base)?;
             }
         }
         self.polish_on_simulation(&mut solved, effects)?;
@@ -570,13 +567,13 @@ impl Dataset {
 
     /// Refines, on the simulation cost of the fit blocks, the parameters of the fitted effects
     /// that the motion is most sensitive to, starting from their least-squares values (see
-    /// [`polished`]); the others keep their least-squares value.
+    /// [`crate::effects::EffectModel::polish`]); the others keep their least-squares value.
     ///
     /// The torque balance estimates them from small differences (a sin/cos pair under the noise,
     /// a breakaway excess seen over a few samples), and a position loop is very sensitive to
-    /// them: a cogging detent of twice the Coulomb level (motor side) decides where the loop
+    /// them: a magnetic detent of twice the Coulomb level (motor side) decides where the loop
     /// stops, and a phase 0.15 rad off (h = 12) drops a closed-loop replay from 99.7 % to 99.0 %
-    /// fit; the stiction excess tau_s - tau_sf sets the amplitude of the hunting around a set
+    /// fit; the breakaway excess tau_s - tau_sf sets the amplitude of the hunting around a set
     /// point. Each parameter gets a grid over its span and a golden-section search, in turn,
     /// and a change is kept only when it lowers the cost.
     fn polish_on_simulation(
@@ -586,7 +583,7 @@ impl Dataset {
     ) -> Result<(), FitError> {
         for e in effects {
             let kind = e.effect.kind;
-            for &(key, span) in polished(kind) {
+            for &(key, span) in kind.model().polish() {
                 let Some(ki) = kind.params().iter().position(|p| p.key == key) else {
                     continue;
                 };
@@ -608,8 +605,8 @@ impl Dataset {
                         .unwrap_or(f64::INFINITY)
                 };
                 let grid = match span {
-                    Span::Add(d) => search::linspace(x0 - d, x0 + d, 9),
-                    Span::Scale(f) => search::linspace(x0 / f, x0 * f, 9),
+                    crate::effects::Span::Add(d) => search::linspace(x0 - d, x0 + d, 9),
+                    crate::effects::Span::Scale(f) => search::linspace(x0 / f, x0 * f, 9),
                 };
                 let c0 = cost(x0);
                 if let Some((x, c)) = search::grid_then_golden(&grid, cost, 10) {
@@ -624,142 +621,13 @@ impl Dataset {
         Ok(())
     }
 
-    /// Sizes the backlash gap of slot `i` on the simulation (output-error) cost of the fit blocks.
-    ///
-    /// Backlash lives outside the equation-error regressors, and a gap biases the rigid-body
-    /// estimates of the torque balance: while the motor crosses the gap the measured load does not
-    /// follow the motor torque, and least squares answers with a smaller J_eq (about 3 % for a
-    /// 0.03 rad gap). A gap sized with that biased inertia comes out too wide (0.045 rad for 0.03),
-    /// so the gap and J_eq are refined together on the simulation cost:
-    ///
-    /// 1. on the usual short prediction segments: a grid over the gap, then J_eq (within +-15 %
-    ///    of its equation-error value) and the gap again by golden-section search;
-    /// 2. on long overlapping segments (0.75 s, a new one every 0.25 s): J_eq and the gap once
-    ///    more. A gap shows as an offset after each reversal, which short segments started from an
-    ///    uncertain contact state blur; long segments hold several reversals each. Over 5 seeds
-    ///    and gaps of 0.015, 0.03 and 0.06 rad this brings every estimate within 12 % (short
-    ///    segments alone: within 35 %).
-    ///
-    /// With `fit_gap` false the gap keeps its value and only J_eq is refined; with `fit_j` false
-    /// J_eq keeps its equation-error value.
-    fn fit_backlash(
-        &self,
-        solved: &mut Solved,
-        i: usize,
-        fit_gap: bool,
-        fit_j: bool,
-    ) -> Result<(), FitError> {
-        let hi = self
-            .grid(&solved.cfg.slots[i], "gap")
-            .last()
-            .copied()
-            .unwrap_or(0.1);
-        let base = to_plant(&solved.cfg, &solved.mech, solved.elec.as_ref())?;
-        let j0 = base.params.j_eq();
-        let short = oe::segments(self, oe::Part::Fit);
-        let long_h = BACKLASH_HORIZON_S.max(self.opts.oe_horizon_s);
-        let long = oe::segments_with(self, oe::Part::Fit, long_h, 3, 90);
-        let tau0 = base.tau_sf();
-        let plant_with = |gap: f64, j_eq: f64, tau_sf: f64| -> Option<Plant> {
-            let mut c = solved.cfg.clone();
-            c.slots[i].set("gap", gap);
-            let mut p = to_plant(&c, &solved.mech, solved.elec.as_ref()).ok()?;
-            p.params.j_eq = Some(j_eq);
-            if tau_sf != tau0 {
-                p.params.tau_sf = Some(tau_sf);
-                set(&mut p, EffectKind::Coulomb, &[tau_sf]).ok()?;
-            }
-            Some(p)
-        };
-        let tau_cell = core::cell::Cell::new(tau0);
-        let cost = |segs: &[(usize, usize)], h: f64, gap: f64, j_eq: f64| -> f64 {
-            plant_with(gap, j_eq, tau_cell.get())
-                .and_then(|p| oe::prediction_cost_over(self, &p, segs, h))
-                .unwrap_or(f64::INFINITY)
-        };
-        let h0 = self.opts.oe_horizon_s;
-        // J_eq that best goes with a gap on the short segments (+-15 % of its equation-error
-        // value): gap and inertia trade off along a ridge (a heavier motor side crosses the gap
-        // later, which looks like a wider gap), so each gap of the grid gets its own J_eq.
-        let best_j = |gap: f64| -> (f64, f64) {
-            if !fit_j {
-                return (j0, cost(&short, h0, gap, j0));
-            }
-            search::grid_then_golden(
-                &search::linspace(0.85, 1.15, 4),
-                |s| cost(&short, h0, gap, j0 * s),
-                5,
-            )
-            .map_or((j0, f64::INFINITY), |(s, c)| (j0 * s, c))
-        };
-        let (mut gap, mut j_eq) = if fit_gap {
-            let mut best = (f64::NAN, j0, f64::INFINITY);
-            for g in search::linspace(0.0, hi, 16) {
-                let (j, c) = best_j(g);
-                if c < best.2 {
-                    best = (g, j, c);
-                }
-            }
-            if !best.2.is_finite() {
-                return Err(FitError::Singular(String::from(
-                    "backlash: the simulation failed for every gap",
-                )));
-            }
-            (best.0, best.1)
-        } else {
-            (solved.cfg.slots[i].get("gap"), j0)
-        };
-        let step = hi / 15.0;
-        for (segs, h, j_span, iters) in [(&short, h0, 0.15, 8), (&long, long_h, 0.05, 8)] {
-            if segs.is_empty() {
-                continue;
-            }
-            if fit_j {
-                let grid = search::linspace(1.0 - j_span, 1.0 + j_span, 5);
-                let jc = j_eq;
-                if let Some((s, _)) =
-                    search::grid_then_golden(&grid, |s| cost(segs, h, gap, jc * s), iters)
-                {
-                    j_eq = jc * s;
-                }
-            }
-            if fit_j && base.effects.contains(EffectKind::Coulomb) {
-                // The Coulomb level decides how far the load coasts once the motor leaves it.
-                let tc = tau_cell.get();
-                let grid = search::linspace(0.9, 1.1, 5);
-                let f = |s: f64| {
-                    tau_cell.set(tc * s);
-                    let c = cost(segs, h, gap, j_eq);
-                    tau_cell.set(tc);
-                    c
-                };
-                if let Some((s, _)) = search::grid_then_golden(&grid, f, iters) {
-                    tau_cell.set(tc * s);
-                }
-            }
-            if fit_gap {
-                let grid = search::linspace((gap - step).max(0.0), gap + step, 5);
-                if let Some((g, _)) =
-                    search::grid_then_golden(&grid, |g| cost(segs, h, g, j_eq), iters)
-                {
-                    gap = g;
-                }
-            }
-        }
-        let refined = plant_with(gap, j_eq, tau_cell.get()).ok_or_else(|| {
-            FitError::BadModel(String::from("backlash: the refined model is not valid"))
-        })?;
-        solved.cfg.slots[i].set("gap", gap);
-        solved.plant = refined;
-        Ok(())
-    }
-
     /// `plant` with J_eq (+-15 %) and the Coulomb level (+-10 %) refined on the simulation cost
     /// of the fit blocks (short segments), each by a grid and a golden-section search, in turn.
     ///
-    /// The reference a backlash candidate is judged against: its own J_eq and tau_sf are refined
-    /// on the simulation together with the gap ([`Dataset::fit_config`]), so the model without
-    /// backlash must get the same refinement, or the candidate wins on the refinement alone.
+    /// The reference a candidate judged on the simulation (a gear play) is judged against: its
+    /// own J_eq and tau_sf are refined on the simulation together with its parameters
+    /// ([`Dataset::fit_config`]), so the model without it must get the same refinement, or the
+    /// candidate wins on the refinement alone.
     pub fn refine_rigid_on_simulation(&self, plant: &Plant) -> Plant {
         let segs = oe::segments(self, oe::Part::Fit);
         let h = self.opts.oe_horizon_s;
@@ -783,7 +651,7 @@ impl Dataset {
             let with_tau = |p: &Plant, t: f64| -> Option<Plant> {
                 let mut q = *p;
                 q.params.tau_sf = Some(t);
-                set(&mut q, EffectKind::Coulomb, &[t]).ok()?;
+                set_effect(&mut q, EffectKind::Coulomb, &[t]).ok()?;
                 Some(q)
             };
             if let Some((s, _)) = search::grid_then_golden(
@@ -804,35 +672,34 @@ impl Dataset {
     }
 
     /// Largest load-side speed in the torque-balance rows [rad/s].
-    fn omega_l_max(&self) -> f64 {
+    pub fn omega_l_max(&self) -> f64 {
         let w = self.sample(&self.mech_rows, |r| &r.omega_f);
         w.iter().fold(0.0f64, |m, v| m.max(v.abs())) / self.gear_ratio
     }
 
-    fn grid(&self, s: &Slot, key: &str) -> Vec<f64> {
-        let umax = self.u_max_v.max(1e-6);
-        let dt = self
-            .recs
-            .iter()
-            .map(|r| r.dt_s)
-            .fold(f64::INFINITY, f64::min);
-        match (s.kind, key) {
-            (EffectKind::Stribeck, _) => {
-                let wl = self.omega_l_max().max(1e-3);
-                search::logspace(wl * 2e-3, wl * 0.5, 24)
-            }
-            (EffectKind::Cogging, _) => (1..=self.opts.max_cogging_harmonic.max(1))
-                .map(f64::from)
-                .collect(),
-            (EffectKind::Saturation, _) => search::linspace(0.2 * umax, umax * 1.001, 33),
-            (EffectKind::Deadzone, _) => search::linspace(0.0, (0.4 * umax).min(3.0), 31),
-            (EffectKind::Delay, _) => {
-                let n = (libm::ceil(self.opts.max_delay_s / (0.5 * dt)) as usize).clamp(2, 200);
-                search::linspace(0.0, self.opts.max_delay_s, n + 1)
-            }
-            (EffectKind::Backlash, _) => search::linspace(0.0, 0.2, 16),
-            _ => alloc::vec![s.get(key)],
+    /// What the search grids may depend on.
+    pub fn grid_context(&self) -> GridContext {
+        GridContext {
+            omega_l_max_rad_s: self.omega_l_max(),
+            u_max_v: self.u_max_v.max(1e-6),
+            dt_s: self
+                .recs
+                .iter()
+                .map(|r| r.dt_s)
+                .fold(f64::INFINITY, f64::min),
+            max_delay_s: self.opts.max_delay_s,
+            max_harmonic: self.opts.max_harmonic,
         }
+    }
+
+    /// The search grid of `key` of slot `s` ([`crate::effects::EffectModel::search_grid`]; its
+    /// current value when the effect gives none).
+    pub fn grid(&self, s: &Slot, key: &str) -> Vec<f64> {
+        s.kind
+            .model()
+            .search_grid(key, &self.grid_context())
+            .filter(|g| !g.is_empty())
+            .unwrap_or_else(|| alloc::vec![s.get(key)])
     }
 
     fn initial(&self, s: &Slot, key: &str) -> f64 {
@@ -895,7 +762,7 @@ impl Dataset {
                 fitted: refit,
             });
         }
-        for s in &solved.cfg.slots {
+        for (si, s) in solved.cfg.slots.iter().enumerate() {
             if s.kind == EffectKind::Coulomb {
                 continue;
             }
@@ -906,33 +773,19 @@ impl Dataset {
                     .value(s.kind, spec.key)
                     .unwrap_or(f64::NAN);
                 let std_err = match (s.kind, spec.key) {
-                    (EffectKind::Stribeck, "tau_s") => solved
-                        .mech
-                        .coef(Coef::StribeckExcess(slot_index(solved, s.kind)))
-                        .map(|c| c.1),
-                    (EffectKind::Asymmetry, "tau_sf_pos") => solved
-                        .mech
-                        .coef(Coef::AsymPos(slot_index(solved, s.kind)))
-                        .map(|c| c.1),
-                    (EffectKind::Asymmetry, "tau_sf_neg") => solved
-                        .mech
-                        .coef(Coef::AsymNeg(slot_index(solved, s.kind)))
-                        .map(|c| c.1),
-                    (EffectKind::Cogging | EffectKind::Imbalance, "amplitude") => {
-                        let i = slot_index(solved, s.kind);
-                        let a = solved
-                            .mech
-                            .coef(Coef::PairSin(i))
-                            .map(|c| c.1)
-                            .unwrap_or(0.0);
-                        let b = solved
-                            .mech
-                            .coef(Coef::PairCos(i))
-                            .map(|c| c.1)
-                            .unwrap_or(0.0);
-                        Some(math::sqrt(0.5 * (a * a + b * b)))
+                    (EffectKind::Asymmetry, "tau_sf_pos") => {
+                        solved.mech.coef(Coef::AsymPos(si)).map(|c| c.1)
                     }
-                    _ => None,
+                    (EffectKind::Asymmetry, "tau_sf_neg") => {
+                        solved.mech.coef(Coef::AsymNeg(si)).map(|c| c.1)
+                    }
+                    _ => {
+                        let m = s.kind.model();
+                        let se: Vec<f64> = (0..m.linear_coefs())
+                            .map(|j| solved.mech.coef(Coef::Effect(si, j)).map_or(0.0, |c| c.1))
+                            .collect();
+                        m.std_err(spec.key, &se)
+                    }
                 }
                 .filter(|v| *v > 0.0);
                 out.push(ParamEstimate {
@@ -949,17 +802,8 @@ impl Dataset {
     }
 }
 
-fn slot_index(solved: &Solved, kind: EffectKind) -> usize {
-    solved
-        .cfg
-        .slots
-        .iter()
-        .position(|s| s.kind == kind)
-        .unwrap_or(usize::MAX)
-}
-
 /// Turns a solved configuration into a plant.
-pub(crate) fn to_plant(
+pub fn to_plant(
     cfg: &Config,
     mech: &EqSolution,
     elec: Option<&EqSolution>,
@@ -977,7 +821,7 @@ pub(crate) fn to_plant(
     }
     let b = c(Coef::BEq).unwrap_or(plant.b_eq()).max(0.0);
     params.b_eq = Some(b);
-    set(&mut plant, EffectKind::Viscous, &[b])?;
+    set_effect(&mut plant, EffectKind::Viscous, &[b])?;
     let asym = cfg
         .slots
         .iter()
@@ -986,12 +830,12 @@ pub(crate) fn to_plant(
     if let Some(ai) = asym {
         let pos = c(Coef::AsymPos(ai)).unwrap_or(0.0).max(0.0);
         let neg = c(Coef::AsymNeg(ai)).unwrap_or(0.0).max(0.0);
-        set(&mut plant, EffectKind::Asymmetry, &[pos, neg])?;
+        set_effect(&mut plant, EffectKind::Asymmetry, &[pos, neg])?;
         tau_sf = Some(0.5 * (pos + neg));
     }
     if let Some(t) = tau_sf {
         params.tau_sf = Some(t.max(0.0));
-        set(&mut plant, EffectKind::Coulomb, &[t.max(0.0)])?;
+        set_effect(&mut plant, EffectKind::Coulomb, &[t.max(0.0)])?;
     }
     if let Some(el) = elec {
         let ci = el.coef(Coef::ROverK).map(|v| v.0).unwrap_or(f64::NAN);
@@ -1009,26 +853,23 @@ pub(crate) fn to_plant(
         let mut v: Vec<f64> = s.values[..s.kind.params().len()].to_vec();
         match s.kind {
             EffectKind::Coulomb | EffectKind::Asymmetry => continue,
-            EffectKind::Stribeck => {
-                let ex = c(Coef::StribeckExcess(si)).unwrap_or(0.0).max(0.0);
-                v[0] = params.tau_sf.unwrap_or(0.0) + ex;
+            _ => {
+                let m = s.kind.model();
+                let nc = m.linear_coefs();
+                if nc > 0 {
+                    let coefs: Vec<f64> = (0..nc)
+                        .map(|j| c(Coef::Effect(si, j)).unwrap_or(0.0))
+                        .collect();
+                    m.values_from_coefs(&coefs, &mut v, params.tau_sf.unwrap_or(0.0));
+                }
             }
-            EffectKind::Cogging | EffectKind::Imbalance => {
-                let a = c(Coef::PairSin(si)).unwrap_or(0.0);
-                let b = c(Coef::PairCos(si)).unwrap_or(0.0);
-                let amp_i = 0;
-                let ph_i = if s.kind == EffectKind::Cogging { 2 } else { 1 };
-                v[amp_i] = math::hypot(a, b);
-                v[ph_i] = math::atan2(b, a);
-            }
-            _ => {}
         }
         for x in v.iter_mut() {
             if x.is_nan() {
                 *x = 0.0;
             }
         }
-        set(&mut plant, s.kind, &v)?;
+        set_effect(&mut plant, s.kind, &v)?;
     }
     for (si, e) in plant.custom.iter_mut().enumerate() {
         for j in 0..e.def.params().len() {
@@ -1071,7 +912,8 @@ fn custom_estimates(base: &Plant, solved: &Solved) -> Vec<crate::custom::fit::Cu
     out
 }
 
-fn set(plant: &mut Plant, kind: EffectKind, values: &[f64]) -> Result<(), FitError> {
+/// Activates `kind` with `values` in `plant` (a fitted value outside its range is a model error).
+pub fn set_effect(plant: &mut Plant, kind: EffectKind, values: &[f64]) -> Result<(), FitError> {
     let e = Effect::new(kind, values)
         .map_err(|e| FitError::BadModel(alloc::format!("fitted {kind}: {e}")))?;
     plant.effects.insert(e);

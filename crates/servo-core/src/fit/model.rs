@@ -4,8 +4,7 @@
 
 use super::dataset::{Dataset, RecData, Rows};
 use super::lsq::{self, Sign};
-use super::shapes;
-use crate::effects::{EffectKind, MAX_PARAMS};
+use crate::effects::{CoefSign, EffectKind, Sample, SimRole, MAX_PARAMS};
 use crate::math;
 use crate::plant::Plant;
 use alloc::vec::Vec;
@@ -13,7 +12,8 @@ use alloc::vec::Vec;
 /// The equations servo fits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Equation {
-    /// k_t i_a = J_eq dw_m/dt + B_eq w_m + friction/N + cogging + imbalance/N (current logged) [N m].
+    /// k_t i_a = J_eq dw_m/dt + B_eq w_m + friction/N + tau_motor_side + tau_load_side/N (current
+    /// logged) [N m].
     Torque,
     /// k_drv u_in = R_eq i_a + k_e w_m with u_in seen through the driver and armature lags,
     /// written per unit k_drv (current logged) [V].
@@ -60,6 +60,22 @@ impl Slot {
             self.values[i] = v;
         }
     }
+    /// The values in parameter order.
+    pub fn param_values(&self) -> &[f64] {
+        &self.values[..self.kind.params().len()]
+    }
+    /// True when every value is set (not NaN).
+    pub fn values_set(&self) -> bool {
+        self.param_values().iter().all(|v| !v.is_nan())
+    }
+    /// True when every nonlinear parameter is finite (the regressors can be built).
+    pub fn nonlinear_set(&self) -> bool {
+        self.kind
+            .params()
+            .iter()
+            .zip(self.param_values())
+            .all(|(p, v)| !p.nonlinear || v.is_finite())
+    }
     pub fn fits(&self, key: &str) -> bool {
         self.kind
             .params()
@@ -75,13 +91,10 @@ pub enum Coef {
     JEq,
     BEq,
     TauSf,
-    /// Stribeck excess tau_s - tau_sf of slot i.
-    StribeckExcess(usize),
     AsymPos(usize),
     AsymNeg(usize),
-    /// amplitude * cos(phase) and amplitude * sin(phase) of a periodic effect (slot i).
-    PairSin(usize),
-    PairCos(usize),
+    /// Linear coefficient j of the effect of slot i ([`crate::effects::EffectModel::regressor`]).
+    Effect(usize, usize),
     /// R_eq / k_drv.
     ROverK,
     /// k_e / k_drv.
@@ -145,23 +158,29 @@ impl Config {
     pub fn has(&self, kind: EffectKind) -> bool {
         self.slot(kind).is_some()
     }
-    /// Input transformation (saturation, then dead zone) of the configuration.
+    /// Input transformation of the configuration: its input maps (effects of role
+    /// [`SimRole::InputMap`] whose values are all set) in increasing order.
     fn input_transform(&self) -> impl Fn(f64) -> f64 {
-        let lim = self
-            .slot(EffectKind::Saturation)
-            .map(|s| s.get("limit"))
-            .filter(|v| v.is_finite());
-        let dz = self
-            .slot(EffectKind::Deadzone)
-            .map(|s| s.get("width"))
-            .filter(|v| v.is_finite());
+        let mut maps: Vec<(u8, &Slot)> = self
+            .slots
+            .iter()
+            .filter_map(|s| match s.kind.sim_role() {
+                SimRole::InputMap { order } if s.values_set() => Some((order, s)),
+                _ => None,
+            })
+            .collect();
+        maps.sort_by_key(|m| m.0);
+        let maps: Vec<(&'static dyn crate::effects::EffectModel, Slot)> = maps
+            .into_iter()
+            .map(|(_, s)| (s.kind.model(), *s))
+            .collect();
         let custom = self.base.custom;
         let input = custom.has(crate::custom::ActsOn::Input);
         move |u| {
-            // Dead zone first, then saturation (as the simulator: |u_in| <= limit always), then
-            // the user's input effects (which see u only here; see crate::custom::fit).
-            let u = dz.map_or(u, |w| shapes::deadzone(u, w));
-            let u = lim.map_or(u, |l| shapes::saturation(u, l));
+            let u = maps
+                .iter()
+                .fold(u, |u, (m, s)| m.input_v(s.param_values(), u));
+            // Then the user's input effects (which see u only here; see crate::custom::fit).
             if input {
                 custom.input(&[0.0, 0.0, 0.0, 0.0, 0.0, u, 0.0])
             } else {
@@ -170,8 +189,10 @@ impl Config {
         }
     }
     fn delay_s(&self) -> f64 {
-        self.slot(EffectKind::Delay)
-            .map(|s| s.get("delay"))
+        self.slots
+            .iter()
+            .find(|s| s.kind.sim_role() == SimRole::InputDelay)
+            .map(|s| s.kind.model().input_delay_s(s.param_values()))
             .filter(|v| v.is_finite())
             .unwrap_or(0.0)
     }
@@ -265,29 +286,6 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
                     fixed,
                 });
             }
-            EffectKind::Stribeck => {
-                let ws = s.get("omega_s");
-                if !ws.is_finite() {
-                    continue;
-                }
-                let col = ds.column(rows, |r: &RecData| {
-                    r.omega_raw
-                        .iter()
-                        .map(|&w| shapes::coulomb_dir(w) * shapes::stribeck_decay(w / n, ws) / n)
-                        .collect()
-                });
-                let fixed = if s.fits("tau_s") {
-                    None
-                } else {
-                    Some(s.get("tau_s") - cfg_tau_sf(cfg))
-                };
-                terms.push(Term {
-                    col,
-                    coef: Coef::StribeckExcess(si),
-                    sign: Sign::NonNegative,
-                    fixed,
-                });
-            }
             EffectKind::Asymmetry => {
                 let pos = ds.column(rows, |r: &RecData| {
                     r.omega_raw
@@ -314,66 +312,7 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
                     fixed: if s.fit[1] { None } else { Some(s.values[1]) },
                 });
             }
-            EffectKind::Cogging | EffectKind::Imbalance => {
-                let cog = s.kind == EffectKind::Cogging;
-                let h = if cog { s.get("harmonic") } else { 1.0 };
-                if !h.is_finite() {
-                    continue;
-                }
-                let scale = if cog { 1.0 } else { 1.0 / n };
-                let angle = move |r: &RecData, k: usize| {
-                    if cog {
-                        r.theta_m_rad[k]
-                    } else {
-                        r.theta_m_rad[k] / n
-                    }
-                };
-                // Above about twice the filter cut-off the sampled sin/cos alias into the band
-                // the fit sees, while the measured response holds none of it: taper them out.
-                let fc = ds.opts.filter_hz;
-                let taper = move |r: &RecData, k: usize| {
-                    let w = if cog {
-                        r.omega_raw[k]
-                    } else {
-                        r.omega_raw[k] / n
-                    };
-                    let f = h * w.abs() / math::TAU;
-                    ((4.0 * fc - f) / (2.0 * fc)).clamp(0.0, 1.0)
-                };
-                let sin_col = ds.column(rows, |r: &RecData| {
-                    (0..r.theta_m_rad.len())
-                        .map(|k| shapes::cogging_pair(angle(r, k), h).0 * scale * taper(r, k))
-                        .collect()
-                });
-                let cos_col = ds.column(rows, |r: &RecData| {
-                    (0..r.theta_m_rad.len())
-                        .map(|k| shapes::cogging_pair(angle(r, k), h).1 * scale * taper(r, k))
-                        .collect()
-                });
-                let fit_amp = s.fits("amplitude") || s.fits("phase");
-                let (a, ph) = (s.get("amplitude"), s.get("phase"));
-                terms.push(Term {
-                    col: sin_col,
-                    coef: Coef::PairSin(si),
-                    sign: Sign::Free,
-                    fixed: if fit_amp {
-                        None
-                    } else {
-                        Some(a * math::cos(ph))
-                    },
-                });
-                terms.push(Term {
-                    col: cos_col,
-                    coef: Coef::PairCos(si),
-                    sign: Sign::Free,
-                    fixed: if fit_amp {
-                        None
-                    } else {
-                        Some(a * math::sin(ph))
-                    },
-                });
-            }
-            _ => {}
+            _ => push_effect_terms(ds, rows, cfg, si, s, &mut terms),
         }
     }
     for c in crate::custom::fit::torque_columns(ds, &cfg.base, rows) {
@@ -413,6 +352,63 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
     solve_terms(equation, rows, y, terms)
 }
 
+/// The regressors of the linear coefficients of slot `si` ([`crate::effects::EffectModel`]:
+/// `linear_coefs`, `regressor`, `coefs_fitted`, `coef_from_values`).
+fn push_effect_terms(
+    ds: &Dataset,
+    rows: &Rows,
+    cfg: &Config,
+    si: usize,
+    s: &Slot,
+    terms: &mut Vec<Term>,
+) {
+    let m = s.kind.model();
+    let nc = m.linear_coefs();
+    if nc == 0 || !s.nonlinear_set() {
+        return;
+    }
+    let v = s.param_values();
+    let fitted = m.coefs_fitted(&s.fit[..v.len()]);
+    let n = cfg.base.params.n;
+    let filter_hz = ds.opts.filter_hz;
+    let tau_sf = cfg_tau_sf(cfg);
+    for j in 0..nc {
+        let col = ds.column(rows, |r: &RecData| {
+            (0..r.theta_m_rad.len())
+                .map(|k| {
+                    let u = r.u_v.get(k).copied().unwrap_or(0.0);
+                    let x = Sample {
+                        omega_m_rad_s: r.omega_raw[k],
+                        theta_m_rad: r.theta_m_rad[k],
+                        u_v: u,
+                        u_prev_v: k
+                            .checked_sub(1)
+                            .and_then(|i| r.u_v.get(i))
+                            .copied()
+                            .unwrap_or(u),
+                        n,
+                        filter_hz,
+                    };
+                    m.regressor(v, j, &x)
+                })
+                .collect()
+        });
+        terms.push(Term {
+            col,
+            coef: Coef::Effect(si, j),
+            sign: match m.coef_sign(j) {
+                CoefSign::NonNegative => Sign::NonNegative,
+                CoefSign::Free => Sign::Free,
+            },
+            fixed: if fitted {
+                None
+            } else {
+                Some(m.coef_from_values(v, j, tau_sf))
+            },
+        });
+    }
+}
+
 fn cfg_tau_sf(cfg: &Config) -> f64 {
     cfg.slot(EffectKind::Coulomb)
         .map(|s| s.values[0])
@@ -446,7 +442,11 @@ pub fn solve_elec(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
         },
     ];
     let (mut y, mut terms) = (y, terms);
-    if cfg.slots.iter().any(|s| s.kind == EffectKind::Backlash) {
+    if cfg
+        .slots
+        .iter()
+        .any(|s| s.kind.sim_role() == SimRole::Contact)
+    {
         // The motor speed is not the measured one while it crosses the gap: no weight there.
         for (i, &u) in rows.torque_reversal.iter().enumerate() {
             if u {

@@ -5,7 +5,6 @@
 //! and works the same on open-loop and closed-loop logs (the logged u drives the model).
 
 use super::dataset::Dataset;
-use crate::effects::EffectKind;
 use crate::math;
 use crate::plant::Plant;
 use crate::sim::{PlantSim, PlantState};
@@ -106,20 +105,15 @@ pub fn prediction_cost_over(
             None => (p.k_drv * u_prev - p.k_e * w) / p.r_eq(),
         };
         let th = r.theta_m_rad[k0];
-        // With backlash and the load angle measured, start in contact on the driving flank.
-        let half_gap = plant
-            .effects
-            .value(EffectKind::Backlash, "gap")
-            .unwrap_or(0.0)
-            * 0.5;
-        // With backlash, the motor side is put on the flank it presses on, the contact spring
+        // With a gear play (a contact effect) and the load angle measured, start in contact on
+        // the driving flank.
+        let contact = plant_contact(plant);
+        let half_gap = contact.map_or(0.0, |c| c.gap_rad) * 0.5;
+        // With play, the motor side is put on the flank it presses on, the contact spring
         // compressed by the torque the load needs (load side [rad]).
         let offset_l = if half_gap > 0.0 {
             let tau_c = contact_torque_l(plant, w, r.accel_f[k0], u_prev, ds.opts.min_speed_rad_s);
-            let k_c = plant
-                .effects
-                .value(EffectKind::Backlash, "stiffness")
-                .unwrap_or(f64::INFINITY);
+            let k_c = contact.map_or(f64::INFINITY, |c| c.stiffness_nm_per_rad);
             half_gap * math::sign(tau_c) + tau_c / k_c
         } else {
             0.0
@@ -158,6 +152,12 @@ pub fn prediction_cost_over(
     Some(math::sqrt(sum / count.max(1) as f64))
 }
 
+/// The contact (gear play) of `plant`, if it has a contact effect.
+fn plant_contact(plant: &Plant) -> Option<crate::effects::Contact> {
+    let e = plant.effects.with_role(crate::effects::SimRole::Contact)?;
+    e.kind.model().contact(e.values())
+}
+
 /// The torque the contact transmits to the load [N m, load side] at a segment start, from the
 /// load body's balance: what it needs to accelerate at `accel` [rad/s^2, motor side] against its
 /// share of the viscous friction and the dry friction at speed `omega` [rad/s, motor side]. Its
@@ -166,10 +166,7 @@ pub fn prediction_cost_over(
 /// the sign of the last input `u_prev` [V] decides (torque 0).
 fn contact_torque_l(plant: &Plant, omega: f64, accel: f64, u_prev: f64, min_speed: f64) -> f64 {
     let p = &plant.params;
-    let f = plant
-        .effects
-        .value(EffectKind::Backlash, "load_inertia_fraction")
-        .unwrap_or(0.3);
+    let f = plant_contact(plant).map_or(0.3, |c| c.load_inertia_fraction);
     if omega.abs() <= min_speed {
         return math::sign(u_prev) * f64::MIN_POSITIVE;
     }

@@ -8,7 +8,7 @@
 //!   against its look-alike, one unmodelled real pole, e = -atan(w/p).
 //! * Resonance: a local peak of |measured/model| of more than 3 dB beyond its bounds.
 //! * Amplitude dependence: two estimates taken at different amplitudes whose gains differ beyond
-//!   their bounds: a linear plant has one gain, friction and backlash do not.
+//!   their bounds: a linear plant has one gain, friction and gear play do not.
 //! * No information: the frequency ranges where the coherence is below 0.5.
 
 use super::Frf;
@@ -428,12 +428,12 @@ pub fn amplitude_dependence(ests: &[AtAmplitude]) -> Option<AmplitudeDependence>
     let (a, b) = (&ests[small], &ests[large]);
     let sentence = if significant {
         format!(
-            "the gain depends on the amplitude: with u at {:.2} V rms ({}) the plant gain is {:.1} dB {} than with {:.2} V rms ({}) over {lo:.2}-{hi:.1} rad/s: a nonlinearity such as friction (small motions stick) or backlash; a linear plant has one gain",
+            "the gain depends on the amplitude: with u at {:.2} V rms ({}) the plant gain is {:.1} dB {} than with {:.2} V rms ({}) over {lo:.2}-{hi:.1} rad/s: a nonlinearity such as friction (small motions stick) or gear play; a linear plant has one gain",
             a.u_rms_v, a.name, mean.abs(), if mean < 0.0 { "lower" } else { "higher" }, b.u_rms_v, b.name
         )
     } else {
         format!(
-            "the gain does not depend on the amplitude between {:.2} and {:.2} V rms (difference {:.1} +- {:.1} dB over {lo:.2}-{hi:.1} rad/s): no sign of friction or backlash at these amplitudes",
+            "the gain does not depend on the amplitude between {:.2} and {:.2} V rms (difference {:.1} +- {:.1} dB over {lo:.2}-{hi:.1} rad/s): no sign of friction or gear play at these amplitudes",
             a.u_rms_v, b.u_rms_v, mean, bound
         )
     };

@@ -156,7 +156,7 @@ pub fn identify_friction(
     if b_eq.value < 0.0 {
         notes.push(format!(
             "B_eq came out negative ({:.3e} N m s/rad): torque falls with speed, which the viscous model cannot \
-             describe (Stribeck effect or a drifting current offset?)",
+             describe (stiction decaying with speed, or a drifting current offset?)",
             b_eq.value
         ));
     }
