@@ -197,7 +197,9 @@ fn hidden_cable_is_fitted_discovered_and_the_proposal_round_trips() {
         custom_param(&v, "cable", "k"),
         custom_param(&v, "cable", "theta0"),
     );
-    println!("fit {fits:?}; k = {k_est:.5} N m/rad (true {k}), theta0 = {th_est:.4} rad (true {theta0})");
+    println!(
+        "fit {fits:?}; k = {k_est:.5} N m/rad (true {k}), theta0 = {th_est:.4} rad (true {theta0})"
+    );
     assert!((k_est / k - 1.0).abs() < 0.15, "k {k_est}");
     assert!((th_est / theta0 - 1.0).abs() < 0.15, "theta0 {th_est}");
     assert!(fits[1] > fits[0] + 1.0, "fit {fits:?}");
@@ -239,4 +241,102 @@ fn hidden_cable_is_fitted_discovered_and_the_proposal_round_trips() {
     let fits2 = ladder_fit(&v2);
     println!("with the proposal {name}: fit {fits2:?} (true effect {true_fit:.2})");
     assert!(fits2[1] > true_fit - 0.5, "{fits2:?} vs {true_fit}");
+}
+
+const OTHERS: &str = r#"
+[custom.eccentric]
+acts_on = "sensor"
+expr = "theta_l + e * sin(theta_l)"
+description = "an encoder mounted off-centre"
+[custom.eccentric.params]
+e = { value = 0.0, min = -0.05, max = 0.05, unit = "rad" }
+
+[custom.offset]
+acts_on = "input"
+expr = "u + u_off"
+description = "a driver with an input offset"
+[custom.offset.params]
+u_off = { value = 0.0, min = -1.0, max = 1.0, unit = "V" }
+"#;
+
+/// Simulate with the user effect `name` at `value`, fit it with compare --add, recover it.
+fn round_trip(name: &str, key: &str, value: f64, tol: f64) {
+    let truth = with_custom(OTHERS, name, &[(key, value)]);
+    let c = case(&truth, OTHERS);
+    let v = compare(
+        &c,
+        &["--effects", c.effects.to_str().unwrap(), "--add", name],
+    );
+    let fits = ladder_fit(&v);
+    let est = custom_param(&v, name, key);
+    println!("{name}: {key} = {est:.5} (true {value}); fit {fits:?}");
+    assert!(
+        (est / value - 1.0).abs() < tol,
+        "{name}: {key} = {est}, true {value}"
+    );
+    assert!(fits[1] >= fits[0], "{fits:?}");
+}
+
+// Not yet: the sensor effect's simulation-error search recovers e = 0.009 for a true 0.02 on
+// this closed-loop log (see the report of issue #11); `user_input_effect_round_trips` holds.
+
+#[test]
+fn user_input_effect_round_trips() {
+    round_trip("offset", "u_off", 0.3, 0.15);
+}
+
+#[test]
+fn bad_expressions_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("m.toml");
+    ModelFile::from_plant(&base_plant()).save(&model).unwrap();
+    let bad = dir.path().join("bad.toml");
+    for (text, want) in [
+        (
+            CABLE.replace("theta_l - theta0", "theta_q - theta0"),
+            "unknown name `theta_q` at column 6",
+        ),
+        (
+            CABLE.replace("theta_l - theta0", "theta_l - thet0"),
+            "unknown name `thet0` at column 16",
+        ),
+        (
+            CABLE.replace("(theta_l - theta0)", "(theta_l - theta0"),
+            "syntax error at column 22",
+        ),
+        (CABLE.replace("k * (", "k ** ("), "syntax error at column 4"),
+        (
+            CABLE.replace("custom.cable", "custom.backlash"),
+            "catalogue",
+        ),
+    ] {
+        std::fs::write(&bad, &text).unwrap();
+        let (ok, _, err) = servo(&[
+            "compare",
+            "nolog.csv",
+            "--model",
+            model.to_str().unwrap(),
+            "--effects",
+            bad.to_str().unwrap(),
+            "--add",
+            "cable",
+        ]);
+        assert!(!ok);
+        assert!(
+            err.contains(want) && err.contains("bad.toml"),
+            "want `{want}` in: {err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    // A model file with a user effect round-trips through --save's writer.
+    let mut with = ModelFile::from_plant(&with_custom(CABLE, "cable", &[("k", 0.02)]));
+    with.save(&model).unwrap();
+    let back = ModelFile::load(&model).unwrap();
+    let (a, b) = (
+        back.custom.get("cable").unwrap(),
+        with.custom.get("cable").unwrap(),
+    );
+    assert_eq!(a.values(), b.values());
+    assert_eq!(a.def.expr(), b.def.expr());
+    with.custom = Default::default();
 }

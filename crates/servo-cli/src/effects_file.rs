@@ -88,9 +88,7 @@ pub fn compile(name: &str, raw: &RawCustom) -> anyhow::Result<&'static CustomDef
 }
 
 /// Compiles every section of a `custom` table.
-pub fn compile_all(
-    table: &BTreeMap<String, RawCustom>,
-) -> anyhow::Result<Vec<&'static CustomDef>> {
+pub fn compile_all(table: &BTreeMap<String, RawCustom>) -> anyhow::Result<Vec<&'static CustomDef>> {
     table.iter().map(|(n, r)| compile(n, r)).collect()
 }
 
@@ -271,7 +269,8 @@ theta0 = { value = 0.0, min = -1.0, max = 1.0, unit = "rad" }
         assert!(e.contains("thet0") && e.contains("column 6"), "{e}");
         let e = format!(
             "{:#}",
-            EffectsFile::parse(&GOOD.replace("(theta_l - theta0)", "(theta_l - theta0")).unwrap_err()
+            EffectsFile::parse(&GOOD.replace("(theta_l - theta0)", "(theta_l - theta0"))
+                .unwrap_err()
         );
         assert!(e.contains("syntax error at column 22"), "{e}");
         let e = format!(

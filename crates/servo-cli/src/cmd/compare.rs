@@ -743,7 +743,10 @@ impl Added {
                 if library.defs.is_empty() {
                     anyhow!("--add {spec}: {e}")
                 } else {
-                    anyhow!("--add {spec}: {e}; the effects files define {}", library.names())
+                    anyhow!(
+                        "--add {spec}: {e}; the effects files define {}",
+                        library.names()
+                    )
                 }
             });
         };
@@ -759,7 +762,11 @@ impl Added {
                 .split_once('=')
                 .ok_or_else(|| anyhow!("--add {spec}: expected key=value, got `{item}`"))?;
             let x: f64 = v.trim().parse().map_err(|_| {
-                anyhow!("--add {spec}: `{}` needs a number, got `{}`", k.trim(), v.trim())
+                anyhow!(
+                    "--add {spec}: `{}` needs a number, got `{}`",
+                    k.trim(),
+                    v.trim()
+                )
             })?;
             active
                 .set(k.trim(), x)

@@ -227,7 +227,8 @@ impl UserFindings {
                         }
                     );
                     for (n, p, det) in &j.checks {
-                        let _ = writeln!(s, "    [{}] {n}: {det}", if *p { "ok" } else { "failed" });
+                        let _ =
+                            writeln!(s, "    [{}] {n}: {det}", if *p { "ok" } else { "failed" });
                     }
                     if let Some(t) = self.proposal_toml() {
                         let _ = writeln!(s, "  as a user-defined effect:\n");

@@ -185,7 +185,12 @@ pub fn judge(
         ),
     ];
     let significant = checks.iter().all(|c| c.1);
-    let fitted = cand.plant.custom.get(effect.name()).copied().unwrap_or(effect);
+    let fitted = cand
+        .plant
+        .custom
+        .get(effect.name())
+        .copied()
+        .unwrap_or(effect);
     let params = fitted
         .def
         .params()
@@ -235,27 +240,122 @@ const fn term(
 
 /// The library of physically motivated load torques.
 pub const LIBRARY: [Term; 21] = [
-    term("theta_l", "k_theta", "N m/rad", "proportional to the load angle (a spring)"),
-    term("theta_l^3", "k_theta3", "N m/rad^3", "cubic in the load angle (a stiffening spring)"),
-    term("1", "tau0", "N m", "constant (a steady load, e.g. a counterweight)"),
-    term("omega_l * abs(omega_l)", "c_drag", "N m s^2/rad^2", "proportional to speed times |speed| (aerodynamic or fluid drag)"),
-    term("omega_l^3", "c_w3", "N m s^3/rad^3", "cubic in the load speed"),
-    term("sign(omega_l)", "tau_c", "N m", "of constant magnitude opposing the motion (dry friction)"),
-    term("sin(theta_l)", "a_s1", "N m", "periodic in the load angle, once per revolution (sin)"),
-    term("cos(theta_l)", "a_c1", "N m", "periodic in the load angle, once per revolution (cos)"),
-    term("sin(2 * theta_l)", "a_s2", "N m", "periodic in the load angle, twice per revolution (sin)"),
-    term("cos(2 * theta_l)", "a_c2", "N m", "periodic in the load angle, twice per revolution (cos)"),
-    term("sin(3 * theta_l)", "a_s3", "N m", "periodic in the load angle, three times per revolution (sin)"),
-    term("cos(3 * theta_l)", "a_c3", "N m", "periodic in the load angle, three times per revolution (cos)"),
-    term("sin(theta_m)", "m_s1", "N m", "periodic in the motor angle, once per motor revolution (sin)"),
-    term("cos(theta_m)", "m_c1", "N m", "periodic in the motor angle, once per motor revolution (cos)"),
-    term("sin(2 * theta_m)", "m_s2", "N m", "periodic in the motor angle, twice per motor revolution (sin)"),
-    term("cos(2 * theta_m)", "m_c2", "N m", "periodic in the motor angle, twice per motor revolution (cos)"),
+    term(
+        "theta_l",
+        "k_theta",
+        "N m/rad",
+        "proportional to the load angle (a spring)",
+    ),
+    term(
+        "theta_l^3",
+        "k_theta3",
+        "N m/rad^3",
+        "cubic in the load angle (a stiffening spring)",
+    ),
+    term(
+        "1",
+        "tau0",
+        "N m",
+        "constant (a steady load, e.g. a counterweight)",
+    ),
+    term(
+        "omega_l * abs(omega_l)",
+        "c_drag",
+        "N m s^2/rad^2",
+        "proportional to speed times |speed| (aerodynamic or fluid drag)",
+    ),
+    term(
+        "omega_l^3",
+        "c_w3",
+        "N m s^3/rad^3",
+        "cubic in the load speed",
+    ),
+    term(
+        "sign(omega_l)",
+        "tau_c",
+        "N m",
+        "of constant magnitude opposing the motion (dry friction)",
+    ),
+    term(
+        "sin(theta_l)",
+        "a_s1",
+        "N m",
+        "periodic in the load angle, once per revolution (sin)",
+    ),
+    term(
+        "cos(theta_l)",
+        "a_c1",
+        "N m",
+        "periodic in the load angle, once per revolution (cos)",
+    ),
+    term(
+        "sin(2 * theta_l)",
+        "a_s2",
+        "N m",
+        "periodic in the load angle, twice per revolution (sin)",
+    ),
+    term(
+        "cos(2 * theta_l)",
+        "a_c2",
+        "N m",
+        "periodic in the load angle, twice per revolution (cos)",
+    ),
+    term(
+        "sin(3 * theta_l)",
+        "a_s3",
+        "N m",
+        "periodic in the load angle, three times per revolution (sin)",
+    ),
+    term(
+        "cos(3 * theta_l)",
+        "a_c3",
+        "N m",
+        "periodic in the load angle, three times per revolution (cos)",
+    ),
+    term(
+        "sin(theta_m)",
+        "m_s1",
+        "N m",
+        "periodic in the motor angle, once per motor revolution (sin)",
+    ),
+    term(
+        "cos(theta_m)",
+        "m_c1",
+        "N m",
+        "periodic in the motor angle, once per motor revolution (cos)",
+    ),
+    term(
+        "sin(2 * theta_m)",
+        "m_s2",
+        "N m",
+        "periodic in the motor angle, twice per motor revolution (sin)",
+    ),
+    term(
+        "cos(2 * theta_m)",
+        "m_c2",
+        "N m",
+        "periodic in the motor angle, twice per motor revolution (cos)",
+    ),
     term("t", "k_t_drift", "N m/s", "growing with time (a drift)"),
-    term("i_a^2", "k_i2", "N m/A^2", "proportional to the current squared"),
+    term(
+        "i_a^2",
+        "k_i2",
+        "N m/A^2",
+        "proportional to the current squared",
+    ),
     term("u", "k_u", "N m/V", "proportional to the driver input u"),
-    term("omega_l", "b_l_extra", "N m s/rad", "proportional to the load speed (viscous)"),
-    term("abs(omega_l)", "c_abs", "N m s/rad", "proportional to |speed|"),
+    term(
+        "omega_l",
+        "b_l_extra",
+        "N m s/rad",
+        "proportional to the load speed (viscous)",
+    ),
+    term(
+        "abs(omega_l)",
+        "c_abs",
+        "N m s/rad",
+        "proportional to |speed|",
+    ),
 ];
 
 /// A discovered term with its coefficient.
@@ -301,7 +401,12 @@ impl Discovery {
             if i > 0 {
                 s.push_str(", plus one ");
             }
-            s.push_str(&alloc::format!("{}, {:.3e} {}", f.term.words, v, f.term.unit));
+            s.push_str(&alloc::format!(
+                "{}, {:.3e} {}",
+                f.term.words,
+                v,
+                f.term.unit
+            ));
         }
         s
     }
@@ -404,14 +509,19 @@ pub fn discover(
     );
     let mut active: Vec<usize> = (0..terms.len()).filter(|&j| scale[j] > 0.0).collect();
     let solve = |act: &[usize], on: &[usize]| -> Option<lsq::LsSolution> {
-        let cols: Vec<&Vec<f64>> = base_cols.iter().chain(act.iter().map(|&j| &lib[j])).collect();
+        let cols: Vec<&Vec<f64>> = base_cols
+            .iter()
+            .chain(act.iter().map(|&j| &lib[j]))
+            .collect();
         lsq_on(&cols, resid, on)
     };
     let hold_rss = |act: &[usize]| -> f64 {
         match solve(act, &fit_rows) {
             Some(s) => {
-                let cols: Vec<&Vec<f64>> =
-                    base_cols.iter().chain(act.iter().map(|&j| &lib[j])).collect();
+                let cols: Vec<&Vec<f64>> = base_cols
+                    .iter()
+                    .chain(act.iter().map(|&j| &lib[j]))
+                    .collect();
                 rss_on(&cols, &s.theta, resid, &hold_rows)
             }
             None => f64::INFINITY,
@@ -425,7 +535,9 @@ pub fn discover(
         let keep: Vec<usize> = active
             .iter()
             .enumerate()
-            .filter(|(i, &j)| (s.theta[nb + i] * scale[j]).abs() >= gates.stlsq_threshold * resid_rms)
+            .filter(|(i, &j)| {
+                (s.theta[nb + i] * scale[j]).abs() >= gates.stlsq_threshold * resid_rms
+            })
             .map(|(_, &j)| j)
             .collect();
         if keep.len() == active.len() {
@@ -465,7 +577,10 @@ pub fn discover(
         let rho = lag1(resid);
         let infl = math::sqrt((1.0 + rho) / (1.0 - rho));
         let half = fit_rows.len() / 2;
-        let (h1, h2) = (solve(&active, &fit_rows[..half]), solve(&active, &fit_rows[half..]));
+        let (h1, h2) = (
+            solve(&active, &fit_rows[..half]),
+            solve(&active, &fit_rows[half..]),
+        );
         let full = hold_rss(&active);
         let mut worst: Option<(usize, String)> = None;
         found.clear();
@@ -483,7 +598,10 @@ pub fn discover(
             let consistent = halves.0 * halves.1 > 0.0
                 && (halves.0 - halves.1).abs() <= gates.max_half_disagreement * mean.abs();
             let why = if t < gates.min_t {
-                Some(alloc::format!("statistical: |t| = {t:.1} < {}", gates.min_t))
+                Some(alloc::format!(
+                    "statistical: |t| = {t:.1} < {}",
+                    gates.min_t
+                ))
             } else if practical < gates.min_eq_drop {
                 Some(alloc::format!(
                     "practical: it lowers the held-out residual by {:.1} % (< {:.1} %)",

@@ -194,10 +194,7 @@ impl<'a> Lexer<'a> {
     fn err(&self, what: &str) -> ExprError {
         let found = match self.tok {
             Tok::End => String::from("the end of the expression"),
-            _ => alloc::format!(
-                "`{}`",
-                self.src.get(self.start..self.pos).unwrap_or("?")
-            ),
+            _ => alloc::format!("`{}`", self.src.get(self.start..self.pos).unwrap_or("?")),
         };
         ExprError::Syntax {
             column: self.column(self.start),
@@ -589,7 +586,10 @@ mod tests {
 
     #[test]
     fn evaluates_with_precedence() {
-        assert_eq!(ev("k * (theta_l - theta0)", &["k", "theta0"], &[2.0, 0.5]), 1.0);
+        assert_eq!(
+            ev("k * (theta_l - theta0)", &["k", "theta0"], &[2.0, 0.5]),
+            1.0
+        );
         assert_eq!(ev("1 + 2 * 3 ^ 2", &[], &[]), 19.0);
         assert_eq!(ev("-2^2", &[], &[]), -4.0);
         assert_eq!(ev("2^-1", &[], &[]), 0.5);
@@ -618,7 +618,10 @@ mod tests {
         let e = Program::compile("sin(u, t)", &[]).unwrap_err();
         assert!(matches!(e, ExprError::Arity { column: 1, .. }), "{e}");
         let e = Program::compile("sin + 1", &[]).unwrap_err();
-        assert!(matches!(e, ExprError::NotAFunction { column: 1, .. }), "{e}");
+        assert!(
+            matches!(e, ExprError::NotAFunction { column: 1, .. }),
+            "{e}"
+        );
         let e = Program::compile("u # 2", &[]).unwrap_err();
         assert!(matches!(e, ExprError::Syntax { column: 3, .. }), "{e}");
         assert!(Program::compile("", &[]).is_err());

@@ -287,8 +287,10 @@ fn cost(ds: &Dataset, plant: &Plant, place: ActsOn) -> f64 {
             // The linear unknowns of torque effects are estimated first; the simulation needs
             // every value.
             match ds.solve_config(&cfg) {
-                Ok(solved) => crate::fit::oe::prediction_cost(ds, &solved.plant, crate::fit::oe::Part::Fit)
-                    .unwrap_or(f64::INFINITY),
+                Ok(solved) => {
+                    crate::fit::oe::prediction_cost(ds, &solved.plant, crate::fit::oe::Part::Fit)
+                        .unwrap_or(f64::INFINITY)
+                }
                 Err(_) => f64::INFINITY,
             }
         }

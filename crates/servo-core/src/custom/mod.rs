@@ -234,7 +234,9 @@ impl CustomDef {
                 why: NameBuf::new(why),
             };
             if !is_ident(p.key) || p.key.len() > 48 {
-                return Err(bad("a key is a letter or `_` followed by letters, digits or `_`"));
+                return Err(bad(
+                    "a key is a letter or `_` followed by letters, digits or `_`",
+                ));
             }
             if SIGNALS.contains(&p.key) || p.key == "pi" {
                 return Err(bad("this is a signal's name (or pi), not a parameter"));
@@ -450,7 +452,12 @@ impl CustomSlots {
     };
     /// Activates (or replaces, by name) an effect.
     pub fn insert(&mut self, e: CustomActive) -> Result<(), CustomError> {
-        if let Some(s) = self.slots.iter_mut().flatten().find(|s| s.name() == e.name()) {
+        if let Some(s) = self
+            .slots
+            .iter_mut()
+            .flatten()
+            .find(|s| s.name() == e.name())
+        {
             *s = e;
             return Ok(());
         }

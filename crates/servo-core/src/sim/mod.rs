@@ -372,13 +372,10 @@ impl PlantSim {
                 return Err(SimError::CustomIncomplete { effect: c.name() });
             }
         }
-        let custom_torque = plant.custom.has(CustomPlace::LoadTorque)
-            || plant.custom.has(CustomPlace::MotorTorque);
-        let nonlinear = dry
-            || smooth_m.is_active()
-            || smooth_l.is_active()
-            || play.is_some()
-            || custom_torque;
+        let custom_torque =
+            plant.custom.has(CustomPlace::LoadTorque) || plant.custom.has(CustomPlace::MotorTorque);
+        let nonlinear =
+            dry || smooth_m.is_active() || smooth_l.is_active() || play.is_some() || custom_torque;
         let substeps = if nonlinear {
             (math::floor(dt_s / max_substep_s - 1e-9) as usize).saturating_add(1)
         } else {
