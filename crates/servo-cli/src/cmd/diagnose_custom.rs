@@ -204,8 +204,8 @@ impl UserFindings {
                         .unwrap_or_default(),
                     params.join(", ")
                 );
-                for (n, p, d) in j.checks.iter().filter(|c| !c.1) {
-                    let _ = writeln!(s, "      failed {n}{}: {d}", if *p { "" } else { "" });
+                for (n, _, d) in j.checks.iter().filter(|c| !c.1) {
+                    let _ = writeln!(s, "      failed {n}: {d}");
                 }
             }
         }

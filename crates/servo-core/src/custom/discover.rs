@@ -556,7 +556,7 @@ pub fn discover(
             let mut a = active.clone();
             a.remove(i);
             let cost = hold_rss(&a) / full.max(1e-300) - 1.0;
-            if best.map_or(true, |(_, c)| cost < c) {
+            if best.is_none_or(|(_, c)| cost < c) {
                 best = Some((i, cost));
             }
         }
@@ -570,10 +570,7 @@ pub fn discover(
     // Gates on each kept term.
     let mut rejected = Vec::new();
     let mut found = Vec::new();
-    loop {
-        let Some(s) = solve(&active, &fit_rows) else {
-            break;
-        };
+    while let Some(s) = solve(&active, &fit_rows) {
         let rho = lag1(resid);
         let infl = math::sqrt((1.0 + rho) / (1.0 - rho));
         let half = fit_rows.len() / 2;

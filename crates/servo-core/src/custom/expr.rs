@@ -475,12 +475,12 @@ impl Program {
 
     /// Does the program read signal `i` (index in [`SIGNALS`])?
     pub fn reads_signal(&self, i: usize) -> bool {
-        self.ops.iter().any(|o| *o == Op::Signal(i as u8))
+        self.ops.contains(&Op::Signal(i as u8))
     }
 
     /// Does the program read parameter `i`?
     pub fn reads_param(&self, i: usize) -> bool {
-        self.ops.iter().any(|o| *o == Op::Param(i as u8))
+        self.ops.contains(&Op::Param(i as u8))
     }
 
     /// Evaluates with `signals` (in [`SIGNALS`] order) and parameter values `params`. Missing

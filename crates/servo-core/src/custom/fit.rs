@@ -157,8 +157,10 @@ fn linear_params(c: &CustomActive, points: &[[f64; 7]]) -> Vec<bool> {
                 v[j] = 2.0;
                 let e2 = at(&v);
                 let scale = e0.abs() + e1.abs() + e2.abs();
-                if !(e0.is_finite() && e1.is_finite() && e2.is_finite())
-                    || !close(e2 - e1, e1 - e0, scale)
+                if !(e0.is_finite()
+                    && e1.is_finite()
+                    && e2.is_finite()
+                    && close(e2 - e1, e1 - e0, scale))
                 {
                     ok = false;
                     break 'settings;

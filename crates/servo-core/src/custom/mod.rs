@@ -26,6 +26,9 @@
 //! parameters ([`fit`]), the diagnosis tries them as candidates, and [`discover`] proposes new
 //! ones from the residual.
 
+// Errors carry their strings inline (no heap), like the catalogue's `EffectError`.
+#![allow(clippy::result_large_err)]
+
 pub mod expr;
 
 #[cfg(feature = "alloc")]
@@ -419,7 +422,7 @@ impl CustomActive {
             why: NameBuf::new("no such parameter"),
         })?;
         let p = &self.def.params[i];
-        if !value.is_nan() && !(value >= p.min && value <= p.max) {
+        if !(value.is_nan() || (value >= p.min && value <= p.max)) {
             return Err(CustomError::Value {
                 name: self.def.name,
                 key: NameBuf::new(key),

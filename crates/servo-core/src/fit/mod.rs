@@ -894,7 +894,7 @@ fn custom_estimates(base: &Plant, solved: &Solved) -> Vec<crate::custom::fit::Cu
     for (si, e) in solved.plant.custom.iter().enumerate() {
         let given = base.custom.get(e.name());
         for (j, spec) in e.def.params().iter().enumerate() {
-            let fitted = given.map_or(true, |g| g.values[j].is_nan());
+            let fitted = given.is_none_or(|g| g.values[j].is_nan());
             out.push(crate::custom::fit::CustomEstimate {
                 effect: e.name(),
                 key: spec.key,
