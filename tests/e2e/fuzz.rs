@@ -397,3 +397,65 @@ fn fuzz_matlab_path_columns() {
         ColumnMap::parse(text(b)?)
     });
 }
+
+/// The expression language of user-defined effects (issue #11): the parser and the compiled
+/// program never panic, whatever the text; a compiled program evaluates without panicking.
+#[test]
+fn fuzz_user_effect_expressions() {
+    use servo_core::custom::Program;
+    let seeds: Vec<Vec<u8>> = [
+        "k * (theta_l - theta0)",
+        "-k^2 * sin(2 * theta_m + pi / 3) + atan2(omega_l, 1e-3) * abs(i_a)",
+        "max(u, min(t, 2.5e-1)) / (1 + exp(-omega_m)) - sign(theta_l)^3",
+        "((((k))))*theta0^-1.5e+2+sqrt(ln(log10(tanh(atan(cos(tan(u)))))))",
+        "pow(theta_l, 3) - k * theta_l * abs(theta_l)",
+    ]
+    .iter()
+    .map(|s| s.as_bytes().to_vec())
+    .collect();
+    let signals = [
+        [0.3, 4.2, -1.0, -14.0, 0.5, 3.0, 1.25],
+        [0.0; 7],
+        [
+            f64::MAX,
+            -f64::MAX,
+            f64::NAN,
+            f64::INFINITY,
+            -0.0,
+            1e-300,
+            -1e300,
+        ],
+    ];
+    fuzz("user effect expression", &seeds, 6000, |bytes| {
+        let text = String::from_utf8_lossy(bytes);
+        let p = Program::compile(&text, &["k", "theta0"])?;
+        let mut acc = 0.0;
+        for s in &signals {
+            acc += p.eval(s, &[0.02, 0.4]);
+        }
+        Ok::<f64, servo_core::custom::ExprError>(acc)
+    });
+}
+
+/// Effects files (`--effects`, `[custom.NAME]` sections).
+#[test]
+fn fuzz_effects_files() {
+    let seeds = vec![br#"[custom.cable]
+acts_on = "load_torque"
+expr = "k * (theta_l - theta0)"
+[custom.cable.params]
+k = { value = 0.0, min = 0.0, unit = "N m/rad" }
+theta0 = { value = 0.0, min = -1.5, max = 1.5, unit = "rad" }
+
+[custom.ecc]
+acts_on = "sensor"
+expr = "theta_l + e * sin(theta_l)"
+[custom.ecc.params]
+e = { value = 0.0, min = -0.05, max = 0.05, unit = "rad" }
+"#
+    .to_vec()];
+    fuzz("effects file", &seeds, 3000, |bytes| {
+        let text = std::str::from_utf8(bytes).map_err(|e| e.to_string())?;
+        servo_cli::effects_file::EffectsFile::parse(text).map_err(|e| format!("{e:#}"))
+    });
+}

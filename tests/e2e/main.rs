@@ -4,6 +4,7 @@
 
 mod compare;
 mod control_loop;
+mod custom;
 mod demo;
 mod design;
 mod diagnose;

@@ -23,13 +23,14 @@ macro_rules! out {
 }
 
 pub mod cmd;
+
 pub mod fuzz;
 pub mod io;
 pub mod plant_args;
 pub mod plot;
 pub mod runner;
 
-pub use servo_io::{gains_file, model_file, reference_file};
+pub use servo_io::{effects_file, gains_file, model_file, reference_file};
 
 use clap::Parser;
 

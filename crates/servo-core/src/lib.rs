@@ -4,6 +4,8 @@
 //!   (eqs. 10, 22, 30).
 //! * [`effects`]: the effect catalogue, the one definition of every physical mechanism that the
 //!   simulator, the model fit and the diagnosis use.
+//! * [`custom`]: user-defined effects (an expression of the signals and parameters), their fit
+//!   and the discovery of a term outside the catalogue.
 //! * [`plant`]: a parameter set together with its active effects: the model of one gearmotor.
 //! * [`control`]: discrete PID, feedforward compensation, reference generators and sequences.
 //! * [`board`]: the servo board firmware core (protocol state machine over a small HAL trait).
@@ -24,6 +26,7 @@ pub mod board;
 #[cfg(feature = "alloc")]
 pub mod compare;
 pub mod control;
+pub mod custom;
 pub mod design;
 #[cfg(feature = "alloc")]
 pub mod diagnose;

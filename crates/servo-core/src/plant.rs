@@ -1,5 +1,6 @@
 //! A gearmotor model: linear parameters plus active effects.
 
+use crate::custom::CustomSlots;
 use crate::effects::{Effect, EffectKind, Effects};
 use crate::params::{ParamError, PlantParams};
 
@@ -14,6 +15,8 @@ pub struct Plant {
     pub params: PlantParams,
     /// Active effects, including the base friction.
     pub effects: Effects,
+    /// Active user-defined effects ([`crate::custom`]).
+    pub custom: CustomSlots,
 }
 
 impl Plant {
@@ -31,7 +34,11 @@ impl Plant {
                 effects.insert(c);
             }
         }
-        Ok(Plant { params, effects })
+        Ok(Plant {
+            params,
+            effects,
+            custom: CustomSlots::NONE,
+        })
     }
 
     /// The nominal Table 2 plant (viscous friction 0, no Coulomb friction).
@@ -39,6 +46,7 @@ impl Plant {
         Plant {
             params: PlantParams::TABLE2,
             effects: Effects::NONE,
+            custom: CustomSlots::NONE,
         }
     }
 

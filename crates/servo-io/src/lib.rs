@@ -18,6 +18,7 @@
 pub mod columns;
 pub mod csv_read;
 pub mod csv_write;
+pub mod effects_file;
 pub mod error;
 pub mod gains_file;
 pub mod loop_msg;

@@ -541,7 +541,14 @@ mod tests {
         m.write_protobuf(&mut pb);
         let d = Loop::decode(pb.as_slice()).unwrap();
         assert_eq!(
-            (d.time_s, d.theta_l_rad, d.u_v, d.i_a_a, d.saturated, d.ref_omega_l_rad_s),
+            (
+                d.time_s,
+                d.theta_l_rad,
+                d.u_v,
+                d.i_a_a,
+                d.saturated,
+                d.ref_omega_l_rad_s
+            ),
             (1.25, -0.125, 9.5, 0.0625, true, 12.5)
         );
     }

@@ -15,6 +15,7 @@
 //! ```
 
 use crate::error::{self as anyhow, anyhow, Context};
+use servo_core::custom::CustomSlots;
 use servo_core::effects::{Effect, EffectKind, Effects};
 use servo_core::sim::SensorConfig;
 use servo_core::{Plant, PlantParams};
@@ -27,6 +28,8 @@ struct Raw {
     params: PlantParams,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     effects: BTreeMap<String, BTreeMap<String, f64>>,
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    custom: BTreeMap<String, crate::effects_file::RawCustom>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     sensors: Option<SensorConfig>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -41,6 +44,8 @@ pub struct ModelFile {
     pub params: PlantParams,
     /// Effects listed in the file (in addition to the friction implied by the params).
     pub effects: Effects,
+    /// User-defined effects (`[custom.NAME]`, see [`crate::effects_file`]), active in the model.
+    pub custom: CustomSlots,
     pub sensors: Option<SensorConfig>,
     /// Free-form provenance (log, method, date, ...).
     pub provenance: Option<toml::Table>,
@@ -65,6 +70,7 @@ impl Default for ModelFile {
         ModelFile {
             params: PlantParams::TABLE2,
             effects: Effects::NONE,
+            custom: CustomSlots::NONE,
             sensors: None,
             provenance: None,
         }
@@ -107,9 +113,16 @@ impl ModelFile {
                 .map_err(|err| anyhow!("[effects.{name}]: {err}"))?;
             effects.insert(e);
         }
+        let mut custom = CustomSlots::NONE;
+        for def in crate::effects_file::compile_all(&raw.custom)? {
+            custom
+                .insert(def.active())
+                .map_err(|e| anyhow!("[custom.{}]: {e}", def.name()))?;
+        }
         Ok(ModelFile {
             params: raw.params,
             effects,
+            custom,
             sensors: raw.sensors,
             provenance: raw.provenance,
         })
@@ -122,6 +135,7 @@ impl ModelFile {
         for e in self.effects.iter() {
             plant.effects.insert(*e);
         }
+        plant.custom = self.custom;
         Ok(plant)
     }
 
@@ -130,6 +144,7 @@ impl ModelFile {
         ModelFile {
             params: plant.params,
             effects: plant.effects,
+            custom: plant.custom,
             sensors: None,
             provenance: None,
         }
@@ -147,9 +162,15 @@ impl ModelFile {
             let kv: BTreeMap<String, f64> = e.iter().map(|(p, v)| (p.key.to_string(), v)).collect();
             effects.insert(e.kind.name().to_string(), kv);
         }
+        let custom = self
+            .custom
+            .iter()
+            .map(|c| (c.name().to_string(), crate::effects_file::to_raw(c, None)))
+            .collect();
         Raw {
             params: self.params,
             effects,
+            custom,
             sensors: self.sensors,
             provenance: self.provenance.clone(),
         }
@@ -217,6 +238,15 @@ impl ModelFile {
                     spec.key, v, spec.doc, spec.unit
                 ));
             }
+        }
+        if !self.custom.is_empty() {
+            s.push_str("\n# user-defined effects (docs/custom-effects.md)\n");
+            let sections: Vec<(String, crate::effects_file::RawCustom)> = self
+                .custom
+                .iter()
+                .map(|c| (c.name().to_string(), crate::effects_file::to_raw(c, None)))
+                .collect();
+            s.push_str(&crate::effects_file::to_toml(&sections));
         }
         if let Some(sn) = &self.sensors {
             s.push_str(&format!(

@@ -15,11 +15,13 @@ use servo_core::compare::quantum::encoder_quantum;
 use servo_core::compare::regimes::{detect_u_limit, Regime};
 use servo_core::compare::report::{describe_window, regime_phrase, with_unit};
 use servo_core::compare::Controller;
+mod added;
 mod plots;
 mod prepare;
 mod report_json;
 mod report_text;
 
+pub use added::Added;
 pub use plots::{compare_figures_svg, stack_svg};
 use report_json::*;
 use report_text::*;
@@ -102,10 +104,15 @@ pub struct Compare {
     /// +/-10 V of the DAC).
     #[arg(long, value_name = "V")]
     pub u_limit_v: Option<f64>,
-    /// Add a catalogue effect: `name[:key=value,...]`; given values are kept, the others fitted
-    /// together with the base parameters. Repeat to add several, in order.
+    /// Add a catalogue effect, or a user-defined one from --effects: `name[:key=value,...]`;
+    /// given values are kept, the others fitted together with the base parameters. Repeat to add
+    /// several, in order.
     #[arg(long = "add", value_name = "EFFECT")]
     pub add: Vec<String>,
+    /// Effects file with user-defined effects (`[custom.NAME]` sections, docs/custom-effects.md)
+    /// that --add can name. Repeat for several files.
+    #[arg(long = "effects", value_name = "effects.toml")]
+    pub effects: Vec<PathBuf>,
     /// Write the (extended) model to this file.
     #[arg(long, value_name = "model.toml")]
     pub save: Option<PathBuf>,
@@ -196,14 +203,11 @@ impl Compare {
         if !(self.segment_s.is_finite() && self.segment_s > 0.0) {
             bail!("--segment-s must be > 0 s, got {}", self.segment_s);
         }
-        let adds: Vec<(String, EffectToFit)> = self
+        let library = crate::effects_file::load_many(&self.effects)?;
+        let adds: Vec<(String, Added)> = self
             .add
             .iter()
-            .map(|s| {
-                EffectToFit::parse(s)
-                    .map(|e| (s.clone(), e))
-                    .map_err(|e| anyhow!("--add {s}: {e}"))
-            })
+            .map(|s| Added::parse(s, &library).map(|e| (s.clone(), e)))
             .collect::<anyhow::Result<_>>()?;
         let opts = CompareOptions::default();
         let mut logs = Vec::new();
@@ -270,13 +274,19 @@ impl Compare {
         let mut current = first;
         let records: Vec<Record> = logs.iter().map(|l| l.record.clone()).collect();
         for (spec, eff) in &adds {
-            let fit = fit_model(
-                &records,
-                &plant,
-                std::slice::from_ref(eff),
-                &FitOptions::default(),
-            )
-            .map_err(|e| anyhow!("--add {spec}: fitting the effect to the logs failed: {e}"))?;
+            let mut start = plant;
+            let catalogue: Vec<EffectToFit> = match eff {
+                Added::Catalogue(e) => vec![*e],
+                Added::Custom(c) => {
+                    start
+                        .custom
+                        .insert(*c)
+                        .map_err(|e| anyhow!("--add {spec}: {e}"))?;
+                    Vec::new()
+                }
+            };
+            let fit = fit_model(&records, &start, &catalogue, &FitOptions::default())
+                .map_err(|e| anyhow!("--add {spec}: fitting the effect to the logs failed: {e}"))?;
             plant = fit.plant;
             let cmp = self.compare_all(&plant, &logs, &modes, &opts)?;
             let fitted = fit
@@ -289,10 +299,17 @@ impl Compare {
                         "std_err": p.std_err, "fitted": p.fitted,
                     })
                 })
+                .chain(fit.custom.iter().map(|p| {
+                    json!({
+                        "effect": p.effect,
+                        "key": p.key, "unit": p.unit, "value": p.value,
+                        "std_err": p.std_err, "fitted": p.fitted,
+                    })
+                }))
                 .collect();
             ladder.push(LadderStep {
-                label: format!("+ {}", eff.effect.kind.name()),
-                effect: Some(eff.effect.kind.name()),
+                label: format!("+ {}", eff.name()),
+                effect: Some(eff.name()),
                 cmp_fit: pooled(&cmp),
                 fitted,
             });

@@ -60,6 +60,21 @@ pub struct Diagnose {
     /// Cut-off of the zero-phase filter applied before differentiating [Hz].
     #[arg(long, default_value_t = 25.0)]
     pub filter_hz: f64,
+    /// Effects file with user-defined effects (`[custom.NAME]`, docs/custom-effects.md): each one
+    /// the model lacks joins the candidates. Repeat for several files.
+    #[arg(long = "effects", value_name = "effects.toml")]
+    pub effects: Vec<PathBuf>,
+    /// When no catalogue or user effect explains the residual, search a library of physical
+    /// terms for the smallest set that does, and propose it as a user-defined effect.
+    #[arg(long)]
+    pub discover: bool,
+    /// Write the discovered effect (with --discover) to this effects file, ready for
+    /// `--effects FILE --add NAME`.
+    #[arg(long, value_name = "found.toml")]
+    pub save_effect: Option<PathBuf>,
+    /// Name of the discovered effect.
+    #[arg(long, default_value = "found", value_name = "NAME")]
+    pub effect_name: String,
 }
 
 impl Diagnose {
@@ -95,6 +110,10 @@ impl Diagnose {
             })?;
             opts.candidates.push(k);
         }
+        if self.save_effect.is_some() && !self.discover {
+            anyhow::bail!("--save-effect writes what --discover finds: add --discover");
+        }
+        let library = crate::effects_file::load_many(&self.effects)?;
         let steps = if self.auto { self.max_steps } else { 0 };
         let (ladder, diags) = diagnose::diagnose_loop(&records, &model, &opts, steps)
             .map_err(|e| anyhow!("diagnosis failed: {e}"))?;
@@ -102,6 +121,19 @@ impl Diagnose {
             .first()
             .ok_or_else(|| anyhow!("diagnosis produced no result"))?;
         let last = diags.last().unwrap_or(first);
+        let final_plant = ladder.last().map(|r| r.plant).unwrap_or(model);
+        let user = crate::cmd::diagnose_custom::run(
+            &records,
+            &final_plant,
+            &opts,
+            &library,
+            last,
+            self.discover,
+            &self.effect_name,
+        )?;
+        if let Some(path) = &self.save_effect {
+            user.save_effect(path)?;
+        }
         if self.json {
             let mut v = json!({
                 "schema": "servo.diagnose/1",
@@ -113,6 +145,7 @@ impl Diagnose {
                 "verdict": last.verdict,
                 "base": base_json(first),
             });
+            user.add_json(&mut v);
             if self.auto {
                 v["ladder"] = Value::Array(ladder.iter().map(rung_json).collect());
                 v["first_ranking"] =
@@ -121,6 +154,10 @@ impl Diagnose {
             outln!("{}", serde_json::to_string_pretty(&v)?);
         } else {
             out!("{}", text_report(first, &ladder, &diags, self.auto));
+            out!("{}", user.text());
+            if let Some(p) = &self.save_effect {
+                outln!("discovered effect written to {}", p.display());
+            }
         }
         if let Some(path) = &self.report {
             let html = html_report(&records, &model, first, &ladder, &diags, &opts, &self.logs)?;

@@ -5,6 +5,7 @@ pub mod compare;
 pub mod demo;
 pub mod design;
 pub mod diagnose;
+pub mod diagnose_custom;
 pub mod export;
 pub mod frf;
 pub mod identify;

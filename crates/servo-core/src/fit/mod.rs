@@ -187,6 +187,8 @@ pub struct FitResult {
     pub params: Vec<ParamEstimate>,
     /// Equation residuals before and after.
     pub equations: Vec<EquationFit>,
+    /// Parameters of the user-defined effects ([`crate::custom`]).
+    pub custom: Vec<crate::custom::fit::CustomEstimate>,
 }
 
 /// Fits `base` extended with `effects` to `records`.
@@ -349,7 +351,11 @@ impl Solved {
 impl Dataset {
     /// Fits `base` extended with `effects` (see [`fit_model`]).
     pub fn fit(&self, base: &Plant, effects: &[EffectToFit]) -> Result<FitResult, FitError> {
-        let before = self.solve_config(&self.config(base, &[], false))?;
+        let before = self.solve_config(&self.config(
+            &crate::custom::fit::without_unknown(base),
+            &[],
+            false,
+        ))?;
         let solved = self.fit_config(base, effects)?;
         let mut equations = Vec::new();
         for (b, a) in [
@@ -366,10 +372,12 @@ impl Dataset {
                 });
             }
         }
+        let custom = custom_estimates(base, &solved);
         Ok(FitResult {
             plant: solved.plant,
             params: self.estimates(&solved),
             equations,
+            custom,
         })
     }
 
@@ -455,6 +463,9 @@ impl Dataset {
     /// Fits a configuration: nonlinear parameters by search (coordinate-wise when several), the
     /// linear ones by least squares.
     pub fn fit_config(&self, base: &Plant, effects: &[EffectToFit]) -> Result<Solved, FitError> {
+        let mut with_custom = *base;
+        crate::custom::fit::search_nonlinear(self, &mut with_custom)?;
+        let base = &with_custom;
         let mut cfg = self.config(base, effects, self.opts.refit_base);
         let searched: Vec<(usize, &'static str)> = cfg
             .slots
@@ -893,11 +904,45 @@ pub fn to_plant(
         }
         set_effect(&mut plant, s.kind, &v)?;
     }
+    for (si, e) in plant.custom.iter_mut().enumerate() {
+        for j in 0..e.def.params().len() {
+            if e.values[j].is_nan() {
+                let spec = &e.def.params()[j];
+                let v = c(Coef::Custom(si, j)).unwrap_or(0.0);
+                e.values[j] = v.clamp(spec.min, spec.max);
+            }
+        }
+    }
     plant.params = params;
     params
         .validate()
         .map_err(|e| FitError::BadModel(alloc::format!("fitted parameters: {e}")))?;
     Ok(plant)
+}
+
+/// The parameters of the user effects of a solved configuration: those unknown in `base` are
+/// marked fitted, with the least-squares standard error of the linear ones.
+fn custom_estimates(base: &Plant, solved: &Solved) -> Vec<crate::custom::fit::CustomEstimate> {
+    let mut out = Vec::new();
+    for (si, e) in solved.plant.custom.iter().enumerate() {
+        let given = base.custom.get(e.name());
+        for (j, spec) in e.def.params().iter().enumerate() {
+            let fitted = given.is_none_or(|g| g.values[j].is_nan());
+            out.push(crate::custom::fit::CustomEstimate {
+                effect: e.name(),
+                key: spec.key,
+                unit: spec.unit,
+                value: e.values[j],
+                std_err: solved
+                    .mech
+                    .coef(Coef::Custom(si, j))
+                    .map(|c| c.1)
+                    .filter(|v| *v > 0.0),
+                fitted,
+            });
+        }
+    }
+    out
 }
 
 /// Activates `kind` with `values` in `plant` (a fitted value outside its range is a model error).

@@ -99,6 +99,8 @@ pub enum Coef {
     ROverK,
     /// k_e / k_drv.
     KeOverK,
+    /// Parameter `.1` of user effect `.0` (index among the plant's user effects).
+    Custom(usize, usize),
 }
 
 /// The fit of one equation.
@@ -172,9 +174,18 @@ impl Config {
             .into_iter()
             .map(|(_, s)| (s.kind.model(), *s))
             .collect();
+        let custom = self.base.custom;
+        let input = custom.has(crate::custom::ActsOn::Input);
         move |u| {
-            maps.iter()
-                .fold(u, |u, (m, s)| m.input_v(s.param_values(), u))
+            let u = maps
+                .iter()
+                .fold(u, |u, (m, s)| m.input_v(s.param_values(), u));
+            // Then the user's input effects (which see u only here; see crate::custom::fit).
+            if input {
+                custom.input(&[0.0, 0.0, 0.0, 0.0, 0.0, u, 0.0])
+            } else {
+                u
+            }
         }
     }
     fn delay_s(&self) -> f64 {
@@ -303,6 +314,18 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
             }
             _ => push_effect_terms(ds, rows, cfg, si, s, &mut terms),
         }
+    }
+    for c in crate::custom::fit::torque_columns(ds, &cfg.base, rows) {
+        terms.push(Term {
+            col: c.col,
+            coef: Coef::Custom(c.slot, c.param.unwrap_or(usize::MAX)),
+            sign: if c.non_negative {
+                Sign::NonNegative
+            } else {
+                Sign::Free
+            },
+            fixed: if c.param.is_none() { Some(1.0) } else { None },
+        });
     }
     let (equation, y) = if ds.has_current {
         (

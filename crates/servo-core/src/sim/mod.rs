@@ -56,6 +56,7 @@
 
 pub mod sensors;
 
+use crate::custom::{ActsOn as CustomPlace, CustomSlots};
 use crate::effects::torque::{Friction, InputNonlinearity};
 use crate::effects::{Contact, Effect, EffectKind, Signals, SimRole};
 use crate::linalg::expm;
@@ -97,6 +98,9 @@ pub enum SimError {
     },
     #[error("sample period {dt_s} s needs more than {max} internal sub-steps of {h_s} s")]
     TooManySubsteps { dt_s: f64, h_s: f64, max: usize },
+    /// A user-defined effect ([`crate::custom`]) has a parameter without a value.
+    #[error("user effect `{effect}`: a parameter has no value")]
+    CustomIncomplete { effect: &'static str },
     /// The simulated state left any physical range (non-finite, or absurd angle or speed): the
     /// model or an effect makes it diverge.
     #[error("the simulation diverged at t = {time_s} s (theta_l = {theta_l_rad:e} rad, omega_m = {omega_m_rad_s:e} rad/s): check the plant's parameters and effects")]
@@ -286,6 +290,9 @@ pub struct PlantSim {
     history: [f64; DELAY_CAPACITY],
     head: usize,
     state: PlantState,
+    /// User-defined effects ([`crate::custom`]), and whether any acts as a torque.
+    custom: CustomSlots,
+    custom_torque: bool,
 }
 
 impl PlantSim {
@@ -370,7 +377,15 @@ impl PlantSim {
             }
             None => None,
         };
-        let nonlinear = dry || smooth_m.is_active() || smooth_l.is_active() || play.is_some();
+        for c in plant.custom.iter() {
+            if !c.is_complete() {
+                return Err(SimError::CustomIncomplete { effect: c.name() });
+            }
+        }
+        let custom_torque =
+            plant.custom.has(CustomPlace::LoadTorque) || plant.custom.has(CustomPlace::MotorTorque);
+        let nonlinear =
+            dry || smooth_m.is_active() || smooth_l.is_active() || play.is_some() || custom_torque;
         let substeps = if nonlinear {
             (math::floor(dt_s / max_substep_s - 1e-9) as usize).saturating_add(1)
         } else {
@@ -438,7 +453,7 @@ impl PlantSim {
                 disc[li][mode] = discretise(plant, frac, play.as_ref(), mode, len);
             }
         }
-        let coarse_stuck = (dry && play.is_none() && substeps > 1)
+        let coarse_stuck = (dry && play.is_none() && substeps > 1 && !custom_torque)
             .then(|| discretise(plant, frac, None, STUCK, dt_s));
         let state = PlantState {
             stuck: dry,
@@ -470,6 +485,8 @@ impl PlantSim {
             history: [0.0; DELAY_CAPACITY],
             head: 0,
             state,
+            custom: plant.custom,
+            custom_torque,
         })
     }
 
@@ -504,6 +521,16 @@ impl PlantSim {
             state.omega_l_rad_s,
             state.theta_l_rad,
         ];
+        if self.custom.has(CustomPlace::Sensor) {
+            // The state given holds the angle as measured: start from the true one.
+            let sig = custom_signals(&self.signals(&self.x));
+            let th = self.custom.sensor_inverse(state.theta_l_rad, &sig);
+            if self.play.is_some() {
+                self.x[5] = th;
+            } else {
+                self.x[3] = th * self.n;
+            }
+        }
         if self.play.is_none() {
             self.x[4] = self.x[2] / self.n;
             self.x[5] = self.x[3] / self.n;
@@ -529,11 +556,20 @@ impl PlantSim {
     /// Applies driver input `u_v` [V] for one control period (zero-order hold) and returns the
     /// state at the end of it. A non-finite `u_v` is treated as 0 V.
     pub fn step(&mut self, u_v: f64) -> &PlantState {
-        let u = if u_v.is_finite() {
+        let mut u = if u_v.is_finite() {
             self.input.apply(u_v)
         } else {
             0.0
         };
+        if self.custom.has(CustomPlace::Input) {
+            let mut sig = custom_signals(&self.signals(&self.x));
+            sig[5] = u;
+            sig[6] = self.steps as f64 * self.dt_s;
+            u = self.custom.input(&sig);
+            if !u.is_finite() {
+                u = 0.0;
+            }
+        }
         // Delay line: history[head] is the newest input.
         self.head = (self.head + 1) % DELAY_CAPACITY;
         self.history[self.head] = u;
@@ -597,8 +633,9 @@ impl PlantSim {
         let x = &self.x;
         let b_eq = self.plant.b_eq();
         let sig = self.signals(x);
-        let smooth_m = self.smooth_m.at(&sig);
-        let smooth_l = self.smooth_l.at(&sig);
+        let (cm, cl) = self.custom_torques(&sig);
+        let smooth_m = self.smooth_m.at(&sig) + cm;
+        let smooth_l = self.smooth_l.at(&sig) + cl;
         let contact = self.contact_torque_l(x);
         let friction = if !self.dry {
             0.0
@@ -626,10 +663,16 @@ impl PlantSim {
 
     fn publish(&mut self, time_s: f64) {
         let x = &self.x;
-        let (omega_l, theta_l) = match self.play {
+        let (omega_l, mut theta_l) = match self.play {
             Some(_) => (x[4], x[5]),
             None => (x[2] / self.n, x[3] / self.n),
         };
+        if self.custom.has(CustomPlace::Sensor) {
+            // With a user sensor effect the published load angle is the one measured.
+            let mut sig = custom_signals(&self.signals(x));
+            sig[6] = time_s;
+            theta_l = self.custom.sensor(&sig);
+        }
         self.state = PlantState {
             time_s,
             u_in_v: self.u_in_v,
@@ -684,13 +727,28 @@ impl PlantSim {
     /// angles are unchanged (when every effect allows it).
     #[inline]
     fn smooth_cached(&mut self, x: &[f64; NS]) -> (f64, f64) {
-        if !self.smooth_m.is_active() && !self.smooth_l.is_active() {
+        if !self.smooth_m.is_active() && !self.smooth_l.is_active() && !self.custom_torque {
             return (0.0, 0.0);
         }
         let sig = self.signals(x);
-        let tau_m = self.smooth_m.cached(x[3], &sig);
-        let tau_l = self.smooth_l.cached(sig.theta_l_rad, &sig);
+        let (cm, cl) = self.custom_torques(&sig);
+        let tau_m = self.smooth_m.cached(x[3], &sig) + cm;
+        let tau_l = self.smooth_l.cached(sig.theta_l_rad, &sig) + cl;
         (tau_m, tau_l)
+    }
+
+    /// User-defined (motor side, load side) torques [N m] at `sig`, evaluated every time (they
+    /// may depend on any signal).
+    #[inline]
+    fn custom_torques(&self, sig: &Signals) -> (f64, f64) {
+        if !self.custom_torque {
+            return (0.0, 0.0);
+        }
+        let s = custom_signals(sig);
+        (
+            self.custom.torque(CustomPlace::MotorTorque, &s),
+            self.custom.torque(CustomPlace::LoadTorque, &s),
+        )
     }
 
     /// Index of the speed of the body that carries the dry friction (omega_m rigid, omega_l with
@@ -718,8 +776,9 @@ impl PlantSim {
     /// tau_m) - tau_l; with play contact torque - tau_l (tau_m, tau_l: the smooth torques).
     fn drive_torque_l(&self, x: &[f64; NS]) -> f64 {
         let sig = self.signals(x);
-        let tau_l = self.smooth_l.at(&sig);
-        let tau_m = self.smooth_m.at(&sig);
+        let (cm, cl) = self.custom_torques(&sig);
+        let tau_l = self.smooth_l.at(&sig) + cl;
+        let tau_m = self.smooth_m.at(&sig) + cm;
         self.drive_torque_l_with(x, tau_m, tau_l)
     }
 
@@ -848,6 +907,20 @@ impl PlantSim {
         }
         next
     }
+}
+
+/// The signals of user-defined effects, in [`crate::custom::SIGNALS`] order.
+#[inline]
+fn custom_signals(s: &Signals) -> [f64; 7] {
+    [
+        s.theta_l_rad,
+        s.theta_m_rad,
+        s.omega_l_rad_s,
+        s.omega_m_rad_s,
+        s.i_a_a,
+        s.u_v,
+        s.t_s,
+    ]
 }
 
 /// x+ = Phi x + G0 inp over the first `N` states (4 rigid, 6 with play).

@@ -173,6 +173,22 @@ pub(super) fn to_json(
         "max_error": finite(hf.max_abs_error),
         "signals": pooled_figs.iter().map(|(k, f)| figures_json(*k, f)).collect::<Vec<_>>(),
         "effects": effects,
+        "custom": c.plant.custom.iter().map(|e| {
+            let params: serde_json::Map<String, Value> = e
+                .def
+                .params()
+                .iter()
+                .zip(e.values())
+                .map(|(p, v)| (p.key.to_string(), json!(v)))
+                .collect();
+            let units: serde_json::Map<String, Value> = e
+                .def
+                .params()
+                .iter()
+                .map(|p| (p.key.to_string(), json!(p.unit)))
+                .collect();
+            json!({"effect": e.name(), "acts_on": e.def.acts_on().name(), "expr": e.def.expr(), "params": params, "units": units})
+        }).collect::<Vec<_>>(),
         "base": base,
         "ladder": ladder_json,
         "regimes": pooled_regimes(c, hk),

@@ -113,6 +113,23 @@ pub(super) fn print_text(
                 .collect();
             outln!("  {:<11} {}", e.kind.name(), kv.join(", "));
         }
+        for e in c.plant.custom.iter() {
+            let kv: Vec<String> = e
+                .def
+                .params()
+                .iter()
+                .zip(e.values())
+                .map(|(p, v)| format!("{} = {:.4e} {}", p.key, v, p.unit))
+                .collect();
+            outln!(
+                "  {:<11} {} = {}: {} (user-defined, {})",
+                e.name(),
+                e.def.acts_on().name(),
+                e.def.expr(),
+                kv.join(", "),
+                e.def.acts_on().unit()
+            );
+        }
         outln!(
             "  base        J_eq = {:.4e} kg m^2, R_eq = {:.4} ohm, k_drv = {:.4}",
             c.plant.params.j_eq(),

@@ -1,0 +1,250 @@
+//! The user-defined part of `servo diagnose`: user effects from `--effects` as candidates, and
+//! `--discover` (see `servo_core::custom::discover`).
+
+use crate::effects_file::{self, EffectsFile};
+use anyhow::{anyhow, Context};
+use serde_json::{json, Value};
+use servo_core::custom::discover::{self, Discovery, Gates, Judged};
+use servo_core::custom::CustomActive;
+use servo_core::diagnose::{DiagnoseOptions, Diagnosis, Status};
+use servo_core::fit::Dataset;
+use servo_core::record::Record;
+use servo_core::Plant;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// What the user-defined candidates and the discovery found.
+pub struct UserFindings {
+    pub candidates: Vec<Judged>,
+    /// Why discovery did not run, when asked and not run.
+    pub discovery_skipped: Option<String>,
+    pub discovery: Option<Discovery>,
+}
+
+/// Judges every user effect of `library` that `model` lacks, then (with `discover`) runs the
+/// discovery when neither a catalogue effect (`last` has no winner) nor a user effect explains
+/// the residual.
+pub fn run(
+    records: &[Record],
+    model: &Plant,
+    opts: &DiagnoseOptions,
+    library: &EffectsFile,
+    last: &Diagnosis,
+    discover_on: bool,
+    name: &str,
+) -> anyhow::Result<UserFindings> {
+    let mut out = UserFindings {
+        candidates: Vec::new(),
+        discovery_skipped: None,
+        discovery: None,
+    };
+    let todo: Vec<CustomActive> = library
+        .defs
+        .iter()
+        .filter(|d| model.custom.get(d.name()).is_none())
+        .map(|d| {
+            let mut a = d.active();
+            for v in a.values.iter_mut() {
+                *v = f64::NAN;
+            }
+            a
+        })
+        .collect();
+    if todo.is_empty() && !discover_on {
+        return Ok(out);
+    }
+    let gates = Gates {
+        min_bic_gain: opts.min_bic_gain,
+        min_eq_drop: opts.min_eq_drop,
+        min_oe_drop: opts.min_oe_drop,
+        ..Gates::default()
+    };
+    let ds = Dataset::new(records, &model.params, &opts.fit)
+        .map_err(|e| anyhow!("preparing the logs: {e}"))?;
+    let base = ds
+        .fit_config(model, &[])
+        .map_err(|e| anyhow!("fitting the model: {e}"))?;
+    let base_oe = discover::reference_oe(&ds, &base);
+    for a in todo {
+        let j = discover::judge(&ds, model, &base, base_oe, a, &gates)
+            .with_context(|| format!("fitting user effect `{}`", a.name()))?;
+        out.candidates.push(j);
+    }
+    out.candidates.sort_by(|a, b| {
+        b.significant
+            .cmp(&a.significant)
+            .then(b.eq_drop.total_cmp(&a.eq_drop))
+    });
+    if discover_on {
+        if name.is_empty() || library.get(name).is_some() || model.custom.get(name).is_some() {
+            return Err(anyhow!(
+                "--effect-name `{name}`: choose a name no user effect has"
+            ));
+        }
+        let explained_by_user = out.candidates.iter().find(|c| c.significant);
+        if let Some(w) = last.winner() {
+            out.discovery_skipped = Some(format!(
+                "the catalogue effect `{}` explains the residual: add it first (`--auto`, or compare --add {})",
+                w.effect.name(),
+                w.effect.name()
+            ));
+        } else if let Some(u) = explained_by_user {
+            out.discovery_skipped = Some(format!(
+                "the user effect `{}` explains the residual: add it first (compare --effects FILE --add {})",
+                u.name, u.name
+            ));
+        } else if last.status == Status::Complete {
+            out.discovery_skipped = Some(String::from(
+                "nothing is left above the noise in any balance: there is nothing to discover",
+            ));
+        } else {
+            out.discovery = Some(
+                discover::discover(&ds, model, &base, base_oe, name, &gates)
+                    .map_err(|e| anyhow!("discovery failed: {e}"))?,
+            );
+        }
+    }
+    Ok(out)
+}
+
+fn judged_json(j: &Judged) -> Value {
+    json!({
+        "effect": j.name,
+        "significant": j.significant,
+        "equation": j.equation.name(),
+        "bic_gain": j.bic_gain,
+        "error_drop_pct": 100.0 * j.eq_drop,
+        "oe_drop_pct": j.oe_drop.map(|d| 100.0 * d),
+        "params": j.params.iter().map(|(k, u, v)| json!({"key": k, "unit": u, "value": v})).collect::<Vec<_>>(),
+        "checks": j.checks.iter().map(|(n, p, d)| json!({"check": n, "passed": p, "detail": d})).collect::<Vec<_>>(),
+    })
+}
+
+impl UserFindings {
+    /// The discovered effect as an effects-file section.
+    pub fn proposal_toml(&self) -> Option<String> {
+        let d = self.discovery.as_ref()?;
+        let (a, _) = d.proposal.as_ref()?;
+        Some(effects_file::to_toml(&[(
+            a.name().to_string(),
+            effects_file::to_raw(a, Some(d.words())),
+        )]))
+    }
+
+    /// Writes the discovered effect to `path`; an error when nothing was discovered.
+    pub fn save_effect(&self, path: &Path) -> anyhow::Result<()> {
+        let text = self.proposal_toml().ok_or_else(|| {
+            anyhow!(
+                "--save-effect {}: nothing discovered to write ({})",
+                path.display(),
+                self.discovery_skipped
+                    .clone()
+                    .unwrap_or_else(|| String::from("no term passed the gates"))
+            )
+        })?;
+        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+    }
+
+    /// Adds `custom_candidates` and `discovery` to the diagnosis JSON.
+    pub fn add_json(&self, v: &mut Value) {
+        v["custom_candidates"] = Value::Array(self.candidates.iter().map(judged_json).collect());
+        if let Some(why) = &self.discovery_skipped {
+            v["discovery"] = json!({ "ran": false, "why": why });
+        }
+        if let Some(d) = &self.discovery {
+            let fitted = |key: &str| {
+                d.proposal
+                    .as_ref()
+                    .and_then(|(a, _)| a.get(key))
+                    .unwrap_or(f64::NAN)
+            };
+            v["discovery"] = json!({
+                "ran": true,
+                "equation": d.equation.name(),
+                "name": d.proposal.as_ref().map(|(a, _)| a.name()),
+                "expr": d.proposal.as_ref().map(|(a, _)| a.def.expr()),
+                "words": d.words(),
+                "significant": d.proposal.as_ref().map(|(_, j)| j.significant),
+                "judged": d.proposal.as_ref().map(|(_, j)| judged_json(j)),
+                "terms": d.terms.iter().map(|f| json!({
+                    "signal_term": f.term.expr, "key": f.term.key, "unit": f.term.unit,
+                    "words": f.term.words, "value": fitted(f.term.key), "regression_value": f.value,
+                    "t": f.t, "practical_pct": 100.0 * f.practical, "halves": [f.halves.0, f.halves.1],
+                })).collect::<Vec<_>>(),
+                "rejected": d.rejected.iter().map(|(t, why)| json!({"signal_term": t.expr, "why": why})).collect::<Vec<_>>(),
+                "toml": self.proposal_toml(),
+            });
+        }
+    }
+
+    /// The text section (empty when there is nothing to say).
+    pub fn text(&self) -> String {
+        let mut s = String::new();
+        if !self.candidates.is_empty() {
+            let _ = writeln!(s, "\nuser-defined effects:");
+            for j in &self.candidates {
+                let params: Vec<String> = j
+                    .params
+                    .iter()
+                    .map(|(k, u, v)| format!("{k} = {v:.4e} {u}"))
+                    .collect();
+                let _ = writeln!(
+                    s,
+                    "  {:<12} {} ({} residual -{:.1} % held out{}): {}",
+                    j.name,
+                    if j.significant {
+                        "significant"
+                    } else {
+                        "not significant"
+                    },
+                    j.equation.name(),
+                    100.0 * j.eq_drop,
+                    j.oe_drop
+                        .map(|d| format!(", simulation -{:.1} %", 100.0 * d))
+                        .unwrap_or_default(),
+                    params.join(", ")
+                );
+                for (n, _, d) in j.checks.iter().filter(|c| !c.1) {
+                    let _ = writeln!(s, "      failed {n}: {d}");
+                }
+            }
+        }
+        if let Some(why) = &self.discovery_skipped {
+            let _ = writeln!(s, "\ndiscovery not run: {why}");
+        }
+        if let Some(d) = &self.discovery {
+            let _ = writeln!(s, "\ndiscovery ({}):", d.equation.name());
+            match &d.proposal {
+                Some((_, j)) => {
+                    let _ = writeln!(
+                        s,
+                        "  proposed: {} ({})",
+                        d.words(),
+                        if j.significant {
+                            "passes every guard"
+                        } else {
+                            "fails a guard: treat with care"
+                        }
+                    );
+                    for (n, p, det) in &j.checks {
+                        let _ =
+                            writeln!(s, "    [{}] {n}: {det}", if *p { "ok" } else { "failed" });
+                    }
+                    if let Some(t) = self.proposal_toml() {
+                        let _ = writeln!(s, "  as a user-defined effect:\n");
+                        for l in t.lines() {
+                            let _ = writeln!(s, "    {l}");
+                        }
+                    }
+                }
+                None => {
+                    let _ = writeln!(s, "  no term of the library explains the residual");
+                }
+            }
+            for (t, why) in &d.rejected {
+                let _ = writeln!(s, "  rejected `{}`: {why}", t.expr);
+            }
+        }
+        s
+    }
+}
