@@ -128,7 +128,7 @@ fn ladder_fit(v: &Value) -> Vec<f64> {
         .as_array()
         .unwrap()
         .iter()
-        .map(|s| s["fit_percent"].as_f64().unwrap())
+        .map(|s| s["fit_pct"].as_f64().unwrap())
         .collect()
 }
 
