@@ -39,7 +39,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         let meas = sensors.measure(sim.state());
         rec.time_s.push(k as f64 * dt);
-        (th.push(meas.theta_l_rad), ia.push(meas.i_a_a), uv.push(u));
+        th.push(meas.theta_l_rad);
+        ia.push(meas.i_a_a);
+        uv.push(u);
         sim.step(u);
     }
     (rec.theta_l_rad, rec.i_a_a, rec.u_v) = (Some(th), Some(ia), Some(uv));

@@ -301,41 +301,6 @@ pub fn loop_from_t(t: &Frf) -> Frf {
     out
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn increments_then_integrator_is_identity_in_frequency() {
-        let ts = 1e-3;
-        let w = 30.0;
-        let d = Complex::new(1.0, 0.0) - c_expj(-w * ts);
-        assert!((integrator(w, ts) * d - Complex::new(1.0, 0.0)).norm() < 1e-12);
-        assert_eq!(increments(&[1.0, 3.0, 6.0]), [0.0, 2.0, 3.0]);
-    }
-
-    #[test]
-    fn leakage_allowance_is_the_gap_to_the_half_length_estimate() {
-        let frf = |freq_hz: Vec<f64>, h: Vec<Complex<f64>>| Frf {
-            coherence: alloc::vec![1.0; h.len()],
-            rel_radius: alloc::vec![0.01; h.len()],
-            freq_hz,
-            h,
-            averages: 16.0,
-            confidence: 0.95,
-        };
-        let one = Complex::new(1.0, 0.0);
-        let mut full = frf(alloc::vec![1.0, 2.0, 3.0, 4.0], alloc::vec![one; 4]);
-        // Half-length bins at 2 and 4 Hz; 3 Hz interpolated between 1.0 and 1.2.
-        let half = frf(alloc::vec![2.0, 4.0], alloc::vec![one, one * 1.2]);
-        allow_leakage(&mut full, &half);
-        assert_eq!(full.rel_radius[0], 0.01); // below the half grid: untouched
-        assert!((full.rel_radius[1] - 0.01).abs() < 1e-12);
-        assert!((full.rel_radius[2] - 0.11).abs() < 1e-12);
-        assert!((full.rel_radius[3] - 0.21).abs() < 1e-12);
-    }
-}
-
 /// One log's signals for [`estimate`]: the position reference [rad] (`None` open loop), the
 /// driver input u [V] and the load angle theta_l [rad].
 pub type Signals<'a> = (Option<&'a [f64]>, &'a [f64], &'a [f64]);
@@ -371,4 +336,39 @@ pub fn estimate(
         let (p, sp) = open_loop(&ol, ts_s, opts)?;
         (p, None, sp)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn increments_then_integrator_is_identity_in_frequency() {
+        let ts = 1e-3;
+        let w = 30.0;
+        let d = Complex::new(1.0, 0.0) - c_expj(-w * ts);
+        assert!((integrator(w, ts) * d - Complex::new(1.0, 0.0)).norm() < 1e-12);
+        assert_eq!(increments(&[1.0, 3.0, 6.0]), [0.0, 2.0, 3.0]);
+    }
+
+    #[test]
+    fn leakage_allowance_is_the_gap_to_the_half_length_estimate() {
+        let frf = |freq_hz: Vec<f64>, h: Vec<Complex<f64>>| Frf {
+            coherence: alloc::vec![1.0; h.len()],
+            rel_radius: alloc::vec![0.01; h.len()],
+            freq_hz,
+            h,
+            averages: 16.0,
+            confidence: 0.95,
+        };
+        let one = Complex::new(1.0, 0.0);
+        let mut full = frf(alloc::vec![1.0, 2.0, 3.0, 4.0], alloc::vec![one; 4]);
+        // Half-length bins at 2 and 4 Hz; 3 Hz interpolated between 1.0 and 1.2.
+        let half = frf(alloc::vec![2.0, 4.0], alloc::vec![one, one * 1.2]);
+        allow_leakage(&mut full, &half);
+        assert_eq!(full.rel_radius[0], 0.01); // below the half grid: untouched
+        assert!((full.rel_radius[1] - 0.01).abs() < 1e-12);
+        assert!((full.rel_radius[2] - 0.11).abs() < 1e-12);
+        assert!((full.rel_radius[3] - 0.21).abs() < 1e-12);
+    }
 }

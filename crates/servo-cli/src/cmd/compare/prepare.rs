@@ -92,7 +92,7 @@ impl super::Compare {
         meta: &LogMeta,
         given: Option<&GainsFile>,
     ) -> anyhow::Result<()> {
-        let logged = crate::io::logged_controller(&meta)?;
+        let logged = crate::io::logged_controller(meta)?;
         let log_gains = meta.gains()?;
         let given_name = self
             .gains
