@@ -26,8 +26,11 @@
 //! around any of them, and stays `no_std` + `alloc` like the simulator that runs it.
 
 use crate::math;
+#[cfg(feature = "alloc")]
 use alloc::string::String;
+#[cfg(feature = "alloc")]
 use alloc::vec::Vec;
+#[cfg(feature = "alloc")]
 use core::fmt;
 
 /// The signals an expression may read, in the order of the `signals` slice given to
@@ -86,6 +89,7 @@ pub enum Func2 {
     Pow,
 }
 
+#[cfg(feature = "alloc")]
 const FUNC1: [(&str, Func1); 11] = [
     ("sin", Func1::Sin),
     ("cos", Func1::Cos),
@@ -99,6 +103,7 @@ const FUNC1: [(&str, Func1); 11] = [
     ("tanh", Func1::Tanh),
     ("atan", Func1::Atan),
 ];
+#[cfg(feature = "alloc")]
 const FUNC2: [(&str, Func2); 4] = [
     ("atan2", Func2::Atan2),
     ("min", Func2::Min),
@@ -106,6 +111,7 @@ const FUNC2: [(&str, Func2); 4] = [
     ("pow", Func2::Pow),
 ];
 
+#[cfg(feature = "alloc")]
 /// Why an expression was rejected. `column` counts characters from 1.
 #[derive(Debug, Clone, PartialEq, Eq)]
 #[non_exhaustive]
@@ -127,6 +133,7 @@ pub enum ExprError {
     TooComplex { column: usize },
 }
 
+#[cfg(feature = "alloc")]
 impl fmt::Display for ExprError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
@@ -157,6 +164,7 @@ impl fmt::Display for ExprError {
     }
 }
 
+#[cfg(feature = "alloc")]
 /// A compiled expression: a flat program for a stack machine.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Program {
@@ -164,6 +172,7 @@ pub struct Program {
     depth: usize,
 }
 
+#[cfg(feature = "alloc")]
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Tok<'a> {
     Num(f64),
@@ -175,6 +184,7 @@ enum Tok<'a> {
     End,
 }
 
+#[cfg(feature = "alloc")]
 struct Lexer<'a> {
     src: &'a str,
     pos: usize,
@@ -183,6 +193,7 @@ struct Lexer<'a> {
     tok: Tok<'a>,
 }
 
+#[cfg(feature = "alloc")]
 impl<'a> Lexer<'a> {
     fn column(&self, byte: usize) -> usize {
         self.src
@@ -269,6 +280,7 @@ impl<'a> Lexer<'a> {
     }
 }
 
+#[cfg(feature = "alloc")]
 struct Parser<'a, 'p> {
     lx: Lexer<'a>,
     params: &'p [&'p str],
@@ -276,6 +288,7 @@ struct Parser<'a, 'p> {
     nest: usize,
 }
 
+#[cfg(feature = "alloc")]
 impl Parser<'_, '_> {
     fn enter(&mut self) -> Result<(), ExprError> {
         self.nest += 1;
@@ -422,6 +435,7 @@ impl Parser<'_, '_> {
     }
 }
 
+#[cfg(feature = "alloc")]
 impl Program {
     /// Compiles `src` with the parameter names `params` (at most 255).
     pub fn compile(src: &str, params: &[&str]) -> Result<Program, ExprError> {

@@ -36,7 +36,9 @@ pub mod discover;
 #[cfg(feature = "alloc")]
 pub mod fit;
 
-pub use expr::{ExprError, Op, Program, SIGNALS, SIGNAL_UNITS};
+#[cfg(feature = "alloc")]
+pub use expr::{ExprError, Program};
+pub use expr::{Op, SIGNALS, SIGNAL_UNITS};
 
 use core::fmt;
 
@@ -128,6 +130,7 @@ pub enum CustomError {
     /// The name is a catalogue effect's, empty, or not a plain identifier.
     BadName { name: NameBuf, why: &'static str },
     /// The expression does not compile.
+    #[cfg(feature = "alloc")]
     Expr { name: NameBuf, error: ExprError },
     /// A parameter is declared badly (bounds, value outside them, too many, bad key).
     Param {
@@ -152,6 +155,7 @@ impl fmt::Display for CustomError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             CustomError::BadName { name, why } => write!(f, "user effect `{name}`: {why}"),
+            #[cfg(feature = "alloc")]
             CustomError::Expr { name, error } => {
                 write!(f, "user effect `{name}`, expr: {error}")
             }
@@ -182,6 +186,7 @@ pub struct ParamDecl<'a> {
     pub max: Option<f64>,
 }
 
+#[cfg(feature = "alloc")]
 fn is_ident(s: &str) -> bool {
     let mut c = s.chars();
     matches!(c.next(), Some(ch) if ch.is_ascii_alphabetic() || ch == '_')
