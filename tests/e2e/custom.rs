@@ -5,22 +5,10 @@
 
 use serde_json::Value;
 use servo_cli::effects_file::EffectsFile;
-use servo_cli::gains_file::{GainsFile, PidSection};
 use servo_cli::model_file::ModelFile;
-use servo_core::compare::quantum::quantize;
-use servo_core::compare::Controller;
-use servo_core::control::{Pid, PidConfig, PidGains};
-use servo_core::sim::PlantSim;
 use servo_core::{Plant, PlantParams};
 use servo_e2e::servo;
-use std::fmt::Write as _;
 use std::path::Path;
-
-const KP: f64 = 7.5244;
-const KI: f64 = 94.0379;
-const KD: f64 = 0.1505;
-const TL: f64 = 0.004;
-const DT: f64 = 1e-3;
 
 const CABLE: &str = r#"
 [custom.cable]
@@ -54,65 +42,18 @@ fn with_custom(effects_toml: &str, name: &str, values: &[(&str, f64)]) -> Plant 
     p
 }
 
-/// A closed-loop run of `truth` with the PID over steps of several sizes and both signs, a
-/// 4096-count encoder, +/-10 V, written as servo CSV (time_s,u_V,theta_l_rad,ref_rad,i_a_A).
+/// A closed-loop run of `truth` with the PID over steps of several sizes and both signs (see
+/// [`crate::util::simulate_pid_steps`]), written as servo CSV
+/// (time_s,u_V,theta_l_rad,ref_rad,i_a_A).
 fn simulate_steps(truth: &Plant, path: &Path) {
-    let steps_deg: [f64; 12] = [
+    let steps_deg = [
         0.0, 40.0, -30.0, 90.0, -60.0, 10.0, 150.0, 60.0, -120.0, -20.0, 80.0, 0.0,
     ];
-    let q = std::f64::consts::TAU / 4096.0;
-    let mut sim = PlantSim::new(truth, DT).unwrap();
-    let mut pid = Pid::new(
-        PidConfig::new(
-            PidGains {
-                kp: KP,
-                ki: KI,
-                kd: KD,
-                tl_s: TL,
-            },
-            DT,
-        )
-        .with_symmetric_limit(10.0),
-    )
-    .unwrap();
-    let mut csv = String::from("time_s,u_V,theta_l_rad,ref_rad,i_a_A\n");
-    let n = steps_deg.len() * 1000;
-    for k in 0..n {
-        let r = steps_deg[k / 1000].to_radians();
-        let y = quantize(sim.state().theta_l_rad, q);
-        let i = sim.state().i_a_a;
-        let u = Controller::update(&mut pid, r, y);
-        writeln!(
-            csv,
-            "{:.6},{:.6},{:.10},{:.10},{:.8}",
-            k as f64 * DT,
-            u,
-            y,
-            r,
-            i
-        )
-        .unwrap();
-        sim.step(u);
-    }
-    std::fs::write(path, csv).unwrap();
+    crate::util::simulate_pid_steps(truth, path, &steps_deg, 1000, true);
 }
 
 fn gains_file(path: &Path) {
-    GainsFile {
-        pid: PidSection {
-            kp: KP,
-            ki: KI,
-            kd: KD,
-            tl_s: TL,
-            ts_s: DT,
-            kw: None,
-            u_limit_v: Some(10.0),
-            derivative_on: None,
-        },
-        design: None,
-    }
-    .save(path)
-    .unwrap();
+    crate::util::write_pid_gains(path);
 }
 
 const COLS: &str = "time=time_s,u=u_V,theta_l=theta_l_rad,ref=ref_rad,i_a=i_a_A";
