@@ -22,6 +22,7 @@ pub mod checks;
 pub mod evidence;
 pub mod regimes;
 pub mod structure;
+pub mod user_effects;
 
 pub use structure::{BalanceKind, BalanceReport, Signature, Thresholds};
 
