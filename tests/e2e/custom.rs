@@ -6,10 +6,12 @@
 use serde_json::Value;
 use servo_cli::effects_file::EffectsFile;
 use servo_cli::gains_file::{GainsFile, PidSection};
+use servo_cli::io::read_log_with_meta;
 use servo_cli::model_file::ModelFile;
 use servo_core::compare::quantum::quantize;
 use servo_core::compare::Controller;
 use servo_core::control::{Pid, PidConfig, PidGains};
+use servo_core::record::Record;
 use servo_core::sim::PlantSim;
 use servo_core::{Plant, PlantParams};
 use servo_e2e::servo;
@@ -183,6 +185,20 @@ fn compare(c: &Case, extra: &[&str]) -> Value {
     run_json(&args)
 }
 
+fn diagnose(c: &Case, extra: &[&str]) -> Value {
+    let mut args = vec![
+        "diagnose",
+        c.log.to_str().unwrap(),
+        "--model",
+        c.model.to_str().unwrap(),
+        "--columns",
+        COLS,
+        "--json",
+    ];
+    args.extend_from_slice(extra);
+    run_json(&args)
+}
+
 #[test]
 fn hidden_cable_is_fitted_discovered_and_the_proposal_round_trips() {
     let (k, theta0) = (0.02, 0.4);
@@ -207,18 +223,10 @@ fn hidden_cable_is_fitted_discovered_and_the_proposal_round_trips() {
 
     // --discover on the plain model proposes a load torque proportional to the load angle.
     let found = c._dir.path().join("found.toml");
-    let d = run_json(&[
-        "diagnose",
-        c.log.to_str().unwrap(),
-        "--model",
-        c.model.to_str().unwrap(),
-        "--columns",
-        COLS,
-        "--json",
-        "--discover",
-        "--save-effect",
-        found.to_str().unwrap(),
-    ]);
+    let d = diagnose(
+        &c,
+        &["--discover", "--save-effect", found.to_str().unwrap()],
+    );
     let prop = &d["discovery"];
     println!("discovery: {prop}");
     let terms = prop["terms"].as_array().unwrap();
@@ -259,8 +267,9 @@ description = "a driver with an input offset"
 u_off = { value = 0.0, min = -1.0, max = 1.0, unit = "V" }
 "#;
 
-/// Simulate with the user effect `name` at `value`, fit it with compare --add, recover it.
-fn round_trip(name: &str, key: &str, value: f64, tol: f64) {
+/// Simulate with the user effect `name` at `value`, fit it with compare --add, recover it; the
+/// case (log, files) for further checks.
+fn round_trip(name: &str, key: &str, value: f64, tol: f64) -> Case {
     let truth = with_custom(OTHERS, name, &[(key, value)]);
     let c = case(&truth, OTHERS);
     let v = compare(
@@ -274,12 +283,36 @@ fn round_trip(name: &str, key: &str, value: f64, tol: f64) {
         (est / value - 1.0).abs() < tol,
         "{name}: {key} = {est}, true {value}"
     );
-    assert!(fits[1] >= fits[0], "{fits:?}");
+    assert!(fits[1] > fits[0], "{fits:?}");
+    c
 }
 
+/// A sensor error is not a force: the measured angle is mapped back through the sensor's inverse
+/// and the balances refitted on it with the base parameters (`servo_core::custom::fit`); other
+/// sensor shapes (a second harmonic, a scale error with the base held) are unit tests there.
 #[test]
 fn user_sensor_effect_round_trips() {
-    round_trip("eccentric", "e", 0.02, 0.15);
+    let c = round_trip("eccentric", "e", 0.02, 0.15);
+    // diagnose --effects judges it as a candidate and sizes it the same.
+    let d = diagnose(&c, &["--effects", c.effects.to_str().unwrap()]);
+    let cand = d["custom_candidates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|j| j["effect"] == "eccentric")
+        .unwrap_or_else(|| panic!("no eccentric candidate in {}", d["custom_candidates"]))
+        .clone();
+    println!("diagnose --effects: {cand}");
+    let e = cand["params"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["key"] == "e")
+        .unwrap()["value"]
+        .as_f64()
+        .unwrap();
+    assert!((e / 0.02 - 1.0).abs() < 0.15, "diagnose: e = {e}");
+    assert_eq!(cand["significant"], true, "{cand}");
 }
 
 #[test]
@@ -344,8 +377,8 @@ fn bad_expressions_are_clear_errors() {
 }
 
 /// `servo run --plant FILE --ref square ... --csv OUT` with the frictionless Table 2 plant plus
-/// the `[custom]` sections `custom_toml`, exact sensors; returns the CSV's columns by name.
-fn run_plant(dir: &Path, tag: &str, custom_toml: &str) -> std::collections::HashMap<String, Vec<f64>> {
+/// the `[custom]` sections `custom_toml`, exact sensors; the log read back.
+fn run_plant(dir: &Path, tag: &str, custom_toml: &str) -> Record {
     let model = dir.join(format!("{tag}.toml"));
     let mut text = ModelFile::default().to_toml_commented();
     text.push_str(custom_toml);
@@ -354,7 +387,7 @@ fn run_plant(dir: &Path, tag: &str, custom_toml: &str) -> std::collections::Hash
 }
 
 /// As [`run_plant`] with a given model file.
-fn run_model(dir: &Path, tag: &str, model: &Path) -> std::collections::HashMap<String, Vec<f64>> {
+fn run_model(dir: &Path, tag: &str, model: &Path) -> Record {
     let gains = dir.join("gains.toml");
     gains_file(&gains);
     let csv = dir.join(format!("{tag}.csv"));
@@ -376,28 +409,17 @@ fn run_model(dir: &Path, tag: &str, model: &Path) -> std::collections::HashMap<S
         csv.to_str().unwrap(),
     ]);
     assert!(ok, "servo run --plant {}: {err}\n{out}", model.display());
-    let text = std::fs::read_to_string(&csv).unwrap();
-    let mut lines = text.lines();
-    let names: Vec<String> = lines
-        .next()
-        .unwrap()
-        .split(',')
-        .map(String::from)
-        .collect();
-    let mut cols: std::collections::HashMap<String, Vec<f64>> =
-        names.iter().map(|n| (n.clone(), Vec::new())).collect();
-    for l in lines {
-        for (n, v) in names.iter().zip(l.split(',')) {
-            cols.get_mut(n).unwrap().push(v.parse().unwrap_or(f64::NAN));
-        }
-    }
-    cols
+    read_log_with_meta(&csv, None).unwrap().0
 }
 
 /// (reference [rad], mean u [V], mean measured angle [rad]) over the last 100 ms of every
 /// plateau of the reference.
-fn plateaus(cols: &std::collections::HashMap<String, Vec<f64>>) -> Vec<(f64, f64, f64)> {
-    let (r, u, th) = (&cols["ref_rad"], &cols["u_V"], &cols["theta_l_rad"]);
+fn plateaus(rec: &Record) -> Vec<(f64, f64, f64)> {
+    let (r, u, th) = (
+        rec.ref_rad.as_ref().unwrap(),
+        rec.u_v.as_ref().unwrap(),
+        rec.theta_l_rad.as_ref().unwrap(),
+    );
     let n = r.len();
     let ends: Vec<usize> = (1..n).filter(|&k| r[k] != r[k - 1]).chain([n]).collect();
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
@@ -420,7 +442,10 @@ fn run_plant_simulates_user_effects_and_compare_save_round_trips() {
     let (k, theta0, e, u_off) = (0.02, 0.3, 0.1, 0.2);
     let cable = CABLE
         .replace("value = 0.0, min = 0.0", &format!("value = {k}, min = 0.0"))
-        .replace("value = 0.0, min = -1.5", &format!("value = {theta0}, min = -1.5"));
+        .replace(
+            "value = 0.0, min = -1.5",
+            &format!("value = {theta0}, min = -1.5"),
+        );
 
     // A cable spring: held against it, the loop's input is what the spring torque needs.
     let a = run_plant(dir.path(), "cable", &cable);
@@ -430,7 +455,10 @@ fn run_plant_simulates_user_effects_and_compare_save_round_trips() {
         let want = holding_u(k * (r - theta0));
         println!("cable: ref {r:+.1} rad: u {u:.5} V (physics {want:.5} V), theta_l {th:.5}");
         assert!((th - r).abs() < 1e-3, "{th} for {r}");
-        assert!((u - want).abs() < 0.02 * want.abs(), "u {u} V, physics {want} V");
+        assert!(
+            (u - want).abs() < 0.02 * want.abs(),
+            "u {u} V, physics {want} V"
+        );
     }
 
     // The same spring read through an off-centre encoder: the loop holds the *measured* angle on
@@ -449,7 +477,10 @@ fn run_plant_simulates_user_effects_and_compare_save_round_trips() {
         let (want, naive) = (holding_u(k * t), holding_u(k * r));
         println!("sensor: ref {r:+.1} rad: theta_l logged {th:.5}, true {t:.5}; u {u:.5} V (physics {want:.5}, without the sensor {naive:.5})");
         assert!((th - r).abs() < 1e-3, "{th} for {r}");
-        assert!((u - want).abs() < 0.02 * want.abs(), "u {u} V, physics {want} V");
+        assert!(
+            (u - want).abs() < 0.02 * want.abs(),
+            "u {u} V, physics {want} V"
+        );
         assert!((want - naive).abs() > 0.05 * naive.abs());
     }
 
@@ -493,7 +524,10 @@ fn run_plant_simulates_user_effects_and_compare_save_round_trips() {
     assert!((k_est / k - 1.0).abs() < 0.15, "k {k_est}");
     assert!((th_est / theta0 - 1.0).abs() < 0.15, "theta0 {th_est}");
     let saved = ModelFile::load(&fitted).unwrap();
-    let sc = saved.custom.get("cable").expect("[custom.cable] in the saved model");
+    let sc = saved
+        .custom
+        .get("cable")
+        .expect("[custom.cable] in the saved model");
     assert_eq!(sc.def.expr(), "k * (theta_l - theta0)");
     assert!((sc.get("k").unwrap() / k_est - 1.0).abs() < 1e-6);
     assert!((sc.get("theta0").unwrap() / th_est - 1.0).abs() < 1e-6);

@@ -488,7 +488,10 @@ mod tests {
         for (name, expr, value, refit) in cases {
             let key = if name == "scale" { "s" } else { "e" };
             let est = recovered(name, expr, key, value, refit);
-            assert!((est / value - 1.0).abs() < 0.15, "{expr}: {est} for {value}");
+            assert!(
+                (est / value - 1.0).abs() < 0.15,
+                "{expr}: {est} for {value}"
+            );
         }
     }
 }
