@@ -246,23 +246,28 @@ fn check_hidden(spec: &str, seed: u64) {
     );
 }
 
+/// Runs `check` on every seed and fails with every seed's message, not only the first.
+fn every_seed(seeds: impl IntoIterator<Item = u64>, check: impl Fn(u64)) {
+    let failures: Vec<String> = seeds
+        .into_iter()
+        .filter_map(|seed| {
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| check(seed)))
+                .err()
+                .map(|e| {
+                    e.downcast_ref::<String>()
+                        .cloned()
+                        .unwrap_or_else(|| format!("seed {seed} failed"))
+                })
+        })
+        .collect();
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
 macro_rules! hidden_tests {
     ($($name:ident: $spec:expr, $seeds:expr;)*) => {$(
         #[test]
         fn $name() {
-            let failures: Vec<String> = $seeds
-                .into_iter()
-                .filter_map(|seed| {
-                    std::panic::catch_unwind(|| check_hidden($spec, seed))
-                        .err()
-                        .map(|e| {
-                            e.downcast_ref::<String>()
-                                .cloned()
-                                .unwrap_or_else(|| format!("seed {seed} failed"))
-                        })
-                })
-                .collect();
-            assert!(failures.is_empty(), "{}", failures.join("\n"));
+            every_seed($seeds, |seed| check_hidden($spec, seed));
         }
     )*};
 }
@@ -702,26 +707,33 @@ fn another_simulators_data_are_diagnosed_on_the_physics() {
     }
 }
 
+/// The other simulator with mechanism `m` (seed `seed`), its base model identified and diagnosed;
+/// the ranking and every balance printed, tagged.
+fn diagnose_other(m: &Mechanism, tag: &str, seed: u64) -> diagnose::Diagnosis {
+    let logs = other_simulator_with(m, seed);
+    let model = identified(&logs);
+    let d = diagnose::diagnose(&logs, &model, &DiagnoseOptions::default()).unwrap();
+    print_ranking(tag, &d, 4);
+    for b in &d.balances {
+        eprintln!(
+            "[{tag}] {} ratio {:.2} above={} sigs {:?}",
+            b.balance.name(),
+            b.ratio_to_noise,
+            b.above_noise,
+            b.signatures
+                .iter()
+                .map(|s| (s.kind, (100.0 * s.share).round(), s.description.clone()))
+                .collect::<Vec<_>>()
+        );
+    }
+    d
+}
+
 /// Mechanisms outside the catalogue, in the other simulator: the verdict is "unexplained", no
 /// catalogue effect is named, and the balance and the shape that carry the error are named.
 fn check_outside(tag: &str, m: &Mechanism, balance: &str, signature: &str, seeds: &[u64]) {
     for &seed in seeds {
-        let logs = other_simulator_with(m, seed);
-        let model = identified(&logs);
-        let d = diagnose::diagnose(&logs, &model, &DiagnoseOptions::default()).unwrap();
-        print_ranking(&format!("{tag} {seed}"), &d, 4);
-        for b in &d.balances {
-            eprintln!(
-                "[{tag} {seed}] {} ratio {:.2} above={} sigs {:?}",
-                b.balance.name(),
-                b.ratio_to_noise,
-                b.above_noise,
-                b.signatures
-                    .iter()
-                    .map(|s| (s.kind, (100.0 * s.share).round(), s.description.clone()))
-                    .collect::<Vec<_>>()
-            );
-        }
+        let d = diagnose_other(m, &format!("{tag} {seed}"), seed);
         assert!(
             d.winner().is_none(),
             "[{tag} seed {seed}] a catalogue effect was named: {}",
@@ -1033,17 +1045,7 @@ fn logs_without_current_are_identified_and_diagnosed() {
     // End to end through the commands, on a CSV without a current column.
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("no_current.csv");
-    let r = &no_i[1];
-    let mut text = String::from("time_s,u_V,theta_l_rad\n");
-    for k in 0..r.len() {
-        text.push_str(&format!(
-            "{:.6},{:.6},{:.10}\n",
-            r.time_s[k],
-            r.u_v.as_ref().unwrap()[k],
-            r.theta_l_rad.as_ref().unwrap()[k]
-        ));
-    }
-    std::fs::write(&csv, text).unwrap();
+    write_csv(&csv, &no_i[1]);
     let model = dir.path().join("model.toml");
     let (ok, out, err) = servo_e2e::servo(&[
         "identify",
@@ -1075,8 +1077,7 @@ fn logs_without_current_are_identified_and_diagnosed() {
 
 /// Three hidden effects at once (Stribeck + imbalance + delay): the loop adds all three, one at a
 /// time, and their main parameters come out within 25 %. (Stribeck + backlash + delay does not
-/// pass yet: after the delay, neither Stribeck nor backlash clears the information criterion on
-/// these short logs, and the verdict says "unexplained".)
+/// pass yet: see `three_hidden_effects_with_backlash_are_found_with_their_parameters`.)
 #[test]
 fn three_hidden_effects_are_found_with_their_parameters() {
     let specs = [
@@ -1112,4 +1113,234 @@ fn three_hidden_effects_are_found_with_their_parameters() {
             );
         }
     }
+}
+
+/// Three hidden effects at once, one of them a gear play (Stribeck + backlash + delay): the loop
+/// adds all three, one at a time, ends "missing" on each step until the last, and their main
+/// parameters come out within 25 %. Three seeds.
+fn check_three_with_backlash(seed: u64) {
+    let specs = [
+        "stribeck:tau_s=0.02,omega_s=0.5",
+        "backlash:gap=0.03",
+        "delay:delay=0.003",
+    ];
+    let hidden: Vec<Effect> = specs.iter().map(|s| Effect::parse(s).unwrap()).collect();
+    let plant = truth(&hidden);
+    let logs = logs(&plant, seed);
+    let model = identified(&logs);
+    let (ladder, diags) =
+        diagnose::diagnose_loop(&logs, &model, &DiagnoseOptions::default(), 4).unwrap();
+    for d in &diags {
+        eprintln!("[three-bl {seed}] {:?}: {}", d.status, d.verdict);
+        print_ranking(&format!("three-bl {seed}"), d, 3);
+    }
+    let added: Vec<EffectKind> = ladder.iter().filter_map(|r| r.added).collect();
+    let last = &ladder.last().unwrap().plant;
+    let mut errs = Vec::new();
+    for h in &hidden {
+        for key in main_param(h.kind) {
+            let got = last.effects.value(h.kind, key);
+            let want = h.get(key).unwrap();
+            eprintln!("[three-bl {seed}] {} {key}: {got:?} (true {want})", h.kind);
+            if !got.is_some_and(|g| (g / want - 1.0).abs() < 0.25) {
+                errs.push(format!("{} {key}: fitted {got:?}, true {want}", h.kind));
+            }
+        }
+    }
+    assert!(
+        hidden.iter().all(|h| added.contains(&h.kind)),
+        "[seed {seed}] added {added:?}; {errs:?}"
+    );
+    assert!(
+        diags[..added.len()]
+            .iter()
+            .all(|d| d.status == diagnose::Status::Missing),
+        "[seed {seed}] a step did not end \"missing\""
+    );
+    assert!(errs.is_empty(), "[seed {seed}] {errs:?}");
+}
+
+#[test]
+#[ignore = "does not hold yet (#10): after the delay, Stribeck fails the information criterion on the torque balance the unmodelled play pollutes, and the play cannot explain reversals without the stiction"]
+fn three_hidden_effects_with_backlash_are_found_with_their_parameters() {
+    every_seed([23, 24, 25], check_three_with_backlash);
+}
+
+/// A compliant shaft between motor and load (outside the catalogue: a two-mass resonance, not a
+/// gear play), in the other simulator: a 1.2 N m/rad shaft at the load with light damping and
+/// half the inertia on each side, a resonance near 30 Hz that the position loop excites at every
+/// step. A gear play fits it well (the contact is a spring too) but is refused: the same contact
+/// without play predicts the held-out motion better. Status "unexplained", nothing named, the
+/// torque balance named as the one left far above its noise floor.
+#[test]
+#[ignore = "does not hold yet (#10): the play-vs-compliance check refuses the gear play on one seed of two (which one depends on the search), and no signature names the resonance (ringing after steps is no phase-locked sinusoid)"]
+fn compliant_shaft_is_unexplained_and_not_a_gear_play() {
+    let shaft = Mechanism {
+        shaft: Some((1.2, 6e-4, 0.5)),
+        ..Mechanism::NONE
+    };
+    for seed in [49u64, 50] {
+        let d = diagnose_other(&shaft, &format!("compliant shaft {seed}"), seed);
+        assert!(d.winner().is_none(), "[seed {seed}] named: {}", d.verdict);
+        assert_eq!(
+            d.status,
+            diagnose::Status::Unexplained,
+            "[seed {seed}] {}",
+            d.verdict
+        );
+        let torque = d
+            .unexplained
+            .iter()
+            .find(|b| b.balance.name() == "torque")
+            .unwrap_or_else(|| panic!("[seed {seed}] torque balance not named: {}", d.verdict));
+        assert!(
+            torque.ratio_to_noise > 10.0,
+            "[seed {seed}] {}",
+            torque.ratio_to_noise
+        );
+        assert!(d.verdict.contains("torque balance"), "{}", d.verdict);
+        // The gear play, when it passes the statistics, is refused as a compliance.
+        if let Some(b) = d
+            .ranking
+            .iter()
+            .find(|c| c.effect == EffectKind::Backlash && !c.checks.is_empty())
+        {
+            let k = b.checks.iter().find(|k| k.name == "play, not a compliance");
+            assert!(
+                k.is_some_and(|k| !k.passed),
+                "[seed {seed}] backlash not refused as a compliance: {:?}",
+                b.checks
+            );
+        }
+    }
+}
+
+/// Writes `r` as a servo CSV: time, u and the load angle, and the current when it has one.
+fn write_csv(path: &std::path::Path, r: &Record) {
+    let i = r.i_a_a.as_ref();
+    let mut text = String::from(if i.is_some() {
+        "time_s,u_V,theta_l_rad,i_a_A\n"
+    } else {
+        "time_s,u_V,theta_l_rad\n"
+    });
+    for k in 0..r.len() {
+        text.push_str(&format!(
+            "{:.6},{:.6},{:.10}",
+            r.time_s[k],
+            r.u_v.as_ref().unwrap()[k],
+            r.theta_l_rad.as_ref().unwrap()[k]
+        ));
+        if let Some(i) = i {
+            text.push_str(&format!(",{:.6}", i[k]));
+        }
+        text.push('\n');
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// `servo identify` on a log of u and angle only (no current column): J_eq, B_eq and tau_sf each
+/// within 10 % of the truth. B_eq alone is checked (not the total damping B_eq + k_t k_e / R_eq,
+/// of which it is 4 % here).
+#[test]
+fn identify_without_current_gets_b_eq_alone_within_10_percent() {
+    let plant = truth(&[]);
+    let dir = tempfile::tempdir().unwrap();
+    for seed in [53u64, 54] {
+        let r = open_loop(&plant, 16.0, seed);
+        let csv = dir.path().join(format!("u_angle_{seed}.csv"));
+        write_csv(&csv, &Record { i_a_a: None, ..r });
+        let (ok, out, err) = servo_e2e::servo(&["identify", csv.to_str().unwrap(), "--json"]);
+        assert!(ok, "identify failed: {err}");
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        for (key, want) in [
+            ("j_eq_kg_m2", 7.0e-7),
+            ("b_eq_n_m_s_rad", 1.0e-6),
+            ("tau_sf_n_m", 0.01),
+        ] {
+            let got = v[key]["value"].as_f64().unwrap();
+            eprintln!("[seed {seed}] {key}: {got:.4e} (true {want:.4e})");
+            assert!(
+                (got / want - 1.0).abs() < 0.10,
+                "[seed {seed}] {key}: {got:.4e}, true {want:.4e}"
+            );
+        }
+    }
+}
+
+/// A gear train stiffer than the contact stiffness the diagnosis assumes (60 N m/rad for 20): the
+/// backlash is named, and its report either estimates the stiffness with the gap (both within
+/// 25 %) or gives the gap as conditional on the assumed stiffness, with a range of gaps over the
+/// plausible stiffnesses that contains the true gap. The same figures reach `--json`.
+#[test]
+fn backlash_gap_with_an_unknown_contact_stiffness() {
+    let hidden = Effect::parse("backlash:gap=0.03,stiffness=60").unwrap();
+    let plant = truth(&[hidden]);
+    let logs = logs(&plant, 61);
+    let model = identified(&logs);
+    let d = diagnose::diagnose(&logs, &model, &DiagnoseOptions::default()).unwrap();
+    print_ranking("stiff gear train", &d, 2);
+    let w = d
+        .winner()
+        .unwrap_or_else(|| panic!("nothing named: {}", d.verdict));
+    assert_eq!(w.effect, EffectKind::Backlash, "{}", d.verdict);
+    let c = w.conditional.as_ref().expect("the gap's stiffness study");
+    eprintln!("{c:?}\n{}", w.evidence);
+    assert_eq!((c.key, c.on), ("gap", "stiffness"));
+    let (lo, hi) = c.range();
+    match c.estimated {
+        Some((k, gap)) => {
+            assert!((k / 60.0 - 1.0).abs() < 0.25, "stiffness estimated {k}");
+            assert!((gap / 0.03 - 1.0).abs() < 0.25, "gap estimated {gap}");
+            assert!(w.evidence.contains("estimated"), "{}", w.evidence);
+        }
+        None => {
+            assert!(
+                lo <= 0.03 && 0.03 <= hi,
+                "gap range {lo}-{hi} misses the true 0.03 rad"
+            );
+            assert!(c.rows.first().unwrap().0 <= 60.0 && 60.0 <= c.rows.last().unwrap().0);
+            assert!(w.evidence.contains("conditional"), "{}", w.evidence);
+        }
+    }
+    // The same study through `servo diagnose --json` (validated against its schema) and text.
+    let dir = tempfile::tempdir().unwrap();
+    let mut paths = Vec::new();
+    for (i, r) in logs.iter().enumerate() {
+        let path = dir.path().join(format!("log{i}.csv"));
+        write_csv(&path, r);
+        paths.push(path.to_str().unwrap().to_string());
+    }
+    let model_file = dir.path().join("model.toml");
+    let (ok, _, err) =
+        servo_e2e::servo(&["identify", &paths[0], "-o", model_file.to_str().unwrap()]);
+    assert!(ok, "identify failed: {err}");
+    let mut args = vec![
+        "diagnose",
+        &paths[0],
+        &paths[1],
+        "--model",
+        model_file.to_str().unwrap(),
+    ];
+    let (ok, text, err) = servo_e2e::servo(&args);
+    assert!(ok, "diagnose failed: {err}");
+    assert!(text.contains("ontact stiffness"), "{text}");
+    args.push("--json");
+    let (ok, out, err) = servo_e2e::servo(&args);
+    assert!(ok, "diagnose --json failed: {err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let first = &v["ranking"][0];
+    assert_eq!(first["effect"], "backlash", "{out}");
+    let cond = &first["conditional"];
+    assert_eq!(cond["on"], "stiffness", "{out}");
+    let range: Vec<f64> = cond["range"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    eprintln!("--json conditional: {cond}");
+    assert!(
+        cond["estimated"].is_object() || (range[0] <= 0.03 && 0.03 <= range[1]),
+        "{cond}"
+    );
 }

@@ -529,6 +529,18 @@ pub trait FitHooks: Sync + Send {
         let _ = (ds, solved, i, fit_main, fit_j);
         Ok(())
     }
+    /// For a significant candidate: its main parameter against another one the fit assumed
+    /// (e.g. a gap against the contact stiffness), refitted over a plausible range of it, with a
+    /// sentence for the evidence. `None`: nothing to report.
+    fn conditional(
+        &self,
+        ds: &crate::fit::Dataset,
+        model: &crate::plant::Plant,
+        c: &crate::diagnose::Candidate,
+    ) -> Option<(crate::diagnose::checks::Conditional, alloc::string::String)> {
+        let _ = (ds, model, c);
+        None
+    }
     /// A note on a significant candidate (e.g. what its estimate is conditional on).
     fn candidate_note(
         &self,

@@ -26,6 +26,39 @@ pub struct Check {
     pub detail: String,
 }
 
+/// A parameter that the data size only together with another one they do not pin down (a
+/// backlash gap against the contact stiffness): the parameter refitted at each value of the other
+/// over a plausible range, judged on the held-out simulation error.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Conditional {
+    /// The parameter reported (e.g. `"gap"`) and its unit.
+    pub key: &'static str,
+    pub unit: &'static str,
+    /// The parameter it is conditional on (e.g. `"stiffness"`) and its unit.
+    pub on: &'static str,
+    pub on_unit: &'static str,
+    /// The value of `on` the candidate was sized with (a default unless estimated).
+    pub assumed: f64,
+    /// `Some((value of on, value of key))` when one value of `on` predicts the held-out motion
+    /// clearly best: then `on` is estimated with `key`; `None`: `key` is conditional on the
+    /// assumed value.
+    pub estimated: Option<(f64, f64)>,
+    /// Per value of `on`, ascending: (value of on, refitted value of key, held-out simulation
+    /// error [rad]).
+    pub rows: Vec<(f64, f64, f64)>,
+}
+
+impl Conditional {
+    /// Smallest and largest value of `key` over the rows.
+    pub fn range(&self) -> (f64, f64) {
+        self.rows
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), r| {
+                (a.min(r.1), b.max(r.1))
+            })
+    }
+}
+
 /// The value of `key` among `params`.
 pub fn get(params: &[ParamEstimate], key: &str) -> Option<f64> {
     params.iter().find(|p| p.key == key).map(|p| p.value)

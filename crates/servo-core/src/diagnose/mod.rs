@@ -113,6 +113,9 @@ pub struct Candidate {
     pub structured_share: f64,
     /// Practical-significance and physical-consistency checks, in the order applied.
     pub checks: Vec<checks::Check>,
+    /// What the main parameter is conditional on (significant candidates whose effect reports
+    /// one: a backlash gap against the contact stiffness).
+    pub conditional: Option<checks::Conditional>,
 }
 
 impl Candidate {
@@ -360,19 +363,27 @@ pub fn diagnose_dataset(
                 if let Some(top) = b.signatures.first().filter(|_| b.above_noise) {
                     let after = structure::analyse(ds, sol, floor_of(eq), &th, ds.gear_ratio);
                     let left = after.signatures.iter().find(|s| s.kind == top.kind);
+                    // Still there: above the noise floor and at least half its size before (a
+                    // true effect removes most of the shape it fits, whatever another missing
+                    // effect leaves of it; a mimic bends to it and leaves most of it).
                     let still = after.above_noise
-                        && left
-                            .is_some_and(|s| s.explained_rms >= th.min_noise_ratio * floor_of(eq));
+                        && left.is_some_and(|s| {
+                            s.explained_rms >= th.min_noise_ratio * floor_of(eq)
+                                && s.explained_rms >= 0.5 * top.explained_rms
+                        });
                     c.checks.push(checks::Check {
                         name: "explains the structure it fits",
                         passed: !still,
                         detail: alloc::format!(
-                            "before it, the {} residual was {:.1} times its noise floor, carried by a shape that {}; with it, {:.1} times, and that shape still carries {:.0} % of it",
+                            "before it, the {} residual was {:.1} times its noise floor, carried by a shape that {} ({:.2e} {unit} RMS); with it, {:.1} times, and that shape still carries {:.0} % of it ({:.2e} {unit} RMS; a shape is still there above the noise floor and at half its size before)",
                             eq.name(),
                             b.ratio_to_noise,
                             top.description,
+                            top.explained_rms,
                             after.ratio_to_noise,
-                            100.0 * left.map_or(0.0, |s| s.share)
+                            100.0 * left.map_or(0.0, |s| s.share),
+                            left.map_or(0.0, |s| s.explained_rms),
+                            unit = eq.unit()
                         ),
                     });
                     if still {
@@ -427,6 +438,15 @@ pub fn diagnose_dataset(
                 .and_then(|h| h.candidate_note(ds, model, c));
             if let Some(note) = note {
                 c.evidence.push_str(&note);
+            }
+            let cond = c
+                .effect
+                .model()
+                .fit_hooks()
+                .and_then(|h| h.conditional(ds, model, c));
+            if let Some((cond, note)) = cond {
+                c.evidence.push_str(&note);
+                c.conditional = Some(cond);
             }
         }
         if !c.significant {
@@ -523,7 +543,11 @@ fn cost_rank(kind: EffectKind) -> usize {
 
 /// `f` over `items`, on up to four threads (std builds, `parallel`) taking items from a shared
 /// queue in order, else in turn; results in the order of `items`.
-fn par_map<T: Sync, R: Send>(items: &[T], parallel: bool, f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+pub(crate) fn par_map<T: Sync, R: Send>(
+    items: &[T],
+    parallel: bool,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
     #[cfg(feature = "std")]
     if parallel && items.len() > 1 {
         let threads = std::thread::available_parallelism()
@@ -685,17 +709,17 @@ fn judge(
         1.0 - rss1 / rss0.max(1e-300)
     };
     let error_reduction_pct = 100.0 * (1.0 - math::sqrt((1.0 - eq_drop).max(0.0)));
-    // Without a logged input nothing can be simulated: the two other guards decide.
-    let oe_ok = match oe_drop {
-        Some(d) => d >= opts.min_oe_drop,
-        None => !ds.has_input,
-    };
     // An effect judged on the simulation alone is judged on something less specific than an
     // equation residual (initial contact state, stick-slip transients): ask for a clear drop.
     let min_drop = if sim_only {
         opts.min_simulation_oe_drop
     } else {
         opts.min_eq_drop
+    };
+    // Without a logged input nothing can be simulated: the two other guards decide.
+    let oe_ok = match oe_drop {
+        Some(d) => d >= opts.min_oe_drop,
+        None => !ds.has_input,
     };
     let statistically = bic_gain > opts.min_bic_gain && eq_drop >= min_drop && oe_ok;
     // Detection floor: RMS of what the effect explains versus the sensor-noise torque/voltage.
@@ -795,6 +819,7 @@ fn judge(
         noise_ratio,
         structured_share,
         checks: found,
+        conditional: None,
     };
     if statistically && !significant {
         evidence::append_failed(&mut out);
@@ -818,6 +843,7 @@ fn failed(base: &Solved, kind: EffectKind, e: &FitError) -> Candidate {
         noise_ratio: 0.0,
         structured_share: 0.0,
         checks: Vec::new(),
+        conditional: None,
     }
 }
 

@@ -131,6 +131,10 @@ pub struct Rows {
     /// angle measured is the load's. With a gear play in the model the motor may be crossing the
     /// gap there, its speed unknown: such rows get no weight in the electrical balance.
     pub torque_reversal: Vec<bool>,
+    /// Torque-balance rows only: the same flag. With a gear play in the model such rows get no
+    /// weight in the torque balance (the rigid-body balance does not hold while the gap is
+    /// crossed); the analyses of the base model's balances keep them.
+    pub gap_crossing: Vec<bool>,
 }
 
 impl Rows {
@@ -684,6 +688,7 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
             mech.rec.push(ri);
             mech.k.push(k);
             mech.fit.push(fit);
+            mech.gap_crossing.push(near_irev[k]);
         }
         if r.has_u && !near_rev[k] {
             elec.rec.push(ri);

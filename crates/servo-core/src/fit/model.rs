@@ -349,7 +349,36 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
             .collect();
         (Equation::Combined, y)
     };
+    let (mut y, mut terms) = (y, terms);
+    mask_gap_crossings(cfg, rows, &mut y, &mut terms);
     solve_terms(equation, rows, y, terms)
+}
+
+/// With a gear play in the model, the rigid-body torque balance does not hold while the motor
+/// crosses the gap (the load coasts, the motor speed is not the measured one): the rows near a
+/// reversal of the motor torque ([`Rows::gap_crossing`], load angle measured) get no weight.
+/// Effects fitted beside a gear play (a breakaway friction, which lives at the same low speeds
+/// as the reversals) are then sized on the motion the rigid balance describes.
+fn mask_gap_crossings(cfg: &Config, rows: &Rows, y: &mut [f64], terms: &mut [Term]) {
+    if !cfg
+        .slots
+        .iter()
+        .any(|s| s.kind.sim_role() == SimRole::Contact)
+    {
+        return;
+    }
+    for (i, &u) in rows.gap_crossing.iter().enumerate() {
+        if u {
+            if let Some(v) = y.get_mut(i) {
+                *v = 0.0;
+            }
+            for t in terms.iter_mut() {
+                if let Some(c) = t.col.get_mut(i) {
+                    *c = 0.0;
+                }
+            }
+        }
+    }
 }
 
 /// The regressors of the linear coefficients of slot `si` ([`crate::effects::EffectModel`]:

@@ -33,6 +33,16 @@ pub(super) fn candidate_json(c: &Candidate) -> Value {
         "noise_ratio": f(c.noise_ratio),
         "structured_share": f(c.structured_share),
         "checks": c.checks.iter().map(|k| json!({ "check": k.name, "passed": k.passed, "detail": k.detail })).collect::<Vec<_>>(),
+        "conditional": c.conditional.as_ref().map(|k| {
+            let (lo, hi) = k.range();
+            json!({
+                "key": k.key, "unit": k.unit, "on": k.on, "on_unit": k.on_unit,
+                "assumed": f(k.assumed),
+                "estimated": k.estimated.map(|(on, v)| json!({ "on_value": f(on), "value": f(v) })),
+                "range": [f(lo), f(hi)],
+                "rows": k.rows.iter().map(|r| json!({ "on_value": f(r.0), "value": f(r.1), "heldout_oe_cost_rad": f(r.2) })).collect::<Vec<_>>(),
+            })
+        }),
     })
 }
 
