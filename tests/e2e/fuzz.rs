@@ -292,6 +292,8 @@ fn absurd_plant_constants_are_refused_not_hung_on() {
         assert_ne!(bad, model, "{key} not in the model file");
         let e = format!("{:#}", ModelFile::parse(&bad).unwrap_err());
         assert!(e.contains(key) && e.contains("physically sensible"), "{e}");
+        // The value and the range in scientific notation, not as 309-digit integers.
+        assert!(e.contains("= 1e308 ") && e.len() < 400, "{e}");
     }
 }
 
