@@ -37,8 +37,8 @@
 use crate::backend::{Backend, HwError};
 use servo_core::control::program::Setpoint;
 use servo_core::control::{
-    ControlError, Feedforward, Pid, PidConfig, Program, SpeedEstimator, SpeedLoop,
-    SpeedLoopConfig, SpeedProfile,
+    ControlError, Feedforward, Pid, PidConfig, Program, SpeedEstimator, SpeedLoop, SpeedLoopConfig,
+    SpeedProfile,
 };
 use servo_core::metrics::{RunSummary, SummaryAccumulator};
 use servo_core::record::Record;
@@ -369,12 +369,10 @@ pub fn run_loop_monitored(
             }
             Some(Pid::new(effective_pid_config(p, u_limit, ts)).map_err(RunError::Controller)?)
         }
-        (None, true) => {
-            return bad(
-                "the program has closed-loop (position) parts but no controller was given (--gains)"
-                    .into(),
-            )
-        }
+        (None, true) => return bad(
+            "the program has closed-loop (position) parts but no controller was given (--gains)"
+                .into(),
+        ),
         (None, false) => None,
     };
     let mut speed_ctl = match (&cfg.speed_loop, cfg.program.needs_speed_loop()) {
@@ -731,7 +729,11 @@ mod tests {
         assert_eq!(b.stopped, 1);
         assert_eq!(mon.finished, 1);
         assert_eq!(mon.warnings.len(), 1);
-        assert!(mon.warnings[0].contains("T_s = 0.002 s"), "{:?}", mon.warnings);
+        assert!(
+            mon.warnings[0].contains("T_s = 0.002 s"),
+            "{:?}",
+            mon.warnings
+        );
         assert_eq!(out.warnings, mon.warnings);
     }
 }
