@@ -6,7 +6,6 @@
 
 use servo_cli::cmd::identify_ramp::{FrictionRecipe, InertiaRecipe};
 use servo_core::control::SpeedLoopConfig;
-use servo_hw::run::{run_loop, RunConfig};
 use servo_core::ident::combined::{identify_combined, CombinedConfig};
 use servo_core::ident::electrical::identify_electrical;
 use servo_core::ident::friction::{identify_friction, FrictionConfig};
@@ -16,6 +15,7 @@ use servo_core::ident::Experiment;
 use servo_core::record::Record;
 use servo_core::sim::SensorConfig;
 use servo_core::{Plant, PlantParams};
+use servo_hw::run::{run_loop, RunConfig};
 use servo_hw::sim::SimBackend;
 use std::path::Path;
 

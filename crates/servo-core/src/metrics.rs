@@ -291,7 +291,13 @@ impl SummaryAccumulator {
         if let Some(o) = self.open.take() {
             self.steps.push(o.close(self.n));
         }
-        let rms = |sq: f64, n: usize| if n == 0 { 0.0 } else { math::sqrt(sq / n as f64) };
+        let rms = |sq: f64, n: usize| {
+            if n == 0 {
+                0.0
+            } else {
+                math::sqrt(sq / n as f64)
+            }
+        };
         RunSummary {
             duration_s: self.n as f64 * self.ts_s,
             samples: self.n,

@@ -127,7 +127,10 @@ impl DiscretizationArg {
 pub struct PidOptions {
     /// Anti-windup scheme (auto: as the log records it for compare, else back-calculation when
     /// --kw or the gains file's kw gives K_w, else none).
-    #[cfg_attr(feature = "clap", arg(long = "anti-windup", value_enum, default_value = "auto"))]
+    #[cfg_attr(
+        feature = "clap",
+        arg(long = "anti-windup", value_enum, default_value = "auto")
+    )]
     pub anti_windup: AntiWindupArg,
     /// Back-calculation anti-windup gain K_w [1/s] (overrides the log's and the gains file's kw).
     #[cfg_attr(feature = "clap", arg(long, value_name = "PER_SECOND"))]
@@ -829,7 +832,10 @@ mod tests {
         use AntiWindupArg as A;
         use DiscretizationArg as D;
         check(&[A::Auto, A::None, A::Clamping, A::BackCalc], A::name);
-        check(&[DerivativeOnArg::Error, DerivativeOnArg::Measurement], |d| d.name());
+        check(
+            &[DerivativeOnArg::Error, DerivativeOnArg::Measurement],
+            |d| d.name(),
+        );
         check(&[D::Auto, D::BackwardEuler, D::Tustin], D::name);
         #[cfg(feature = "clap")]
         {

@@ -13,9 +13,7 @@
 use anyhow::Context;
 use servo_core::PlantParams;
 use servo_hw::backend::Backend;
-use servo_hw::run::experiments::{
-    identification_experiments, run_experiment, ExperimentError,
-};
+use servo_hw::run::experiments::{identification_experiments, run_experiment, ExperimentError};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 

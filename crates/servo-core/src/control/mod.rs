@@ -28,13 +28,13 @@ pub use feedforward::{
     Feedforward, FeedforwardConfig, FeedforwardParams, FeedforwardTerms, SmoothSign,
 };
 pub use pid::{AntiWindup, DerivativeOn, Discretization, Pid, PidConfig, PidGains, PidOutput};
-pub use reference::{ChirpMode, RefParseError, RefSample, Reference, Shape, Snippet};
 #[cfg(feature = "alloc")]
 pub use program::{Program, ProgramError, SpeedPiece, SpeedProfile};
-pub use speed::{SpeedEstimator, SpeedLoop, SpeedLoopConfig, SpeedLoopError, SpeedLoopOutput};
+pub use reference::{ChirpMode, RefParseError, RefSample, Reference, Shape, Snippet};
 pub use sequence::{
     PlacedSegment, Segment, SegmentMode, Sequence, SequenceError, Setpoint, Target,
 };
+pub use speed::{SpeedEstimator, SpeedLoop, SpeedLoopConfig, SpeedLoopError, SpeedLoopOutput};
 
 /// Why a controller could not be built or reconfigured.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]

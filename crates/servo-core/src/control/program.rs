@@ -154,7 +154,12 @@ impl SpeedProfile {
     }
 
     /// Appends a ramp from `from_rad_s` to `to_rad_s` [rad/s] over `duration_s` [s].
-    pub fn ramp(&mut self, duration_s: f64, from_rad_s: f64, to_rad_s: f64) -> Result<(), ProgramError> {
+    pub fn ramp(
+        &mut self,
+        duration_s: f64,
+        from_rad_s: f64,
+        to_rad_s: f64,
+    ) -> Result<(), ProgramError> {
         self.push(duration_s, from_rad_s, (to_rad_s - from_rad_s) / duration_s)
     }
 

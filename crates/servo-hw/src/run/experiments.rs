@@ -12,7 +12,7 @@ use servo_core::control::speed::SPEED_LOOP_CROSSOVER_RAD_S;
 use servo_core::control::{SpeedLoopConfig, SpeedLoopError, SpeedProfile};
 use servo_core::PlantParams;
 use servo_io::recipe_file::{FrictionRecipe, InertiaRecipe};
-use servo_io::{meta_keys, McapLog, McapLogOptions};
+use servo_io::{meta_keys, Context as _, McapLog, McapLogOptions};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -114,12 +114,8 @@ pub fn run_experiment(
         experiment.profile.duration_s().to_string(),
     );
     meta.extend(extra.iter().map(|(k, v)| (k.clone(), v.clone())));
-    let mut log = McapLog::create(&path, &meta, McapLogOptions::default()).map_err(|e| {
-        servo_io::Error::Context {
-            context: format!("creating log {}", path.display()),
-            source: Box::new(e),
-        }
-    })?;
+    let mut log = McapLog::create(&path, &meta, McapLogOptions::default())
+        .with_context(|| format!("creating log {}", path.display()))?;
     let cfg = RunConfig {
         keep_record: false,
         ..RunConfig::speed(experiment.profile.clone(), speed_loop)

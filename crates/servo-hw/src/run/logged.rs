@@ -58,10 +58,7 @@ impl RunMetadata {
         self.put(meta_keys::SERVO_VERSION, env!("CARGO_PKG_VERSION").into());
         self.put(meta_keys::BACKEND, backend.to_string());
         self.put(meta_keys::FIRMWARE, info.firmware.into());
-        self.put(
-            meta_keys::SAMPLE_PERIOD_S,
-            info.sample_period_s.to_string(),
-        );
+        self.put(meta_keys::SAMPLE_PERIOD_S, info.sample_period_s.to_string());
         self.put(meta_keys::COUNTS_PER_REV, info.counts_per_rev.to_string());
         self.put(meta_keys::DURATION_S, duration_s.to_string());
         self.put(
@@ -135,10 +132,7 @@ pub fn summary_map(
                 map.extend(ls.to_map());
             }
             // What really ran (the run metadata holds the planned duration).
-            map.insert(
-                "planned_duration_s".into(),
-                planned_duration_s.to_string(),
-            );
+            map.insert("planned_duration_s".into(), planned_duration_s.to_string());
             map.insert("stop_reason".into(), out.stop.describe().into());
             map
         }
