@@ -241,13 +241,12 @@ fn mcap_with_corrupted_lengths_is_refused_cleanly() {
     let seeds = mcap_seeds();
     let good = &seeds[1];
     // A record length of u64::MAX right after the magic and at the first chunk.
-    let chunk_at = good
-        .windows(1)
-        .enumerate()
-        .skip(8)
-        .find(|(_, w)| w[0] == 0x06)
-        .map(|(i, _)| i)
-        .unwrap();
+    // The first chunk record, found by walking the records (opcode, u64 length, body).
+    let mut chunk_at = 8;
+    while good[chunk_at] != 0x06 {
+        let len = u64::from_le_bytes(good[chunk_at + 1..chunk_at + 9].try_into().unwrap());
+        chunk_at += 9 + len as usize;
+    }
     for at in [8usize, chunk_at] {
         let mut b = good.clone();
         b[at + 1..at + 9].copy_from_slice(&u64::MAX.to_le_bytes());
