@@ -286,9 +286,9 @@ pub struct ErrorLadder {
 /// use servo_core::compare::{CompareOptions, Measured};
 /// use servo_core::effects::{Effect, EffectKind};
 /// use servo_core::fit::EffectToFit;
-/// // A motor with an imbalance (10 mN m), driven open loop by voltage steps; the model lacks it.
+/// // A driver that saturates at 4.5 V, driven open loop by voltage steps; the model lacks it.
 /// let mut truth = Plant::from_params(PlantParams::TABLE2)?;
-/// truth.effects.insert(Effect::new(EffectKind::Imbalance, &[0.01, 0.5])?);
+/// truth.effects.insert(Effect::new(EffectKind::Saturation, &[4.5])?);
 /// let (mut sim, mut sensors) = (PlantSim::new(&truth, 1e-3)?, Sensors::new(SensorConfig::default()));
 /// let mut rec = Record::default();
 /// let (mut th, mut ia, mut uv) = (Vec::new(), Vec::new(), Vec::new());
@@ -305,11 +305,11 @@ pub struct ErrorLadder {
 /// let log = LogReplay { name: "sim", measured: &measured, controller: None, feedforward_v: None, u_limit_v: None };
 /// let modes = [choose_mode(&log, None, "")?]; // no controller: open-loop speed replay
 /// let model = Plant::from_params(PlantParams::TABLE2)?;
-/// let imbalance = AddEffect::Catalogue(EffectToFit::parse("imbalance")?);
-/// let ladder = error_ladder(&model, &[log], &modes, &[rec], &[imbalance], &opts)?;
+/// let saturation = AddEffect::Catalogue(EffectToFit::parse("saturation")?);
+/// let ladder = error_ladder(&model, &[log], &modes, &[rec], &[saturation], &opts)?;
 /// let fit = |i: usize| ladder.steps[i].cmp_fit[0].1.fit_percent;
 /// assert!(fit(1) > fit(0), "fit {} % -> {} %", fit(0), fit(1));
-/// assert!(ladder.steps[1].params.iter().any(|p| p.effect == Some(EffectKind::Imbalance)));
+/// assert!(ladder.steps[1].params.iter().any(|p| p.effect == Some(EffectKind::Saturation)));
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub fn error_ladder(
