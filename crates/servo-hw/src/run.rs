@@ -260,7 +260,7 @@ pub enum RunError {
     Sample {
         k: usize,
         #[source]
-        source: HwError,
+        source: Box<HwError>,
     },
     /// The backend failed to apply a voltage.
     #[error("applying u = {u_v} V at t = {t_s} s")]
@@ -268,7 +268,7 @@ pub enum RunError {
         u_v: f64,
         t_s: f64,
         #[source]
-        source: HwError,
+        source: Box<HwError>,
     },
     /// A measurement or reference the controller cannot use.
     #[error("non-finite measurement or reference at t = {t_s} s (theta_l = {theta_l_rad} rad)")]
@@ -278,7 +278,7 @@ pub enum RunError {
     Sink(#[source] SinkError),
     /// The run went to its end (or was stopped) but stopping the board failed.
     #[error("stopping the board (0 V)")]
-    Stop(#[source] HwError),
+    Stop(#[source] Box<HwError>),
     /// The run went to its end but the log sink could not flush.
     #[error("flushing the log")]
     Flush(#[source] SinkError),
@@ -423,9 +423,10 @@ pub fn run_loop_monitored(
                 stop = StopReason::Interrupted;
                 break;
             }
-            let s = backend
-                .sample()
-                .map_err(|source| RunError::Sample { k, source })?;
+            let s = backend.sample().map_err(|source| RunError::Sample {
+                k,
+                source: Box::new(source),
+            })?;
             // Run time from the sample index: the board clock may start anywhere.
             let t = k as f64 * ts;
             let omega = speed.update(s.theta_l_rad);
@@ -473,7 +474,7 @@ pub fn run_loop_monitored(
             backend.apply(u).map_err(|source| RunError::Apply {
                 u_v: u,
                 t_s: t,
-                source,
+                source: Box::new(source),
             })?;
             acc.push(t, r, s.theta_l_rad, u, sat);
             last_t = t;
@@ -522,7 +523,7 @@ pub fn run_loop_monitored(
             cause: Box::new(e),
         });
     }
-    stopped.map_err(RunError::Stop)?;
+    stopped.map_err(|e| RunError::Stop(Box::new(e)))?;
     flushed.map_err(RunError::Flush)?;
     if !any_ref {
         rec.ref_rad = None;

@@ -87,7 +87,7 @@ pub fn run_experiments(args: &Identify, p: &PlantParams) -> anyhow::Result<Vec<P
         );
         let link = match &result {
             Ok(r) => r.link,
-            Err(ExperimentError::Run { link, .. }) => *link,
+            Err(ExperimentError::Run { link, .. }) => link.as_deref().copied(),
             Err(_) => None,
         };
         if let Some(ls) = &link {

@@ -150,7 +150,7 @@ pub enum LadderError {
     Replay {
         log: String,
         #[source]
-        source: CompareError,
+        source: alloc::boxed::Box<CompareError>,
     },
     #[error("{log}: closed-loop replay without a controller")]
     NoController { log: String },
@@ -166,7 +166,7 @@ pub enum LadderError {
         rung: usize,
         effect: String,
         // Not a #[source]: CustomError is an Error only with std.
-        error: CustomError,
+        error: alloc::boxed::Box<CustomError>,
     },
     /// Fitting an added effect to the logs failed (`rung`: its index in the added effects).
     #[error("fitting {effect} to the logs failed")]
@@ -198,7 +198,7 @@ pub fn compare_logs(
         let m = log.measured;
         let failed = |source| LadderError::Replay {
             log: log.name.to_string(),
-            source,
+            source: alloc::boxed::Box::new(source),
         };
         let rp = if mc.mode == ReplayMode::ClosedLoop {
             let mut pid = log
@@ -341,7 +341,7 @@ pub fn error_ladder(
                     .map_err(|error| LadderError::Custom {
                         rung,
                         effect: eff.name().to_string(),
-                        error,
+                        error: alloc::boxed::Box::new(error),
                     })?;
                 Vec::new()
             }

@@ -43,7 +43,7 @@ pub enum InertiaMethod {
 }
 
 /// Settings of [`identify`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct IdentifyOptions {
     /// One method only; `None`: every applicable one, with the fallback described in the module.
     pub method: Option<Method>,
@@ -51,18 +51,6 @@ pub struct IdentifyOptions {
     pub friction: FrictionConfig,
     pub phases: PhaseConfig,
     pub combined: CombinedConfig,
-}
-
-impl Default for IdentifyOptions {
-    fn default() -> Self {
-        IdentifyOptions {
-            method: None,
-            inertia_method: InertiaMethod::default(),
-            friction: FrictionConfig::default(),
-            phases: PhaseConfig::default(),
-            combined: CombinedConfig::default(),
-        }
-    }
 }
 
 /// What the methods gave, and why the others did not run.

@@ -78,9 +78,9 @@ pub enum ExperimentError {
     Run {
         name: &'static str,
         log: PathBuf,
-        link: Option<LinkStats>,
+        link: Option<Box<LinkStats>>,
         #[source]
-        source: RunError,
+        source: Box<RunError>,
     },
 }
 
@@ -132,8 +132,8 @@ pub fn run_experiment(
             return Err(ExperimentError::Run {
                 name,
                 log: path,
-                link,
-                source: e,
+                link: link.map(Box::new),
+                source: Box::new(e),
             });
         }
     };
