@@ -12,6 +12,7 @@ mod diagnose;
 mod frf;
 mod fuzz;
 mod identify;
+mod layout;
 mod mat;
 mod registry;
 mod run_log;

@@ -573,6 +573,27 @@ fn run_rejects_bad_input_clearly() {
         assert!(!ok, "{args:?} should fail");
         assert!(err.contains(needle), "{args:?}: `{needle}` not in {err}");
     }
+    // Runs too long for what they ask to keep are refused before they start (no allocation,
+    // no disk filled): 9e7 s of log is at least 4.5 TB; 10 h of samples in memory for a CSV.
+    let log = dir.path().join("long.mcap");
+    let csv = dir.path().join("long.csv");
+    let common = ["run", "--gains", g, "--ref", "square:amp=1,period=2"];
+    for (extra, needle) in [
+        (
+            ["--duration", "9e7", "--log", log.to_str().unwrap()],
+            "free",
+        ),
+        (
+            ["--duration", "36000", "--csv", csv.to_str().unwrap()],
+            "log to MCAP instead",
+        ),
+    ] {
+        let args: Vec<&str> = common.iter().chain(extra.iter()).copied().collect();
+        let (ok, _, err) = servo_e2e::servo(&args);
+        assert!(!ok, "{args:?} should be refused");
+        assert!(err.contains(needle), "{args:?}: `{needle}` not in {err}");
+    }
+    assert!(!log.exists() && !csv.exists(), "a refused run left a file");
 }
 
 #[test]

@@ -305,6 +305,11 @@ impl RunError {
 /// index loses precision as a time.
 pub const MAX_SAMPLES: f64 = 1e11;
 
+/// Most samples a run keeps in memory when [`RunConfig::keep_record`] asks for every sample
+/// (about 2.8 hours at 1 kHz, at most ~1 GB with the vectors' growth): beyond, the caller must
+/// stream them (a [`LogSink`]) instead. Checked before the run starts.
+pub const MAX_KEPT_SAMPLES: f64 = 1e7;
+
 /// The PID configuration that actually runs on a loop at period `ts_s` [s] with the voltage
 /// limit `u_limit_v` [V] (the tighter of the run's and the board's): `pid` with its output limits
 /// narrowed to +-`u_limit_v` and its period set to the loop's.
@@ -389,6 +394,14 @@ pub fn run_loop_monitored(
     if n_f > MAX_SAMPLES {
         return bad(format!(
             "--duration {} s at T_s = {ts} s is {n_f:e} samples; servo runs at most {MAX_SAMPLES:e}",
+            cfg.duration_s
+        ));
+    }
+    if cfg.keep_record && n_f > MAX_KEPT_SAMPLES {
+        return bad(format!(
+            "keeping every sample in memory (for a CSV or a plot) of {} s at T_s = {ts} s is \
+             {n_f:e} samples, more than the {MAX_KEPT_SAMPLES:e} servo keeps (~1 GB); log to \
+             MCAP instead (it streams to disk) and convert with `servo export`",
             cfg.duration_s
         ));
     }

@@ -15,6 +15,7 @@
 //! * [`csv_read`], [`csv_write`]: CSV logs.
 //! * [`loop_msg`]: the `/servo/loop` JSON message and its JSON schema.
 //! * [`mcap_write`], [`mcap_read`]: MCAP logs (Foxglove/PlotJuggler compatible).
+//! * [`disk`]: room on disk for a long log, checked before a run starts.
 //! * [`mat_read`], [`mat_path`], [`mat_log`]: MATLAB MAT-files (Level 5, -v6/-v7), MATLAB paths
 //!   in `--columns`, Simulink Scope structures.
 
@@ -22,6 +23,7 @@ pub mod columns;
 pub mod controller;
 pub mod csv_read;
 pub mod csv_write;
+pub mod disk;
 pub mod effects_file;
 pub mod error;
 pub mod gains_file;

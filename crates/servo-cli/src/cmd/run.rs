@@ -268,7 +268,11 @@ impl Run {
             ..McapLogOptions::default()
         };
         let mut log = match &self.log {
-            Some(p) => Some(McapLog::create(p, &meta.0, log_options)?),
+            Some(p) => {
+                let samples = (duration_s / ts_s).ceil();
+                servo_io::disk::ensure_room_for_log(p, samples, self.log_encoding)?;
+                Some(McapLog::create(p, &meta.0, log_options)?)
+            }
             None => None,
         };
         let progress = runner::Progress::from_mode(self.progress, "servo run");
