@@ -48,7 +48,10 @@ fn record(
 }
 
 /// Open-loop identification-like excitation: voltage steps of random size and sign, some slow
-/// ramps through zero.
+/// ramps (this log's own generator rather than `servo_core::sim::excitation::RandomSteps`: its
+/// ramps keep a historical slope of -2|a| per hold, so the negative ones run away from zero
+/// instead of through it, and every seed these tests were checked on keeps its data; new tests
+/// should use the library's generator).
 fn open_loop(plant: &Plant, seconds: f64, seed: u64) -> Record {
     let mut sim = PlantSim::new(plant, DT).unwrap();
     let mut sensors = Sensors::new(SensorConfig {

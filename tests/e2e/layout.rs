@@ -78,7 +78,11 @@ fn each_catalogue_effect_name_appears_in_at_most_three_source_files() {
         // Its own file at least: a name found nowhere means the scan is broken.
         assert!(!files.is_empty(), "`{word}` appears in no source file");
         if files.len() > 3 {
-            failures.push(format!("`{word}` in {} files: {}", files.len(), files.join(", ")));
+            failures.push(format!(
+                "`{word}` in {} files: {}",
+                files.len(),
+                files.join(", ")
+            ));
         }
     }
     assert!(
@@ -93,7 +97,12 @@ fn each_catalogue_effect_name_appears_in_at_most_three_source_files() {
 fn no_command_file_is_longer_than_400_lines() {
     let cmd = workspace().join("crates/servo-cli/src/cmd");
     let files = rust_files(&cmd);
-    assert!(files.len() > 5, "found only {} files under {}", files.len(), cmd.display());
+    assert!(
+        files.len() > 5,
+        "found only {} files under {}",
+        files.len(),
+        cmd.display()
+    );
     let long: Vec<String> = files
         .iter()
         .filter_map(|p| {

@@ -9,8 +9,8 @@ use servo_core::effects::{
 };
 use servo_core::fit::{self, search, EffectToFit, FitOptions};
 use servo_core::record::Record;
-use servo_core::sim::sensors::SplitMix64;
-use servo_core::sim::{PlantSim, SensorConfig, Sensors};
+use servo_core::sim::excitation::{simulate_open_loop, RandomSteps};
+use servo_core::sim::SensorConfig;
 use servo_core::{Effect, Plant, PlantParams};
 use std::sync::OnceLock;
 
@@ -108,35 +108,12 @@ fn truth(hidden: Effect) -> Plant {
 
 /// Voltage steps of random size and sign (an identification-like log), current logged.
 fn open_loop(plant: &Plant, seconds: f64, seed: u64) -> Record {
-    let mut sim = PlantSim::new(plant, DT).unwrap();
-    let mut sensors = Sensors::new(SensorConfig {
+    let u = RandomSteps::new(seed ^ 0x5EED).voltages((seconds / DT) as usize, DT);
+    let sensors = SensorConfig {
         seed,
         ..SensorConfig::default()
-    });
-    let mut rng = SplitMix64(seed ^ 0x5EED);
-    let n = (seconds / DT) as usize;
-    let (mut t, mut th, mut ia, mut uv) = (vec![], vec![], vec![], vec![]);
-    let mut u = 0.0;
-    for k in 0..n {
-        if k % 400 == 0 {
-            let mag = 0.8 + 7.0 * rng.uniform();
-            u = if rng.uniform() < 0.5 { -mag } else { mag };
-        }
-        let m = sensors.measure(sim.state());
-        t.push(k as f64 * DT);
-        th.push(m.theta_l_rad);
-        ia.push(m.i_a_a);
-        uv.push(u);
-        sim.step(u);
-    }
-    Record {
-        source: "open-loop".into(),
-        time_s: t,
-        theta_l_rad: Some(th),
-        i_a_a: Some(ia),
-        u_v: Some(uv),
-        ..Record::default()
-    }
+    };
+    simulate_open_loop(plant, sensors, DT, &u, "open-loop").unwrap()
 }
 
 #[test]

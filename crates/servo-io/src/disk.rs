@@ -100,7 +100,10 @@ mod tests {
         let e = ensure_room_for_log(&path, samples, LogEncoding::Protobuf)
             .expect_err("a log twice the disk's free space")
             .to_string();
-        assert!(e.contains("run.mcap") && e.contains("free") && e.contains("--duration"), "{e}");
+        assert!(
+            e.contains("run.mcap") && e.contains("free") && e.contains("--duration"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -972,8 +972,8 @@ pub fn set_effect(plant: &mut Plant, kind: EffectKind, values: &[f64]) -> Result
 pub(crate) mod tests {
     use super::*;
     use crate::params::PlantParams;
-    use crate::sim::sensors::SplitMix64;
-    use crate::sim::{PlantSim, SensorConfig, Sensors};
+    use crate::sim::excitation::{simulate_open_loop, RandomSteps};
+    use crate::sim::SensorConfig;
 
     /// An open-loop identification-like log: random voltage steps of both signs.
     pub(crate) fn open_loop_log(
@@ -983,36 +983,20 @@ pub(crate) mod tests {
         with_current: bool,
     ) -> Record {
         let dt = 1e-3;
-        let mut sim = PlantSim::new(plant, dt).unwrap();
-        let mut sensors = Sensors::new(SensorConfig {
+        let steps = RandomSteps {
+            hold_samples: 300,
+            min_v: 0.5,
+            span_v: 5.0,
+            ..RandomSteps::new(seed ^ 0xABCD)
+        };
+        let u = steps.voltages((seconds / dt) as usize, dt);
+        let sensors = SensorConfig {
             seed,
             ..SensorConfig::default()
-        });
-        let mut rng = SplitMix64(seed ^ 0xABCD);
-        let n = (seconds / dt) as usize;
-        let mut rec = Record {
-            source: "sim".into(),
-            ..Record::default()
         };
-        let (mut t, mut th, mut ia, mut uv) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        let mut u = 0.0;
-        for k in 0..n {
-            if k % 300 == 0 {
-                let mag = 0.5 + 5.0 * rng.uniform();
-                u = if rng.uniform() < 0.5 { -mag } else { mag };
-            }
-            let m = sensors.measure(sim.state());
-            t.push(k as f64 * dt);
-            th.push(m.theta_l_rad);
-            ia.push(m.i_a_a);
-            uv.push(u);
-            sim.step(u);
-        }
-        rec.time_s = t;
-        rec.theta_l_rad = Some(th);
-        rec.u_v = Some(uv);
-        if with_current {
-            rec.i_a_a = Some(ia);
+        let mut rec = simulate_open_loop(plant, sensors, dt, &u, "sim").unwrap();
+        if !with_current {
+            rec.i_a_a = None;
         }
         rec
     }

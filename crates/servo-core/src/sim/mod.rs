@@ -54,6 +54,8 @@
 // Small dense matrix code reads best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
+#[cfg(feature = "alloc")]
+pub mod excitation;
 pub mod sensors;
 
 use crate::custom::{ActsOn as CustomPlace, CustomSlots};
