@@ -265,6 +265,29 @@ fn proxied(
 
 /// Step response with the PID on `backend`; returns (time_s, theta_l_rad) per period and the
 /// error that ended the run early, if any.
+/// [`step_run`] of [`PERIODS`] periods through the [`proxied`] link with mischief `m` (a
+/// tolerant board), to its end: the samples, the host's error, its link statistics and the
+/// board's report.
+fn proxied_step_run(
+    m: Mischief,
+) -> (
+    Vec<(f64, f64)>,
+    Option<HwError>,
+    servo_hw::LinkStats,
+    BoardReport,
+) {
+    let (host, board, stop, threads) = proxied(tolerant(), m);
+    let mut be = SerialBackend::from_port(Box::new(host), host_cfg()).unwrap();
+    let (ser, err) = step_run(&mut be, PERIODS);
+    let stats = be.stats();
+    eprintln!("{stats}");
+    drop(be);
+    stop.store(true, Ordering::Relaxed);
+    threads.into_iter().for_each(|t| t.join().unwrap());
+    let (rep, _) = board.finish();
+    (ser, err, stats, rep)
+}
+
 fn step_run(backend: &mut dyn Backend, periods: usize) -> (Vec<(f64, f64)>, Option<HwError>) {
     let cfg = PidConfig {
         anti_windup: AntiWindup::Clamping,
@@ -415,16 +438,8 @@ fn closed_loop_through_serial_matches_the_simulator() {
 fn corrupted_bytes_are_rejected_and_the_loop_survives() {
     let _rt = realtime();
     let sim = sim_reference();
-    let (host, board, stop, threads) = proxied(tolerant(), Mischief::Corrupt(397));
-    let mut be = SerialBackend::from_port(Box::new(host), host_cfg()).unwrap();
-    let (ser, err) = step_run(&mut be, PERIODS);
+    let (ser, err, stats, rep) = proxied_step_run(Mischief::Corrupt(397));
     assert!(err.is_none(), "{err:?}");
-    let stats = be.stats();
-    eprintln!("{stats}");
-    drop(be);
-    stop.store(true, Ordering::Relaxed);
-    threads.into_iter().for_each(|t| t.join().unwrap());
-    let (rep, _) = board.finish();
     eprintln!("{rep:?}");
     assert!(
         stats.crc_errors + stats.framing_errors > 5,
@@ -449,16 +464,8 @@ fn corrupted_bytes_are_rejected_and_the_loop_survives() {
 #[test]
 fn dropped_bytes_are_resynchronised() {
     let _rt = realtime();
-    let (host, board, stop, threads) = proxied(tolerant(), Mischief::Drop(301));
-    let mut be = SerialBackend::from_port(Box::new(host), host_cfg()).unwrap();
-    let (ser, err) = step_run(&mut be, PERIODS);
+    let (ser, err, stats, rep) = proxied_step_run(Mischief::Drop(301));
     assert!(err.is_none(), "{err:?}");
-    let stats = be.stats();
-    eprintln!("{stats}");
-    drop(be);
-    stop.store(true, Ordering::Relaxed);
-    threads.into_iter().for_each(|t| t.join().unwrap());
-    let (rep, _) = board.finish();
     assert!(
         stats.lost_frames > 5 && stats.crc_errors + stats.framing_errors > 5,
         "{stats}"
