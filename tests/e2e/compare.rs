@@ -39,6 +39,25 @@ fn run_json(args: &[&str]) -> Value {
     serde_json::from_str(&out).unwrap_or_else(|e| panic!("bad JSON ({e}): {out}"))
 }
 
+/// `servo compare LOG --model MODEL --gains GAINS --columns COLS --json EXTRA...`, parsed.
+fn compare_json(log: &Path, model: &Path, gains: &Path, cols: &str, extra: &[&str]) -> Value {
+    let path = |p: &Path| p.to_str().unwrap().to_string();
+    let (log, model, gains) = (path(log), path(model), path(gains));
+    let mut args = vec![
+        "compare",
+        &log,
+        "--model",
+        &model,
+        "--gains",
+        &gains,
+        "--columns",
+        cols,
+        "--json",
+    ];
+    args.extend_from_slice(extra);
+    run_json(&args)
+}
+
 fn regime<'a>(v: &'a Value, name: &str) -> &'a Value {
     v["regimes"]
         .as_array()
@@ -61,23 +80,20 @@ fn hidden_coulomb_friction_is_located_and_added() {
     ModelFile::from_plant(&plant(None)).save(&model).unwrap();
     gains_file(&gains);
     let cols = "time=time_s,u=u_V,theta_l=theta_l_rad,ref=ref_rad";
-    let v = run_json(&[
-        "compare",
-        log.to_str().unwrap(),
-        "--model",
-        model.to_str().unwrap(),
-        "--gains",
-        gains.to_str().unwrap(),
-        "--columns",
+    let v = compare_json(
+        &log,
+        &model,
+        &gains,
         cols,
-        "--json",
-        "--add",
-        "coulomb",
-        "--save",
-        saved.to_str().unwrap(),
-        "--plot",
-        svg.to_str().unwrap(),
-    ]);
+        &[
+            "--add",
+            "coulomb",
+            "--save",
+            saved.to_str().unwrap(),
+            "--plot",
+            svg.to_str().unwrap(),
+        ],
+    );
     assert_eq!(v["mode"], "closed-loop", "{v}");
     assert_eq!(v["signal"], "theta_l");
     // The given gains are the ones that ran: the controller check passes.
@@ -121,17 +137,7 @@ fn hidden_coulomb_friction_is_located_and_added() {
     }
 
     // Where the model without friction fails: compare the base model alone.
-    let v0 = run_json(&[
-        "compare",
-        log.to_str().unwrap(),
-        "--model",
-        model.to_str().unwrap(),
-        "--gains",
-        gains.to_str().unwrap(),
-        "--columns",
-        cols,
-        "--json",
-    ]);
+    let v0 = compare_json(&log, &model, &gains, cols, &[]);
     let rev = regime(&v0, "reversal");
     let still = regime(&v0, "standstill");
     println!("base model: reversal {} / standstill {}", rev, still);
@@ -167,17 +173,13 @@ fn model_equal_to_truth_fits_within_noise() {
     simulate_steps(&truth, &log);
     ModelFile::from_plant(&truth).save(&model).unwrap();
     gains_file(&gains);
-    let v = run_json(&[
-        "compare",
-        log.to_str().unwrap(),
-        "--model",
-        model.to_str().unwrap(),
-        "--gains",
-        gains.to_str().unwrap(),
-        "--columns",
+    let v = compare_json(
+        &log,
+        &model,
+        &gains,
         "time=time_s,u=u_V,theta_l=theta_l_rad,ref=ref_rad",
-        "--json",
-    ]);
+        &[],
+    );
     let fit = v["fit_pct"].as_f64().unwrap();
     let rmse = v["rmse"].as_f64().unwrap();
     let count = std::f64::consts::TAU / 4096.0;
