@@ -39,25 +39,6 @@ fn run_json(args: &[&str]) -> Value {
     serde_json::from_str(&out).unwrap_or_else(|e| panic!("bad JSON ({e}): {out}"))
 }
 
-/// `servo compare LOG --model MODEL --gains GAINS --columns COLS --json EXTRA...`, parsed.
-fn compare_json(log: &Path, model: &Path, gains: &Path, cols: &str, extra: &[&str]) -> Value {
-    let path = |p: &Path| p.to_str().unwrap().to_string();
-    let (log, model, gains) = (path(log), path(model), path(gains));
-    let mut args = vec![
-        "compare",
-        &log,
-        "--model",
-        &model,
-        "--gains",
-        &gains,
-        "--columns",
-        cols,
-        "--json",
-    ];
-    args.extend_from_slice(extra);
-    run_json(&args)
-}
-
 fn regime<'a>(v: &'a Value, name: &str) -> &'a Value {
     v["regimes"]
         .as_array()
@@ -80,12 +61,15 @@ fn hidden_coulomb_friction_is_located_and_added() {
     ModelFile::from_plant(&plant(None)).save(&model).unwrap();
     gains_file(&gains);
     let cols = "time=time_s,u=u_V,theta_l=theta_l_rad,ref=ref_rad";
+    let g = gains.to_str().unwrap();
     let v = compare_json(
         &log,
         &model,
-        &gains,
-        cols,
         &[
+            "--gains",
+            g,
+            "--columns",
+            cols,
             "--add",
             "coulomb",
             "--save",
@@ -137,7 +121,7 @@ fn hidden_coulomb_friction_is_located_and_added() {
     }
 
     // Where the model without friction fails: compare the base model alone.
-    let v0 = compare_json(&log, &model, &gains, cols, &[]);
+    let v0 = compare_json(&log, &model, &["--gains", g, "--columns", cols]);
     let rev = regime(&v0, "reversal");
     let still = regime(&v0, "standstill");
     println!("base model: reversal {} / standstill {}", rev, still);
@@ -173,12 +157,11 @@ fn model_equal_to_truth_fits_within_noise() {
     simulate_steps(&truth, &log);
     ModelFile::from_plant(&truth).save(&model).unwrap();
     gains_file(&gains);
+    let cols = "time=time_s,u=u_V,theta_l=theta_l_rad,ref=ref_rad";
     let v = compare_json(
         &log,
         &model,
-        &gains,
-        "time=time_s,u=u_V,theta_l=theta_l_rad,ref=ref_rad",
-        &[],
+        &["--gains", gains.to_str().unwrap(), "--columns", cols],
     );
     let fit = v["fit_pct"].as_f64().unwrap();
     let rmse = v["rmse"].as_f64().unwrap();
