@@ -17,11 +17,11 @@ use super::loop_msg::{
 };
 use crate::error::{self as anyhow, anyhow, Context, Error};
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{mpsc, Arc};
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
 
 /// Name of the metadata record that describes a run.
 pub const RUN_METADATA: &str = "servo.run";
@@ -297,7 +297,10 @@ impl Writer {
                             self.metadata_indexes
                                 .push((offset, record.len() as u64, name.clone()));
                         }
-                        self.fail_on(r.map_err(|e| (format!("writing metadata {name}"), e)), failed);
+                        self.fail_on(
+                            r.map_err(|e| (format!("writing metadata {name}"), e)),
+                            failed,
+                        );
                     }
                 }
                 Job::Sync(done) => {
@@ -641,7 +644,10 @@ impl McapLog {
             };
             let e = match what {
                 Some((what, e)) => self.io_error(&what, e),
-                None => anyhow!("MCAP log {}: its writer thread stopped", self.path.display()),
+                None => anyhow!(
+                    "MCAP log {}: its writer thread stopped",
+                    self.path.display()
+                ),
             };
             self.failed = Some(format!("{e:#}"));
             return e;
