@@ -15,11 +15,13 @@
 use super::loop_msg::{
     loop_descriptor_set, loop_schema, LoopMsg, LOOP_PROTO_NAME, LOOP_SCHEMA_NAME, LOOP_TOPIC,
 };
-use crate::error::{self as anyhow, anyhow, Context};
+use crate::error::{self as anyhow, anyhow, Context, Error};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
 
 /// Name of the metadata record that describes a run.
 pub const RUN_METADATA: &str = "servo.run";
@@ -216,31 +218,286 @@ impl Compressor {
     }
 }
 
-/// An MCAP log being written. Call [`McapLog::finish`] at the end (also on Ctrl-C); a log that
-/// is dropped unfinished is still readable up to its last flush.
-pub struct McapLog {
-    /// `None` once finished.
-    out: Option<Out>,
-    path: PathBuf,
-    opts: McapLogOptions,
-    sequence: u32,
-    messages: u64,
-    last_flush_s: f64,
-    last_flush_wall: std::time::Instant,
-    /// Records of the open chunk, uncompressed (message records laid out in place).
-    chunk: Vec<u8>,
-    /// Message index entries of the open chunk: (log_time, offset in `chunk`), little-endian.
-    chunk_msg_index: Vec<u8>,
-    /// First and last log time of the open chunk [ns].
-    chunk_times: Option<(u64, u64)>,
-    /// First and last log time of the whole log [ns].
+/// At most this many closed chunks wait for the writer thread: the loop then blocks on the next
+/// one (back-pressure) instead of queueing without bound. With the open chunk, the one being
+/// written and the recycled ones, a log holds at most `QUEUED_CHUNKS + 3` chunk buffers (each
+/// at most [`MAX_CHUNK_BYTES`] and its message index).
+const QUEUED_CHUNKS: usize = 2;
+
+/// A chunk's records (uncompressed, laid out in place), its message index entries ((log_time,
+/// offset in `records`), little-endian) and the first and last log time it holds [ns]. Closed
+/// chunks go to the writer thread; their buffers come back for reuse.
+#[derive(Default)]
+struct ChunkBuf {
+    records: Vec<u8>,
+    msg_index: Vec<u8>,
     times: Option<(u64, u64)>,
+}
+
+/// Work for the writer thread, in file order.
+enum Job {
+    /// A closed chunk; then flush the file buffer to the OS when `flush`.
+    Chunk { chunk: ChunkBuf, flush: bool },
+    /// A whole metadata record named `name` (metadata lies outside chunks).
+    Metadata { record: Vec<u8>, name: String },
+    /// Flush the file buffer to the OS, then answer: the log is durable up to here.
+    Sync(mpsc::SyncSender<()>),
+}
+
+/// The writer thread's side of a log: the file, the compressor, and what the summary section
+/// will index. Its first I/O error stops all writing; the log's side reports it.
+struct Writer {
+    out: Out,
     compressor: Compressor,
     /// Compressed chunk, reused.
     compressed: Vec<u8>,
     chunk_indexes: Vec<ChunkIndexEntry>,
     /// (offset, length, name) of each metadata record.
     metadata_indexes: Vec<(u64, u64, String)>,
+    /// What was being written when the first error happened, and the error.
+    error: Option<(String, std::io::Error)>,
+}
+
+impl Writer {
+    /// Runs the jobs until the log's side closes the channel, sending chunk buffers back on
+    /// `free`; sets `failed` on the first error. Returns itself for the summary section.
+    fn run(
+        mut self,
+        jobs: mpsc::Receiver<Job>,
+        free: mpsc::Sender<ChunkBuf>,
+        failed: &AtomicBool,
+    ) -> Writer {
+        for job in jobs {
+            match job {
+                Job::Chunk { mut chunk, flush } => {
+                    if self.error.is_none() {
+                        let r = self.write_chunk(&chunk).map_err(|e| ("writing a chunk", e));
+                        let r = r.and_then(|()| match flush {
+                            true => self.out.w.flush().map_err(|e| ("flushing", e)),
+                            false => Ok(()),
+                        });
+                        self.fail_on(r.map_err(|(what, e)| (what.to_string(), e)), failed);
+                    }
+                    chunk.records.clear();
+                    chunk.msg_index.clear();
+                    chunk.times = None;
+                    // A chunk that grew to the size limit should not keep its memory in a
+                    // real-time run.
+                    if chunk.records.capacity() > 2 * MAX_CHUNK_BYTES {
+                        chunk.records.shrink_to(MAX_CHUNK_BYTES + 4096);
+                    }
+                    // The log's side may be gone (finishing): the buffer is then dropped.
+                    let _ = free.send(chunk);
+                }
+                Job::Metadata { record, name } => {
+                    if self.error.is_none() {
+                        let offset = self.out.pos;
+                        let r = self.out.write(&record);
+                        if r.is_ok() {
+                            self.metadata_indexes
+                                .push((offset, record.len() as u64, name.clone()));
+                        }
+                        self.fail_on(
+                            r.map_err(|e| (format!("writing metadata {name}"), e)),
+                            failed,
+                        );
+                    }
+                }
+                Job::Sync(done) => {
+                    if self.error.is_none() {
+                        let r = self.out.w.flush();
+                        self.fail_on(r.map_err(|e| ("flushing".to_string(), e)), failed);
+                    }
+                    let _ = done.send(());
+                }
+            }
+        }
+        self
+    }
+
+    fn fail_on(&mut self, r: Result<(), (String, std::io::Error)>, failed: &AtomicBool) {
+        if let Err(e) = r {
+            self.error = Some(e);
+            failed.store(true, Ordering::Release);
+        }
+    }
+
+    /// Compresses a chunk and writes the chunk record and its message index.
+    fn write_chunk(&mut self, chunk: &ChunkBuf) -> std::io::Result<()> {
+        let Some((start_ns, end_ns)) = chunk.times else {
+            return Ok(());
+        };
+        let uncompressed_crc = crc32fast::hash(&chunk.records);
+        self.compressor
+            .compress(&chunk.records, &mut self.compressed)?;
+        let compression = self.compressor.name();
+        let mut head = Vec::with_capacity(64);
+        head.push(op::CHUNK);
+        let body_len = 8 + 8 + 8 + 4 + 4 + compression.len() + 8 + self.compressed.len();
+        put_u64(&mut head, body_len as u64);
+        put_u64(&mut head, start_ns);
+        put_u64(&mut head, end_ns);
+        put_u64(&mut head, chunk.records.len() as u64);
+        put_u32(&mut head, uncompressed_crc);
+        put_str(&mut head, compression);
+        put_u64(&mut head, self.compressed.len() as u64);
+        let mut index = Vec::with_capacity(15);
+        index.push(op::MESSAGE_INDEX);
+        put_u64(&mut index, (2 + 4 + chunk.msg_index.len()) as u64);
+        put_u16(&mut index, CHANNEL_ID);
+        put_u32(&mut index, chunk.msg_index.len() as u32);
+        let out = &mut self.out;
+        let offset = out.pos;
+        out.write(&head)?;
+        out.write(&self.compressed)?;
+        let message_index_offset = out.pos;
+        out.write(&index)?;
+        out.write(&chunk.msg_index)?;
+        self.chunk_indexes.push(ChunkIndexEntry {
+            start_ns,
+            end_ns,
+            offset,
+            length: message_index_offset - offset,
+            message_index_offset,
+            message_index_length: out.pos - message_index_offset,
+            compressed_size: self.compressed.len() as u64,
+            uncompressed_size: chunk.records.len() as u64,
+        });
+        Ok(())
+    }
+
+    /// Data end, the summary section, the footer and the closing magic.
+    fn summary_section(
+        &mut self,
+        schema_record: &[u8],
+        channel_record: &[u8],
+        messages: u64,
+        times: Option<(u64, u64)>,
+    ) -> std::io::Result<()> {
+        let out = &mut self.out;
+        let mut body = Vec::new();
+        put_u32(&mut body, out.crc.clone().finalize());
+        out.write(&record(op::DATA_END, &body))?;
+        let summary_start = out.pos;
+        out.crc = crc32fast::Hasher::new();
+        let mut groups: Vec<(u8, u64, u64)> = Vec::new();
+        let mut group = |out: &mut Out, opcode: u8, records: &[&[u8]]| {
+            if records.is_empty() {
+                return Ok(());
+            }
+            let start = out.pos;
+            for r in records {
+                out.write(r)?;
+            }
+            groups.push((opcode, start, out.pos - start));
+            Ok::<(), std::io::Error>(())
+        };
+        group(out, op::SCHEMA, &[schema_record])?;
+        group(out, op::CHANNEL, &[channel_record])?;
+        let (start_ns, end_ns) = times.unwrap_or((0, 0));
+        body.clear();
+        put_u64(&mut body, messages);
+        put_u16(&mut body, 1); // schemas
+        put_u32(&mut body, 1); // channels
+        put_u32(&mut body, 0); // attachments
+        put_u32(&mut body, self.metadata_indexes.len() as u32);
+        put_u32(&mut body, self.chunk_indexes.len() as u32);
+        put_u64(&mut body, start_ns);
+        put_u64(&mut body, end_ns);
+        put_u32(&mut body, 10); // channel message counts: one (u16, u64) pair
+        put_u16(&mut body, CHANNEL_ID);
+        put_u64(&mut body, messages);
+        group(out, op::STATISTICS, &[&record(op::STATISTICS, &body)])?;
+        let compression = self.compressor.name();
+        let chunk_indexes: Vec<Vec<u8>> = self
+            .chunk_indexes
+            .iter()
+            .map(|c| {
+                let mut b = Vec::with_capacity(96);
+                put_u64(&mut b, c.start_ns);
+                put_u64(&mut b, c.end_ns);
+                put_u64(&mut b, c.offset);
+                put_u64(&mut b, c.length);
+                put_u32(&mut b, 10); // message index offsets: one (u16, u64) pair
+                put_u16(&mut b, CHANNEL_ID);
+                put_u64(&mut b, c.message_index_offset);
+                put_u64(&mut b, c.message_index_length);
+                put_str(&mut b, compression);
+                put_u64(&mut b, c.compressed_size);
+                put_u64(&mut b, c.uncompressed_size);
+                record(op::CHUNK_INDEX, &b)
+            })
+            .collect();
+        let refs: Vec<&[u8]> = chunk_indexes.iter().map(|r| &r[..]).collect();
+        group(out, op::CHUNK_INDEX, &refs)?;
+        let metadata_indexes: Vec<Vec<u8>> = self
+            .metadata_indexes
+            .iter()
+            .map(|(offset, length, name)| {
+                let mut b = Vec::new();
+                put_u64(&mut b, *offset);
+                put_u64(&mut b, *length);
+                put_str(&mut b, name);
+                record(op::METADATA_INDEX, &b)
+            })
+            .collect();
+        let refs: Vec<&[u8]> = metadata_indexes.iter().map(|r| &r[..]).collect();
+        group(out, op::METADATA_INDEX, &refs)?;
+        let summary_offset_start = out.pos;
+        for (opcode, start, length) in groups {
+            body.clear();
+            body.push(opcode);
+            put_u64(&mut body, start);
+            put_u64(&mut body, length);
+            out.write(&record(op::SUMMARY_OFFSET, &body))?;
+        }
+        // Footer: the summary CRC covers the summary section up to the footer's CRC field.
+        let mut footer = vec![op::FOOTER];
+        put_u64(&mut footer, 8 + 8 + 4);
+        put_u64(&mut footer, summary_start);
+        put_u64(&mut footer, summary_offset_start);
+        out.write(&footer)?;
+        let crc = out.crc.clone().finalize();
+        out.write(&crc.to_le_bytes())?;
+        out.write(MAGIC)?;
+        out.w.flush()
+    }
+}
+
+/// The log's link to its writer thread.
+struct Pipe {
+    jobs: mpsc::SyncSender<Job>,
+    /// Chunk buffers the writer is done with.
+    free: mpsc::Receiver<ChunkBuf>,
+    /// Set by the writer on its first error.
+    failed: Arc<AtomicBool>,
+    thread: std::thread::JoinHandle<Writer>,
+}
+
+/// An MCAP log being written. Call [`McapLog::finish`] at the end (also on Ctrl-C); a log that
+/// is dropped unfinished is still readable up to its last flush.
+///
+/// The caller's thread only frames messages into the open chunk's buffer; a writer thread
+/// compresses each closed chunk, computes the CRCs and writes the file, so that a run's loop
+/// never waits for compression or a write system call. Closed chunks reach it through a queue
+/// of at most [`QUEUED_CHUNKS`] (a writer that falls behind blocks the caller: memory stays
+/// bounded) and their buffers come back for reuse. An error of the writer is reported by the
+/// next [`McapLog::write_loop`], [`McapLog::flush`] or [`McapLog::finish`] call.
+pub struct McapLog {
+    path: PathBuf,
+    opts: McapLogOptions,
+    sequence: u32,
+    messages: u64,
+    last_flush_s: f64,
+    last_flush_wall: std::time::Instant,
+    /// The open chunk.
+    chunk: ChunkBuf,
+    /// First and last log time of the whole log [ns].
+    times: Option<(u64, u64)>,
+    /// The writer thread; `None` once finished or failed.
+    pipe: Option<Pipe>,
+    /// Why the log stopped, once its writer failed (for the calls after the first report).
+    failed: Option<String>,
     schema_record: Vec<u8>,
     channel_record: Vec<u8>,
 }
@@ -303,30 +560,6 @@ impl McapLog {
         put_str(&mut body, message_encoding);
         put_str_map(&mut body, &BTreeMap::new());
         let channel_record = record(op::CHANNEL, &body);
-
-        let mut log = McapLog {
-            out: Some(Out {
-                w: BufWriter::with_capacity(1 << 16, file),
-                pos: 0,
-                crc: crc32fast::Hasher::new(),
-            }),
-            path: path.to_path_buf(),
-            opts,
-            sequence: 0,
-            messages: 0,
-            last_flush_s: f64::NEG_INFINITY,
-            last_flush_wall: std::time::Instant::now(),
-            chunk: Vec::new(),
-            chunk_msg_index: Vec::new(),
-            chunk_times: None,
-            times: None,
-            compressor,
-            compressed: Vec::new(),
-            chunk_indexes: Vec::new(),
-            metadata_indexes: Vec::new(),
-            schema_record,
-            channel_record,
-        };
         body.clear();
         put_str(&mut body, PROFILE);
         put_str(
@@ -334,16 +567,56 @@ impl McapLog {
             concat!("servo ", env!("CARGO_PKG_VERSION"), " / servo-io"),
         );
         let header = record(op::HEADER, &body);
-        let (schema, channel) = (log.schema_record.clone(), log.channel_record.clone());
-        let mut metadata = metadata.clone();
-        metadata.insert(START_TIME_KEY.to_string(), opts.start_unix_ns.to_string());
-        let out = log.out_mut()?;
+
+        let mut out = Out {
+            w: BufWriter::with_capacity(1 << 16, file),
+            pos: 0,
+            crc: crc32fast::Hasher::new(),
+        };
         let written = out
             .write(MAGIC)
             .and_then(|()| out.write(&header))
-            .and_then(|()| out.write(&schema))
-            .and_then(|()| out.write(&channel));
+            .and_then(|()| out.write(&schema_record))
+            .and_then(|()| out.write(&channel_record));
         written.with_context(|| format!("MCAP log {}: writing the header", path.display()))?;
+        let writer = Writer {
+            out,
+            compressor,
+            compressed: Vec::new(),
+            chunk_indexes: Vec::new(),
+            metadata_indexes: Vec::new(),
+            error: None,
+        };
+        let (jobs, job_rx) = mpsc::sync_channel(QUEUED_CHUNKS);
+        let (free_tx, free) = mpsc::channel();
+        let failed = Arc::new(AtomicBool::new(false));
+        let flag = Arc::clone(&failed);
+        let thread = std::thread::Builder::new()
+            .name("mcap-writer".to_string())
+            .spawn(move || writer.run(job_rx, free_tx, &flag))
+            .with_context(|| format!("MCAP log {}: starting its writer thread", path.display()))?;
+
+        let mut log = McapLog {
+            path: path.to_path_buf(),
+            opts,
+            sequence: 0,
+            messages: 0,
+            last_flush_s: f64::NEG_INFINITY,
+            last_flush_wall: std::time::Instant::now(),
+            chunk: ChunkBuf::default(),
+            times: None,
+            pipe: Some(Pipe {
+                jobs,
+                free,
+                failed,
+                thread,
+            }),
+            failed: None,
+            schema_record,
+            channel_record,
+        };
+        let mut metadata = metadata.clone();
+        metadata.insert(START_TIME_KEY.to_string(), opts.start_unix_ns.to_string());
         log.write_metadata(RUN_METADATA, &metadata)?;
         log.flush()?;
         Ok(log)
@@ -359,11 +632,57 @@ impl McapLog {
         self.messages
     }
 
-    fn out_mut(&mut self) -> anyhow::Result<&mut Out> {
-        let path = &self.path;
-        self.out
-            .as_mut()
-            .ok_or_else(|| anyhow!("MCAP log {}: already finished", path.display()))
+    /// The error of a log that cannot take more records: finished, or its writer failed (the
+    /// first call after the failure gets the I/O error itself).
+    fn closed_error(&mut self) -> Error {
+        if let Some(p) = self.pipe.take() {
+            // The writer failed: stop it and take its error.
+            drop(p.jobs);
+            let what = match p.thread.join() {
+                Ok(w) => w.error,
+                Err(_) => None,
+            };
+            let e = match what {
+                Some((what, e)) => self.io_error(&what, e),
+                None => anyhow!(
+                    "MCAP log {}: its writer thread stopped",
+                    self.path.display()
+                ),
+            };
+            self.failed = Some(format!("{e:#}"));
+            return e;
+        }
+        match &self.failed {
+            Some(why) => anyhow!("{why} (the log stopped there)"),
+            None => anyhow!("MCAP log {}: already finished", self.path.display()),
+        }
+    }
+
+    /// "MCAP log PATH: `what`" caused by `e`.
+    fn io_error(&self, what: &str, e: std::io::Error) -> Error {
+        Error::Context {
+            context: format!("MCAP log {}: {what}", self.path.display()),
+            source: Box::new(Error::Io(e)),
+        }
+    }
+
+    /// The writer, if it is running and has not failed.
+    fn pipe(&mut self) -> Result<&Pipe, Error> {
+        match &self.pipe {
+            Some(p) if !p.failed.load(Ordering::Acquire) => {}
+            _ => return Err(self.closed_error()),
+        }
+        self.pipe
+            .as_ref()
+            .ok_or_else(|| anyhow!("MCAP log {}: already finished", self.path.display()))
+    }
+
+    /// Hands `job` to the writer thread (waiting while its queue is full).
+    fn send(&mut self, job: Job) -> anyhow::Result<()> {
+        if self.pipe()?.jobs.send(job).is_err() {
+            return Err(self.closed_error());
+        }
+        Ok(())
     }
 
     fn log_time_ns(&self, time_s: f64) -> u64 {
@@ -375,19 +694,14 @@ impl McapLog {
 
     /// Writes one loop sample; ends the chunk and flushes when `flush_period_s` of run time has
     /// passed since the last flush (of wall-clock time with `flush_on_wall_clock`), or when
-    /// the chunk holds [`MAX_CHUNK_BYTES`].
+    /// the chunk holds [`MAX_CHUNK_BYTES`]. Reports an earlier failure of the writer thread.
     pub fn write_loop(&mut self, msg: &LoopMsg) -> anyhow::Result<()> {
-        if self.out.is_none() {
-            return Err(anyhow!(
-                "MCAP log {}: already finished",
-                self.path.display()
-            ));
-        }
+        self.pipe()?;
         let t = self.log_time_ns(msg.time_s);
         // The message record, framed in place in the chunk: the length is patched once the
         // message is encoded.
-        let at = self.chunk.len();
-        let c = &mut self.chunk;
+        let at = self.chunk.records.len();
+        let c = &mut self.chunk.records;
         let mut head = [0u8; 31];
         head[0] = op::MESSAGE;
         head[9..11].copy_from_slice(&CHANNEL_ID.to_le_bytes());
@@ -404,9 +718,10 @@ impl McapLog {
         let mut entry = [0u8; 16];
         entry[..8].copy_from_slice(&t.to_le_bytes());
         entry[8..].copy_from_slice(&(at as u64).to_le_bytes());
-        self.chunk_msg_index.extend_from_slice(&entry);
-        self.chunk_times = Some(
-            self.chunk_times
+        self.chunk.msg_index.extend_from_slice(&entry);
+        self.chunk.times = Some(
+            self.chunk
+                .times
                 .map_or((t, t), |(a, b)| (a.min(t), b.max(t))),
         );
         self.sequence = self.sequence.wrapping_add(1);
@@ -419,216 +734,94 @@ impl McapLog {
             msg.time_s - self.last_flush_s >= self.opts.flush_period_s - 1e-9 || msg.time_s.is_nan()
         };
         if due {
-            self.flush()?;
+            self.end_chunk(true)?;
             self.last_flush_s = msg.time_s;
             self.last_flush_wall = std::time::Instant::now();
-        } else if self.chunk.len() >= MAX_CHUNK_BYTES {
-            self.end_chunk()?;
+        } else if self.chunk.records.len() >= MAX_CHUNK_BYTES {
+            self.end_chunk(false)?;
         }
         Ok(())
     }
 
-    /// Ends the open chunk (if any): compresses it and writes the chunk record and its message
-    /// index to the file buffer.
-    fn end_chunk(&mut self) -> anyhow::Result<()> {
-        let Some((start_ns, end_ns)) = self.chunk_times.take() else {
+    /// Ends the open chunk (if any) and hands it to the writer thread, which compresses and
+    /// writes it (and then flushes the file to the OS when `flush`). The next chunk starts in
+    /// a buffer the writer is done with, or a new one.
+    fn end_chunk(&mut self, flush: bool) -> anyhow::Result<()> {
+        if self.chunk.times.is_none() {
             return Ok(());
-        };
-        let uncompressed_crc = crc32fast::hash(&self.chunk);
-        let path = self.path.clone();
-        self.compressor
-            .compress(&self.chunk, &mut self.compressed)
-            .with_context(|| format!("MCAP log {}: compressing a chunk", path.display()))?;
-        let compression = self.compressor.name();
-        let mut head = Vec::with_capacity(64);
-        head.push(op::CHUNK);
-        let body_len = 8 + 8 + 8 + 4 + 4 + compression.len() + 8 + self.compressed.len();
-        put_u64(&mut head, body_len as u64);
-        put_u64(&mut head, start_ns);
-        put_u64(&mut head, end_ns);
-        put_u64(&mut head, self.chunk.len() as u64);
-        put_u32(&mut head, uncompressed_crc);
-        put_str(&mut head, compression);
-        put_u64(&mut head, self.compressed.len() as u64);
-        let mut index = Vec::with_capacity(15);
-        index.push(op::MESSAGE_INDEX);
-        put_u64(&mut index, (2 + 4 + self.chunk_msg_index.len()) as u64);
-        put_u16(&mut index, CHANNEL_ID);
-        put_u32(&mut index, self.chunk_msg_index.len() as u32);
-        let out = self
-            .out
-            .as_mut()
-            .ok_or_else(|| anyhow!("MCAP log {}: already finished", path.display()))?;
-        let offset = out.pos;
-        let written = out
-            .write(&head)
-            .and_then(|()| out.write(&self.compressed))
-            .and_then(|()| {
-                let message_index_offset = out.pos;
-                out.write(&index)?;
-                out.write(&self.chunk_msg_index)?;
-                Ok(message_index_offset)
-            });
-        let message_index_offset =
-            written.with_context(|| format!("MCAP log {}: writing a chunk", path.display()))?;
-        self.chunk_indexes.push(ChunkIndexEntry {
-            start_ns,
-            end_ns,
-            offset,
-            length: message_index_offset - offset,
-            message_index_offset,
-            message_index_length: out.pos - message_index_offset,
-            compressed_size: self.compressed.len() as u64,
-            uncompressed_size: self.chunk.len() as u64,
-        });
-        self.times = Some(self.times.map_or((start_ns, end_ns), |(a, b)| {
-            (a.min(start_ns), b.max(end_ns))
-        }));
-        self.chunk.clear();
-        self.chunk_msg_index.clear();
-        // A chunk that grew to the size limit should not keep its memory in a real-time run.
-        if self.chunk.capacity() > 2 * MAX_CHUNK_BYTES {
-            self.chunk.shrink_to(MAX_CHUNK_BYTES + 4096);
         }
-        Ok(())
+        let next = self.pipe()?.free.try_recv().unwrap_or_default();
+        let chunk = std::mem::replace(&mut self.chunk, next);
+        if let Some((s, e)) = chunk.times {
+            self.times = Some(self.times.map_or((s, e), |(a, b)| (a.min(s), b.max(e))));
+        }
+        self.send(Job::Chunk { chunk, flush })
     }
 
     /// Writes a metadata record (after ending the open chunk: metadata lies outside chunks).
     fn write_metadata(&mut self, name: &str, map: &BTreeMap<String, String>) -> anyhow::Result<()> {
-        self.end_chunk()?;
+        self.end_chunk(false)?;
         let mut body = Vec::new();
         put_str(&mut body, name);
         put_str_map(&mut body, map);
-        let rec = record(op::METADATA, &body);
-        let path = self.path.clone();
-        let out = self.out_mut()?;
-        let offset = out.pos;
-        out.write(&rec)
-            .with_context(|| format!("MCAP log {}: writing metadata {name}", path.display()))?;
-        self.metadata_indexes
-            .push((offset, rec.len() as u64, name.to_string()));
-        Ok(())
+        self.send(Job::Metadata {
+            record: record(op::METADATA, &body),
+            name: name.to_string(),
+        })
     }
 
-    /// Ends the open chunk and flushes to the OS now.
+    /// Ends the open chunk and flushes to the OS now: returns once everything written so far
+    /// is in the file (or with the writer's error).
     pub fn flush(&mut self) -> anyhow::Result<()> {
-        if self.out.is_none() {
-            return Ok(());
+        if self.pipe.is_none() && self.failed.is_none() {
+            return Ok(()); // finished
         }
-        self.end_chunk()?;
-        let path = self.path.clone();
-        self.out_mut()?
-            .w
-            .flush()
-            .with_context(|| format!("MCAP log {}: flushing", path.display()))
+        self.end_chunk(false)?;
+        let (done_tx, done) = mpsc::sync_channel(1);
+        self.send(Job::Sync(done_tx))?;
+        if done.recv().is_err() {
+            return Err(self.closed_error());
+        }
+        self.pipe().map(|_| ())
     }
 
     /// Writes the end-of-run summary metadata record ([`SUMMARY_METADATA`]).
     pub fn write_summary(&mut self, summary: &BTreeMap<String, String>) -> anyhow::Result<()> {
-        self.out_mut()?;
+        self.pipe()?;
         self.write_metadata(SUMMARY_METADATA, summary)
     }
 
-    /// Writes the summary section and the footer and closes the file. Safe to call twice.
+    /// Writes the summary section and the footer and closes the file. Safe to call twice; a
+    /// log whose writer failed returns that error.
     pub fn finish(&mut self) -> anyhow::Result<()> {
-        if self.out.is_none() {
-            return Ok(());
+        if self.pipe.is_none() {
+            return match self.failed.is_some() {
+                true => Err(self.closed_error()),
+                false => Ok(()),
+            };
         }
-        self.end_chunk()?;
-        let path = self.path.clone();
-        let Some(mut out) = self.out.take() else {
+        self.end_chunk(false)?;
+        let Some(p) = self.pipe.take() else {
             return Ok(());
         };
-        let summary = self.summary_section(&mut out);
-        summary
-            .and_then(|()| out.w.flush())
-            .with_context(|| format!("MCAP log {}: finishing", path.display()))
-    }
-
-    /// Data end, the summary section, the footer and the closing magic.
-    fn summary_section(&self, out: &mut Out) -> std::io::Result<()> {
-        let mut body = Vec::new();
-        put_u32(&mut body, out.crc.clone().finalize());
-        out.write(&record(op::DATA_END, &body))?;
-        let summary_start = out.pos;
-        out.crc = crc32fast::Hasher::new();
-        let mut groups: Vec<(u8, u64, u64)> = Vec::new();
-        let mut group = |out: &mut Out, opcode: u8, records: &[Vec<u8>]| {
-            if records.is_empty() {
-                return Ok(());
-            }
-            let start = out.pos;
-            for r in records {
-                out.write(r)?;
-            }
-            groups.push((opcode, start, out.pos - start));
-            Ok::<(), std::io::Error>(())
-        };
-        group(out, op::SCHEMA, std::slice::from_ref(&self.schema_record))?;
-        group(out, op::CHANNEL, std::slice::from_ref(&self.channel_record))?;
-        let (start_ns, end_ns) = self.times.unwrap_or((0, 0));
-        body.clear();
-        put_u64(&mut body, self.messages);
-        put_u16(&mut body, 1); // schemas
-        put_u32(&mut body, 1); // channels
-        put_u32(&mut body, 0); // attachments
-        put_u32(&mut body, self.metadata_indexes.len() as u32);
-        put_u32(&mut body, self.chunk_indexes.len() as u32);
-        put_u64(&mut body, start_ns);
-        put_u64(&mut body, end_ns);
-        put_u32(&mut body, 10); // channel message counts: one (u16, u64) pair
-        put_u16(&mut body, CHANNEL_ID);
-        put_u64(&mut body, self.messages);
-        group(out, op::STATISTICS, &[record(op::STATISTICS, &body)])?;
-        let chunk_indexes: Vec<Vec<u8>> = self
-            .chunk_indexes
-            .iter()
-            .map(|c| {
-                let mut b = Vec::with_capacity(96);
-                put_u64(&mut b, c.start_ns);
-                put_u64(&mut b, c.end_ns);
-                put_u64(&mut b, c.offset);
-                put_u64(&mut b, c.length);
-                put_u32(&mut b, 10); // message index offsets: one (u16, u64) pair
-                put_u16(&mut b, CHANNEL_ID);
-                put_u64(&mut b, c.message_index_offset);
-                put_u64(&mut b, c.message_index_length);
-                put_str(&mut b, self.compressor.name());
-                put_u64(&mut b, c.compressed_size);
-                put_u64(&mut b, c.uncompressed_size);
-                record(op::CHUNK_INDEX, &b)
-            })
-            .collect();
-        group(out, op::CHUNK_INDEX, &chunk_indexes)?;
-        let metadata_indexes: Vec<Vec<u8>> = self
-            .metadata_indexes
-            .iter()
-            .map(|(offset, length, name)| {
-                let mut b = Vec::new();
-                put_u64(&mut b, *offset);
-                put_u64(&mut b, *length);
-                put_str(&mut b, name);
-                record(op::METADATA_INDEX, &b)
-            })
-            .collect();
-        group(out, op::METADATA_INDEX, &metadata_indexes)?;
-        let summary_offset_start = out.pos;
-        for (opcode, start, length) in groups {
-            body.clear();
-            body.push(opcode);
-            put_u64(&mut body, start);
-            put_u64(&mut body, length);
-            out.write(&record(op::SUMMARY_OFFSET, &body))?;
+        drop(p.jobs);
+        let path = self.path.display().to_string();
+        let mut w = p
+            .thread
+            .join()
+            .map_err(|_| anyhow!("MCAP log {path}: its writer thread panicked"))?;
+        if let Some((what, e)) = w.error.take() {
+            let e = self.io_error(&what, e);
+            self.failed = Some(format!("{e:#}"));
+            return Err(e);
         }
-        // Footer: the summary CRC covers the summary section up to the footer's CRC field.
-        let mut footer = vec![op::FOOTER];
-        put_u64(&mut footer, 8 + 8 + 4);
-        put_u64(&mut footer, summary_start);
-        put_u64(&mut footer, summary_offset_start);
-        out.write(&footer)?;
-        let crc = out.crc.clone().finalize();
-        out.write(&crc.to_le_bytes())?;
-        out.write(MAGIC)
+        w.summary_section(
+            &self.schema_record,
+            &self.channel_record,
+            self.messages,
+            self.times,
+        )
+        .with_context(|| format!("MCAP log {path}: finishing"))
     }
 }
 
@@ -661,6 +854,48 @@ mod tests {
             saturated: k.is_multiple_of(7),
             ref_omega_l_rad_s: if k > 900 { 2.5 } else { f64::NAN },
         }
+    }
+
+    /// The writer thread's first I/O error (here the reader of a FIFO goes away after 64 KiB:
+    /// EPIPE) is reported by a later `write_loop` with the file and the cause, then by `flush`
+    /// and `finish`; nothing hangs and nothing panics.
+    #[cfg(unix)]
+    #[test]
+    fn a_failing_file_is_reported_by_the_next_write_and_at_finish() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("log.fifo");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.unwrap().success());
+        let r = fifo.clone();
+        let reader = std::thread::spawn(move || {
+            let mut f = File::open(&r).unwrap();
+            let mut buf = vec![0u8; 1 << 16];
+            std::io::Read::read_exact(&mut f, &mut buf).unwrap();
+        });
+        let opts = McapLogOptions {
+            compress: false,
+            encoding: LogEncoding::Protobuf,
+            ..McapLogOptions::default()
+        };
+        let mut log = McapLog::create(&fifo, &BTreeMap::new(), opts).unwrap();
+        let mut failed_at = None;
+        for k in 0..1_000_000 {
+            if let Err(e) = log.write_loop(&msg(k)) {
+                failed_at = Some((k, format!("{e:#}")));
+                break;
+            }
+        }
+        reader.join().unwrap();
+        let (k, e) = failed_at.expect("the broken pipe is reported");
+        // 64 KiB are about 600 messages; the error shows within a few 50-message chunks.
+        assert!(k < 5_000, "reported only at message {k}");
+        assert!(e.contains("MCAP log") && e.contains("log.fifo"), "{e}");
+        assert!(e.to_lowercase().contains("broken pipe"), "{e}");
+        for e in [log.flush().unwrap_err(), log.finish().unwrap_err()] {
+            let e = format!("{e:#}").to_lowercase();
+            assert!(e.contains("log.fifo") && e.contains("broken pipe"), "{e}");
+        }
+        assert!(log.write_loop(&msg(0)).is_err());
     }
 
     /// Every kind of log servo writes (three compressions, two encodings, chunks by run time,
