@@ -89,8 +89,11 @@ impl Diagnose {
         let model = model_file.plant()?;
         let mut records = Vec::new();
         for p in &self.logs {
-            let r = read_log(p, self.columns.as_deref())
-                .with_context(|| format!("reading log {}", p.display()))?;
+            let r = servo_core::diagnose::timing::timed(
+                || format!("read {}", p.display()),
+                || read_log(p, self.columns.as_deref()),
+            )
+            .with_context(|| format!("reading log {}", p.display()))?;
             records.push(r);
         }
         if !(self.filter_hz > 0.0 && self.filter_hz.is_finite()) {
@@ -122,14 +125,19 @@ impl Diagnose {
             .ok_or_else(|| anyhow!("diagnosis produced no result"))?;
         let last = diags.last().unwrap_or(first);
         let final_plant = ladder.last().map(|r| r.plant).unwrap_or(model);
-        let user = crate::cmd::diagnose_custom::run(
-            &records,
-            &final_plant,
-            &opts,
-            &library,
-            last,
-            self.discover,
-            &self.effect_name,
+        let user = servo_core::diagnose::timing::timed(
+            || "user effects".into(),
+            || {
+                crate::cmd::diagnose_custom::run(
+                    &records,
+                    &final_plant,
+                    &opts,
+                    &library,
+                    last,
+                    self.discover,
+                    &self.effect_name,
+                )
+            },
         )?;
         if let Some(path) = &self.save_effect {
             user.save_effect(path)?;

@@ -22,6 +22,7 @@ pub mod checks;
 pub mod evidence;
 pub mod regimes;
 pub mod structure;
+pub mod timing;
 pub mod user_effects;
 
 pub use structure::{BalanceKind, BalanceReport, Signature, Thresholds};
@@ -257,7 +258,7 @@ pub fn diagnose_dataset(
     model: &Plant,
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, FitError> {
-    let base = ds.fit_config(model, &[])?;
+    let base = timing::timed(|| "base fit".into(), || ds.fit_config(model, &[]))?;
     let noise = current_noise(ds);
     let th = opts.thresholds;
     let sols: Vec<&EqSolution> = core::iter::once(&base.mech)
@@ -302,16 +303,28 @@ pub fn diagnose_dataset(
     let mut balances: Vec<BalanceReport> = Vec::new();
     let mut analysed: Vec<(usize, BalanceReport)> = Vec::new();
     for done in par_map(&tasks, opts.parallel, |t| match *t {
-        Task::Fit(k) => Done::Fit(k, Box::new(ds.fit_config(model, &[EffectToFit::all(k)]))),
+        Task::Fit(k) => Done::Fit(
+            k,
+            Box::new(timing::timed(
+                || alloc::format!("fit {k}"),
+                || ds.fit_config(model, &[EffectToFit::all(k)]),
+            )),
+        ),
         // The simulation reference every candidate is judged against: the model without it,
         // its inertia and Coulomb level tuned on the simulation (fit blocks). Candidates that
         // refine parameters on the simulation (a gear play with J_eq and tau_sf) would otherwise
         // win on the tuning alone, and the ranking would compare drops from different
         // references.
-        Task::Reference => Done::Reference(ds.refine_rigid_on_simulation(&base.plant)),
+        Task::Reference => Done::Reference(timing::timed(
+            || "simulation reference".into(),
+            || ds.refine_rigid_on_simulation(&base.plant),
+        )),
         Task::Balance(i) => Done::Balance(
             i,
-            structure::analyse(ds, sols[i], floor_of(sols[i].equation), &th, ds.gear_ratio),
+            timing::timed(
+                || alloc::format!("analyse the {}", sols[i].equation.name()),
+                || structure::analyse(ds, sols[i], floor_of(sols[i].equation), &th, ds.gear_ratio),
+            ),
         ),
     }) {
         match done {
@@ -425,7 +438,10 @@ pub fn diagnose_dataset(
     // Physical consistency of the candidates that pass every other check: their parameters
     // must agree across independent parts of the data.
     for c in ranking.iter_mut().filter(|c| c.significant) {
-        let cons = checks::consistency(ds, model, c, &th);
+        let cons = timing::timed(
+            || alloc::format!("consistency of {}", c.effect),
+            || checks::consistency(ds, model, c, &th),
+        );
         if cons.iter().any(|k| !k.passed) {
             c.significant = false;
         }
@@ -439,11 +455,12 @@ pub fn diagnose_dataset(
             if let Some(note) = note {
                 c.evidence.push_str(&note);
             }
-            let cond = c
-                .effect
-                .model()
-                .fit_hooks()
-                .and_then(|h| h.conditional(ds, model, c));
+            let cond = c.effect.model().fit_hooks().and_then(|h| {
+                timing::timed(
+                    || alloc::format!("conditional of {}", c.effect),
+                    || h.conditional(ds, model, c),
+                )
+            });
             if let Some((cond, note)) = cond {
                 c.evidence.push_str(&note);
                 c.conditional = Some(cond);
@@ -868,7 +885,10 @@ pub fn diagnose_loop(
     opts: &DiagnoseOptions,
     max_steps: usize,
 ) -> Result<(Vec<Rung>, Vec<Diagnosis>), FitError> {
-    let ds = Dataset::new(records, &model.params, &opts.fit)?;
+    let ds = timing::timed(
+        || "prepare the data set".into(),
+        || Dataset::new(records, &model.params, &opts.fit),
+    )?;
     let mut plant = *model;
     let mut ladder = Vec::new();
     let mut diags = Vec::new();

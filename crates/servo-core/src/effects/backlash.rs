@@ -274,24 +274,30 @@ mod fit {
                 .unwrap_or(f64::INFINITY)
         };
         let h0 = ds.opts.oe_horizon_s;
-        // J_eq that best goes with a gap on the short segments (+-15 % of its equation-error
-        // value): gap and inertia trade off along a ridge (a heavier motor side crosses the gap
-        // later, which looks like a wider gap), so each gap of the grid gets its own J_eq.
-        let best_j = |gap: f64| -> (f64, f64) {
-            if !fit_j {
-                return (j0, cost(&short, h0, gap, j0, f64::INFINITY));
-            }
-            search::grid_then_golden_bounded(
-                &search::linspace(0.85, 1.15, 4),
-                |s, bound| cost(&short, h0, gap, j0 * s, bound),
-                5,
-            )
-            .map_or((j0, f64::INFINITY), |(s, c)| (j0 * s, c))
-        };
         let (mut gap, mut j_eq) = if fit_gap {
             let mut best = (f64::NAN, j0, f64::INFINITY);
-            for g in search::linspace(0.0, hi, 16) {
-                let (j, c) = best_j(g);
+            // The plant of a grid point (the Coulomb level and a delay at their start values),
+            // built from plain values so that the grid can run on several threads.
+            let delay0 = delay_cell.get();
+            let (cfg, mech, elec) = (&solved.cfg, &solved.mech, solved.elec.as_ref());
+            let grid_plant = |gap: f64, j_eq: f64| -> Option<Plant> {
+                let mut c = cfg.clone();
+                c.slots[i].set("gap", gap);
+                if let Some(d) = delay_slot {
+                    c.slots[d].set("delay", delay0);
+                }
+                let mut p = to_plant(&c, mech, elec).ok()?;
+                p.params.j_eq = Some(j_eq);
+                Some(p)
+            };
+            let grid_cost = |gap: f64, j_eq: f64, bound: f64| -> f64 {
+                grid_plant(gap, j_eq)
+                    .and_then(|p| {
+                        oe::prediction_cost_stepped(ds, &p, &short, h0, bound, oe::SEARCH_SUBSTEP_S)
+                    })
+                    .unwrap_or(f64::INFINITY)
+            };
+            for (g, (j, c)) in gap_grid(hi, j0, fit_j, grid_cost) {
                 if c < best.2 {
                     best = (g, j, c);
                 }
@@ -358,6 +364,35 @@ mod fit {
         }
         solved.plant = refined;
         Ok(())
+    }
+
+    /// The grid of gaps of [`refine`]: 16 gaps over 0..`hi` [rad], each with the J_eq that best
+    /// goes with it on `cost(gap, j_eq, bound)` (+-15 % of `j0`, or `j0` alone when `fit_j` is
+    /// false): gap and inertia trade off along a ridge (a heavier motor side crosses the gap
+    /// later, which looks like a wider gap), so each gap gets its own J_eq. Returns (gap, (J_eq,
+    /// cost)) in grid order. The gaps are independent: they run on the worker threads of the
+    /// diagnosis (std builds), so the costliest candidate does not end the diagnosis alone.
+    fn gap_grid(
+        hi: f64,
+        j0: f64,
+        fit_j: bool,
+        cost: impl Fn(f64, f64, f64) -> f64 + Sync,
+    ) -> Vec<(f64, (f64, f64))> {
+        let best_j = |gap: &f64| -> (f64, f64) {
+            let gap = *gap;
+            if !fit_j {
+                return (j0, cost(gap, j0, f64::INFINITY));
+            }
+            search::grid_then_golden_bounded(
+                &search::linspace(0.85, 1.15, 4),
+                |s, bound| cost(gap, j0 * s, bound),
+                5,
+            )
+            .map_or((j0, f64::INFINITY), |(s, c)| (j0 * s, c))
+        };
+        let gaps = search::linspace(0.0, hi, 16);
+        let fits = crate::diagnose::par_map(&gaps, true, best_j);
+        gaps.into_iter().zip(fits).collect()
     }
 
     /// Refines an input delay already in the model together with a gear play, on the simulation
