@@ -14,9 +14,11 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use servo_cli::io::mcap_read::{read_mcap, read_mcap_signals};
 use servo_cli::io::{LogEncoding, LoopMsg, McapLog, McapLogOptions, Signal};
-use servo_cli::runner::{self, LogSink, Program, RunConfig};
+use servo_cli::live;
+use servo_core::control::program::Program;
 use servo_core::control::Reference;
 use servo_core::control::{PidConfig, PidGains};
+use servo_hw::run::{LogSink, RunConfig};
 use std::collections::BTreeMap;
 use std::time::Duration;
 
@@ -85,7 +87,7 @@ fn closed_loop_10min(log: Option<(&std::path::Path, LogEncoding)>) -> usize {
         )
         .unwrap()
     });
-    let out = runner::run_loop(
+    let out = live::run_loop(
         &mut backend,
         &cfg,
         mcap.as_mut().map(|l| l as &mut dyn LogSink),

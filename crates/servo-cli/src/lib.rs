@@ -29,9 +29,6 @@ pub mod io;
 pub mod live;
 pub mod plant_args;
 pub mod plot;
-/// The run as the commands see it: the library's loop and types, with the CLI's Ctrl-C and
-/// progress ([`live`]).
-pub use live as runner;
 
 pub use servo_io::{effects_file, gains_file, model_file, reference_file};
 
@@ -66,7 +63,7 @@ where
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            if e.downcast_ref::<runner::Interrupted>().is_some() {
+            if e.downcast_ref::<live::Interrupted>().is_some() {
                 // Like a shell after SIGINT.
                 std::process::ExitCode::from(130)
             } else {

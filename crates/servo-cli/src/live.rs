@@ -1,22 +1,15 @@
 //! The CLI's side of a run: Ctrl-C handling and live progress on stderr, around the library's
 //! loop ([`servo_hw::run`]). The run loop, its configuration and output, the log sink, the
 //! programs, the speed estimator and controller and the step metrics live in the library crates
-//! (servo-hw, servo-core) and are re-exported here so that `crate::runner::...` paths keep
-//! working; the controller resolution is [`servo_io::controller`].
+//! (servo-hw, servo-core), and the controller resolution in [`servo_io::controller`]: commands
+//! import them from there.
 //!
 //! Ctrl-C (with [`run_loop`]): the loop stops at the next sample, the backend is stopped at 0 V,
 //! the log is flushed and the output says [`StopReason::Interrupted`]; a second Ctrl-C exits at
 //! once with status 130. With a [`Progress`], long runs show their progress on stderr: run time
 //! elapsed and left, and the missed deadlines of a board.
 
-pub use servo_core::control::program::{Program, Setpoint, SpeedPiece, SpeedProfile};
-pub use servo_core::control::speed::{self, SpeedEstimator, SpeedLoop, SpeedLoopConfig};
-pub use servo_core::metrics::{RunSummary, StepMetrics};
-pub use servo_hw::run::{
-    effective_pid_config, LogSink, RunConfig, RunError, RunMonitor, RunOutput, SinkError,
-    StopOutcome, StopReason, DEFAULT_SPEED_BANDWIDTH_RAD_S, MAX_SAMPLES,
-};
-pub use servo_io::controller;
+use servo_hw::run::{LogSink, RunConfig, RunError, RunMonitor, RunOutput};
 
 use servo_hw::Backend;
 use std::sync::atomic::{AtomicBool, Ordering};

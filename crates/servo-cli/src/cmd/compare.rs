@@ -5,14 +5,14 @@ use crate::gains_file::{GainsFile, PidSection};
 use crate::io::{meta_keys, LogMeta};
 use crate::model_file::ModelFile;
 use crate::plot::{line_chart_svg, Chart, Series};
-use crate::runner::controller::{
-    pid_config, ControllerPart, LoggedController, PidOptions, PidSources, ResolvedPid,
-};
 use anyhow::{anyhow, bail, Context};
 use serde_json::{json, Value};
 use servo_core::compare::controller_check::{check_controller, ControllerCheck};
 use servo_core::compare::regimes::{detect_u_limit, Regime};
 use servo_core::compare::report::{describe_window, regime_phrase, with_unit};
+use servo_io::controller::{
+    pid_config, ControllerPart, LoggedController, PidOptions, PidSources, ResolvedPid,
+};
 mod added;
 mod plots;
 mod prepare;

@@ -19,16 +19,18 @@ use stages_model::*;
 
 use crate::gains_file::{GainsFile, PidSection};
 use crate::io::{meta_keys, write_csv, McapLog, McapLogOptions};
+use crate::live;
 use crate::model_file::ModelFile;
-use crate::runner::controller::{pid_config, LoggedController, PidOptions, PidSources};
-use crate::runner::{self, Program, RunConfig, RunOutput};
 use anyhow::{anyhow, Context};
+use servo_core::control::program::Program;
 use servo_core::control::sequence::{PlacedSegment, Segment};
 use servo_core::control::Reference;
 use servo_core::effects::{Effect, EffectKind};
 use servo_core::sim::SensorConfig;
 use servo_core::{Plant, PlantParams};
+use servo_hw::run::{RunConfig, RunOutput};
 use servo_hw::{Backend, SimBackend};
+use servo_io::controller::{pid_config, LoggedController, PidOptions, PidSources};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 

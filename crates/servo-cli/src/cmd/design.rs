@@ -17,7 +17,6 @@ use words::*;
 
 use crate::gains_file::{GainsFile, PidSection};
 use crate::model_file::ModelFile;
-use crate::runner::controller::DerivativeOnArg;
 use anyhow::{anyhow, bail, Context};
 use serde_json::{json, Value};
 use servo_core::control::DerivativeOn;
@@ -35,6 +34,7 @@ use servo_core::design::tf::TransferFunction;
 use servo_core::design::verify::{design, Achieved, DesignReport, DesignRequest};
 use servo_core::design::{c_abs, c_arg, deg, rad, ControllerKind, PidGains, PlantModel};
 use servo_core::PlantParams;
+use servo_io::controller::DerivativeOnArg;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 

@@ -15,13 +15,13 @@ use crate::gains_file::GainsFile;
 use crate::io::{read_log_signals, Signal};
 use crate::model_file::ModelFile;
 use crate::plot::{line_chart_svg, Chart, Series};
-use crate::runner::controller::{pid_config, PidOptions, PidSources};
 use anyhow::{bail, Context};
 use serde_json::{json, Value};
 use servo_core::design::Complex;
 use servo_core::frf::analysis::{analyze, FrfController, FrfLog, FrfRequest};
 use servo_core::frf::{Frf as Estimate, Interval};
 use servo_core::record::Record;
+use servo_io::controller::{pid_config, PidOptions, PidSources};
 use std::path::PathBuf;
 
 /// Estimate the frequency response from logs: the plant, the loop and its achieved margins.
@@ -66,7 +66,7 @@ struct Log {
     name: String,
     rec: Record,
     gains: Option<GainsFile>,
-    logged: Option<crate::runner::controller::LoggedController>,
+    logged: Option<servo_io::controller::LoggedController>,
 }
 
 impl Frf {

@@ -154,7 +154,7 @@ pub struct Identify {
     /// Live progress of the `--ramp` experiments on stderr (elapsed, left, missed deadlines):
     /// `auto` on a terminal, `always`, `never`.
     #[arg(long, value_enum, default_value = "auto")]
-    pub progress: crate::runner::ProgressMode,
+    pub progress: crate::live::ProgressMode,
 
     /// Directory for the `--ramp` logs.
     #[arg(long = "log-dir", value_name = "DIR", default_value = ".")]

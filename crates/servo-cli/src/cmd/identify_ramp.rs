@@ -21,7 +21,8 @@ use super::identify::Identify;
 pub use crate::io::recipe_file::{
     FrictionRecipe, InertiaRecipe, BUILT_IN, FRICTION_RECIPE, INERTIA_RECIPE,
 };
-use crate::runner::{self, CliMonitor, Progress, StopReason};
+use crate::live::{self, CliMonitor, Progress};
+use servo_hw::run::StopReason;
 
 /// The backend of one experiment: the simulator of the command's plant options, or the board on
 /// `--port` with the host's position limits off (the staircase turns the load for many
@@ -102,7 +103,7 @@ pub fn run_experiments(args: &Identify, p: &PlantParams) -> anyhow::Result<Vec<P
                 "the board was stopped at 0 V; {} holds the samples so far",
                 run.log.display()
             );
-            return Err(runner::Interrupted {
+            return Err(live::Interrupted {
                 at_s: run.last_time_s,
             }
             .into());

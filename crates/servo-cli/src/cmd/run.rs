@@ -10,15 +10,18 @@
 
 use crate::gains_file::GainsFile;
 use crate::io::{meta_keys, write_csv, McapLog, McapLogOptions};
+use crate::live;
 use crate::model_file::ModelFile;
 use crate::plant_args::PlantArgs;
 use crate::reference_file::load_experiment;
-use crate::runner::controller::{feedforward, run_controller, PidOptions};
-use crate::runner::{self, Program, RunConfig, RunOutput, StopReason};
 use anyhow::{anyhow, bail, Context};
+use servo_core::control::program::Program;
 use servo_core::control::Reference;
+use servo_core::metrics::RunSummary;
 use servo_hw::run::logged::{close_log, RunMetadata};
+use servo_hw::run::{LogSink, RunConfig, RunOutput, StopOutcome, StopReason};
 use servo_hw::{Backend, SimBackend};
+use servo_io::controller::{feedforward, run_controller, PidOptions};
 use std::path::PathBuf;
 
 /// The plots of a run (also used by `servo demo`).
@@ -86,7 +89,7 @@ pub struct Run {
     /// Live progress on stderr (run time elapsed and left, missed deadlines of a board): `auto`
     /// on a terminal, `always` (a line every 2 s when stderr is not a terminal), `never`.
     #[arg(long, value_enum, default_value = "auto")]
-    pub progress: runner::ProgressMode,
+    pub progress: live::ProgressMode,
 
     /// Simulator: stop the run with an error when |theta_l| exceeds this many load revolutions,
     /// like the board's soft position limit (+-2 rev: `--soft-limit-rev 2`). Off by default;
@@ -140,7 +143,7 @@ pub struct Run {
 #[derive(Debug)]
 pub struct RunReport {
     pub output: RunOutput,
-    pub summary: runner::RunSummary,
+    pub summary: RunSummary,
 }
 
 impl Run {
@@ -149,7 +152,7 @@ impl Run {
         if report.output.stop == StopReason::Interrupted {
             let at_s = report.output.last_time_s;
             eprintln!("the board was stopped at 0 V and the logs are closed");
-            return Err(runner::Interrupted { at_s }.into());
+            return Err(live::Interrupted { at_s }.into());
         }
         Ok(())
     }
@@ -275,9 +278,9 @@ impl Run {
             }
             None => None,
         };
-        let progress = runner::Progress::from_mode(self.progress, "servo run");
-        let sink = log.as_mut().map(|l| l as &mut dyn runner::LogSink);
-        let out = runner::run_loop_with_progress(backend.as_mut(), &cfg, sink, progress);
+        let progress = live::Progress::from_mode(self.progress, "servo run");
+        let sink = log.as_mut().map(|l| l as &mut dyn LogSink);
+        let out = live::run_loop_with_progress(backend.as_mut(), &cfg, sink, progress);
         let link = backend.link_stats();
         let out = match out {
             Ok(o) => o,
@@ -293,7 +296,7 @@ impl Run {
                         l.messages()
                     );
                 }
-                if let Some(runner::StopOutcome::Failed(why)) = e.stop_outcome() {
+                if let Some(StopOutcome::Failed(why)) = e.stop_outcome() {
                     eprintln!(
                         "WARNING: 0 V could not be confirmed ({why}); check the motor and power"
                     );

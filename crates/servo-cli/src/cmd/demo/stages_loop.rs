@@ -122,7 +122,7 @@ pub(super) fn stage_run(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<Pa
     meta.insert(
         meta_keys::CONTROLLER_TOML.into(),
         LoggedController::of(
-            &runner::effective_pid_config(
+            &servo_hw::run::effective_pid_config(
                 &pid,
                 cfg.u_limit_v.min(backend.info().voltage_limit_v),
                 backend.info().sample_period_s,
@@ -133,7 +133,7 @@ pub(super) fn stage_run(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<Pa
     );
     let log_path = ctx.out.join("run.mcap");
     let mut log = McapLog::create(&log_path, &meta, McapLogOptions::default())?;
-    let out = runner::run_loop(&mut backend, &cfg, Some(&mut log))?;
+    let out = live::run_loop(&mut backend, &cfg, Some(&mut log))?;
     let summary = out.summary();
     log.write_summary(&summary.to_map())?;
     log.finish()?;
