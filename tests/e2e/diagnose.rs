@@ -1076,8 +1076,8 @@ fn logs_without_current_are_identified_and_diagnosed() {
 }
 
 /// Three hidden effects at once (Stribeck + imbalance + delay): the loop adds all three, one at a
-/// time, and their main parameters come out within 25 %. (Stribeck + backlash + delay does not
-/// pass yet: see `three_hidden_effects_with_backlash_are_found_with_their_parameters`.)
+/// time, and their main parameters come out within 25 %. (Stribeck + backlash + delay: see
+/// `three_hidden_effects_with_backlash_are_found_with_their_parameters`.)
 #[test]
 fn three_hidden_effects_are_found_with_their_parameters() {
     let specs = [
@@ -1116,8 +1116,11 @@ fn three_hidden_effects_are_found_with_their_parameters() {
 }
 
 /// Three hidden effects at once, one of them a gear play (Stribeck + backlash + delay): the loop
-/// adds all three, one at a time, ends "missing" on each step until the last, and their main
-/// parameters come out within 25 %. Three seeds.
+/// adds all three, ends "missing" on each step until the last, and their main parameters come
+/// out within 25 %. The play and the stiction hide each other (neither passes alone: the play's
+/// impacts at reversals pollute the torque balance the stiction is judged in, and without the
+/// stiction the play's simulation drop is small), so they are found together, as a pair each
+/// member of which is material given the other (`diagnose::joint`). Three seeds.
 fn check_three_with_backlash(seed: u64) {
     let specs = [
         "stribeck:tau_s=0.02,omega_s=0.5",
@@ -1132,13 +1135,24 @@ fn check_three_with_backlash(seed: u64) {
         diagnose::diagnose_loop(&logs, &model, &DiagnoseOptions::default(), 4).unwrap();
     for d in &diags {
         eprintln!("[three-bl {seed}] {:?}: {}", d.status, d.verdict);
-        print_ranking(&format!("three-bl {seed}"), d, 3);
+        print_ranking(&format!("three-bl {seed}"), d, 5);
     }
-    let added: Vec<EffectKind> = ladder.iter().filter_map(|r| r.added).collect();
+    // A pair found together (each material only given the other) is added at one rung.
+    let added: Vec<EffectKind> = ladder
+        .iter()
+        .flat_map(|r| r.added.into_iter().chain(r.added_with))
+        .collect();
+    let steps = ladder.iter().filter(|r| r.added.is_some()).count();
     let last = &ladder.last().unwrap().plant;
     let mut errs = Vec::new();
     for h in &hidden {
-        for key in main_param(h.kind) {
+        // The breakaway's speed scale too: it decides how the stiction and the play share the
+        // low-speed motion.
+        let keys: &[&str] = match h.kind {
+            EffectKind::Stribeck => &["tau_s", "omega_s"],
+            k => main_param(k),
+        };
+        for key in keys {
             let got = last.effects.value(h.kind, key);
             let want = h.get(key).unwrap();
             eprintln!("[three-bl {seed}] {} {key}: {got:?} (true {want})", h.kind);
@@ -1152,7 +1166,7 @@ fn check_three_with_backlash(seed: u64) {
         "[seed {seed}] added {added:?}; {errs:?}"
     );
     assert!(
-        diags[..added.len()]
+        diags[..steps]
             .iter()
             .all(|d| d.status == diagnose::Status::Missing),
         "[seed {seed}] a step did not end \"missing\""
@@ -1161,7 +1175,6 @@ fn check_three_with_backlash(seed: u64) {
 }
 
 #[test]
-#[ignore = "does not hold yet (#10): after the delay, Stribeck fails the information criterion on the torque balance the unmodelled play pollutes, and the play cannot explain reversals without the stiction"]
 fn three_hidden_effects_with_backlash_are_found_with_their_parameters() {
     every_seed([23, 24, 25], check_three_with_backlash);
 }
@@ -1343,4 +1356,15 @@ fn backlash_gap_with_an_unknown_contact_stiffness() {
         cond["estimated"].is_object() || (range[0] <= 0.03 && 0.03 <= range[1]),
         "{cond}"
     );
+}
+
+#[test]
+#[ignore = "dev"]
+fn dev_three_bl() {
+    let seeds: Vec<u64> = std::env::var("SEEDS")
+        .unwrap()
+        .split(',')
+        .map(|s| s.parse().unwrap())
+        .collect();
+    every_seed(seeds, check_three_with_backlash);
 }
