@@ -11,7 +11,7 @@
 //! the model.
 //!
 //! So when no single candidate passes and some balance is still above its noise floor, the
-//! candidates with the largest held-out simulation drops ([`MAX_PAIRED`] of them) are fitted in
+//! candidates with the largest held-out simulation drops ([`super::DiagnoseOptions::joint_candidates`] of them) are fitted in
 //! pairs, jointly (base refitted, nonlinear parameters searched together, see
 //! [`crate::fit::Dataset::fit_config`]). A pair is accepted only if *each* member passes every
 //! check of a single candidate *given the other* (a drop-one test, like a partial F-test): the
@@ -33,10 +33,6 @@ use crate::fit::oe::{self, Part};
 use crate::fit::{Dataset, EffectToFit, FitError, Solved};
 use crate::plant::Plant;
 use alloc::vec::Vec;
-
-/// Most candidates (best held-out simulation drops first) tried in pairs: three candidates,
-/// three pairs.
-pub const MAX_PAIRED: usize = 3;
 
 /// What a pair search needs from the diagnosis.
 pub(super) struct Context<'a> {
@@ -63,7 +59,7 @@ impl Context<'_> {
 }
 
 /// The candidates worth pairing: not significant alone, fitted, with a held-out simulation drop
-/// of at least the minimum, best first, at most [`MAX_PAIRED`].
+/// of at least the minimum, best first, at most [`super::DiagnoseOptions::joint_candidates`].
 fn seeds<'a>(
     cx: &Context,
     fits: &'a [(EffectKind, Result<Solved, FitError>)],
@@ -89,7 +85,7 @@ fn seeds<'a>(
         })
         .collect();
     top.sort_by(|a, b| b.0.total_cmp(&a.0));
-    top.truncate(MAX_PAIRED);
+    top.truncate(cx.opts.joint_candidates);
     top.into_iter().map(|(_, k, s)| (k, s)).collect()
 }
 
@@ -126,13 +122,6 @@ pub(super) fn best_pair(
             (top[j].0, top[j].1, &refs[j]),
         )
     });
-    #[cfg(feature = "std")]
-    if std::env::var_os("SERVO_JOINT_DEBUG").is_some() {
-        std::eprintln!(
-            "JOINT seeds {:?}",
-            top.iter().map(|t| t.0).collect::<Vec<_>>()
-        );
-    }
     judged
         .into_iter()
         .flatten()
@@ -161,18 +150,6 @@ fn joint_fit(
         .filter_map(|(from, fit)| {
             let s = cx.ds.fit_config(from, fit).ok()?;
             let cost = oe::prediction_cost(cx.ds, &s.plant, Part::Fit)?;
-            #[cfg(feature = "std")]
-            if std::env::var_os("SERVO_JOINT_DEBUG").is_some() {
-                std::eprintln!(
-                    "JOINT start {a}+{b} from {:?}: fit cost {cost:.4e} {:?}",
-                    fit.iter().map(|f| f.effect.kind).collect::<Vec<_>>(),
-                    s.plant
-                        .effects
-                        .iter()
-                        .map(|e| alloc::format!("{e}"))
-                        .collect::<Vec<_>>()
-                );
-            }
             Some((cost, s))
         })
         .min_by(|x, y| x.0.total_cmp(&y.0))
@@ -189,29 +166,6 @@ fn judge_pair(
     let joint = joint_fit(cx, (a.0, a.1), (b.0, b.1))?;
     let ca = judge_member(cx, a.0, (b.0, b.1, b.2), &joint);
     let cb = judge_member(cx, b.0, (a.0, a.1, a.2), &joint);
-    #[cfg(feature = "std")]
-    if std::env::var_os("SERVO_JOINT_DEBUG").is_some() {
-        for c in [&ca, &cb].into_iter().flatten() {
-            std::eprintln!(
-                "JOINT {}+{}: {} sig={} red={:.1} oe={:?} bic={:.1} params={:?} checks={:?}",
-                a.0,
-                b.0,
-                c.effect,
-                c.significant,
-                c.error_reduction_pct,
-                c.oe_reduction_pct,
-                c.bic_gain,
-                c.params
-                    .iter()
-                    .map(|p| (p.key, p.value))
-                    .collect::<Vec<_>>(),
-                c.checks
-                    .iter()
-                    .map(|k| (k.name, k.passed, k.detail.clone()))
-                    .collect::<Vec<_>>()
-            );
-        }
-    }
     let (mut ca, mut cb) = (ca.filter(|c| c.significant)?, cb.filter(|c| c.significant)?);
     // The pair against the model holding neither.
     let joint_oe = oe::prediction_cost(cx.ds, &joint.plant, Part::Holdout)?;

@@ -62,6 +62,11 @@ pub struct DiagnoseOptions {
     pub parallel: bool,
     /// Practical-significance and "unexplained" thresholds.
     pub thresholds: Thresholds,
+    /// When no single candidate passes and a balance is above its noise floor, how many of the
+    /// best candidates to try in pairs ([`joint`]; 0: none). Off by default: on Stribeck +
+    /// backlash + delay the pair search names the breakaway given the play on two seeds of
+    /// three, but not yet the play given the breakaway.
+    pub joint_candidates: usize,
 }
 
 impl Default for DiagnoseOptions {
@@ -79,6 +84,7 @@ impl Default for DiagnoseOptions {
             extra_candidates: Vec::new(),
             parallel: true,
             thresholds: Thresholds::default(),
+            joint_candidates: 0,
         }
     }
 }
@@ -451,7 +457,10 @@ pub fn diagnose_dataset(
     });
     // No single effect passes but a balance is still above its noise floor: two missing effects
     // may hide each other; judge the best candidates in pairs ([`joint`]).
-    if !ranking.first().is_some_and(|c| c.significant) && balances.iter().any(|b| b.above_noise) {
+    if opts.joint_candidates >= 2
+        && !ranking.first().is_some_and(|c| c.significant)
+        && balances.iter().any(|b| b.above_noise)
+    {
         let cx = joint::Context {
             ds,
             model,
