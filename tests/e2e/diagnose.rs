@@ -1079,8 +1079,8 @@ fn logs_without_current_are_identified_and_diagnosed() {
 }
 
 /// Three hidden effects at once (Stribeck + imbalance + delay): the loop adds all three, one at a
-/// time, and their main parameters come out within 25 %. (Stribeck + backlash + delay does not
-/// pass yet: see `three_hidden_effects_with_backlash_are_found_with_their_parameters`.)
+/// time, and their main parameters come out within 25 %. (Stribeck + backlash + delay: see
+/// `three_hidden_effects_with_backlash_are_found_with_their_parameters`.)
 #[test]
 fn three_hidden_effects_are_found_with_their_parameters() {
     let specs = [
@@ -1119,8 +1119,11 @@ fn three_hidden_effects_are_found_with_their_parameters() {
 }
 
 /// Three hidden effects at once, one of them a gear play (Stribeck + backlash + delay): the loop
-/// adds all three, one at a time, ends "missing" on each step until the last, and their main
-/// parameters come out within 25 %. Three seeds.
+/// adds all three, ends "missing" on each step until the last, and their main parameters come
+/// out within 25 %. The play and the stiction hide each other (neither passes alone: the play's
+/// impacts at reversals pollute the torque balance the stiction is judged in, and without the
+/// stiction the play's simulation drop is small), so they are found together, as a pair each
+/// member of which is material given the other (`diagnose::joint`). Three seeds.
 fn check_three_with_backlash(seed: u64) {
     let specs = [
         "stribeck:tau_s=0.02,omega_s=0.5",
@@ -1131,17 +1134,31 @@ fn check_three_with_backlash(seed: u64) {
     let plant = truth(&hidden);
     let logs = logs(&plant, seed);
     let model = identified(&logs);
-    let (ladder, diags) =
-        diagnose::diagnose_loop(&logs, &model, &DiagnoseOptions::default(), 4).unwrap();
+    let opts = DiagnoseOptions {
+        joint_candidates: 3,
+        ..DiagnoseOptions::default()
+    };
+    let (ladder, diags) = diagnose::diagnose_loop(&logs, &model, &opts, 4).unwrap();
     for d in &diags {
         eprintln!("[three-bl {seed}] {:?}: {}", d.status, d.verdict);
-        print_ranking(&format!("three-bl {seed}"), d, 3);
+        print_ranking(&format!("three-bl {seed}"), d, 5);
     }
-    let added: Vec<EffectKind> = ladder.iter().filter_map(|r| r.added).collect();
+    // A pair found together (each material only given the other) is added at one rung.
+    let added: Vec<EffectKind> = ladder
+        .iter()
+        .flat_map(|r| r.added.into_iter().chain(r.added_with))
+        .collect();
+    let steps = ladder.iter().filter(|r| r.added.is_some()).count();
     let last = &ladder.last().unwrap().plant;
     let mut errs = Vec::new();
     for h in &hidden {
-        for key in main_param(h.kind) {
+        // The breakaway's speed scale too: it decides how the stiction and the play share the
+        // low-speed motion.
+        let keys: &[&str] = match h.kind {
+            EffectKind::Stribeck => &["tau_s", "omega_s"],
+            k => main_param(k),
+        };
+        for key in keys {
             let got = last.effects.value(h.kind, key);
             let want = h.get(key).unwrap();
             eprintln!("[three-bl {seed}] {} {key}: {got:?} (true {want})", h.kind);
@@ -1155,7 +1172,7 @@ fn check_three_with_backlash(seed: u64) {
         "[seed {seed}] added {added:?}; {errs:?}"
     );
     assert!(
-        diags[..added.len()]
+        diags[..steps]
             .iter()
             .all(|d| d.status == diagnose::Status::Missing),
         "[seed {seed}] a step did not end \"missing\""
@@ -1164,7 +1181,7 @@ fn check_three_with_backlash(seed: u64) {
 }
 
 #[test]
-#[ignore = "does not hold yet (#10): after the delay, Stribeck fails the information criterion on the torque balance the unmodelled play pollutes, and the play cannot explain reversals without the stiction"]
+#[ignore = "does not hold yet (#10): with the pair search on (diagnose::joint), the breakaway passes given the play on seeds 24 and 25 but the play given the breakaway does not (simulation drop 7.9 % against 8 % on seed 25, gap refitted to 0.004-0.067 rad on 23 and 24), and the delay is named first 35-45 % high"]
 fn three_hidden_effects_with_backlash_are_found_with_their_parameters() {
     every_seed([23, 24, 25], check_three_with_backlash);
 }

@@ -281,9 +281,35 @@ pub fn verdict(
     s
 }
 
+/// The verdict when the winner passed only together with another effect
+/// ([`super::joint`]).
+fn joint_missing(w: &Candidate, sig: &[&Candidate]) -> String {
+    let other = sig.iter().find(|c| Some(c.effect) == w.joint_with);
+    let mut s = alloc::format!(
+        "The model is missing {} ({}) together with {}: neither passes alone, each hides the other, and each is material once the other is in the model (",
+        w.effect,
+        w.effect.description(),
+        w.joint_with.map_or("", |k| k.name()),
+    );
+    for (i, c) in core::iter::once(w).chain(other.copied()).enumerate() {
+        let _ = write!(
+            s,
+            "{}{} removes {:.1} % of the held-out {} residual and {:.1} % of the held-out simulation error given the other",
+            if i > 0 { "; " } else { "" },
+            c.effect,
+            c.error_reduction_pct,
+            c.equation.name(),
+            c.oe_reduction_pct.unwrap_or(0.0)
+        );
+    }
+    s.push_str("): add both, refit and diagnose again.");
+    s
+}
+
 fn verdict_missing(ranking: &[Candidate]) -> String {
     let sig: Vec<&Candidate> = ranking.iter().filter(|c| c.significant).collect();
     match sig.first() {
+        Some(w) if w.joint_with.is_some() => joint_missing(w, &sig),
         Some(w) => {
             let mut s = alloc::format!(
                 "The model is missing {} ({}): adding it removes {:.1} % of the held-out {} residual.",

@@ -20,6 +20,7 @@
 
 pub mod checks;
 pub mod evidence;
+pub mod joint;
 pub mod regimes;
 pub mod structure;
 pub mod timing;
@@ -62,6 +63,11 @@ pub struct DiagnoseOptions {
     pub parallel: bool,
     /// Practical-significance and "unexplained" thresholds.
     pub thresholds: Thresholds,
+    /// When no single candidate passes and a balance is above its noise floor, how many of the
+    /// best candidates to try in pairs ([`joint`]; 0: none). Off by default: on Stribeck +
+    /// backlash + delay the pair search names the breakaway given the play on two seeds of
+    /// three, but not yet the play given the breakaway.
+    pub joint_candidates: usize,
 }
 
 impl Default for DiagnoseOptions {
@@ -79,6 +85,7 @@ impl Default for DiagnoseOptions {
             extra_candidates: Vec::new(),
             parallel: true,
             thresholds: Thresholds::default(),
+            joint_candidates: 0,
         }
     }
 }
@@ -117,6 +124,9 @@ pub struct Candidate {
     /// What the main parameter is conditional on (significant candidates whose effect reports
     /// one: a gear play against the contact stiffness).
     pub conditional: Option<checks::Conditional>,
+    /// The other member when this candidate passed only together with it ([`joint`]): judged
+    /// against the model holding that one alone, and added with it.
+    pub joint_with: Option<EffectKind>,
 }
 
 impl Candidate {
@@ -373,32 +383,9 @@ pub fn diagnose_dataset(
         // balance's residual is still there, above the noise floor, after adding it.
         if c.significant && !on_simulation(kind) && kind != EffectKind::Coulomb {
             if let (Some(b), Some(sol)) = (bal, solved.equation(eq)) {
-                if let Some(top) = b.signatures.first().filter(|_| b.above_noise) {
-                    let after = structure::analyse(ds, sol, floor_of(eq), &th, ds.gear_ratio);
-                    let left = after.signatures.iter().find(|s| s.kind == top.kind);
-                    // Still there: above the noise floor and at least half its size before (a
-                    // true effect removes most of the shape it fits, whatever another missing
-                    // effect leaves of it; a mimic bends to it and leaves most of it).
-                    let still = after.above_noise
-                        && left.is_some_and(|s| {
-                            s.explained_rms >= th.min_noise_ratio * floor_of(eq)
-                                && s.explained_rms >= 0.5 * top.explained_rms
-                        });
-                    c.checks.push(checks::Check {
-                        name: "explains the structure it fits",
-                        passed: !still,
-                        detail: alloc::format!(
-                            "before it, the {} residual was {:.1} times its noise floor, carried by a shape that {} ({:.2e} {unit} RMS); with it, {:.1} times, and that shape still carries {:.0} % of it ({:.2e} {unit} RMS; a shape is still there above the noise floor and at half its size before)",
-                            eq.name(),
-                            b.ratio_to_noise,
-                            top.description,
-                            top.explained_rms,
-                            after.ratio_to_noise,
-                            100.0 * left.map_or(0.0, |s| s.share),
-                            left.map_or(0.0, |s| s.explained_rms),
-                            unit = eq.unit()
-                        ),
-                    });
+                if let Some(k) = structure_check(ds, b, sol, floor_of(eq), &th) {
+                    let still = !k.passed;
+                    c.checks.push(k);
                     if still {
                         c.significant = false;
                         c.experiment = Some(String::from(evidence::experiment(c.effect)));
@@ -485,6 +472,26 @@ pub fn diagnose_dataset(
             .then(score(b).total_cmp(&score(a)))
             .then(b.error_reduction_pct.total_cmp(&a.error_reduction_pct))
     });
+    // No single effect passes but a balance is still above its noise floor: two missing effects
+    // may hide each other; judge the best candidates in pairs ([`joint`]).
+    if opts.joint_candidates >= 2
+        && !ranking.first().is_some_and(|c| c.significant)
+        && balances.iter().any(|b| b.above_noise)
+    {
+        let cx = joint::Context {
+            ds,
+            model,
+            noise_a: noise,
+            floors: &floors,
+            electrical_broken: electrical_broken.is_some(),
+            reference: &reference,
+            opts,
+        };
+        if let Some(pair) = joint::best_pair(&cx, &fits, &ranking) {
+            ranking.retain(|c| !pair.iter().any(|m| m.effect == c.effect));
+            ranking.splice(0..0, pair);
+        }
+    }
     let mut equations = Vec::new();
     for sol in core::iter::once(&base.mech).chain(base.elec.as_ref()) {
         let rows = if sol.equation == Equation::Electrical {
@@ -531,6 +538,46 @@ pub fn diagnose_dataset(
         status,
         balances,
         unexplained,
+    })
+}
+
+/// A mimic leaves the structure it was meant to explain: the shape that carried the balance's
+/// residual (`before`) is still there, above the noise floor `floor`, in the residual `after` the
+/// candidate was added. `None` when the balance was not above its noise floor or had no shape.
+pub(crate) fn structure_check(
+    ds: &Dataset,
+    before: &BalanceReport,
+    after: &EqSolution,
+    floor: f64,
+    th: &Thresholds,
+) -> Option<checks::Check> {
+    let b = before;
+    let eq = after.equation;
+    let top = b.signatures.first().filter(|_| b.above_noise)?;
+    let after = structure::analyse(ds, after, floor, th, ds.gear_ratio);
+    let left = after.signatures.iter().find(|s| s.kind == top.kind);
+    // Still there: above the noise floor and at least half its size before (a true effect
+    // removes most of the shape it fits, whatever another missing effect leaves of it; a mimic
+    // bends to it and leaves most of it).
+    let still = after.above_noise
+        && left.is_some_and(|s| {
+            s.explained_rms >= th.min_noise_ratio * floor
+                && s.explained_rms >= 0.5 * top.explained_rms
+        });
+    Some(checks::Check {
+        name: "explains the structure it fits",
+        passed: !still,
+        detail: alloc::format!(
+            "before it, the {} residual was {:.1} times its noise floor, carried by a shape that {} ({:.2e} {unit} RMS); with it, {:.1} times, and that shape still carries {:.0} % of it ({:.2e} {unit} RMS; a shape is still there above the noise floor and at half its size before)",
+            eq.name(),
+            b.ratio_to_noise,
+            top.description,
+            top.explained_rms,
+            after.ratio_to_noise,
+            100.0 * left.map_or(0.0, |s| s.share),
+            left.map_or(0.0, |s| s.explained_rms),
+            unit = eq.unit()
+        ),
     })
 }
 
@@ -837,6 +884,7 @@ fn judge(
         structured_share,
         checks: found,
         conditional: None,
+        joint_with: None,
     };
     if statistically && !significant {
         evidence::append_failed(&mut out);
@@ -861,6 +909,7 @@ fn failed(base: &Solved, kind: EffectKind, e: &FitError) -> Candidate {
         structured_share: 0.0,
         checks: Vec::new(),
         conditional: None,
+        joint_with: None,
     }
 }
 
@@ -869,6 +918,9 @@ fn failed(base: &Solved, kind: EffectKind, e: &FitError) -> Candidate {
 pub struct Rung {
     /// The effect added at this rung (`None` for the starting model).
     pub added: Option<EffectKind>,
+    /// The effect added together with `added` at this rung, when the two passed only together
+    /// ([`Candidate::joint_with`]).
+    pub added_with: Option<EffectKind>,
     /// The model after this rung (base and effects refitted on the fit blocks).
     pub plant: Plant,
     /// RMS residual per equation.
@@ -893,22 +945,25 @@ pub fn diagnose_loop(
     let mut ladder = Vec::new();
     let mut diags = Vec::new();
     let mut added: Option<EffectKind> = None;
+    let mut added_with: Option<EffectKind> = None;
     for step in 0..=max_steps {
         let d = diagnose_dataset(&ds, &plant, opts)?;
         ladder.push(Rung {
             added,
+            added_with,
             plant: d.base.plant,
             equations: d.base.equations.iter().map(|e| (e.0, e.1)).collect(),
             oe_cost_rad: d.base.oe_cost_rad,
         });
-        let next = d.winner().map(|w| (w.effect, w.plant));
+        let next = d.winner().map(|w| (w.effect, w.joint_with, w.plant));
         diags.push(d);
         match next {
-            Some((kind, cand_plant)) if step < max_steps => {
-                // Keep the candidate's nonlinear parameters; the next diagnosis refits the linear ones.
+            Some((kind, with, cand_plant)) if step < max_steps => {
+                // Keep the candidate's nonlinear parameters; the next diagnosis refits the linear
+                // ones. A pair found together ([`joint`]) is added together.
                 plant = cand_plant;
-                let _ = kind;
                 added = Some(kind);
+                added_with = with;
             }
             _ => break,
         }

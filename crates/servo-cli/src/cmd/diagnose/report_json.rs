@@ -33,6 +33,7 @@ pub(super) fn candidate_json(c: &Candidate) -> Value {
         "noise_ratio": f(c.noise_ratio),
         "structured_share": f(c.structured_share),
         "checks": c.checks.iter().map(|k| json!({ "check": k.name, "passed": k.passed, "detail": k.detail })).collect::<Vec<_>>(),
+        "joint_with": c.joint_with.map(|k| k.name()),
         "conditional": c.conditional.as_ref().map(|k| {
             let (lo, hi) = k.range();
             json!({
@@ -92,6 +93,7 @@ pub(super) fn base_json(d: &Diagnosis) -> Value {
 pub(super) fn rung_json(r: &Rung) -> Value {
     json!({
         "added": r.added.map(|k| k.name()),
+        "added_with": r.added_with.map(|k| k.name()),
         "equations": r.equations.iter().map(|(e, rms)| json!({ "equation": e.name(), "unit": e.unit(), "rms": f(*rms) })).collect::<Vec<_>>(),
         "oe_cost_rad": r.oe_cost_rad.map(f),
         "effects": r.plant.effects.iter().map(|e| e.to_string()).collect::<Vec<_>>(),

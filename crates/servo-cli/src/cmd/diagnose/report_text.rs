@@ -7,7 +7,8 @@ use super::*;
 pub(super) fn headline(ladder: &[Rung], last: &Diagnosis) -> String {
     let added: Vec<String> = ladder
         .iter()
-        .filter_map(|r| r.added.map(|k| k.name().to_string()))
+        .flat_map(|r| r.added.into_iter().chain(r.added_with))
+        .map(|k| k.name().to_string())
         .collect();
     let status = match last.status {
         servo_core::diagnose::Status::Complete => "complete: nothing material is left",
@@ -116,7 +117,10 @@ pub(super) fn ladder_text(ladder: &[Rung]) -> String {
     for r in ladder {
         let name = r
             .added
-            .map_or("starting model".to_string(), |k| format!("+ {k}"));
+            .map_or("starting model".to_string(), |k| match r.added_with {
+                Some(w) => format!("+ {k} + {w}"),
+                None => format!("+ {k}"),
+            });
         let eqs: Vec<String> = r
             .equations
             .iter()

@@ -1,0 +1,258 @@
+//! Two effects judged together, when neither passes alone.
+//!
+//! The diagnosis accepts one effect at a time: adding several at once produces false effects.
+//! But two missing effects can hide each other so that neither passes alone. A gear play and a
+//! breakaway friction both live at the low speeds around reversals: without the play in the
+//! model, the torque balance near every reversal holds the play's unmodelled impacts, which
+//! dominate its residual, and the breakaway friction fails the information criterion there
+//! (it cuts the simulation error by 15-31 % but explains too little of a torque residual the
+//! play pollutes); without the stiction, the simulated load sticks and slips at the wrong times
+//! and the play's own simulation drop stays at 2-3 %. Each is material only once the other is in
+//! the model.
+//!
+//! So when no single candidate passes and some balance is still above its noise floor, the
+//! candidates with the largest held-out simulation drops ([`super::DiagnoseOptions::joint_candidates`] of them) are fitted in
+//! pairs, jointly (base refitted, nonlinear parameters searched together, see
+//! [`crate::fit::Dataset::fit_config`]). A pair is accepted only if *each* member passes every
+//! check of a single candidate *given the other* (a drop-one test, like a partial F-test): the
+//! pair is judged against the model holding the other member alone, fitted and with its inertia
+//! and Coulomb level tuned on the simulation exactly as the single candidate's reference is, on
+//! the information criterion of the member's own balance, its held-out residual and simulation
+//! drops, its noise floor and structured share, its physical constraints, "explains the
+//! structure it fits", and its agreement across both halves of the data (refitted with the other
+//! member in the model). A mimic pair (two effects bending together to soak up a mechanism
+//! outside the catalogue) must therefore pass every guard twice over.
+
+use super::{
+    checks, judge, on_simulation, par_map, structure, structure_check, Candidate, DiagnoseOptions,
+    Reference,
+};
+use crate::effects::EffectKind;
+use crate::fit::model::{Config, Equation};
+use crate::fit::oe::{self, Part};
+use crate::fit::{Dataset, EffectToFit, FitError, Solved};
+use crate::plant::Plant;
+use alloc::vec::Vec;
+
+/// What a pair search needs from the diagnosis.
+pub(super) struct Context<'a> {
+    pub ds: &'a Dataset,
+    pub model: &'a Plant,
+    pub noise_a: Option<f64>,
+    /// Noise floor per balance of the base model.
+    pub floors: &'a [(Equation, f64)],
+    /// The electrical balance is itself far above its noise floor and no drive-side effect
+    /// explains it (no torque may be named).
+    pub electrical_broken: bool,
+    /// The simulation reference of the diagnosis (the model holding neither member).
+    pub reference: &'a Reference,
+    pub opts: &'a DiagnoseOptions,
+}
+
+impl Context<'_> {
+    fn floor_of(&self, eq: Equation) -> f64 {
+        self.floors
+            .iter()
+            .find(|(e, _)| *e == eq)
+            .map_or(0.0, |(_, f)| *f)
+    }
+}
+
+/// The candidates worth pairing: not significant alone, fitted, with a held-out simulation drop
+/// of at least the minimum, best first, at most [`super::DiagnoseOptions::joint_candidates`].
+fn seeds<'a>(
+    cx: &Context,
+    fits: &'a [(EffectKind, Result<Solved, FitError>)],
+    ranking: &[Candidate],
+) -> Vec<(EffectKind, &'a Solved)> {
+    let mut top: Vec<(f64, EffectKind, &Solved)> = ranking
+        .iter()
+        .filter(|c| !c.significant)
+        .filter_map(|c| {
+            let drop = c.oe_reduction_pct?;
+            // An effect judged on the simulation alone (a gear play) has no balance of its own
+            // to show in: its only evidence, the simulation, is the one another missing effect
+            // spoils most. It is always a seed.
+            let drop = if on_simulation(c.effect) {
+                f64::INFINITY
+            } else if drop < 100.0 * cx.opts.min_oe_drop {
+                return None;
+            } else {
+                drop
+            };
+            let (_, r) = fits.iter().find(|(k, _)| *k == c.effect)?;
+            Some((drop, c.effect, r.as_ref().ok()?))
+        })
+        .collect();
+    top.sort_by(|a, b| b.0.total_cmp(&a.0));
+    top.truncate(cx.opts.joint_candidates);
+    top.into_iter().map(|(_, k, s)| (k, s)).collect()
+}
+
+/// The best accepted pair (largest joint held-out simulation drop), its two members as
+/// candidates, the first with the larger drop given the other; `None` when no pair passes.
+pub(super) fn best_pair(
+    cx: &Context,
+    fits: &[(EffectKind, Result<Solved, FitError>)],
+    ranking: &[Candidate],
+) -> Option<[Candidate; 2]> {
+    let top = seeds(cx, fits, ranking);
+    if top.len() < 2 {
+        return None;
+    }
+    // Each member is judged against the model holding the other alone, tuned on the simulation
+    // as the single candidates' reference is.
+    let refs: Vec<Reference> = par_map(&top, cx.opts.parallel, |(_, s)| {
+        let plant = cx.ds.refine_rigid_on_simulation(&s.plant);
+        Reference {
+            oe_holdout: oe::prediction_cost(cx.ds, &plant, Part::Holdout),
+            plant,
+        }
+    });
+    let mut pairs = Vec::new();
+    for i in 0..top.len() {
+        for j in i + 1..top.len() {
+            pairs.push((i, j));
+        }
+    }
+    let judged = par_map(&pairs, cx.opts.parallel, |&(i, j)| {
+        judge_pair(
+            cx,
+            (top[i].0, top[i].1, &refs[i]),
+            (top[j].0, top[j].1, &refs[j]),
+        )
+    });
+    judged
+        .into_iter()
+        .flatten()
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, pair)| pair)
+}
+
+/// The joint fit of `a` and `b`, from three starts: both searched together, and each searched
+/// with the other held at its own single fit (its nonlinear parameters kept, its linear ones
+/// refitted). The joint problem is not convex: a breakaway friction fitted beside a play whose
+/// gap is still unknown can settle on a narrow spike at low speed that the play then
+/// compensates with a wide gap. The start with the lowest simulation cost on the fit blocks
+/// (never the held-out ones) is kept.
+fn joint_fit(
+    cx: &Context,
+    (a, a_alone): (EffectKind, &Solved),
+    (b, b_alone): (EffectKind, &Solved),
+) -> Option<Solved> {
+    let starts = [
+        (*cx.model, &[EffectToFit::all(a), EffectToFit::all(b)][..]),
+        (a_alone.plant, &[EffectToFit::all(b)][..]),
+        (b_alone.plant, &[EffectToFit::all(a)][..]),
+    ];
+    starts
+        .iter()
+        .filter_map(|(from, fit)| {
+            let s = cx.ds.fit_config(from, fit).ok()?;
+            let cost = oe::prediction_cost(cx.ds, &s.plant, Part::Fit)?;
+            Some((cost, s))
+        })
+        .min_by(|x, y| x.0.total_cmp(&y.0))
+        .map(|(_, s)| s)
+}
+
+/// Fits `a` and `b` jointly and judges each given the other. `Some((joint held-out simulation
+/// drop against the model holding neither, [members]))` when both pass.
+fn judge_pair(
+    cx: &Context,
+    a: (EffectKind, &Solved, &Reference),
+    b: (EffectKind, &Solved, &Reference),
+) -> Option<(f64, [Candidate; 2])> {
+    let joint = joint_fit(cx, (a.0, a.1), (b.0, b.1))?;
+    let ca = judge_member(cx, a.0, (b.0, b.1, b.2), &joint);
+    let cb = judge_member(cx, b.0, (a.0, a.1, a.2), &joint);
+    let (mut ca, mut cb) = (ca.filter(|c| c.significant)?, cb.filter(|c| c.significant)?);
+    // The pair against the model holding neither.
+    let joint_oe = oe::prediction_cost(cx.ds, &joint.plant, Part::Holdout)?;
+    let base_oe = cx.reference.oe_holdout?;
+    let total = 1.0 - joint_oe / base_oe.max(1e-300);
+    if total < cx.opts.min_oe_drop {
+        return None;
+    }
+    if !(confirm_member(cx, &mut ca, &joint) && confirm_member(cx, &mut cb, &joint)) {
+        return None;
+    }
+    let drop = |c: &Candidate| c.oe_reduction_pct.unwrap_or(f64::NEG_INFINITY);
+    Some((
+        total,
+        if drop(&ca) >= drop(&cb) {
+            [ca, cb]
+        } else {
+            [cb, ca]
+        },
+    ))
+}
+
+/// Judges `m` in the joint fit against the model holding only the other member `o` (fitted
+/// alone, `o_alone`, and its simulation reference `o_ref`): every check of a single candidate but
+/// the agreement across parts of the data ([`confirm_member`]). `None` when a balance is
+/// missing.
+fn judge_member(
+    cx: &Context,
+    m: EffectKind,
+    (o, o_alone, o_ref): (EffectKind, &Solved, &Reference),
+    joint: &Solved,
+) -> Option<Candidate> {
+    let ds = cx.ds;
+    let th = &cx.opts.thresholds;
+    let eq = Config::equation_of(m, ds.has_current);
+    let floor = cx.floor_of(eq);
+    let before = structure::analyse(ds, o_alone.equation(eq)?, floor, th, ds.gear_ratio);
+    let mut c = judge(
+        ds, o_alone, o_ref, cx.noise_a, floor, before.rms, m, joint, cx.opts,
+    );
+    c.joint_with = Some(o);
+    if c.significant && !on_simulation(m) && m != EffectKind::Coulomb {
+        if let Some(k) = structure_check(ds, &before, joint.equation(eq)?, floor, th) {
+            c.significant &= k.passed;
+            c.checks.push(k);
+        }
+    }
+    // No torque is named while the electrical balance is itself inconsistent.
+    if c.significant && cx.electrical_broken && m.is_mechanical() && !on_simulation(m) {
+        c.significant = false;
+    }
+    Some(c)
+}
+
+/// The agreement of `c` (a member of a joint fit, with the other member `c.joint_with`) across
+/// independent parts of the data, refitted with the other member in the model, then its notes.
+/// Returns whether it passed.
+fn confirm_member(cx: &Context, c: &mut Candidate, joint: &Solved) -> bool {
+    let ds = cx.ds;
+    let Some(o) = c.joint_with else {
+        return false;
+    };
+    let Some(other) = joint.plant.effects.get(o) else {
+        return false;
+    };
+    let mut given = *cx.model;
+    given.effects.insert(*other);
+    let cons = checks::consistency(ds, &given, c, &cx.opts.thresholds);
+    let ok = cons.iter().all(|k| k.passed);
+    c.checks.extend(cons);
+    if !ok {
+        c.significant = false;
+        return false;
+    }
+    let m = c.effect;
+    let hooks = m.model().fit_hooks();
+    if let Some(note) = hooks.and_then(|h| h.candidate_note(ds, &given, c)) {
+        c.evidence.push_str(&note);
+    }
+    if let Some((cond, note)) = hooks.and_then(|h| h.conditional(ds, &given, c)) {
+        c.evidence.push_str(&note);
+        c.conditional = Some(cond);
+    }
+    c.evidence = alloc::format!(
+        "Found together with {o}: no single effect passed, and {m} is material once {o} is in the model (judged against the model with {o} alone, fitted jointly with it). {}",
+        c.evidence
+    );
+    c.experiment = None;
+    true
+}
