@@ -1173,7 +1173,7 @@ fn three_hidden_effects_with_backlash_are_found_with_their_parameters() {
 /// without play predicts the held-out motion better. Status "unexplained", nothing named, the
 /// torque balance named as the one left far above its noise floor.
 #[test]
-#[ignore = "does not hold yet (#10): the play-vs-compliance check refuses the gear play on one seed of two (which one depends on the search), and no signature names the resonance (ringing after steps is no phase-locked sinusoid)"]
+#[ignore = "does not hold yet (#10): the resonance signature and the \"explains the resonance\" check (diagnose/resonance.rs) are in, but the gear play is still named on a seed"]
 fn compliant_shaft_is_unexplained_and_not_a_gear_play() {
     let shaft = Mechanism {
         shaft: Some((1.2, 6e-4, 0.5)),

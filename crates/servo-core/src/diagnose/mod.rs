@@ -21,6 +21,7 @@
 pub mod checks;
 pub mod evidence;
 pub mod regimes;
+pub mod resonance;
 pub mod structure;
 
 pub use structure::{BalanceKind, BalanceReport, Signature, Thresholds};
@@ -393,6 +394,16 @@ pub fn diagnose_dataset(
                 }
             }
         }
+        if c.significant {
+            if let Some(k) = bal.and_then(|b| resonance_check(ds, b, solved.equation(eq))) {
+                c.significant = k.passed;
+                c.checks.push(k);
+                if !c.significant {
+                    c.experiment = Some(String::from(evidence::experiment(c.effect)));
+                    evidence::append_failed(&mut c);
+                }
+            }
+        }
         c
     });
     let mut ranking = judged;
@@ -513,6 +524,38 @@ pub fn diagnose_dataset(
         status,
         balances,
         unexplained,
+    })
+}
+
+/// A candidate that leaves the resonance ringing in the balance it is judged on is a mimic: a
+/// resonance is a second mass on a spring, which no catalogue effect of the rigid model holds
+/// (a gear play bends to it through its contact stiffness but does not ring at a fixed
+/// frequency). The check fails when the candidate's residual keeps at least half the base
+/// residual's mean square in the resonance band. `None` when the balance shows no resonance.
+fn resonance_check(
+    ds: &Dataset,
+    b: &BalanceReport,
+    sol: Option<&EqSolution>,
+) -> Option<checks::Check> {
+    let res = b.resonance.as_ref().filter(|_| b.above_noise)?;
+    let left = structure::resonance_left(ds, sol?, res);
+    let kept = left / res.band_ms.max(1e-300);
+    Some(checks::Check {
+        name: "explains the resonance",
+        passed: kept < 0.5,
+        detail: alloc::format!(
+            "the {} residual rings near {:.1} Hz (damping ratio ~{:.2}, {:.0} % of it); with this effect {:.0} % of that band's power is still there (needs under 50 %){}",
+            b.equation.name(),
+            res.freq_hz,
+            res.damping_ratio,
+            100.0 * res.share,
+            100.0 * kept,
+            if kept < 0.5 {
+                ""
+            } else {
+                ": a resonance (e.g. a compliant shaft or coupling) that this effect does not explain"
+            }
+        ),
     })
 }
 

@@ -75,8 +75,8 @@ impl BalanceKind {
 /// One interpretable shape of a residual.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Signature {
-    /// Family: `speed`, `load_angle`, `motor_angle`, `time_drift`, `oscillation`, `current`,
-    /// `voltage`, `offset`.
+    /// Family: `speed`, `load_angle`, `motor_angle`, `time_drift`, `oscillation`, `resonance`,
+    /// `current`, `voltage`, `offset`.
     pub kind: &'static str,
     /// Plain-language description with the measured figure (shape, cycles per revolution, ...).
     pub description: String,
@@ -105,6 +105,8 @@ pub struct BalanceReport {
     pub above_noise: bool,
     /// The experiment that would tell the candidates apart.
     pub experiment: String,
+    /// A resonance that rings in the residual (named among the signatures as `resonance`).
+    pub resonance: Option<super::resonance::Resonance>,
 }
 
 /// Variance gains of the record's filter applied to white noise: (value, first derivative,
@@ -229,6 +231,9 @@ struct View {
 }
 
 const MAX_ROWS: usize = 12_000;
+
+/// A resonance's spectral peak must stand this many times above the median of the spectrum.
+const MIN_PROMINENCE: f64 = 8.0;
 
 fn view(ds: &Dataset, rows: &Rows, sol: &EqSolution) -> View {
     let n = rows.len().min(sol.resid.len());
@@ -662,6 +667,29 @@ pub fn analyse(
         };
         push("voltage", String::from(what), res);
     }
+    // A resonance: ringing after each step at a fixed frequency, which no steady sinusoid fits
+    // (its phase restarts at every excitation) but whose spectrum has a narrow peak.
+    let mut resonance = None;
+    {
+        let steady = sigs
+            .iter()
+            .find(|s| s.kind == "oscillation")
+            .map_or(0.0, |s| s.share);
+        if let Some(res) = super::resonance::find(ds, rows, &v.row_idx, &v.r, &v.omega_m)
+            .filter(|res| res.prominence >= MIN_PROMINENCE && res.share >= 2.0 * steady)
+        {
+            sigs.push(Signature {
+                kind: "resonance",
+                description: alloc::format!(
+                    "rings as a resonance near {:.1} Hz (damping ratio ~{:.2}) after steps and reversals, at the same frequency whatever the speed (no harmonic of load or motor angle): e.g. a compliant shaft or coupling",
+                    res.freq_hz, res.damping_ratio
+                ),
+                share: res.share,
+                explained_rms: math::sqrt(res.band_ms),
+            });
+            resonance = Some(res);
+        }
+    }
     sigs.retain(|s| s.share >= th.min_signature_share && s.explained_rms > 0.0);
     sigs.sort_by(|a, b| b.share.total_cmp(&a.share));
     let structured = !sigs.is_empty() || ratio >= 2.0 * th.unexplained_ratio;
@@ -682,7 +710,16 @@ pub fn analyse(
     } else {
         BalanceKind::Torque
     };
-    let experiment = experiment_for(balance, sigs.first());
+    let resonance = resonance.filter(|_| sigs.iter().any(|s| s.kind == "resonance"));
+    let experiment = match (sigs.first(), resonance) {
+        (Some(s), Some(res)) if s.kind == "resonance" => alloc::format!(
+            "excite around {:.0} Hz with a small chirp (experiments/chirp.toml, e.g. {:.0} to {:.0} Hz) and run `servo frf` on the log, logging motor and load angles if you can: a compliant shaft or coupling shows a resonance peak and an antiresonance at fixed frequencies, whatever the amplitude and speed, and the motor and load angles differ there; a play would instead change with the amplitude",
+            res.freq_hz,
+            (0.5 * res.freq_hz).max(1.0),
+            2.0 * res.freq_hz
+        ),
+        _ => experiment_for(balance, sigs.first()),
+    };
     BalanceReport {
         equation: sol.equation,
         balance,
@@ -692,6 +729,7 @@ pub fn analyse(
         signatures: sigs,
         above_noise,
         experiment,
+        resonance,
     }
 }
 
@@ -713,6 +751,18 @@ fn experiment_for(balance: BalanceKind, top: Option<&Signature>) -> String {
         ),
         _ => String::from(base),
     }
+}
+
+/// Mean square that the residual `sol` (a candidate's, on the same balance) leaves in the band of
+/// the resonance `res` found in the base model's residual [unit^2], on the same rows.
+pub fn resonance_left(ds: &Dataset, sol: &EqSolution, res: &super::resonance::Resonance) -> f64 {
+    let rows = if sol.equation == Equation::Electrical {
+        &ds.elec_rows
+    } else {
+        &ds.mech_rows
+    };
+    let v = view(ds, rows, sol);
+    super::resonance::band_ms(ds, rows, &v.row_idx, &v.r, res)
 }
 
 /// Text of a balance report (for the verdict).
