@@ -6,20 +6,11 @@
 use serde_json::Value;
 use servo_cli::gains_file::{GainsFile, PidSection};
 use servo_cli::model_file::ModelFile;
-use servo_core::compare::quantum::quantize;
-use servo_core::compare::Controller;
-use servo_core::control::{Pid, PidConfig, PidGains};
-use servo_core::sim::PlantSim;
 use servo_core::{Plant, PlantParams};
 use servo_e2e::{realdata_dir, servo};
-use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-const KP: f64 = 7.5244;
-const KI: f64 = 94.0379;
-const KD: f64 = 0.1505;
-const TL: f64 = 0.004;
-const DT: f64 = 1e-3;
+use crate::util::{DT_S as DT, PID};
 
 fn plant(tau_sf: Option<f64>) -> Plant {
     Plant::from_params(PlantParams {
@@ -31,52 +22,15 @@ fn plant(tau_sf: Option<f64>) -> Plant {
     .unwrap()
 }
 
-/// A closed-loop run of `truth` with the PID, steps of several sizes, a 4096-count encoder and a
-/// +/-10 V output limit, written as servo CSV (time_s,u_V,theta_l_rad,ref_rad).
+/// A closed-loop run of `truth` with the PID over steps of several sizes (see
+/// [`crate::util::simulate_pid_steps`]), written as servo CSV (time_s,u_V,theta_l_rad,ref_rad).
 fn simulate_steps(truth: &Plant, path: &Path) {
-    let steps_deg: [f64; 10] = [0.0, 30.0, 0.0, 90.0, -45.0, 0.0, 180.0, 20.0, -10.0, 0.0];
-    let q = std::f64::consts::TAU / 4096.0;
-    let mut sim = PlantSim::new(truth, DT).unwrap();
-    let mut pid = Pid::new(
-        PidConfig::new(
-            PidGains {
-                kp: KP,
-                ki: KI,
-                kd: KD,
-                tl_s: TL,
-            },
-            DT,
-        )
-        .with_symmetric_limit(10.0),
-    )
-    .unwrap();
-    let mut csv = String::from("time_s,u_V,theta_l_rad,ref_rad\n");
-    let n = steps_deg.len() * 1500;
-    for k in 0..n {
-        let r = steps_deg[k / 1500].to_radians();
-        let y = quantize(sim.state().theta_l_rad, q);
-        let u = Controller::update(&mut pid, r, y);
-        writeln!(csv, "{:.6},{:.6},{:.10},{:.10}", k as f64 * DT, u, y, r).unwrap();
-        sim.step(u);
-    }
-    std::fs::write(path, csv).unwrap();
+    let steps_deg = [0.0, 30.0, 0.0, 90.0, -45.0, 0.0, 180.0, 20.0, -10.0, 0.0];
+    crate::util::simulate_pid_steps(truth, path, &steps_deg, 1500, false);
 }
 
 fn gains_file(path: &Path) {
-    let g = GainsFile {
-        pid: PidSection {
-            kp: KP,
-            ki: KI,
-            kd: KD,
-            tl_s: TL,
-            ts_s: DT,
-            kw: None,
-            u_limit_v: Some(10.0),
-            derivative_on: None,
-        },
-        design: None,
-    };
-    g.save(path).unwrap();
+    crate::util::write_pid_gains(path);
 }
 
 fn run_json(args: &[&str]) -> Value {
@@ -252,9 +206,9 @@ fn real_closed_loop_steps_show_friction() {
     mf.save(&friction).unwrap();
     GainsFile {
         pid: PidSection {
-            kp: KP,
-            ki: KI,
-            kd: KD,
+            kp: PID.kp,
+            ki: PID.ki,
+            kd: PID.kd,
             tl_s: 0.0,
             ts_s: DT,
             kw: None,
@@ -307,10 +261,31 @@ fn real_closed_loop_steps_show_friction() {
 /// back-calculation anti-windup K_w = 30 1/s.
 fn tustin_gains_file(path: &Path) {
     let text = format!(
-        "[pid]\nkp = {KP}\nki = {KI}\nkd = {KD}\ntl_s = {TL}\nts_s = {DT}\nkw = 30.0\n\n[design]\ndiscretization = \"tustin\"\n"
+        "[pid]\nkp = {}\nki = {}\nkd = {}\ntl_s = {}\nts_s = {DT}\nkw = 30.0\n\n[design]\ndiscretization = \"tustin\"\n",
+        PID.kp, PID.ki, PID.kd, PID.tl_s
     );
     assert!(GainsFile::parse(&text).is_ok());
     std::fs::write(path, text).unwrap();
+}
+
+/// In `dir`: the Tustin gains, the model of `plant(Some(0.01))` and the path of the log `log_name`.
+fn tustin_files(dir: &Path, log_name: &str) -> (PathBuf, PathBuf, PathBuf) {
+    let (gains, model) = (dir.join("gains.toml"), dir.join("model.toml"));
+    tustin_gains_file(&gains);
+    ModelFile::from_plant(&plant(Some(0.01)))
+        .save(&model)
+        .unwrap();
+    (gains, model, dir.join(log_name))
+}
+
+/// [`tustin_files`] and the [`SQUARE`] run with the derivative on the measurement, logged to
+/// run.mcap.
+fn tustin_square_run(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
+    let (gains, model, log) = tustin_files(dir, "run.mcap");
+    let mut run_args = SQUARE.to_vec();
+    run_args.extend_from_slice(&["--derivative-on", "measurement"]);
+    sim_run(&gains, &model, &log, &run_args);
+    (gains, model, log)
 }
 
 /// `servo run` on the simulator (the plant of `model`, 4096-count encoder) with `gains` and
@@ -352,18 +327,7 @@ const SQUARE: [&str; 4] = ["--ref", "square:amp=1.5,period=1", "--duration", "4"
 #[test]
 fn closed_loop_replay_uses_the_controller_the_run_used() {
     let dir = tempfile::tempdir().unwrap();
-    let (gains, model, log) = (
-        dir.path().join("gains.toml"),
-        dir.path().join("model.toml"),
-        dir.path().join("run.mcap"),
-    );
-    tustin_gains_file(&gains);
-    ModelFile::from_plant(&plant(Some(0.01)))
-        .save(&model)
-        .unwrap();
-    let mut run_args = SQUARE.to_vec();
-    run_args.extend_from_slice(&["--derivative-on", "measurement"]);
-    sim_run(&gains, &model, &log, &run_args);
+    let (_gains, model, log) = tustin_square_run(dir.path());
 
     // The model is the truth: replayed with the controller of the log's metadata.
     let v = compare_json(&log, &model, &[]);
@@ -438,18 +402,7 @@ fn closed_loop_replay_uses_the_controller_the_run_used() {
 fn logs_without_a_controller_record_replay_through_gains_and_options() {
     use servo_cli::io::{mcap_read::read_mcap, meta_keys, McapLog, McapLogOptions};
     let dir = tempfile::tempdir().unwrap();
-    let (gains, model, log) = (
-        dir.path().join("gains.toml"),
-        dir.path().join("model.toml"),
-        dir.path().join("run.mcap"),
-    );
-    tustin_gains_file(&gains);
-    ModelFile::from_plant(&plant(Some(0.01)))
-        .save(&model)
-        .unwrap();
-    let mut run_args = SQUARE.to_vec();
-    run_args.extend_from_slice(&["--derivative-on", "measurement"]);
-    sim_run(&gains, &model, &log, &run_args);
+    let (gains, model, log) = tustin_square_run(dir.path());
     let g = gains.to_str().unwrap();
 
     // A CSV has no metadata: --gains gives gains, K_w and the [design]'s Tustin; the derivative
@@ -516,15 +469,7 @@ fn logs_without_a_controller_record_replay_through_gains_and_options() {
 #[test]
 fn the_logged_feedforward_is_replayed() {
     let dir = tempfile::tempdir().unwrap();
-    let (gains, model, log) = (
-        dir.path().join("gains.toml"),
-        dir.path().join("model.toml"),
-        dir.path().join("ff.mcap"),
-    );
-    tustin_gains_file(&gains);
-    ModelFile::from_plant(&plant(Some(0.01)))
-        .save(&model)
-        .unwrap();
+    let (gains, model, log) = tustin_files(dir.path(), "ff.mcap");
     sim_run(
         &gains,
         &model,

@@ -5,7 +5,7 @@
 //!   each SOURCE.txt reproduced within 3 %, and the electrical check of padova2021-jacopisky.
 
 use servo_cli::cmd::identify_ramp::{FrictionRecipe, InertiaRecipe};
-use servo_cli::runner::{run_loop, RunConfig, SpeedLoopConfig};
+use servo_core::control::SpeedLoopConfig;
 use servo_core::ident::combined::{identify_combined, CombinedConfig};
 use servo_core::ident::electrical::identify_electrical;
 use servo_core::ident::friction::{identify_friction, FrictionConfig};
@@ -15,6 +15,7 @@ use servo_core::ident::Experiment;
 use servo_core::record::Record;
 use servo_core::sim::SensorConfig;
 use servo_core::{Plant, PlantParams};
+use servo_hw::run::{run_loop, RunConfig};
 use servo_hw::sim::SimBackend;
 use std::path::Path;
 
@@ -283,12 +284,9 @@ fn simulate(seed: u64) -> (Record, Record) {
         rest_s: 0.3,
     };
     // The shared runner with its speed controller, as `servo identify --ramp` runs them.
-    let run = |profile: servo_cli::runner::SpeedProfile, seed: u64, source: &str| {
+    let run = |profile: servo_core::control::SpeedProfile, seed: u64, source: &str| {
         let mut b = SimBackend::new(&plant, SensorConfig { seed, ..sensors }, 1e-3).unwrap();
-        let cfg = RunConfig {
-            handle_ctrlc: false,
-            ..RunConfig::speed(profile, SpeedLoopConfig::from_params(&p, 50.0).unwrap())
-        };
+        let cfg = RunConfig::speed(profile, SpeedLoopConfig::from_params(&p, 50.0).unwrap());
         let mut rec = run_loop(&mut b, &cfg, None).unwrap().record;
         rec.source = source.to_string();
         // The estimators on the encoder angle (differentiated without lag), not on the loop's

@@ -1,5 +1,6 @@
 //! The end-to-end tests, one module per area, in ONE integration-test binary (as ripgrep does),
-//! so a change relinks once. Shared helpers live in the `servo_e2e` library (src/lib.rs).
+//! so a change relinks once. Shared helpers live in the `servo_e2e` library (src/lib.rs)
+//! and, for those that build logs with the core's types, in `util`.
 //! Run one area with `cargo test --release --test e2e diagnose::`.
 
 mod compare;
@@ -17,3 +18,4 @@ mod run_log;
 mod schemas;
 mod serial;
 mod sim;
+mod util;

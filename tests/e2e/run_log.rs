@@ -195,8 +195,8 @@ fn bad_csv_inputs_name_file_line_column() {
 
 use servo_cli::io::mcap_read::read_mcap;
 use servo_cli::io::{LoopMsg, McapLog, McapLogOptions};
-use servo_cli::runner::{self, LogSink, Program, RunConfig};
-use servo_core::control::{PidConfig, PidGains, Reference};
+use servo_core::control::{PidConfig, PidGains, Program, Reference};
+use servo_hw::run::{self as runner, LogSink, RunConfig, SinkError};
 use std::collections::BTreeMap;
 
 /// Writes to an MCAP log and remembers what it wrote.
@@ -206,11 +206,11 @@ struct Tee {
 }
 
 impl LogSink for Tee {
-    fn write_loop(&mut self, msg: &LoopMsg) -> anyhow::Result<()> {
+    fn write_loop(&mut self, msg: &LoopMsg) -> Result<(), SinkError> {
         self.written.push(*msg);
         Ok(self.log.write_loop(msg)?)
     }
-    fn flush(&mut self) -> anyhow::Result<()> {
+    fn flush(&mut self) -> Result<(), SinkError> {
         Ok(self.log.flush()?)
     }
 }
@@ -268,10 +268,7 @@ fn mcap_of_a_run_reopens_equal_to_what_was_written() {
         written: Vec::new(),
     };
     let program = Program::Position(Reference::parse("step:1.5").unwrap());
-    let cfg = RunConfig {
-        handle_ctrlc: false,
-        ..RunConfig::closed_loop(program, handout_pid(), 3.0)
-    };
+    let cfg = RunConfig::closed_loop(program, handout_pid(), 3.0);
     let out = runner::run_loop(&mut backend, &cfg, Some(&mut tee)).unwrap();
     tee.log.finish().unwrap();
     assert_eq!(tee.written.len(), 3000);

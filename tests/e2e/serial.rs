@@ -754,35 +754,39 @@ fn an_experiment_runs_over_serial(kind: Kind) {
     assert_eq!(u_end, 0.0);
 }
 
-// ---- The binaries: `servo board --pty` and `servo run --backend serial` as separate processes.
+// ---- The binaries: `servo board` and `servo run`/`servo identify` with `--backend serial` as
+// separate processes. Shared by the pseudo-terminal board (`cli`) and the QEMU board (`qemu_cli`).
 
-mod cli {
-    use super::realtime;
+mod board_proc {
     use servo_e2e::{servo, servo_bin};
     use std::path::{Path, PathBuf};
     use std::process::{Child, Command, Stdio};
     use std::time::{Duration, Instant};
 
-    struct BoardProc {
+    /// `servo board ARGS --path-file F` as a child process and the port it announced in F.
+    pub struct BoardProc {
         child: Child,
-        port: String,
+        pub port: String,
     }
 
     impl BoardProc {
-        fn start(dir: &Path) -> BoardProc {
+        /// Starts the board and waits up to `wait` for the path file (complete once it ends with
+        /// a newline). Panics if no `/dev/...` port was announced.
+        pub fn start(dir: &Path, args: &[&str], wait: Duration) -> BoardProc {
             let pf = dir.join("port.txt");
             let _ = std::fs::remove_file(&pf);
             let child = Command::new(servo_bin())
-                .args(["board", "--pty", "--watchdog-ms", "200", "--path-file"])
+                .arg("board")
+                .args(args)
+                .arg("--path-file")
                 .arg(&pf)
                 .stdout(Stdio::piped())
                 .stderr(Stdio::piped())
                 .spawn()
                 .expect("spawn servo board");
             let t = Instant::now();
-            // The file is complete once it ends with a newline.
             let mut port = String::new();
-            while t.elapsed() < Duration::from_secs(20) {
+            while t.elapsed() < wait {
                 port = std::fs::read_to_string(&pf).unwrap_or_default();
                 if port.ends_with('\n') {
                     break;
@@ -793,16 +797,19 @@ mod cli {
             assert!(port.starts_with("/dev/"), "{port}");
             BoardProc { child, port }
         }
-        fn signal(&self, sig: &str) {
+        /// Sends `sig` (e.g. "-STOP") to the board process.
+        pub fn signal(&self, sig: &str) {
             let ok = Command::new("kill")
                 .args([sig, &self.child.id().to_string()])
                 .status()
                 .unwrap();
             assert!(ok.success());
         }
-        /// Ctrl-C, then its stdout.
-        fn quit(mut self) -> String {
-            self.signal("-INT");
+        /// Ctrl-C, up to 10 s to exit (then killed), then its stdout.
+        pub fn quit(mut self) -> String {
+            let _ = Command::new("kill")
+                .args(["-INT", &self.child.id().to_string()])
+                .status();
             let t = Instant::now();
             while self.child.try_wait().unwrap().is_none() && t.elapsed() < Duration::from_secs(10)
             {
@@ -814,58 +821,95 @@ mod cli {
         }
     }
 
-    fn gains(dir: &Path) -> PathBuf {
+    /// A gains file designed for 60 deg phase margin at 30 rad/s, with `extra` design flags.
+    pub fn gains(dir: &Path, extra: &[&str]) -> PathBuf {
         let g = dir.join("gains.toml");
-        let (ok, _, err) = servo(&[
-            "design",
-            "--pm",
-            "60",
-            "--wc",
-            "30",
-            "-o",
-            g.to_str().unwrap(),
-        ]);
+        let mut args = vec!["design", "--pm", "60", "--wc", "30"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["-o", g.to_str().unwrap()]);
+        let (ok, _, err) = servo(&args);
         assert!(ok, "{err}");
         g
     }
 
-    fn run_args<'a>(g: &'a str, port: &'a str, log: &'a str, duration: &'a str) -> Vec<&'a str> {
-        vec![
+    /// `servo run --backend serial` of a 1 rad step for `duration` seconds, with `extra` flags.
+    pub fn run_args(
+        g: &Path,
+        port: &str,
+        log: &Path,
+        duration: &str,
+        extra: &[&str],
+    ) -> Vec<String> {
+        let mut v: Vec<String> = [
             "run",
             "--backend",
             "serial",
             "--port",
             port,
             "--gains",
-            g,
+            g.to_str().unwrap(),
             "--ref",
             "step:1",
             "--duration",
             duration,
             "--log",
-            log,
+            log.to_str().unwrap(),
         ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        v.extend(extra.iter().map(|s| s.to_string()));
+        v
     }
 
-    fn theta(path: &Path) -> Vec<(f64, f64)> {
+    /// `servo ARGS` run to completion: (success, stdout, stderr).
+    pub fn servo_owned(args: &[String]) -> (bool, String, String) {
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        servo(&refs)
+    }
+
+    /// `servo ARGS` spawned with its output discarded, to be killed by the test.
+    pub fn spawn_quiet(args: &[String]) -> Child {
+        Command::new(servo_bin())
+            .args(args)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap()
+    }
+
+    /// The logged (t [s], theta_l [rad]) samples.
+    pub fn theta(path: &Path) -> Vec<(f64, f64)> {
         let r = servo_cli::io::read_log(path, None).expect("log readable");
         let th = r.theta_l_rad.expect("theta_l in the log");
         r.time_s.into_iter().zip(th).collect()
+    }
+}
+
+mod cli {
+    use super::board_proc::{gains, run_args, servo_owned, spawn_quiet, theta, BoardProc};
+    use super::realtime;
+    use servo_e2e::{servo, servo_bin};
+    use std::path::Path;
+    use std::process::{Command, Stdio};
+    use std::time::{Duration, Instant};
+
+    fn start(dir: &Path) -> BoardProc {
+        BoardProc::start(
+            dir,
+            &["--pty", "--watchdog-ms", "200"],
+            Duration::from_secs(20),
+        )
     }
 
     #[test]
     fn serial_run_through_the_binaries_matches_the_simulator() {
         let _rt = realtime();
         let dir = tempfile::tempdir().unwrap();
-        let g = gains(dir.path());
-        let board = BoardProc::start(dir.path());
+        let g = gains(dir.path(), &[]);
+        let board = start(dir.path());
         let ser_log = dir.path().join("serial.mcap");
-        let (ok, out, err) = servo(&run_args(
-            g.to_str().unwrap(),
-            &board.port,
-            ser_log.to_str().unwrap(),
-            "1",
-        ));
+        let (ok, out, err) = servo_owned(&run_args(&g, &board.port, &ser_log, "1", &[]));
         let board_out = board.quit();
         assert!(ok, "{out}\n{err}");
         assert!(
@@ -909,17 +953,12 @@ mod cli {
     fn a_board_that_freezes_or_vanishes_ends_the_run_with_a_finished_log() {
         let _rt = realtime();
         let dir = tempfile::tempdir().unwrap();
-        let g = gains(dir.path());
+        let g = gains(dir.path(), &[]);
         for (case, sig) in [("frozen", "-STOP"), ("vanished", "-KILL")] {
-            let board = BoardProc::start(dir.path());
+            let board = start(dir.path());
             let log = dir.path().join(format!("{case}.mcap"));
             let child = Command::new(servo_bin())
-                .args(run_args(
-                    g.to_str().unwrap(),
-                    &board.port,
-                    log.to_str().unwrap(),
-                    "30",
-                ))
+                .args(run_args(&g, &board.port, &log, "30", &[]))
                 .stdout(Stdio::piped())
                 .stderr(Stdio::piped())
                 .spawn()
@@ -962,20 +1001,10 @@ mod cli {
     fn a_killed_host_trips_the_board_watchdog_and_its_log_is_recovered() {
         let _rt = realtime();
         let dir = tempfile::tempdir().unwrap();
-        let g = gains(dir.path());
-        let board = BoardProc::start(dir.path());
+        let g = gains(dir.path(), &[]);
+        let board = start(dir.path());
         let log = dir.path().join("killed.mcap");
-        let mut child = Command::new(servo_bin())
-            .args(run_args(
-                g.to_str().unwrap(),
-                &board.port,
-                log.to_str().unwrap(),
-                "30",
-            ))
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
+        let mut child = spawn_quiet(&run_args(&g, &board.port, &log, "30", &[]));
         std::thread::sleep(Duration::from_millis(1500));
         child.kill().unwrap(); // SIGKILL: no cleanup at all
         child.wait().unwrap();
@@ -1007,14 +1036,15 @@ mod cli {
 // a busy CI machine.
 
 mod qemu_cli {
+    use super::board_proc::{gains, run_args, servo_owned, spawn_quiet, BoardProc};
     use super::realtime;
-    use servo_e2e::{servo, servo_bin};
+    use servo_e2e::servo;
     use std::path::{Path, PathBuf};
-    use std::process::{Child, Command, Stdio};
-    use std::time::{Duration, Instant};
+    use std::time::Duration;
 
+    /// The QEMU board (`servo board --qemu` at 2 ms) and its statistics file.
     struct QemuProc {
-        child: Child,
+        board: BoardProc,
         port: String,
         stats: PathBuf,
     }
@@ -1023,33 +1053,20 @@ mod qemu_cli {
         /// `servo board --qemu` with `extra` flags; None (skip) without qemu or the image.
         fn start(dir: &Path, extra: &[&str]) -> Option<QemuProc> {
             let elf = servo_e2e::qemu_image()?;
-            let pf = dir.join("qemu-port.txt");
             let stats = dir.join("qemu-stats.txt");
-            let _ = std::fs::remove_file(&pf);
-            let child = Command::new(servo_bin())
-                .args(["board", "--qemu", "--period-ms", "2", "--elf"])
-                .arg(&elf)
-                .arg("--path-file")
-                .arg(&pf)
-                .arg("--stats-file")
-                .arg(&stats)
-                .args(extra)
-                .stdout(Stdio::piped())
-                .stderr(Stdio::piped())
-                .spawn()
-                .expect("spawn servo board --qemu");
-            let t = Instant::now();
-            let mut port = String::new();
-            while t.elapsed() < Duration::from_secs(30) {
-                port = std::fs::read_to_string(&pf).unwrap_or_default();
-                if port.ends_with('\n') {
-                    break;
-                }
-                std::thread::sleep(Duration::from_millis(20));
-            }
-            let port = port.trim().to_string();
-            assert!(port.starts_with("/dev/"), "{port}");
-            Some(QemuProc { child, port, stats })
+            let mut args = vec![
+                "--qemu",
+                "--period-ms",
+                "2",
+                "--elf",
+                elf.to_str()?,
+                "--stats-file",
+                stats.to_str()?,
+            ];
+            args.extend_from_slice(extra);
+            let board = BoardProc::start(dir, &args, Duration::from_secs(30));
+            let port = board.port.clone();
+            Some(QemuProc { board, port, stats })
         }
         /// The firmware's latest statistics line (written once a second).
         fn stats_after(&self, wait: Duration) -> String {
@@ -1057,61 +1074,23 @@ mod qemu_cli {
             let text = std::fs::read_to_string(&self.stats).unwrap_or_default();
             text.lines().last().unwrap_or_default().to_string()
         }
-        fn quit(mut self) {
-            let _ = Command::new("kill")
-                .args(["-INT", &self.child.id().to_string()])
-                .status();
-            let t = Instant::now();
-            while self.child.try_wait().unwrap().is_none() && t.elapsed() < Duration::from_secs(10)
-            {
-                std::thread::sleep(Duration::from_millis(20));
-            }
-            let _ = self.child.kill();
-            let _ = self.child.wait();
+        fn quit(self) {
+            let _ = self.board.quit();
         }
     }
 
-    fn gains(dir: &Path) -> PathBuf {
-        let g = dir.join("gains.toml");
-        let (ok, _, err) = servo(&[
-            "design",
-            "--pm",
-            "60",
-            "--wc",
-            "30",
-            "--ts",
-            "0.002",
-            "-o",
-            g.to_str().unwrap(),
-        ]);
-        assert!(ok, "{err}");
-        g
+    fn gains_2ms(dir: &Path) -> PathBuf {
+        gains(dir, &["--ts", "0.002"])
     }
 
-    fn run_args<'a>(g: &'a str, port: &'a str, log: &'a str, duration: &'a str) -> Vec<&'a str> {
-        vec![
-            "run",
-            "--backend",
-            "serial",
-            "--port",
-            port,
-            "--gains",
-            g,
-            "--ref",
-            "step:1",
-            "--duration",
-            duration,
-            "--log",
-            log,
-            "--board-timeout-ms",
-            "500",
-        ]
+    /// `servo run` on the QEMU board (tolerant host timeout for a busy CI machine).
+    fn qemu_run_args(g: &Path, port: &str, log: &Path, duration: &str) -> Vec<String> {
+        run_args(g, port, log, duration, &["--board-timeout-ms", "500"])
     }
 
     fn final_theta(path: &Path) -> (usize, f64) {
-        let r = servo_cli::io::read_log(path, None).expect("log readable");
-        let th = r.theta_l_rad.expect("theta_l in the log");
-        (th.len(), *th.last().expect("samples"))
+        let th = super::board_proc::theta(path);
+        (th.len(), th.last().expect("samples").1)
     }
 
     #[test]
@@ -1121,14 +1100,9 @@ mod qemu_cli {
         let Some(board) = QemuProc::start(dir.path(), &["--watchdog-ms", "250"]) else {
             return;
         };
-        let g = gains(dir.path());
+        let g = gains_2ms(dir.path());
         let log = dir.path().join("step.mcap");
-        let (ok, out, err) = servo(&run_args(
-            g.to_str().unwrap(),
-            &board.port,
-            log.to_str().unwrap(),
-            "3",
-        ));
+        let (ok, out, err) = servo_owned(&qemu_run_args(&g, &board.port, &log, "3"));
         let stats = board.stats_after(Duration::from_millis(1200));
         board.quit();
         eprintln!("{out}\n{err}\nQEMU: {stats}");
@@ -1234,19 +1208,9 @@ mod qemu_cli {
         let Some(board) = QemuProc::start(dir.path(), &["--watchdog-ms", "100"]) else {
             return;
         };
-        let g = gains(dir.path());
+        let g = gains_2ms(dir.path());
         let log = dir.path().join("killed.mcap");
-        let mut child = Command::new(servo_bin())
-            .args(run_args(
-                g.to_str().unwrap(),
-                &board.port,
-                log.to_str().unwrap(),
-                "30",
-            ))
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
+        let mut child = spawn_quiet(&qemu_run_args(&g, &board.port, &log, "30"));
         std::thread::sleep(Duration::from_millis(2000));
         child.kill().unwrap(); // SIGKILL: no Stop, no 0 V from the host
         child.wait().unwrap();
@@ -1255,12 +1219,7 @@ mod qemu_cli {
         assert!(stats.contains("| u 0.000 V |"), "{stats}");
         // The next run starts cleanly and completes.
         let log2 = dir.path().join("next.mcap");
-        let (ok, out, err) = servo(&run_args(
-            g.to_str().unwrap(),
-            &board.port,
-            log2.to_str().unwrap(),
-            "1",
-        ));
+        let (ok, out, err) = servo_owned(&qemu_run_args(&g, &board.port, &log2, "1"));
         let stats = board.stats_after(Duration::from_millis(1200));
         board.quit();
         assert!(ok, "{out}\n{err}");

@@ -69,7 +69,6 @@ fn closed_loop_10min(log: Option<(&std::path::Path, LogEncoding)>) -> usize {
     );
     let program = Program::Position(Reference::parse("prbs:amp=0.3,bit=0.02").unwrap());
     let cfg = RunConfig {
-        handle_ctrlc: false,
         keep_record: false,
         ..RunConfig::closed_loop(program, pid, 600.0)
     };

@@ -26,9 +26,12 @@ pub mod cmd;
 
 pub mod fuzz;
 pub mod io;
+pub mod live;
 pub mod plant_args;
 pub mod plot;
-pub mod runner;
+/// The run as the commands see it: the library's loop and types, with the CLI's Ctrl-C and
+/// progress ([`live`]).
+pub use live as runner;
 
 pub use servo_io::{effects_file, gains_file, model_file, reference_file};
 

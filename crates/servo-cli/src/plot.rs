@@ -181,3 +181,56 @@ pub fn line_chart(path: &std::path::Path, chart: &Chart, series: &[Series]) -> a
     let svg = line_chart_svg(chart, series)?;
     std::fs::write(path, svg).map_err(|e| anyhow!("writing plot {}: {e}", path.display()))
 }
+
+/// Plots reference and angle [deg] over time, and the voltage (second SVG `<stem>_u.svg`).
+pub fn plot_run(path: &std::path::Path, out: &servo_hw::run::RunOutput) -> anyhow::Result<()> {
+    let rec = &out.record;
+    let deg = |v: &Option<Vec<f64>>| {
+        v.as_ref()
+            .map(|v| v.iter().map(|x| x.to_degrees()).collect::<Vec<f64>>())
+    };
+    let th = deg(&rec.theta_l_rad).unwrap_or_default();
+    let r = deg(&rec.ref_rad);
+    let mut series = Vec::new();
+    if let Some(r) = &r {
+        series.push(Series {
+            label: "reference [deg]",
+            x: &rec.time_s,
+            y: r,
+        });
+    }
+    series.push(Series {
+        label: "theta_l [deg]",
+        x: &rec.time_s,
+        y: &th,
+    });
+    line_chart(
+        path,
+        &Chart {
+            title: "servo run: load angle",
+            x_label: "time [s]",
+            y_label: "angle [deg]",
+            ..Chart::default()
+        },
+        &series,
+    )?;
+    let u = rec.u_v.clone().unwrap_or_default();
+    let upath = path.with_file_name(format!(
+        "{}_u.svg",
+        path.file_stem().and_then(|s| s.to_str()).unwrap_or("run")
+    ));
+    line_chart(
+        &upath,
+        &Chart {
+            title: "servo run: driver input",
+            x_label: "time [s]",
+            y_label: "u [V]",
+            ..Chart::default()
+        },
+        &[Series {
+            label: "u [V]",
+            x: &rec.time_s,
+            y: &u,
+        }],
+    )
+}

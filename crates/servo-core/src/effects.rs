@@ -926,7 +926,7 @@ pub enum EffectError {
         unit: &'static str,
         value: EffectName,
     },
-    #[error("effect `{effect}`: `{key}` = {value} is below its physical minimum {min} {unit}")]
+    #[error("effect `{effect}`: `{key}` = {} is below its physical minimum {} {unit}", crate::math::Num(*.value), crate::math::Num(*.min))]
     OutOfRange {
         effect: &'static str,
         key: &'static str,

@@ -11,6 +11,8 @@
 //! * [`board`]: the servo board firmware core (protocol state machine over a small HAL trait).
 //! * `frf` (std): frequency-response estimates from logs (Welch/H1, coherence, bounds), the
 //!   margins a measured loop achieved and the model's errors by frequency.
+//! * `metrics` (alloc): figures of merit of a run (tracking error, overshoot and settling of each
+//!   reference step, saturation time), computed while it runs.
 //! * [`sim`]: integration of the plant with its effects (truth for the simulator, model for
 //!   `compare`).
 //!
@@ -39,6 +41,8 @@ pub mod frf;
 pub mod ident;
 pub mod linalg;
 pub mod math;
+#[cfg(feature = "alloc")]
+pub mod metrics;
 pub mod params;
 pub mod plant;
 pub mod protocol;

@@ -82,3 +82,38 @@ pub fn rem_euclid(x: f64, m: f64) -> f64 {
 pub use core::f64::consts::PI;
 /// 2 pi.
 pub const TAU: f64 = core::f64::consts::TAU;
+
+/// A number for a message: plain decimal when its magnitude is ordinary (1e-4 .. 1e6, or 0),
+/// scientific otherwise (`1e308`, not a 309-digit integer; `2.5e-9`, not `0.0000000025`).
+/// Non-finite values print as Rust does (`inf`, `NaN`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Num(pub f64);
+
+impl core::fmt::Display for Num {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let a = if self.0 < 0.0 { -self.0 } else { self.0 };
+        if self.0 == 0.0 || !self.0.is_finite() || (1e-4..1e6).contains(&a) {
+            core::fmt::Display::fmt(&self.0, f)
+        } else {
+            core::fmt::LowerExp::fmt(&self.0, f)
+        }
+    }
+}
+
+#[cfg(test)]
+mod num_tests {
+    use super::Num;
+    extern crate std;
+    use std::format;
+
+    #[test]
+    fn extreme_numbers_print_in_scientific_notation() {
+        assert_eq!(format!("{}", Num(1e308)), "1e308");
+        assert_eq!(format!("{}", Num(-1.5e300)), "-1.5e300");
+        assert_eq!(format!("{}", Num(2.5e-9)), "2.5e-9");
+        assert_eq!(format!("{}", Num(7.682e-3)), "0.007682");
+        assert_eq!(format!("{}", Num(1200.0)), "1200");
+        assert_eq!(format!("{}", Num(0.0)), "0");
+        assert_eq!(format!("{}", Num(f64::INFINITY)), "inf");
+    }
+}

@@ -9,14 +9,14 @@ pub enum ParamError {
     #[error("parameter `{key}` must be a finite number, got {value}")]
     NotFinite { key: &'static str, value: f64 },
     /// A parameter that must be positive (resistance, inductance, inertia, constants, ratio) is not.
-    #[error("parameter `{key}` must be > 0 ({unit}), got {value}")]
+    #[error("parameter `{key}` must be > 0 ({unit}), got {}", math::Num(*.value))]
     NotPositive {
         key: &'static str,
         unit: &'static str,
         value: f64,
     },
     /// A parameter that must be non-negative (friction) is negative.
-    #[error("parameter `{key}` must be >= 0 ({unit}), got {value}")]
+    #[error("parameter `{key}` must be >= 0 ({unit}), got {}", math::Num(*.value))]
     Negative {
         key: &'static str,
         unit: &'static str,
@@ -25,7 +25,7 @@ pub enum ParamError {
     /// A parameter lies outside any physically sensible range for a DC gearmotor (e.g. a
     /// torque constant of 1e308 N m/A, a typo or a unit slip); computations on it would overflow
     /// or never converge.
-    #[error("parameter `{key}` = {value} {unit} is outside the physically sensible range {min:e} .. {max:e} {unit} for a DC gearmotor (a typo or a unit slip?)")]
+    #[error("parameter `{key}` = {} {unit} is outside the physically sensible range {min:e} .. {max:e} {unit} for a DC gearmotor (a typo or a unit slip?)", math::Num(*.value))]
     OutOfRange {
         key: &'static str,
         unit: &'static str,
@@ -348,6 +348,9 @@ mod tests {
                 matches!(e, ParamError::OutOfRange { key: k, .. } if k == key),
                 "{e}"
             );
+            // Readable: `1e308`, not a 309-digit integer.
+            let msg = std::format!("{e}");
+            assert!(msg.contains("= 1e308 ") && msg.len() < 300, "{msg}");
         }
     }
 }

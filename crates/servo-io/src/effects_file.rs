@@ -280,7 +280,7 @@ theta0 = { value = 0.0, min = -1.0, max = 1.0, unit = "rad" }
         assert!(e.contains("acts_on") && e.contains("load_torque"), "{e}");
         let e = format!(
             "{:#}",
-            EffectsFile::parse(&GOOD.replace("custom.cable", "custom.cogging")).unwrap_err()
+            EffectsFile::parse(&GOOD.replace("custom.cable", "custom.viscous")).unwrap_err()
         );
         assert!(e.contains("catalogue"), "{e}");
     }

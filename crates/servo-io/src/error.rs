@@ -44,6 +44,9 @@ pub enum Error {
     /// A MATLAB MAT-file.
     #[error(transparent)]
     Mat(#[from] crate::mat_read::MatError),
+    /// A setpoint program (speed profile of an experiment recipe).
+    #[error(transparent)]
+    Program(#[from] servo_core::control::ProgramError),
     /// A unit in a column map or header.
     #[error(transparent)]
     Unit(#[from] crate::units::UnitError),

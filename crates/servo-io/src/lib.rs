@@ -2,6 +2,9 @@
 //! servo's CSV, foreign CSVs through a column map, MATLAB MAT-files.
 //!
 //! * [`model_file`], [`gains_file`], [`reference_file`]: the TOML files servo reads and writes.
+//! * [`recipe_file`]: the recipes of the identification experiments (speed staircase, ramps).
+//! * [`controller`]: the controller of a run from the gains file, the options and a log's record
+//!   of the controller that ran.
 //! * [`error`]: the typed [`Error`] every function here returns.
 //!
 //! Every command that reads a log calls [`read_log`] (or [`read_log_with_meta`] for the run's
@@ -16,6 +19,7 @@
 //!   in `--columns`, Simulink Scope structures.
 
 pub mod columns;
+pub mod controller;
 pub mod csv_read;
 pub mod csv_write;
 pub mod effects_file;
@@ -29,6 +33,7 @@ pub mod mcap_read;
 pub mod mcap_recover;
 pub mod mcap_write;
 pub mod model_file;
+pub mod recipe_file;
 pub mod reference_file;
 pub mod units;
 
@@ -36,6 +41,7 @@ pub use loop_msg::LoopMsg;
 pub use mcap_write::{LogEncoding, McapLog, McapLogOptions};
 
 pub use columns::ColumnMap;
+pub use controller::logged_controller;
 pub use csv_write::write_csv;
 pub use error::{Context, Error, Result};
 pub use units::{Signal, Unit};

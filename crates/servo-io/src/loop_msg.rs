@@ -176,6 +176,9 @@ pub fn loop_descriptor_set() -> Vec<u8> {
     set
 }
 
+/// Bytes of a message as [`LoopMsg::write_protobuf`] writes it.
+pub const PROTOBUF_LEN: usize = 110;
+
 impl LoopMsg {
     fn f64_fields(&self) -> [f64; 11] {
         [
@@ -196,14 +199,17 @@ impl LoopMsg {
     /// Appends the message in protobuf wire format (`servo.Loop`, [`loop_descriptor_set`]):
     /// fields 1-11 and 13 as 64-bit doubles, 12 as a bool; 110 bytes, no number formatting.
     pub fn write_protobuf(&self, out: &mut Vec<u8>) {
+        // Laid out on the stack and appended at once: the log's hot path.
+        let mut b = [0u8; PROTOBUF_LEN];
         for (i, v) in self.f64_fields().into_iter().enumerate() {
-            out.push(((i as u8 + 1) << 3) | 1);
-            out.extend_from_slice(&v.to_le_bytes());
+            b[9 * i] = ((i as u8 + 1) << 3) | 1;
+            b[9 * i + 1..9 * i + 9].copy_from_slice(&v.to_le_bytes());
         }
-        out.push(12 << 3);
-        out.push(self.saturated as u8);
-        out.push((13 << 3) | 1);
-        out.extend_from_slice(&self.ref_omega_l_rad_s.to_le_bytes());
+        b[99] = 12 << 3;
+        b[100] = self.saturated as u8;
+        b[101] = (13 << 3) | 1;
+        b[102..110].copy_from_slice(&self.ref_omega_l_rad_s.to_le_bytes());
+        out.extend_from_slice(&b);
     }
 
     /// The message exactly as [`LoopMsg::write_protobuf`] lays it out (the fast path of the

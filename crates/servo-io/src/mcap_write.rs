@@ -1,7 +1,16 @@
-//! Writing a run to MCAP: JSON messages on channels with a registered JSON schema (they open
-//! directly in Foxglove and PlotJuggler), a metadata record describing the run, and a chunk flush
-//! at least every [`McapLogOptions::flush_period_s`] of run time so that a killed run loses at
-//! most that much (the open chunk).
+//! Writing a run to MCAP: `/servo/loop` messages (protobuf or JSON, with their schema, so they
+//! open directly in Foxglove and PlotJuggler), a metadata record describing the run, and a chunk
+//! flush at least every [`McapLogOptions::flush_period_s`] so that a killed run loses at most
+//! that much (the open chunk).
+//!
+//! The writer lays the records out itself (MCAP spec, <https://mcap.dev/spec>) because the log
+//! is the hot path of a simulation faster than real time: a message is framed directly into the
+//! open chunk's buffer (no allocation, no per-message stream write), and a chunk is compressed
+//! in one call when it ends (the `mcap` crate's writer streams every record through its
+//! compressor and CRC layers, which cost twice the physics). The file is what the `mcap` crate
+//! writes: header, schema, channel, run metadata, chunks each followed by its message index,
+//! the summary metadata, data end with the data-section CRC, and a summary section (schema,
+//! channel, statistics, chunk and metadata indexes, summary offsets) with its CRC.
 
 use super::loop_msg::{
     loop_descriptor_set, loop_schema, LoopMsg, LOOP_PROTO_NAME, LOOP_SCHEMA_NAME, LOOP_TOPIC,
@@ -9,7 +18,7 @@ use super::loop_msg::{
 use crate::error::{self as anyhow, anyhow, Context};
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::BufWriter;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 /// Name of the metadata record that describes a run.
@@ -20,6 +29,10 @@ pub const SUMMARY_METADATA: &str = "servo.summary";
 pub const START_TIME_KEY: &str = "start_time_unix_ns";
 /// Profile string in the MCAP header.
 pub const PROFILE: &str = "";
+/// A chunk ends once its uncompressed records reach this size [bytes] (about 29 000 protobuf
+/// messages), whatever the flush period: it bounds the writer's memory and keeps each chunk
+/// quick to decompress for a viewer seeking in the file (the `mcap` tools' default is 4 MiB).
+pub const MAX_CHUNK_BYTES: usize = 4 << 20;
 
 /// Options of an MCAP log.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -28,8 +41,8 @@ pub struct McapLogOptions {
     pub flush_period_s: f64,
     /// Compress chunks (zstd, or LZ4 with `fast_compression`).
     pub compress: bool,
-    /// LZ4 instead of zstd: about 3 times faster to write, files about 25 % larger (for
-    /// simulations faster than real time, where the log's cost is the run's cost).
+    /// LZ4 instead of zstd: faster to write, files larger (for simulations faster than real
+    /// time, where the log's cost is the run's cost).
     pub fast_compression: bool,
     /// Unix time [ns] of run time 0, added to `log_time`/`publish_time`.
     pub start_unix_ns: u64,
@@ -74,19 +87,162 @@ impl Default for McapLogOptions {
     }
 }
 
+/// MCAP opcodes (spec "Records").
+mod op {
+    pub const HEADER: u8 = 0x01;
+    pub const FOOTER: u8 = 0x02;
+    pub const SCHEMA: u8 = 0x03;
+    pub const CHANNEL: u8 = 0x04;
+    pub const MESSAGE: u8 = 0x05;
+    pub const CHUNK: u8 = 0x06;
+    pub const MESSAGE_INDEX: u8 = 0x07;
+    pub const CHUNK_INDEX: u8 = 0x08;
+    pub const STATISTICS: u8 = 0x0B;
+    pub const METADATA: u8 = 0x0C;
+    pub const METADATA_INDEX: u8 = 0x0D;
+    pub const SUMMARY_OFFSET: u8 = 0x0E;
+    pub const DATA_END: u8 = 0x0F;
+}
+
+/// The MCAP magic, at the start and the end of a file.
+const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+/// The one schema and the one channel of a servo log.
+const SCHEMA_ID: u16 = 1;
+const CHANNEL_ID: u16 = 1;
+
+fn put_u16(v: &mut Vec<u8>, x: u16) {
+    v.extend_from_slice(&x.to_le_bytes());
+}
+fn put_u32(v: &mut Vec<u8>, x: u32) {
+    v.extend_from_slice(&x.to_le_bytes());
+}
+fn put_u64(v: &mut Vec<u8>, x: u64) {
+    v.extend_from_slice(&x.to_le_bytes());
+}
+/// A length-prefixed string (u32 length).
+fn put_str(v: &mut Vec<u8>, s: &str) {
+    put_u32(v, s.len() as u32);
+    v.extend_from_slice(s.as_bytes());
+}
+/// A map<string, string>: u32 byte length, then the pairs.
+fn put_str_map(v: &mut Vec<u8>, m: &BTreeMap<String, String>) {
+    let len: usize = m.iter().map(|(k, x)| 8 + k.len() + x.len()).sum();
+    put_u32(v, len as u32);
+    for (k, x) in m {
+        put_str(v, k);
+        put_str(v, x);
+    }
+}
+/// A whole record: opcode, u64 body length, body.
+fn record(opcode: u8, body: &[u8]) -> Vec<u8> {
+    let mut v = Vec::with_capacity(9 + body.len());
+    v.push(opcode);
+    put_u64(&mut v, body.len() as u64);
+    v.extend_from_slice(body);
+    v
+}
+
+/// The file being written: position and running CRC of everything written (the data-section
+/// CRC, then the summary CRC).
+struct Out {
+    w: BufWriter<File>,
+    pos: u64,
+    crc: crc32fast::Hasher,
+}
+
+impl Out {
+    fn write(&mut self, b: &[u8]) -> std::io::Result<()> {
+        self.w.write_all(b)?;
+        self.crc.update(b);
+        self.pos += b.len() as u64;
+        Ok(())
+    }
+}
+
+/// What the summary section needs of one chunk.
+#[derive(Debug, Clone, Copy)]
+struct ChunkIndexEntry {
+    start_ns: u64,
+    end_ns: u64,
+    offset: u64,
+    length: u64,
+    message_index_offset: u64,
+    message_index_length: u64,
+    compressed_size: u64,
+    uncompressed_size: u64,
+}
+
+/// Chunk compression, with its reused state.
+enum Compressor {
+    None,
+    Lz4,
+    Zstd(Box<zstd::bulk::Compressor<'static>>),
+}
+
+impl Compressor {
+    fn name(&self) -> &'static str {
+        match self {
+            Compressor::None => "",
+            Compressor::Lz4 => "lz4",
+            Compressor::Zstd(_) => "zstd",
+        }
+    }
+
+    /// Compresses `src` into `dst` (cleared first): one LZ4 or zstd frame.
+    fn compress(&mut self, src: &[u8], dst: &mut Vec<u8>) -> std::io::Result<()> {
+        dst.clear();
+        match self {
+            Compressor::None => dst.extend_from_slice(src),
+            Compressor::Lz4 => {
+                // Block and content checksums off: the chunk carries its own CRC (as the
+                // `mcap` crate writes LZ4 chunks).
+                let mut enc = lz4::EncoderBuilder::new()
+                    .level(1)
+                    .block_size(lz4::BlockSize::Max4MB)
+                    .block_checksum(lz4::liblz4::BlockChecksum::NoBlockChecksum)
+                    .checksum(lz4::ContentChecksum::NoChecksum)
+                    .build(std::mem::take(dst))?;
+                enc.write_all(src)?;
+                let (out, r) = enc.finish();
+                *dst = out;
+                r?;
+            }
+            Compressor::Zstd(z) => {
+                dst.reserve(zstd::zstd_safe::compress_bound(src.len()));
+                z.compress_to_buffer(src, dst)?;
+            }
+        }
+        Ok(())
+    }
+}
+
 /// An MCAP log being written. Call [`McapLog::finish`] at the end (also on Ctrl-C); a log that
 /// is dropped unfinished is still readable up to its last flush.
 pub struct McapLog {
-    writer: Option<mcap::Writer<BufWriter<File>>>,
+    /// `None` once finished.
+    out: Option<Out>,
     path: PathBuf,
-    loop_channel: u16,
-    sequence: u32,
-    last_flush_s: f64,
     opts: McapLogOptions,
+    sequence: u32,
     messages: u64,
-    /// Encoding buffer, reused.
-    buf: Vec<u8>,
+    last_flush_s: f64,
     last_flush_wall: std::time::Instant,
+    /// Records of the open chunk, uncompressed (message records laid out in place).
+    chunk: Vec<u8>,
+    /// Message index entries of the open chunk: (log_time, offset in `chunk`), little-endian.
+    chunk_msg_index: Vec<u8>,
+    /// First and last log time of the open chunk [ns].
+    chunk_times: Option<(u64, u64)>,
+    /// First and last log time of the whole log [ns].
+    times: Option<(u64, u64)>,
+    compressor: Compressor,
+    /// Compressed chunk, reused.
+    compressed: Vec<u8>,
+    chunk_indexes: Vec<ChunkIndexEntry>,
+    /// (offset, length, name) of each metadata record.
+    metadata_indexes: Vec<(u64, u64, String)>,
+    schema_record: Vec<u8>,
+    channel_record: Vec<u8>,
 }
 
 impl std::fmt::Debug for McapLog {
@@ -96,12 +252,6 @@ impl std::fmt::Debug for McapLog {
             .field("messages", &self.messages)
             .finish()
     }
-}
-
-fn mcap_err(path: &Path, what: &str) -> impl FnOnce(mcap::McapError) -> anyhow::Error {
-    let p = path.display().to_string();
-    let what = what.to_string();
-    move |e| anyhow!("MCAP log {p}: {what}: {e}")
 }
 
 impl McapLog {
@@ -115,59 +265,88 @@ impl McapLog {
     ) -> anyhow::Result<McapLog> {
         let file =
             File::create(path).with_context(|| format!("creating MCAP log {}", path.display()))?;
-        let wopts = mcap::WriteOptions::new()
-            .library(concat!(
-                "servo ",
-                env!("CARGO_PKG_VERSION"),
-                " / ",
-                "mcap-rust"
-            ))
-            .compression(match (opts.compress, opts.fast_compression) {
-                (false, _) => None,
-                (true, false) => Some(mcap::Compression::Zstd),
-                (true, true) => Some(mcap::Compression::Lz4),
-            })
-            // Chunks of 50-100 samples: one thread, fast level.
-            .compression_threads(0)
-            .compression_level(1)
-            // Chunks end on flush (by run time), not by size.
-            .chunk_size(None);
-        let mut writer = mcap::Writer::with_options(BufWriter::with_capacity(1 << 16, file), wopts)
-            .map_err(mcap_err(path, "writing the header"))?;
-        let (schema, encoding) = match opts.encoding {
+        let compressor = match (opts.compress, opts.fast_compression) {
+            (false, _) => Compressor::None,
+            (true, true) => Compressor::Lz4,
+            // Level 1: chunks of 50-100 samples in real time, the fastest zstd level that
+            // still finds the repetition between samples.
+            (true, false) => Compressor::Zstd(Box::new(
+                zstd::bulk::Compressor::new(1)
+                    .with_context(|| format!("MCAP log {}: zstd", path.display()))?,
+            )),
+        };
+        let (schema_name, schema_encoding, schema_data, message_encoding) = match opts.encoding {
             LogEncoding::Json => (
-                writer.add_schema(LOOP_SCHEMA_NAME, "jsonschema", loop_schema().as_bytes()),
+                LOOP_SCHEMA_NAME,
+                "jsonschema",
+                loop_schema().into_bytes(),
                 "json",
             ),
             LogEncoding::Protobuf => (
-                writer.add_schema(LOOP_PROTO_NAME, "protobuf", &loop_descriptor_set()),
+                LOOP_PROTO_NAME,
+                "protobuf",
+                loop_descriptor_set(),
                 "protobuf",
             ),
         };
-        let schema = schema.map_err(mcap_err(path, "adding the schema"))?;
-        let loop_channel = writer
-            .add_channel(schema, LOOP_TOPIC, encoding, &BTreeMap::new())
-            .map_err(mcap_err(path, "adding the channel"))?;
+        let mut body = Vec::new();
+        put_u16(&mut body, SCHEMA_ID);
+        put_str(&mut body, schema_name);
+        put_str(&mut body, schema_encoding);
+        put_u32(&mut body, schema_data.len() as u32);
+        body.extend_from_slice(&schema_data);
+        let schema_record = record(op::SCHEMA, &body);
+        body.clear();
+        put_u16(&mut body, CHANNEL_ID);
+        put_u16(&mut body, SCHEMA_ID);
+        put_str(&mut body, LOOP_TOPIC);
+        put_str(&mut body, message_encoding);
+        put_str_map(&mut body, &BTreeMap::new());
+        let channel_record = record(op::CHANNEL, &body);
+
+        let mut log = McapLog {
+            out: Some(Out {
+                w: BufWriter::with_capacity(1 << 16, file),
+                pos: 0,
+                crc: crc32fast::Hasher::new(),
+            }),
+            path: path.to_path_buf(),
+            opts,
+            sequence: 0,
+            messages: 0,
+            last_flush_s: f64::NEG_INFINITY,
+            last_flush_wall: std::time::Instant::now(),
+            chunk: Vec::new(),
+            chunk_msg_index: Vec::new(),
+            chunk_times: None,
+            times: None,
+            compressor,
+            compressed: Vec::new(),
+            chunk_indexes: Vec::new(),
+            metadata_indexes: Vec::new(),
+            schema_record,
+            channel_record,
+        };
+        body.clear();
+        put_str(&mut body, PROFILE);
+        put_str(
+            &mut body,
+            concat!("servo ", env!("CARGO_PKG_VERSION"), " / servo-io"),
+        );
+        let header = record(op::HEADER, &body);
+        let (schema, channel) = (log.schema_record.clone(), log.channel_record.clone());
         let mut metadata = metadata.clone();
         metadata.insert(START_TIME_KEY.to_string(), opts.start_unix_ns.to_string());
-        writer
-            .write_metadata(&mcap::records::Metadata {
-                name: RUN_METADATA.to_string(),
-                metadata,
-            })
-            .map_err(mcap_err(path, "writing the metadata"))?;
-        writer.flush().map_err(mcap_err(path, "flushing"))?;
-        Ok(McapLog {
-            writer: Some(writer),
-            path: path.to_path_buf(),
-            loop_channel,
-            sequence: 0,
-            last_flush_s: f64::NEG_INFINITY,
-            opts,
-            messages: 0,
-            buf: Vec::with_capacity(512),
-            last_flush_wall: std::time::Instant::now(),
-        })
+        let out = log.out_mut()?;
+        let written = out
+            .write(MAGIC)
+            .and_then(|()| out.write(&header))
+            .and_then(|()| out.write(&schema))
+            .and_then(|()| out.write(&channel));
+        written.with_context(|| format!("MCAP log {}: writing the header", path.display()))?;
+        log.write_metadata(RUN_METADATA, &metadata)?;
+        log.flush()?;
+        Ok(log)
     }
 
     /// The file being written.
@@ -180,6 +359,13 @@ impl McapLog {
         self.messages
     }
 
+    fn out_mut(&mut self) -> anyhow::Result<&mut Out> {
+        let path = &self.path;
+        self.out
+            .as_mut()
+            .ok_or_else(|| anyhow!("MCAP log {}: already finished", path.display()))
+    }
+
     fn log_time_ns(&self, time_s: f64) -> u64 {
         let ns = (time_s.max(0.0) * 1e9).round();
         self.opts
@@ -188,28 +374,41 @@ impl McapLog {
     }
 
     /// Writes one loop sample; ends the chunk and flushes when `flush_period_s` of run time has
-    /// passed since the last flush.
+    /// passed since the last flush (of wall-clock time with `flush_on_wall_clock`), or when
+    /// the chunk holds [`MAX_CHUNK_BYTES`].
     pub fn write_loop(&mut self, msg: &LoopMsg) -> anyhow::Result<()> {
-        self.buf.clear();
-        match self.opts.encoding {
-            LogEncoding::Json => msg.write_json(&mut self.buf),
-            LogEncoding::Protobuf => msg.write_protobuf(&mut self.buf),
-        }
-        let t = self.log_time_ns(msg.time_s);
-        let header = mcap::records::MessageHeader {
-            channel_id: self.loop_channel,
-            sequence: self.sequence,
-            log_time: t,
-            publish_time: t,
-        };
-        let Some(w) = self.writer.as_mut() else {
+        if self.out.is_none() {
             return Err(anyhow!(
                 "MCAP log {}: already finished",
                 self.path.display()
             ));
-        };
-        w.write_to_known_channel(&header, &self.buf)
-            .map_err(|e| mcap_err(&self.path, "writing a message")(e))?;
+        }
+        let t = self.log_time_ns(msg.time_s);
+        // The message record, framed in place in the chunk: the length is patched once the
+        // message is encoded.
+        let at = self.chunk.len();
+        let c = &mut self.chunk;
+        let mut head = [0u8; 31];
+        head[0] = op::MESSAGE;
+        head[9..11].copy_from_slice(&CHANNEL_ID.to_le_bytes());
+        head[11..15].copy_from_slice(&self.sequence.to_le_bytes());
+        head[15..23].copy_from_slice(&t.to_le_bytes());
+        head[23..31].copy_from_slice(&t.to_le_bytes());
+        c.extend_from_slice(&head);
+        match self.opts.encoding {
+            LogEncoding::Json => msg.write_json(c),
+            LogEncoding::Protobuf => msg.write_protobuf(c),
+        }
+        let len = (c.len() - at - 9) as u64;
+        c[at + 1..at + 9].copy_from_slice(&len.to_le_bytes());
+        let mut entry = [0u8; 16];
+        entry[..8].copy_from_slice(&t.to_le_bytes());
+        entry[8..].copy_from_slice(&(at as u64).to_le_bytes());
+        self.chunk_msg_index.extend_from_slice(&entry);
+        self.chunk_times = Some(
+            self.chunk_times
+                .map_or((t, t), |(a, b)| (a.min(t), b.max(t))),
+        );
         self.sequence = self.sequence.wrapping_add(1);
         self.messages += 1;
         let due = if self.opts.flush_on_wall_clock {
@@ -220,46 +419,216 @@ impl McapLog {
             msg.time_s - self.last_flush_s >= self.opts.flush_period_s - 1e-9 || msg.time_s.is_nan()
         };
         if due {
-            w.flush().map_err(|e| mcap_err(&self.path, "flushing")(e))?;
+            self.flush()?;
             self.last_flush_s = msg.time_s;
             self.last_flush_wall = std::time::Instant::now();
+        } else if self.chunk.len() >= MAX_CHUNK_BYTES {
+            self.end_chunk()?;
         }
+        Ok(())
+    }
+
+    /// Ends the open chunk (if any): compresses it and writes the chunk record and its message
+    /// index to the file buffer.
+    fn end_chunk(&mut self) -> anyhow::Result<()> {
+        let Some((start_ns, end_ns)) = self.chunk_times.take() else {
+            return Ok(());
+        };
+        let uncompressed_crc = crc32fast::hash(&self.chunk);
+        let path = self.path.clone();
+        self.compressor
+            .compress(&self.chunk, &mut self.compressed)
+            .with_context(|| format!("MCAP log {}: compressing a chunk", path.display()))?;
+        let compression = self.compressor.name();
+        let mut head = Vec::with_capacity(64);
+        head.push(op::CHUNK);
+        let body_len = 8 + 8 + 8 + 4 + 4 + compression.len() + 8 + self.compressed.len();
+        put_u64(&mut head, body_len as u64);
+        put_u64(&mut head, start_ns);
+        put_u64(&mut head, end_ns);
+        put_u64(&mut head, self.chunk.len() as u64);
+        put_u32(&mut head, uncompressed_crc);
+        put_str(&mut head, compression);
+        put_u64(&mut head, self.compressed.len() as u64);
+        let mut index = Vec::with_capacity(15);
+        index.push(op::MESSAGE_INDEX);
+        put_u64(&mut index, (2 + 4 + self.chunk_msg_index.len()) as u64);
+        put_u16(&mut index, CHANNEL_ID);
+        put_u32(&mut index, self.chunk_msg_index.len() as u32);
+        let out = self
+            .out
+            .as_mut()
+            .ok_or_else(|| anyhow!("MCAP log {}: already finished", path.display()))?;
+        let offset = out.pos;
+        let written = out
+            .write(&head)
+            .and_then(|()| out.write(&self.compressed))
+            .and_then(|()| {
+                let message_index_offset = out.pos;
+                out.write(&index)?;
+                out.write(&self.chunk_msg_index)?;
+                Ok(message_index_offset)
+            });
+        let message_index_offset =
+            written.with_context(|| format!("MCAP log {}: writing a chunk", path.display()))?;
+        self.chunk_indexes.push(ChunkIndexEntry {
+            start_ns,
+            end_ns,
+            offset,
+            length: message_index_offset - offset,
+            message_index_offset,
+            message_index_length: out.pos - message_index_offset,
+            compressed_size: self.compressed.len() as u64,
+            uncompressed_size: self.chunk.len() as u64,
+        });
+        self.times = Some(self.times.map_or((start_ns, end_ns), |(a, b)| {
+            (a.min(start_ns), b.max(end_ns))
+        }));
+        self.chunk.clear();
+        self.chunk_msg_index.clear();
+        // A chunk that grew to the size limit should not keep its memory in a real-time run.
+        if self.chunk.capacity() > 2 * MAX_CHUNK_BYTES {
+            self.chunk.shrink_to(MAX_CHUNK_BYTES + 4096);
+        }
+        Ok(())
+    }
+
+    /// Writes a metadata record (after ending the open chunk: metadata lies outside chunks).
+    fn write_metadata(&mut self, name: &str, map: &BTreeMap<String, String>) -> anyhow::Result<()> {
+        self.end_chunk()?;
+        let mut body = Vec::new();
+        put_str(&mut body, name);
+        put_str_map(&mut body, map);
+        let rec = record(op::METADATA, &body);
+        let path = self.path.clone();
+        let out = self.out_mut()?;
+        let offset = out.pos;
+        out.write(&rec)
+            .with_context(|| format!("MCAP log {}: writing metadata {name}", path.display()))?;
+        self.metadata_indexes
+            .push((offset, rec.len() as u64, name.to_string()));
         Ok(())
     }
 
     /// Ends the open chunk and flushes to the OS now.
     pub fn flush(&mut self) -> anyhow::Result<()> {
-        let path = self.path.clone();
-        if let Some(w) = self.writer.as_mut() {
-            w.flush().map_err(mcap_err(&path, "flushing"))?;
+        if self.out.is_none() {
+            return Ok(());
         }
-        Ok(())
+        self.end_chunk()?;
+        let path = self.path.clone();
+        self.out_mut()?
+            .w
+            .flush()
+            .with_context(|| format!("MCAP log {}: flushing", path.display()))
     }
 
     /// Writes the end-of-run summary metadata record ([`SUMMARY_METADATA`]).
     pub fn write_summary(&mut self, summary: &BTreeMap<String, String>) -> anyhow::Result<()> {
-        let path = self.path.clone();
-        let w = self
-            .writer
-            .as_mut()
-            .ok_or_else(|| anyhow!("MCAP log {}: already finished", path.display()))?;
-        w.write_metadata(&mcap::records::Metadata {
-            name: SUMMARY_METADATA.to_string(),
-            metadata: summary.clone(),
-        })
-        .map_err(mcap_err(&path, "writing the summary"))
+        self.out_mut()?;
+        self.write_metadata(SUMMARY_METADATA, summary)
     }
 
     /// Writes the summary section and the footer and closes the file. Safe to call twice.
     pub fn finish(&mut self) -> anyhow::Result<()> {
-        let path = self.path.clone();
-        if let Some(mut w) = self.writer.take() {
-            w.finish().map_err(mcap_err(&path, "finishing"))?;
-            let mut inner = w.into_inner();
-            std::io::Write::flush(&mut inner)
-                .with_context(|| format!("MCAP log {}: flushing", path.display()))?;
+        if self.out.is_none() {
+            return Ok(());
         }
-        Ok(())
+        self.end_chunk()?;
+        let path = self.path.clone();
+        let Some(mut out) = self.out.take() else {
+            return Ok(());
+        };
+        let summary = self.summary_section(&mut out);
+        summary
+            .and_then(|()| out.w.flush())
+            .with_context(|| format!("MCAP log {}: finishing", path.display()))
+    }
+
+    /// Data end, the summary section, the footer and the closing magic.
+    fn summary_section(&self, out: &mut Out) -> std::io::Result<()> {
+        let mut body = Vec::new();
+        put_u32(&mut body, out.crc.clone().finalize());
+        out.write(&record(op::DATA_END, &body))?;
+        let summary_start = out.pos;
+        out.crc = crc32fast::Hasher::new();
+        let mut groups: Vec<(u8, u64, u64)> = Vec::new();
+        let mut group = |out: &mut Out, opcode: u8, records: &[Vec<u8>]| {
+            if records.is_empty() {
+                return Ok(());
+            }
+            let start = out.pos;
+            for r in records {
+                out.write(r)?;
+            }
+            groups.push((opcode, start, out.pos - start));
+            Ok::<(), std::io::Error>(())
+        };
+        group(out, op::SCHEMA, std::slice::from_ref(&self.schema_record))?;
+        group(out, op::CHANNEL, std::slice::from_ref(&self.channel_record))?;
+        let (start_ns, end_ns) = self.times.unwrap_or((0, 0));
+        body.clear();
+        put_u64(&mut body, self.messages);
+        put_u16(&mut body, 1); // schemas
+        put_u32(&mut body, 1); // channels
+        put_u32(&mut body, 0); // attachments
+        put_u32(&mut body, self.metadata_indexes.len() as u32);
+        put_u32(&mut body, self.chunk_indexes.len() as u32);
+        put_u64(&mut body, start_ns);
+        put_u64(&mut body, end_ns);
+        put_u32(&mut body, 10); // channel message counts: one (u16, u64) pair
+        put_u16(&mut body, CHANNEL_ID);
+        put_u64(&mut body, self.messages);
+        group(out, op::STATISTICS, &[record(op::STATISTICS, &body)])?;
+        let chunk_indexes: Vec<Vec<u8>> = self
+            .chunk_indexes
+            .iter()
+            .map(|c| {
+                let mut b = Vec::with_capacity(96);
+                put_u64(&mut b, c.start_ns);
+                put_u64(&mut b, c.end_ns);
+                put_u64(&mut b, c.offset);
+                put_u64(&mut b, c.length);
+                put_u32(&mut b, 10); // message index offsets: one (u16, u64) pair
+                put_u16(&mut b, CHANNEL_ID);
+                put_u64(&mut b, c.message_index_offset);
+                put_u64(&mut b, c.message_index_length);
+                put_str(&mut b, self.compressor.name());
+                put_u64(&mut b, c.compressed_size);
+                put_u64(&mut b, c.uncompressed_size);
+                record(op::CHUNK_INDEX, &b)
+            })
+            .collect();
+        group(out, op::CHUNK_INDEX, &chunk_indexes)?;
+        let metadata_indexes: Vec<Vec<u8>> = self
+            .metadata_indexes
+            .iter()
+            .map(|(offset, length, name)| {
+                let mut b = Vec::new();
+                put_u64(&mut b, *offset);
+                put_u64(&mut b, *length);
+                put_str(&mut b, name);
+                record(op::METADATA_INDEX, &b)
+            })
+            .collect();
+        group(out, op::METADATA_INDEX, &metadata_indexes)?;
+        let summary_offset_start = out.pos;
+        for (opcode, start, length) in groups {
+            body.clear();
+            body.push(opcode);
+            put_u64(&mut body, start);
+            put_u64(&mut body, length);
+            out.write(&record(op::SUMMARY_OFFSET, &body))?;
+        }
+        // Footer: the summary CRC covers the summary section up to the footer's CRC field.
+        let mut footer = vec![op::FOOTER];
+        put_u64(&mut footer, 8 + 8 + 4);
+        put_u64(&mut footer, summary_start);
+        put_u64(&mut footer, summary_offset_start);
+        out.write(&footer)?;
+        let crc = out.crc.clone().finalize();
+        out.write(&crc.to_le_bytes())?;
+        out.write(MAGIC)
     }
 }
 
@@ -267,5 +636,185 @@ impl Drop for McapLog {
     /// An unfinished log is finished on drop (errors ignored); call [`McapLog::finish`] to see them.
     fn drop(&mut self) {
         let _ = self.finish();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mcap_read::read_mcap;
+
+    fn msg(k: usize) -> LoopMsg {
+        let t = k as f64 * 1e-3;
+        LoopMsg {
+            time_s: t,
+            ref_rad: if k < 3 { f64::NAN } else { 1.5 },
+            theta_l_rad: (t * 7.0).sin() / 3.0,
+            omega_l_rad_s: (t * 7.0).cos() * 7.0 / 3.0,
+            err_rad: 1.5 - (t * 7.0).sin() / 3.0,
+            u_v: (k as f64 * 0.37).sin() * 10.0,
+            ff_v: 0.0,
+            p_v: 1.0 / (k as f64 + 1.0),
+            i_v: -0.25,
+            d_v: 1e-9 * k as f64,
+            i_a_a: 0.01 * k as f64,
+            saturated: k.is_multiple_of(7),
+            ref_omega_l_rad_s: if k > 900 { 2.5 } else { f64::NAN },
+        }
+    }
+
+    /// Every kind of log servo writes (three compressions, two encodings, chunks by run time,
+    /// by wall clock and by size) is read by the `mcap` crate's strict readers: the linear
+    /// reader checking every chunk CRC, the data-section CRC, the summary CRC and that nothing
+    /// follows the end magic; the summary (statistics, schema, channel, chunk and metadata
+    /// indexes); and, as a viewer seeking in the file does, every message reached through its
+    /// chunk index and message index. servo's reader gets the same messages back.
+    #[test]
+    fn every_log_is_read_by_the_strict_mcap_readers() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("w.mcap");
+        let n = 40_100; // over MAX_CHUNK_BYTES of protobuf messages in one wall-clock chunk
+        for (compress, fast) in [(true, false), (true, true), (false, false)] {
+            for encoding in [LogEncoding::Protobuf, LogEncoding::Json] {
+                for wall in [false, true] {
+                    let what = format!("compress {compress} fast {fast} {encoding:?} wall {wall}");
+                    let mut meta = BTreeMap::new();
+                    meta.insert("gains_toml".to_string(), "[pid]\nkp = 1.0\n".to_string());
+                    let mut log = McapLog::create(
+                        &path,
+                        &meta,
+                        McapLogOptions {
+                            compress,
+                            fast_compression: fast,
+                            encoding,
+                            flush_on_wall_clock: wall,
+                            flush_period_s: if wall { 1e3 } else { 0.05 },
+                            start_unix_ns: 1_000,
+                        },
+                    )
+                    .unwrap();
+                    for k in 0..n {
+                        log.write_loop(&msg(k)).unwrap();
+                    }
+                    let mut summary = BTreeMap::new();
+                    summary.insert("samples".to_string(), n.to_string());
+                    log.write_summary(&summary).unwrap();
+                    log.finish().unwrap();
+                    log.finish().unwrap();
+                    assert!(log.write_loop(&msg(0)).is_err());
+                    let bytes = std::fs::read(&path).unwrap();
+
+                    let mut reader = mcap::sans_io::LinearReader::new_with_options(
+                        mcap::sans_io::LinearReaderOptions::default()
+                            .with_validate_chunk_crcs(true)
+                            .with_validate_data_section_crc(true)
+                            .with_validate_summary_section_crc(true)
+                            .with_check_finishes_after_end_magic(true),
+                    );
+                    let (mut rest, mut messages, mut records) = (&bytes[..], 0, 0);
+                    while let Some(event) = reader.next_event() {
+                        match event.unwrap_or_else(|e| panic!("{what}: {e}")) {
+                            mcap::sans_io::LinearReadEvent::ReadRequest(need) => {
+                                let k = need.min(rest.len());
+                                reader.insert(k).copy_from_slice(&rest[..k]);
+                                reader.notify_read(k);
+                                rest = &rest[k..];
+                            }
+                            mcap::sans_io::LinearReadEvent::Record { opcode, .. } => {
+                                records += 1;
+                                messages += usize::from(opcode == op::MESSAGE);
+                            }
+                        }
+                    }
+                    assert_eq!(messages, n, "{what}");
+                    assert!(records > n, "{what}");
+
+                    let s = mcap::Summary::read(&bytes).unwrap().unwrap();
+                    let stats = s.stats.as_ref().unwrap();
+                    assert_eq!(stats.message_count, n as u64, "{what}");
+                    assert_eq!(stats.channel_message_counts[&CHANNEL_ID], n as u64);
+                    assert_eq!(stats.metadata_count, 2);
+                    assert_eq!(stats.chunk_count as usize, s.chunk_indexes.len());
+                    assert_eq!(
+                        (stats.message_start_time, stats.message_end_time),
+                        (1_000, 1_000 + (n as u64 - 1) * 1_000_000),
+                        "{what}"
+                    );
+                    // Chunks: by run time every 50 samples; by wall clock (never due here)
+                    // and by size, at MAX_CHUNK_BYTES.
+                    let chunks = s.chunk_indexes.len();
+                    if wall {
+                        assert!((2..10).contains(&chunks), "{what}: {chunks} chunks");
+                    } else {
+                        // The first sample flushes at once (the run has started), then every 50.
+                        assert_eq!(chunks, 1 + (n - 1).div_ceil(50), "{what}");
+                    }
+                    let ch = &s.channels[&CHANNEL_ID];
+                    let schema = ch.schema.as_ref().unwrap();
+                    assert_eq!(ch.topic, LOOP_TOPIC);
+                    let (enc, schema_enc) = match encoding {
+                        LogEncoding::Protobuf => ("protobuf", "protobuf"),
+                        LogEncoding::Json => ("json", "jsonschema"),
+                    };
+                    assert_eq!(ch.message_encoding, enc);
+                    assert_eq!(
+                        (schema.name.as_str(), schema.encoding.as_str()),
+                        ("servo.Loop", schema_enc)
+                    );
+                    let names: Vec<&str> =
+                        s.metadata_indexes.iter().map(|m| m.name.as_str()).collect();
+                    assert_eq!(names, [RUN_METADATA, SUMMARY_METADATA]);
+                    let mut seen = 0;
+                    for ci in &s.chunk_indexes {
+                        let expected = if compress && fast {
+                            "lz4"
+                        } else if compress {
+                            "zstd"
+                        } else {
+                            ""
+                        };
+                        assert_eq!(ci.compression, expected);
+                        let idx = s.read_message_indexes(&bytes, ci).unwrap();
+                        // seek_message decompresses the whole chunk: the first and the last
+                        // message of each chunk only (every message would take minutes).
+                        let entries = &idx[ch.as_ref()];
+                        for (k, entry) in entries.iter().enumerate() {
+                            if k == 0 || k + 1 == entries.len() {
+                                let m = s.seek_message(&bytes, ci, entry).unwrap();
+                                assert_eq!(m.log_time, entry.log_time);
+                                assert_eq!(m.sequence as usize, seen);
+                            }
+                            seen += 1;
+                        }
+                        assert_eq!(
+                            s.stream_chunk(&bytes, ci).unwrap().count(),
+                            idx[ch.as_ref()].len()
+                        );
+                    }
+                    assert_eq!(seen, n, "{what}");
+
+                    let run = read_mcap(&path).unwrap();
+                    assert!(
+                        run.finished && run.notes.is_empty(),
+                        "{what}: {:?}",
+                        run.notes
+                    );
+                    assert_eq!(run.summary["samples"], n.to_string());
+                    assert_eq!(run.metadata["gains_toml"], "[pid]\nkp = 1.0\n");
+                    assert_eq!(run.loop_msgs.len(), n);
+                    for k in [0, 1, 899, 901, n - 1] {
+                        let (a, b) = (run.loop_msgs[k], msg(k));
+                        assert_eq!(a.time_s, b.time_s, "{what}");
+                        assert_eq!(a.u_v, b.u_v, "{what}");
+                        assert_eq!(a.saturated, b.saturated, "{what}");
+                        assert_eq!(
+                            a.ref_omega_l_rad_s.to_bits(),
+                            b.ref_omega_l_rad_s.to_bits(),
+                            "{what}"
+                        );
+                    }
+                }
+            }
+        }
     }
 }

@@ -278,7 +278,7 @@ mod tests {
     fn serde_round_trip_validates() {
         let mut m = ModelFile::default();
         m.effects
-            .insert(Effect::new(EffectKind::Imbalance, &[0.01, 0.5]).unwrap());
+            .insert(Effect::new(EffectKind::Delay, &[0.003]).unwrap());
         let json = serde_json::to_string(&m).unwrap();
         // (effects compare by their TOML: unused parameter slots hold NaN)
         let back: ModelFile = serde_json::from_str(&json).unwrap();

@@ -11,42 +11,37 @@ use crate::runner::controller::{
 use anyhow::{anyhow, bail, Context};
 use serde_json::{json, Value};
 use servo_core::compare::controller_check::{check_controller, ControllerCheck};
-use servo_core::compare::quantum::encoder_quantum;
 use servo_core::compare::regimes::{detect_u_limit, Regime};
 use servo_core::compare::report::{describe_window, regime_phrase, with_unit};
-use servo_core::compare::Controller;
 mod added;
 mod plots;
 mod prepare;
 mod report_json;
 mod report_text;
 
-pub use added::Added;
+pub use added::{Added, ParseAdded};
 pub use plots::{compare_figures_svg, stack_svg};
 use report_json::*;
 use report_text::*;
 pub use report_text::{controller_description, controller_words};
 
-use servo_core::compare::{
-    compare, replay, ClosedLoop, CompareOptions, CompareReport, Figures, Measured, ReplayMode,
-    SignalKind,
+pub use servo_core::compare::logs::LadderStep;
+use servo_core::compare::logs::{
+    choose_mode, error_ladder, rebuild_u, ErrorLadder, LadderError, LogReplay, ModeRefusal,
 };
 pub use servo_core::compare::{pooled, ModeChoice, ModelComparison, ReplayController};
+use servo_core::compare::{
+    CompareOptions, CompareReport, Figures, Measured, ReplayMode, SignalKind,
+};
 
 /// The replay controller of `log` (None when the log's controller is unknown).
 pub fn replay_controller(log: &LogData) -> anyhow::Result<Option<ReplayController<'_>>> {
-    log.controller
-        .as_ref()
-        .map(|c| {
-            ReplayController::new(&c.config, log.feedforward_v.as_deref())
-                .map_err(|e| anyhow!("controller: {e}"))
-        })
-        .transpose()
+    log.replay()
+        .controller()
+        .map_err(|e| anyhow!("controller: {e}"))
 }
 use servo_core::control::pid::AntiWindup;
-use servo_core::fit::{fit_model, EffectToFit, FitOptions};
 use servo_core::record::Record;
-use servo_core::Plant;
 use std::path::{Path, PathBuf};
 
 /// Compare a model with measurements; add effects and watch the error fall.
@@ -127,6 +122,8 @@ pub struct Compare {
 /// One log, read and checked.
 pub struct LogData {
     pub path: PathBuf,
+    /// The path as printed.
+    pub name: String,
     pub record: Record,
     pub measured: Measured,
     /// The controller of the log (--gains, the log's metadata or --gains-from-log, with the
@@ -145,43 +142,20 @@ pub struct LogData {
     pub check: Option<ControllerCheck>,
 }
 
-impl Compare {
-    fn compare_all(
-        &self,
-        plant: &Plant,
-        logs: &[LogData],
-        modes: &[ModeChoice],
-        opts: &CompareOptions,
-    ) -> anyhow::Result<ModelComparison> {
-        let mut reports = Vec::new();
-        for (log, mc) in logs.iter().zip(modes) {
-            let m = &log.measured;
-            let rp = if mc.mode == ReplayMode::ClosedLoop {
-                let mut pid = replay_controller(log)?
-                    .ok_or_else(|| anyhow!("closed-loop replay without a controller"))?;
-                let q = m.theta_l_rad.as_deref().and_then(encoder_quantum);
-                replay(
-                    plant,
-                    m,
-                    mc.mode,
-                    Some(ClosedLoop {
-                        controller: &mut pid,
-                        u_limit_v: log.u_limit.as_ref().map(|l| l.0),
-                        encoder_quantum_rad: q,
-                    }),
-                )
-            } else {
-                replay(plant, m, mc.mode, None)
-            }
-            .with_context(|| format!("replaying {} on the model", log.path.display()))?;
-            reports.push(compare(m, &rp, plant.params.n, opts));
+impl LogData {
+    /// The log as the library replays it.
+    pub fn replay(&self) -> LogReplay<'_> {
+        LogReplay {
+            name: &self.name,
+            measured: &self.measured,
+            controller: self.controller.as_ref().map(|c| &c.config),
+            feedforward_v: self.feedforward_v.as_deref(),
+            u_limit_v: self.u_limit.as_ref().map(|l| l.0),
         }
-        Ok(ModelComparison {
-            plant: *plant,
-            reports,
-        })
     }
+}
 
+impl Compare {
     pub fn run(self) -> anyhow::Result<()> {
         self.run_report().map(|_| ())
     }
@@ -190,7 +164,7 @@ impl Compare {
     /// error ladder and the comparison of the final model (used by `servo demo`).
     pub fn run_report(self) -> anyhow::Result<(Vec<LadderStep>, ModelComparison)> {
         let model_file = ModelFile::load(&self.model)?;
-        let mut plant = model_file.plant()?;
+        let plant = model_file.plant()?;
         let gains = match &self.gains {
             Some(p) => Some(GainsFile::load(p)?),
             None => None,
@@ -231,6 +205,7 @@ impl Compare {
                 .map_err(|e| anyhow!("log {}: {e}", path.display()))?;
             let mut log = LogData {
                 path: path.clone(),
+                name: path.display().to_string(),
                 record,
                 measured,
                 controller: None,
@@ -263,58 +238,25 @@ impl Compare {
             .map(|l| self.mode_for(l))
             .collect::<anyhow::Result<_>>()?;
 
-        let mut ladder = Vec::new();
-        let first = self.compare_all(&plant, &logs, &modes, &opts)?;
-        ladder.push(LadderStep {
-            label: String::from("model as given"),
-            effect: None,
-            cmp_fit: pooled(&first),
-            fitted: Vec::new(),
-        });
-        let mut current = first;
         let records: Vec<Record> = logs.iter().map(|l| l.record.clone()).collect();
-        for (spec, eff) in &adds {
-            let mut start = plant;
-            let catalogue: Vec<EffectToFit> = match eff {
-                Added::Catalogue(e) => vec![*e],
-                Added::Custom(c) => {
-                    start
-                        .custom
-                        .insert(*c)
-                        .map_err(|e| anyhow!("--add {spec}: {e}"))?;
-                    Vec::new()
+        let replays: Vec<LogReplay> = logs.iter().map(LogData::replay).collect();
+        let effects: Vec<Added> = adds.iter().map(|a| a.1).collect();
+        let ErrorLadder {
+            steps: ladder,
+            plant,
+            comparison: current,
+        } = error_ladder(&plant, &replays, &modes, &records, &effects, &opts).map_err(
+            |e| match e {
+                LadderError::Custom { rung, error, .. } => {
+                    anyhow!("--add {}: {error}", adds[rung].0)
                 }
-            };
-            let fit = fit_model(&records, &start, &catalogue, &FitOptions::default())
-                .map_err(|e| anyhow!("--add {spec}: fitting the effect to the logs failed: {e}"))?;
-            plant = fit.plant;
-            let cmp = self.compare_all(&plant, &logs, &modes, &opts)?;
-            let fitted = fit
-                .params
-                .iter()
-                .map(|p| {
-                    json!({
-                        "effect": p.effect.map(|k| k.name()),
-                        "key": p.key, "unit": p.unit, "value": p.value,
-                        "std_err": p.std_err, "fitted": p.fitted,
-                    })
-                })
-                .chain(fit.custom.iter().map(|p| {
-                    json!({
-                        "effect": p.effect,
-                        "key": p.key, "unit": p.unit, "value": p.value,
-                        "std_err": p.std_err, "fitted": p.fitted,
-                    })
-                }))
-                .collect();
-            ladder.push(LadderStep {
-                label: format!("+ {}", eff.name()),
-                effect: Some(eff.name()),
-                cmp_fit: pooled(&cmp),
-                fitted,
-            });
-            current = cmp;
-        }
+                LadderError::Fit { rung, source, .. } => anyhow!(
+                    "--add {}: fitting the effect to the logs failed: {source}",
+                    adds[rung].0
+                ),
+                e => anyhow::Error::new(e),
+            },
+        )?;
 
         if let Some(path) = &self.save {
             let mut mf = ModelFile::from_plant(&plant);
@@ -378,16 +320,6 @@ impl Compare {
         }
         Ok((ladder, current))
     }
-}
-
-/// Figures of one rung of the error ladder.
-pub struct LadderStep {
-    pub label: String,
-    pub effect: Option<&'static str>,
-    /// Pooled figures of each signal over the logs.
-    pub cmp_fit: Vec<(SignalKind, Figures)>,
-    /// Fitted parameters (JSON rows) of this step.
-    pub fitted: Vec<Value>,
 }
 
 #[cfg(test)]

@@ -4,26 +4,28 @@
 use crate::effects_file::{self, EffectsFile};
 use anyhow::{anyhow, Context};
 use serde_json::{json, Value};
-use servo_core::custom::discover::{self, Discovery, Gates, Judged};
+use servo_core::custom::discover::Judged;
 use servo_core::custom::CustomActive;
-use servo_core::diagnose::{DiagnoseOptions, Diagnosis, Status};
-use servo_core::fit::Dataset;
+use servo_core::diagnose::user_effects::{self, judge_user_effects};
+use servo_core::diagnose::{DiagnoseOptions, Diagnosis};
 use servo_core::record::Record;
 use servo_core::Plant;
 use std::fmt::Write as _;
 use std::path::Path;
 
-/// What the user-defined candidates and the discovery found.
-pub struct UserFindings {
-    pub candidates: Vec<Judged>,
-    /// Why discovery did not run, when asked and not run.
-    pub discovery_skipped: Option<String>,
-    pub discovery: Option<Discovery>,
+/// The user effects judged and what the discovery found (servo_core::diagnose::user_effects),
+/// with their JSON, text and TOML.
+pub struct UserFindings(pub user_effects::UserFindings);
+
+impl std::ops::Deref for UserFindings {
+    type Target = user_effects::UserFindings;
+    fn deref(&self) -> &Self::Target {
+        &self.0
+    }
 }
 
-/// Judges every user effect of `library` that `model` lacks, then (with `discover`) runs the
-/// discovery when neither a catalogue effect (`last` has no winner) nor a user effect explains
-/// the residual.
+/// Judges the user effects of `library` the model lacks and, with `discover_on`, searches a new
+/// one called `name`.
 pub fn run(
     records: &[Record],
     model: &Plant,
@@ -33,11 +35,6 @@ pub fn run(
     discover_on: bool,
     name: &str,
 ) -> anyhow::Result<UserFindings> {
-    let mut out = UserFindings {
-        candidates: Vec::new(),
-        discovery_skipped: None,
-        discovery: None,
-    };
     let todo: Vec<CustomActive> = library
         .defs
         .iter()
@@ -50,61 +47,22 @@ pub fn run(
             a
         })
         .collect();
-    if todo.is_empty() && !discover_on {
-        return Ok(out);
+    if discover_on
+        && (name.is_empty() || library.get(name).is_some() || model.custom.get(name).is_some())
+    {
+        return Err(anyhow!(
+            "--effect-name `{name}`: choose a name no user effect has"
+        ));
     }
-    let gates = Gates {
-        min_bic_gain: opts.min_bic_gain,
-        min_eq_drop: opts.min_eq_drop,
-        min_oe_drop: opts.min_oe_drop,
-        ..Gates::default()
-    };
-    let ds = Dataset::new(records, &model.params, &opts.fit)
-        .map_err(|e| anyhow!("preparing the logs: {e}"))?;
-    let base = ds
-        .fit_config(model, &[])
-        .map_err(|e| anyhow!("fitting the model: {e}"))?;
-    let base_oe = discover::reference_oe(&ds, &base);
-    for a in todo {
-        let j = discover::judge(&ds, model, &base, base_oe, a, &gates)
-            .with_context(|| format!("fitting user effect `{}`", a.name()))?;
-        out.candidates.push(j);
-    }
-    out.candidates.sort_by(|a, b| {
-        b.significant
-            .cmp(&a.significant)
-            .then(b.eq_drop.total_cmp(&a.eq_drop))
-    });
-    if discover_on {
-        if name.is_empty() || library.get(name).is_some() || model.custom.get(name).is_some() {
-            return Err(anyhow!(
-                "--effect-name `{name}`: choose a name no user effect has"
-            ));
-        }
-        let explained_by_user = out.candidates.iter().find(|c| c.significant);
-        if let Some(w) = last.winner() {
-            out.discovery_skipped = Some(format!(
-                "the catalogue effect `{}` explains the residual: add it first (`--auto`, or compare --add {})",
-                w.effect.name(),
-                w.effect.name()
-            ));
-        } else if let Some(u) = explained_by_user {
-            out.discovery_skipped = Some(format!(
-                "the user effect `{}` explains the residual: add it first (compare --effects FILE --add {})",
-                u.name, u.name
-            ));
-        } else if last.status == Status::Complete {
-            out.discovery_skipped = Some(String::from(
-                "nothing is left above the noise in any balance: there is nothing to discover",
-            ));
-        } else {
-            out.discovery = Some(
-                discover::discover(&ds, model, &base, base_oe, name, &gates)
-                    .map_err(|e| anyhow!("discovery failed: {e}"))?,
-            );
-        }
-    }
-    Ok(out)
+    let found = judge_user_effects(
+        records,
+        model,
+        opts,
+        &todo,
+        last,
+        discover_on.then_some(name),
+    )?;
+    Ok(UserFindings(found))
 }
 
 fn judged_json(j: &Judged) -> Value {

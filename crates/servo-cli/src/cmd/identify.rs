@@ -12,7 +12,6 @@
 //! friction, the electrical check where the voltage u was logged, and the combined LS (4.3) for
 //! whatever the dedicated tests could not give.
 
-mod estimate;
 mod plot;
 mod report;
 mod without_current;
@@ -21,14 +20,13 @@ use plot::*;
 use report::*;
 
 use anyhow::{anyhow, bail, Context};
-use servo_core::ident::combined::{identify_combined, CombinedConfig, CombinedFit};
-use servo_core::ident::electrical::{identify_electrical, ElectricalFit};
-use servo_core::ident::friction::{
-    friction_points, identify_friction, FrictionConfig, FrictionFit,
+use servo_core::ident::auto::{
+    self, identify, needs_u_driven_balance, Identification, IdentifyOptions,
 };
-use servo_core::ident::inertia::{identify_inertia, identify_inertia_ls, InertiaFit};
-use servo_core::ident::phases::{find_phases, PhaseConfig};
-use servo_core::ident::{Estimate, Experiment, IdentError};
+use servo_core::ident::combined::CombinedConfig;
+use servo_core::ident::friction::FrictionConfig;
+use servo_core::ident::phases::PhaseConfig;
+use servo_core::ident::{Estimate, Experiment};
 use servo_core::PlantParams;
 use std::path::PathBuf;
 
@@ -169,37 +167,8 @@ pub struct Identify {
 }
 
 /// Everything identified, with where it came from.
-#[derive(Debug, Default)]
-pub struct Report {
-    pub friction: Option<FrictionFit>,
-    pub inertia: Option<InertiaFit>,
-    pub combined: Option<CombinedFit>,
-    pub electrical: Option<ElectricalFit>,
-    /// Methods that could not run, with the reason.
-    pub skipped: Vec<String>,
-}
-
-impl Report {
-    /// B_eq with the method that gave it.
-    pub fn b_eq(&self) -> Option<(Estimate, &'static str)> {
-        self.friction
-            .as_ref()
-            .map(|f| (f.b_eq, "friction"))
-            .or_else(|| self.combined.as_ref().map(|c| (c.b_eq, "combined")))
-    }
-    pub fn tau_sf(&self) -> Option<(Estimate, &'static str)> {
-        self.friction
-            .as_ref()
-            .map(|f| (f.tau_sf, "friction"))
-            .or_else(|| self.combined.as_ref().map(|c| (c.tau_sf, "combined")))
-    }
-    pub fn j_eq(&self) -> Option<(Estimate, &'static str)> {
-        self.inertia
-            .as_ref()
-            .map(|f| (f.j_eq, "inertia"))
-            .or_else(|| self.combined.as_ref().map(|c| (c.j_eq, "combined")))
-    }
-}
+/// What the methods gave (servo_core::ident::auto).
+pub type Report = Identification;
 
 impl Identify {
     pub fn run(self) -> anyhow::Result<()> {
@@ -264,7 +233,7 @@ impl Identify {
                 logs.push(path);
             }
         }
-        if records.iter().all(|r| r.i_a_a.is_none() && r.u_v.is_some()) {
+        if needs_u_driven_balance(&records) {
             return self.run_without_current(&records, &logs, params);
         }
         let mut exps = Vec::new();
@@ -273,7 +242,7 @@ impl Identify {
                 .with_context(|| format!("log {}", path.display()))?;
             exps.push(e);
         }
-        let report = self.estimate(&exps, &params.params)?;
+        let report = identify(&exps, &params.params, &self.options())?;
         if self.json {
             outln!(
                 "{}",
@@ -315,6 +284,38 @@ impl Identify {
 }
 
 /// Parses `--phase-window FROM,TO` (fractions of a phase, 0 <= FROM < TO <= 1).
+impl Identify {
+    /// The library's settings from the flags.
+    fn options(&self) -> IdentifyOptions {
+        IdentifyOptions {
+            method: self.method.map(|m| match m {
+                Method::Friction => auto::Method::Friction,
+                Method::Inertia => auto::Method::Inertia,
+                Method::Combined => auto::Method::Combined,
+                Method::Electrical => auto::Method::Electrical,
+            }),
+            inertia_method: match self.inertia_method {
+                InertiaMethod::Phases => auto::InertiaMethod::Phases,
+                InertiaMethod::Ls => auto::InertiaMethod::Ls,
+            },
+            friction: FrictionConfig {
+                samples: self.samples,
+                ..FrictionConfig::default()
+            },
+            phases: PhaseConfig {
+                cutoff_hz: self.cutoff_hz,
+                min_accel_rad_s2: self.min_accel,
+                window_frac: self.phase_window,
+                ..PhaseConfig::default()
+            },
+            combined: CombinedConfig {
+                cutoff_hz: self.cutoff_hz,
+                ..CombinedConfig::default()
+            },
+        }
+    }
+}
+
 fn parse_window(s: &str) -> Result<(f64, f64), String> {
     let err =
         || format!("expected FROM,TO with 0 <= FROM < TO <= 1 (fractions of a phase), got `{s}`");

@@ -13,15 +13,16 @@ use crate::io::{meta_keys, write_csv, McapLog, McapLogOptions};
 use crate::model_file::ModelFile;
 use crate::plant_args::PlantArgs;
 use crate::reference_file::load_experiment;
-use crate::runner::controller::{
-    ff_name, parse_ff, pid_config, LoggedController, PidOptions, PidSources,
-};
+use crate::runner::controller::{feedforward, run_controller, PidOptions};
 use crate::runner::{self, Program, RunConfig, RunOutput, StopReason};
 use anyhow::{anyhow, bail, Context};
-use servo_core::control::{Feedforward, FeedforwardParams, Reference};
+use servo_core::control::Reference;
+use servo_hw::run::logged::{close_log, RunMetadata};
 use servo_hw::{Backend, SimBackend};
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
+
+/// The plots of a run (also used by `servo demo`).
+pub use crate::plot::plot_run;
 
 /// Which backend runs the loop.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -213,62 +214,125 @@ impl Run {
             }
             None => None,
         };
-        let u_limit_v = self
-            .u_limit
-            .or(gains.as_ref().and_then(|g| g.pid.u_limit_v))
-            .unwrap_or(10.0);
-        if !(u_limit_v.is_finite() && u_limit_v > 0.0) {
-            bail!("--u-limit must be > 0 V, got {u_limit_v}");
-        }
-        let ts_s = self
-            .ts
-            .or(gains.as_ref().map(|g| g.pid.ts_s))
-            .unwrap_or(1e-3);
-        if !(ts_s.is_finite() && ts_s > 0.0 && ts_s <= 0.1) {
-            bail!("--ts must be a sample period in (0, 0.1] s, got {ts_s}");
-        }
-        let gains_name = self
-            .gains
-            .as_ref()
-            .map(|p| p.display().to_string())
-            .unwrap_or_default();
-        let pid = gains
-            .as_ref()
-            .map(|g| {
-                let src = PidSources {
-                    opts: &self.pid,
-                    logged: None,
-                    gains_file: Some((g, &gains_name)),
-                };
-                pid_config(&src, ts_s, Some((u_limit_v, String::new()))).map(|r| r.config)
-            })
-            .transpose()?;
+        let gains_name = self.gains.as_ref().map(|p| p.display().to_string());
+        let gains_src = gains.as_ref().zip(gains_name.as_deref());
+        let ctl = run_controller(gains_src, &self.pid, self.ts, self.u_limit)?;
+        let (ts_s, u_limit_v, pid) = (ctl.ts_s, ctl.u_limit_v, ctl.pid);
         let model = match &self.model {
             Some(p) => Some(ModelFile::load(p).context("--model")?),
             None => None,
         };
-        let feedforward = match &self.ff {
-            Some(text) => {
-                let cfg = parse_ff(text)?;
-                let m = model.clone().unwrap_or_default();
-                if model.is_none() {
-                    eprintln!(
-                        "note: --ff without --model: feedforward constants from Table 2 (nominal)"
-                    );
-                }
-                let plant = m.plant().context("--model")?;
-                Some(
-                    Feedforward::new(FeedforwardParams::from_plant(&plant), cfg)
-                        .map_err(|e| anyhow!("feedforward: {e}"))?,
-                )
-            }
+        if self.ff.is_some() && model.is_none() {
+            eprintln!("note: --ff without --model: feedforward constants from Table 2 (nominal)");
+        }
+        let feedforward = self
+            .ff
+            .as_deref()
+            .map(|terms| feedforward(terms, model.as_ref()))
+            .transpose()?;
+
+        let (mut backend, mut meta) = self.open_backend(ts_s, u_limit_v)?;
+        let info = backend.info();
+        let backend_name = format!("{:?}", self.backend).to_lowercase();
+        meta.run(&backend_name, &info, duration_s, u_limit_v, &program_text)
+            .controller(
+                &info,
+                u_limit_v,
+                gains.as_ref(),
+                pid.as_ref(),
+                feedforward.as_ref(),
+                model.as_ref(),
+            )?
+            .put(
+                meta_keys::COMMAND,
+                std::env::args().collect::<Vec<_>>().join(" "),
+            );
+
+        let cfg = RunConfig {
+            program,
+            duration_s,
+            pid,
+            feedforward,
+            u_limit_v,
+            speed_bandwidth_rad_s: 2.0 * std::f64::consts::PI * self.speed_bandwidth_hz,
+            // Samples stay in memory only for --csv and --plot; the log and the summary stream.
+            keep_record: self.csv.is_some() || self.plot.is_some(),
+            speed_loop: None,
+        };
+        // A simulation faster than real time: log chunks by wall-clock time, fast compression.
+        let fast = self.backend == BackendKind::Sim && !self.realtime;
+        let log_options = McapLogOptions {
+            flush_on_wall_clock: fast,
+            fast_compression: fast,
+            encoding: self.log_encoding,
+            ..McapLogOptions::default()
+        };
+        let mut log = match &self.log {
+            Some(p) => Some(McapLog::create(p, &meta.0, log_options)?),
             None => None,
         };
+        let progress = runner::Progress::from_mode(self.progress, "servo run");
+        let sink = log.as_mut().map(|l| l as &mut dyn runner::LogSink);
+        let out = runner::run_loop_with_progress(backend.as_mut(), &cfg, sink, progress);
+        let link = backend.link_stats();
+        let out = match out {
+            Ok(o) => o,
+            Err(e) => {
+                if let Some(ls) = &link {
+                    eprintln!("{ls}");
+                }
+                if let Some(l) = log.as_mut() {
+                    let _ = close_log(l, Err(&e), link.as_ref(), duration_s);
+                    eprintln!(
+                        "log {} finished with the {} samples before the fault",
+                        l.path().display(),
+                        l.messages()
+                    );
+                }
+                if let Some(runner::StopOutcome::Failed(why)) = e.stop_outcome() {
+                    eprintln!(
+                        "WARNING: 0 V could not be confirmed ({why}); check the motor and power"
+                    );
+                }
+                return Err(e.into());
+            }
+        };
+        let summary = out.summary();
+        outln!("{summary}");
+        if let Some(ls) = &link {
+            outln!("{ls}");
+        }
+        if let Some(l) = log.as_mut() {
+            close_log(l, Ok(&out), link.as_ref(), duration_s)?;
+            outln!(
+                "log: {} ({} samples, MCAP: open in Foxglove/PlotJuggler, or `servo export`)",
+                l.path().display(),
+                l.messages()
+            );
+        }
+        if let Some(p) = &self.csv {
+            write_csv(p, &out.record)?;
+            outln!("csv: {}", p.display());
+        }
+        if let Some(p) = &self.plot {
+            plot_run(p, &out)?;
+            outln!("plot: {}", p.display());
+        }
+        Ok(RunReport {
+            output: out,
+            summary,
+        })
+    }
 
-        // Backend.
-        let (mut backend, mut meta): (Box<dyn Backend>, BTreeMap<String, String>) = match self
-            .backend
-        {
+    /// The backend of `--backend` at period `ts_s` [s] (the board must run at it), and the
+    /// metadata it contributes to the log (the simulated plant, or the serial link).
+    fn open_backend(
+        &self,
+        ts_s: f64,
+        u_limit_v: f64,
+    ) -> anyhow::Result<(Box<dyn Backend>, RunMetadata)> {
+        let mut meta = RunMetadata::default();
+        match self.backend {
             BackendKind::Sim => {
                 let (plant, sensors) = self.plant.load()?;
                 let sim = SimBackend::new(&plant, sensors, ts_s)
@@ -280,14 +344,8 @@ impl Run {
                         .context("--soft-limit-rev")?,
                     None => sim,
                 };
-                let mut meta = BTreeMap::new();
-                let mut mf = ModelFile::from_plant(&plant);
-                mf.sensors = Some(sensors);
-                meta.insert(meta_keys::PLANT_TOML.into(), mf.to_toml()?);
-                let effects: Vec<String> = plant.effects.iter().map(|e| e.to_string()).collect();
-                meta.insert(meta_keys::PLANT_EFFECTS.into(), effects.join(" "));
-                meta.insert(meta_keys::SEED.into(), sensors.seed.to_string());
-                (Box::new(sim), meta)
+                meta.simulated_plant(&plant, sensors)?;
+                Ok((Box::new(sim), meta))
             }
             BackendKind::Serial => {
                 let cfg = servo_hw::SerialConfig {
@@ -310,218 +368,9 @@ impl Run {
                         self.port
                     );
                 }
-                let mut meta = BTreeMap::new();
-                meta.insert("serial_port".into(), self.port.clone());
-                meta.insert("serial_baud".into(), self.baud.to_string());
-                (Box::new(be), meta)
+                meta.serial_port(&self.port, self.baud);
+                Ok((Box::new(be), meta))
             }
-        };
-        let info = backend.info();
-        meta.insert(
-            meta_keys::SERVO_VERSION.into(),
-            env!("CARGO_PKG_VERSION").into(),
-        );
-        meta.insert(
-            meta_keys::BACKEND.into(),
-            format!("{:?}", self.backend).to_lowercase(),
-        );
-        meta.insert(meta_keys::FIRMWARE.into(), info.firmware.into());
-        meta.insert(
-            meta_keys::SAMPLE_PERIOD_S.into(),
-            info.sample_period_s.to_string(),
-        );
-        meta.insert(
-            meta_keys::COUNTS_PER_REV.into(),
-            info.counts_per_rev.to_string(),
-        );
-        meta.insert(meta_keys::DURATION_S.into(), duration_s.to_string());
-        meta.insert(
-            meta_keys::U_LIMIT_V.into(),
-            u_limit_v.min(info.voltage_limit_v).to_string(),
-        );
-        meta.insert(meta_keys::REFERENCE.into(), program_text);
-        if let Some(g) = &gains {
-            meta.insert(meta_keys::GAINS_TOML.into(), g.to_toml_commented());
         }
-        let ff_config = feedforward.as_ref().map(|f| *f.config());
-        if let Some(pid) = &pid {
-            let runs = runner::effective_pid_config(
-                pid,
-                u_limit_v.min(info.voltage_limit_v),
-                info.sample_period_s,
-            );
-            meta.insert(
-                meta_keys::CONTROLLER_TOML.into(),
-                LoggedController::of(&runs, ff_config.as_ref()).to_toml()?,
-            );
-        }
-        meta.insert(
-            meta_keys::FEEDFORWARD.into(),
-            ff_config.as_ref().map_or("none".into(), ff_name),
-        );
-        if feedforward.is_some() {
-            meta.insert(
-                meta_keys::MODEL_TOML.into(),
-                model.clone().unwrap_or_default().to_toml()?,
-            );
-        }
-        meta.insert(
-            meta_keys::COMMAND.into(),
-            std::env::args().collect::<Vec<_>>().join(" "),
-        );
-
-        let cfg = RunConfig {
-            program,
-            duration_s,
-            pid,
-            feedforward,
-            u_limit_v,
-            speed_bandwidth_rad_s: 2.0 * std::f64::consts::PI * self.speed_bandwidth_hz,
-            handle_ctrlc: true,
-            // Samples stay in memory only for --csv and --plot; the log and the summary stream.
-            keep_record: self.csv.is_some() || self.plot.is_some(),
-            speed_loop: None,
-            progress: runner::Progress::from_mode(self.progress, "servo run"),
-        };
-        let mut log = match &self.log {
-            Some(p) => Some(McapLog::create(
-                p,
-                &meta,
-                McapLogOptions {
-                    // A simulation faster than real time: chunks by wall-clock time.
-                    flush_on_wall_clock: self.backend == BackendKind::Sim && !self.realtime,
-                    fast_compression: self.backend == BackendKind::Sim && !self.realtime,
-                    encoding: self.log_encoding,
-                    ..McapLogOptions::default()
-                },
-            )?),
-            None => None,
-        };
-        let out = runner::run_loop(
-            backend.as_mut(),
-            &cfg,
-            log.as_mut().map(|l| l as &mut dyn runner::LogSink),
-        );
-        let link = backend.link_stats();
-        let out = match out {
-            Ok(o) => o,
-            Err(e) => {
-                if let Some(ls) = &link {
-                    eprintln!("{ls}");
-                }
-                let stop = e.downcast_ref::<runner::StopOutcome>().cloned();
-                if let Some(l) = log.as_mut() {
-                    let mut map = link.as_ref().map(|ls| ls.to_map()).unwrap_or_default();
-                    map.insert("stop_reason".into(), format!("error: {e:#}"));
-                    map.insert("samples".into(), l.messages().to_string());
-                    let _ = l.write_summary(&map);
-                    let _ = l.finish();
-                    eprintln!(
-                        "log {} finished with the {} samples before the fault",
-                        l.path().display(),
-                        l.messages()
-                    );
-                }
-                if let Some(runner::StopOutcome::Failed(why)) = stop {
-                    eprintln!(
-                        "WARNING: 0 V could not be confirmed ({why}); check the motor and power"
-                    );
-                }
-                return Err(e);
-            }
-        };
-        let summary = out.summary();
-        outln!("{summary}");
-        if let Some(ls) = &link {
-            outln!("{ls}");
-        }
-        if let Some(l) = log.as_mut() {
-            let mut map = summary.to_map();
-            if let Some(ls) = &link {
-                map.extend(ls.to_map());
-            }
-            // What really ran (the run metadata holds the planned duration).
-            map.insert("planned_duration_s".into(), duration_s.to_string());
-            map.insert(
-                "stop_reason".into(),
-                match out.stop {
-                    StopReason::Completed => "completed".into(),
-                    StopReason::Interrupted => "interrupted by Ctrl-C".into(),
-                },
-            );
-            l.write_summary(&map)?;
-            l.finish()?;
-            outln!(
-                "log: {} ({} samples, MCAP: open in Foxglove/PlotJuggler, or `servo export`)",
-                l.path().display(),
-                l.messages()
-            );
-        }
-        if let Some(p) = &self.csv {
-            write_csv(p, &out.record)?;
-            outln!("csv: {}", p.display());
-        }
-        if let Some(p) = &self.plot {
-            plot_run(p, &out)?;
-            outln!("plot: {}", p.display());
-        }
-        Ok(RunReport {
-            output: out,
-            summary,
-        })
     }
-}
-
-/// Plots reference and angle [deg] over time, and the voltage (second SVG `<stem>_u.svg`).
-pub fn plot_run(path: &Path, out: &RunOutput) -> anyhow::Result<()> {
-    use crate::plot::{line_chart, Chart, Series};
-    let rec = &out.record;
-    let deg = |v: &Option<Vec<f64>>| {
-        v.as_ref()
-            .map(|v| v.iter().map(|x| x.to_degrees()).collect::<Vec<f64>>())
-    };
-    let th = deg(&rec.theta_l_rad).unwrap_or_default();
-    let r = deg(&rec.ref_rad);
-    let mut series = Vec::new();
-    if let Some(r) = &r {
-        series.push(Series {
-            label: "reference [deg]",
-            x: &rec.time_s,
-            y: r,
-        });
-    }
-    series.push(Series {
-        label: "theta_l [deg]",
-        x: &rec.time_s,
-        y: &th,
-    });
-    line_chart(
-        path,
-        &Chart {
-            title: "servo run: load angle",
-            x_label: "time [s]",
-            y_label: "angle [deg]",
-            ..Chart::default()
-        },
-        &series,
-    )?;
-    let u = rec.u_v.clone().unwrap_or_default();
-    let upath = path.with_file_name(format!(
-        "{}_u.svg",
-        path.file_stem().and_then(|s| s.to_str()).unwrap_or("run")
-    ));
-    line_chart(
-        &upath,
-        &Chart {
-            title: "servo run: driver input",
-            x_label: "time [s]",
-            y_label: "u [V]",
-            ..Chart::default()
-        },
-        &[Series {
-            label: "u [V]",
-            x: &rec.time_s,
-            y: &u,
-        }],
-    )
 }

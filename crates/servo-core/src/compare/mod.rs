@@ -19,6 +19,7 @@ pub mod chi2;
 pub mod controller_check;
 pub mod figures;
 pub mod ladder;
+pub mod logs;
 pub mod measured;
 pub mod periodic;
 pub mod quantum;

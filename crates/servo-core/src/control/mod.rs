@@ -10,21 +10,31 @@
 //! * [`reference`]: reference generators on the load angle (step, ramp, trapezoid, sine, chirp,
 //!   square, PRBS) with analytic speed and acceleration, and their `--ref` text syntax.
 //! * [`sequence`]: sequences of references (segments with durations, absolute or chained).
+//! * [`speed`]: the speed estimate from the encoder angle (tracking loop) and the load-speed PI
+//!   of the identification experiments.
+//! * `program` (alloc): what a run applies over time: a position reference, a sequence of
+//!   position and voltage segments, or a load-speed profile.
 
 pub mod feedforward;
 pub mod pid;
+#[cfg(feature = "alloc")]
+pub mod program;
 pub mod reference;
 mod reference_parse;
 pub mod sequence;
+pub mod speed;
 
 pub use feedforward::{
     Feedforward, FeedforwardConfig, FeedforwardParams, FeedforwardTerms, SmoothSign,
 };
 pub use pid::{AntiWindup, DerivativeOn, Discretization, Pid, PidConfig, PidGains, PidOutput};
+#[cfg(feature = "alloc")]
+pub use program::{Program, ProgramError, SpeedPiece, SpeedProfile};
 pub use reference::{ChirpMode, RefParseError, RefSample, Reference, Shape, Snippet};
 pub use sequence::{
     PlacedSegment, Segment, SegmentMode, Sequence, SequenceError, Setpoint, Target,
 };
+pub use speed::{SpeedEstimator, SpeedLoop, SpeedLoopConfig, SpeedLoopError, SpeedLoopOutput};
 
 /// Why a controller could not be built or reconfigured.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]

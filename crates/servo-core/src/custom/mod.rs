@@ -11,9 +11,9 @@
 //! ```
 //!
 //! Where it acts ([`ActsOn`]):
-//! * `load_torque` [N m]: a resisting torque at the load, like friction or imbalance (subtracted
+//! * `load_torque` [N m]: a resisting torque at the load, like friction or gravity on an unbalanced arm (subtracted
 //!   from the motor torque through 1/N; positive opposes positive motion);
-//! * `motor_torque` [N m]: a resisting torque at the motor shaft, like cogging;
+//! * `motor_torque` [N m]: a resisting torque at the motor shaft, like the detent torque of the magnets;
 //! * `input` [V]: the expression *is* the driver input u_in, in terms of u (the input after the
 //!   catalogue's dead zone and saturation, before the delay);
 //! * `sensor` [rad]: the expression *is* the load angle as measured, in terms of the true
@@ -617,7 +617,7 @@ mod tests {
     #[test]
     fn rejects_bad_definitions() {
         let err = |r: Result<&'static CustomDef, CustomError>| std::format!("{}", r.unwrap_err());
-        let e = err(CustomDef::new("backlash", ActsOn::LoadTorque, "1", &[]));
+        let e = err(CustomDef::new("viscous", ActsOn::LoadTorque, "1", &[]));
         assert!(e.contains("catalogue"), "{e}");
         let e = err(CustomDef::new(
             "x",

@@ -56,7 +56,7 @@ pub enum DesignError {
     #[error("{0}")]
     Invalid(&'static str),
     /// A quantity is out of its valid range.
-    #[error("{name} = {value} is invalid: {why}")]
+    #[error("{name} = {} is invalid: {why}", math::Num(*.value))]
     OutOfRange {
         name: &'static str,
         value: f64,

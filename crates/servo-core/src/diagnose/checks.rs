@@ -27,7 +27,7 @@ pub struct Check {
 }
 
 /// A parameter that the data size only together with another one they do not pin down (a
-/// backlash gap against the contact stiffness): the parameter refitted at each value of the other
+/// gear play against the contact stiffness): the parameter refitted at each value of the other
 /// over a plausible range, judged on the held-out simulation error.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Conditional {

@@ -23,6 +23,7 @@ pub mod evidence;
 pub mod regimes;
 pub mod resonance;
 pub mod structure;
+pub mod user_effects;
 
 pub use structure::{BalanceKind, BalanceReport, Signature, Thresholds};
 
@@ -114,7 +115,7 @@ pub struct Candidate {
     /// Practical-significance and physical-consistency checks, in the order applied.
     pub checks: Vec<checks::Check>,
     /// What the main parameter is conditional on (significant candidates whose effect reports
-    /// one: a backlash gap against the contact stiffness).
+    /// one: a gear play against the contact stiffness).
     pub conditional: Option<checks::Conditional>,
 }
 
@@ -206,10 +207,10 @@ impl Diagnosis {
 /// use servo_core::diagnose::{diagnose, DiagnoseOptions};
 /// use servo_core::effects::{Effect, EffectKind};
 /// let mut truth = Plant::from_params(PlantParams::TABLE2)?;
-/// truth.effects.insert(Effect::new(EffectKind::Imbalance, &[0.01, 0.5])?);
+/// truth.effects.insert(Effect::new(EffectKind::Deadzone, &[0.8])?);
 /// let logs = [simulate(&truth, 6.0)];
 /// let d = diagnose(&logs, &Plant::from_params(PlantParams::TABLE2)?, &DiagnoseOptions::default())?;
-/// assert_eq!(d.winner().map(|c| c.effect), Some(EffectKind::Imbalance));
+/// assert_eq!(d.winner().map(|c| c.effect), Some(EffectKind::Deadzone));
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub fn diagnose(

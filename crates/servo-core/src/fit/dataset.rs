@@ -186,25 +186,27 @@ impl Dataset {
         params: &PlantParams,
         opts: &FitOptions,
     ) -> Result<Dataset, FitError> {
-        let mut ds = Self::prepared(records, params, opts)?;
+        let mut ds = Self::prepared(records, params, opts, true)?;
         ds.search = search_windows(records, ds.recs.iter().map(|r| r.dt_s))
-            .and_then(|w| Self::prepared(&w, params, opts).ok())
+            .and_then(|w| Self::prepared(&w, params, opts, true).ok())
             .map(alloc::boxed::Box::new);
         Ok(ds)
     }
 
-    /// [`Dataset::new`] without search windows.
+    /// [`Dataset::new`] without search windows; `centre_counts`: move an encoder's readings to
+    /// the centre of their count cells (see [`prepare`]).
     fn prepared(
         records: &[Record],
         params: &PlantParams,
         opts: &FitOptions,
+        centre_counts: bool,
     ) -> Result<Dataset, FitError> {
         if records.is_empty() {
             return Err(FitError::NoData(String::from("no records given")));
         }
         let mut recs = Vec::new();
         for r in records {
-            recs.push(prepare(r, params, opts)?);
+            recs.push(prepare(r, params, opts, centre_counts)?);
         }
         let has_current = recs.iter().all(|r| r.i_raw.is_some());
         if !has_current {
@@ -258,6 +260,47 @@ impl Dataset {
                 .collect()
         });
         Ok(ds)
+    }
+
+    /// The same records prepared again with the motor angle of each record replaced by
+    /// `angle(record)` [rad] (full length; N times the load angle when the record measures the
+    /// load's), e.g. the true angle recovered from a distorted sensor's reading. The new angles
+    /// are taken as they are (already centred in their count cells); the rows are selected again;
+    /// no search windows (see [`Dataset::search_set`]): call it on `search_set()` to search.
+    pub fn with_motor_angles(
+        &self,
+        params: &PlantParams,
+        angle: impl Fn(&RecData) -> Vec<f64>,
+    ) -> Result<Dataset, FitError> {
+        let mut records = Vec::with_capacity(self.recs.len());
+        for r in &self.recs {
+            let th = angle(r);
+            if th.len() != r.theta_m_rad.len() {
+                return Err(FitError::BadRecord(alloc::format!(
+                    "{}: a corrected angle has {} samples for {}",
+                    r.source,
+                    th.len(),
+                    r.theta_m_rad.len()
+                )));
+            }
+            let (theta_l_rad, theta_m_rad) = if r.angle_is_load {
+                (Some(th.iter().map(|v| v / params.n).collect()), None)
+            } else {
+                (None, Some(th))
+            };
+            records.push(Record {
+                source: r.source.clone(),
+                time_s: r.time_s.clone(),
+                u_v: r.has_u.then(|| r.u_v.clone()),
+                theta_l_rad,
+                theta_m_rad,
+                omega_l_rad_s: None,
+                omega_m_rad_s: None,
+                i_a_a: r.i_raw.clone(),
+                ref_rad: None,
+            });
+        }
+        Self::prepared(&records, params, &self.opts, false)
     }
 
     /// The data the searches over nonlinear parameters run on: the search windows on long logs,
@@ -388,7 +431,12 @@ fn slice(r: &Record, a: usize, b: usize) -> Record {
     }
 }
 
-fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecData, FitError> {
+fn prepare(
+    r: &Record,
+    params: &PlantParams,
+    opts: &FitOptions,
+    centre_counts: bool,
+) -> Result<RecData, FitError> {
     let n = r.len();
     let src = r.source.clone();
     if n < 50 {
@@ -437,7 +485,7 @@ fn prepare(r: &Record, params: &PlantParams, opts: &FitOptions) -> Result<RecDat
     // phase and a simulation started from a reading starts half a count behind.
     let angle_logged = r.theta_m_rad.is_some() || r.theta_l_rad.is_some();
     let mut theta_m = theta_m;
-    if angle_logged {
+    if angle_logged && centre_counts {
         if let Some(q) = crate::compare::quantum::encoder_quantum(&theta_m) {
             for v in theta_m.iter_mut() {
                 *v += 0.5 * q;

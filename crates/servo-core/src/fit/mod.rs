@@ -462,10 +462,25 @@ impl Dataset {
 
     /// Fits a configuration: nonlinear parameters by search (coordinate-wise when several), the
     /// linear ones by least squares.
+    ///
+    /// With a user sensor effect the configuration is fitted on the angle mapped back through
+    /// the sensor's inverse ([`crate::custom::fit::sensor_corrected`]).
     pub fn fit_config(&self, base: &Plant, effects: &[EffectToFit]) -> Result<Solved, FitError> {
         let mut with_custom = *base;
         crate::custom::fit::search_nonlinear(self, &mut with_custom)?;
-        let base = &with_custom;
+        if with_custom.custom.has(crate::custom::ActsOn::Sensor) {
+            let corrected = crate::custom::fit::sensor_corrected(self, &with_custom)?;
+            return corrected.fit_config_searched(&with_custom, effects);
+        }
+        self.fit_config_searched(&with_custom, effects)
+    }
+
+    /// [`Dataset::fit_config`] once the user effects' nonlinear parameters are set.
+    fn fit_config_searched(
+        &self,
+        base: &Plant,
+        effects: &[EffectToFit],
+    ) -> Result<Solved, FitError> {
         let mut cfg = self.config(base, effects, self.opts.refit_base);
         let searched: Vec<(usize, &'static str)> = cfg
             .slots

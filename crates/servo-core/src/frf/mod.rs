@@ -21,6 +21,7 @@
 //! period: the plant with its zero-order hold, as a discrete controller sees it.
 
 pub mod against;
+pub mod analysis;
 pub mod margins;
 pub mod welch;
 

@@ -18,6 +18,7 @@
 // `!(x > 0.0)` is deliberate throughout: it also rejects NaN. Index loops walk parallel slices.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
+pub mod auto;
 pub mod combined;
 pub mod electrical;
 pub mod friction;

@@ -89,7 +89,7 @@ pub enum SimError {
     DelayTooLong { delay_s: f64, max_s: f64 },
     #[error("contact effect (gear play): load_inertia_fraction must be strictly between 0 and 1, got {0}")]
     InertiaFraction(f64),
-    #[error("effect `{effect}`: `{key}` = {value} is not a usable value ({why})")]
+    #[error("effect `{effect}`: `{key}` = {} is not a usable value ({why})", math::Num(*.value))]
     BadValue {
         effect: &'static str,
         key: &'static str,

@@ -5,16 +5,19 @@ use servo_core::fit::EffectToFit;
 
 /// An effect given to `--add`: from the catalogue, or user-defined (from `--effects`) with its
 /// unknown parameters NaN.
-#[derive(Debug, Clone, Copy)]
-pub enum Added {
-    Catalogue(EffectToFit),
-    Custom(servo_core::custom::CustomActive),
-}
+pub use servo_core::compare::logs::AddEffect as Added;
 
-impl Added {
+/// Parsing `--add`.
+pub trait ParseAdded: Sized {
     /// Parses `name[:key=value,...]`: a user effect of `library` when the name is one, else a
     /// catalogue effect.
-    pub fn parse(spec: &str, library: &crate::effects_file::EffectsFile) -> anyhow::Result<Added> {
+    fn parse(spec: &str, library: &crate::effects_file::EffectsFile) -> anyhow::Result<Self>;
+}
+
+impl ParseAdded for Added {
+    /// Parses `name[:key=value,...]`: a user effect of `library` when the name is one, else a
+    /// catalogue effect.
+    fn parse(spec: &str, library: &crate::effects_file::EffectsFile) -> anyhow::Result<Added> {
         let (name, rest) = match spec.split_once(':') {
             Some((n, r)) => (n.trim(), Some(r)),
             None => (spec.trim(), None),
@@ -54,13 +57,5 @@ impl Added {
                 .map_err(|e| anyhow!("--add {spec}: {e}"))?;
         }
         Ok(Added::Custom(active))
-    }
-
-    /// The effect's name.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Added::Catalogue(e) => e.effect.kind.name(),
-            Added::Custom(c) => c.name(),
-        }
     }
 }

@@ -6,54 +6,28 @@ use super::*;
 
 impl super::Compare {
     pub(super) fn mode_for(&self, log: &LogData) -> anyhow::Result<ModeChoice> {
-        let gains = log.controller.as_ref();
-        let m = &log.measured;
-        let seg = ((self.segment_s / m.dt_s).round() as usize).max(1);
-        let has_ref = m.ref_rad.is_some();
-        let has_pos = m.theta_l_rad.is_some();
-        if let Some(s) = &self.mode {
-            let mode = parse_mode(s, self.k_steps.max(1), seg);
-            if mode == ReplayMode::ClosedLoop {
-                if gains.is_none() {
-                    bail!("--mode closed-loop needs the controller of {}: give --gains gains.toml or --gains-from-log", log.path.display());
-                }
-                if !has_ref || !has_pos {
-                    bail!(
-                        "--mode closed-loop needs the position reference and the measured position in {} (map them with --columns ref=...,theta_l=...)",
-                        log.path.display()
-                    );
-                }
-            }
-            if matches!(mode, ReplayMode::KStep { .. } | ReplayMode::Segments { .. }) && !has_pos {
-                bail!(
-                    "--mode {s} re-initialises from the measured position, which {} does not have",
-                    log.path.display()
-                );
-            }
-            return Ok(ModeChoice {
-                mode,
-                reason: String::from("forced with --mode"),
-            });
-        }
-        Ok(match (gains.is_some(), has_ref && has_pos) {
-            (true, true) => ModeChoice {
-                mode: ReplayMode::ClosedLoop,
-                reason: format!(
-                    "controller (gains {}) and reference are known: the model runs in the logged loop, as the motor did",
-                    gains
-                        .and_then(|g| g.part("gains"))
-                        .map(|p| p.source.as_str())
-                        .unwrap_or_default()
-                ),
-            },
-            (true, false) => ModeChoice {
-                mode: ReplayMode::Speed,
-                reason: String::from("gains given but the log has no reference/position: open-loop speed simulation with the logged u"),
-            },
-            _ => ModeChoice {
-                mode: ReplayMode::Speed,
-                reason: String::from("no controller known (--gains): open-loop speed simulation with the logged u (position would drift)"),
-            },
+        let seg = ((self.segment_s / log.measured.dt_s).round() as usize).max(1);
+        let forced = self
+            .mode
+            .as_deref()
+            .map(|s| parse_mode(s, self.k_steps.max(1), seg));
+        let gains_source = log
+            .controller
+            .as_ref()
+            .and_then(|g| g.part("gains"))
+            .map(|p| p.source.as_str())
+            .unwrap_or_default();
+        let name = log.path.display();
+        choose_mode(&log.replay(), forced, gains_source).map_err(|e| match e {
+            ModeRefusal::NoController => anyhow!("--mode closed-loop needs the controller of {name}: give --gains gains.toml or --gains-from-log"),
+            ModeRefusal::NoReferenceOrPosition => anyhow!(
+                "--mode closed-loop needs the position reference and the measured position in {name} (map them with --columns ref=...,theta_l=...)"
+            ),
+            ModeRefusal::NoPosition => anyhow!(
+                "--mode {} re-initialises from the measured position, which {name} does not have",
+                self.mode.as_deref().unwrap_or_default()
+            ),
+            e => anyhow::Error::new(e),
         })
     }
 
@@ -210,11 +184,12 @@ impl super::Compare {
         };
         let limit = log.u_limit.as_ref().map(|l| l.0);
         let ff = log.feedforward_v.as_deref();
-        let check = match replay_controller(log)? {
-            Some(mut c) => check_controller(&mut c, r, th, &m.u_v, ff, limit, m.dt_s),
-            // No controller: only the least-squares PID is wanted.
-            None => check_controller(&mut |_: f64, _: f64| 0.0, r, th, &m.u_v, ff, limit, m.dt_s),
-        };
+        // Without a controller only the least-squares PID is wanted.
+        let check = log
+            .replay()
+            .check_controller()
+            .map_err(|e| anyhow!("controller: {e}"))?
+            .ok_or_else(|| anyhow!("internal error: no reference or position to check"))?;
         if self.gains_from_log {
             let [kp, ki, kd] = check.ls_gains.ok_or_else(|| {
                 anyhow!("--gains-from-log: the logged u of {} does not determine PID gains (singular least squares)", log.path.display())
@@ -278,17 +253,10 @@ impl super::Compare {
                 "{name} has no u, so the controller's output limit cannot be read off it: give --u-limit-v (e.g. 10 for a +/-10 V DAC) or `u_limit_v` in the gains file"
             );
         };
-        let m = &log.measured;
-        let (Some(r), Some(th)) = (&m.ref_rad, &m.theta_l_rad) else {
+        let Some(u) = rebuild_u(&log.replay(), limit).map_err(|e| anyhow!("controller: {e}"))?
+        else {
             return Ok(());
         };
-        let mut c =
-            replay_controller(log)?.ok_or_else(|| anyhow!("{name}: no controller to rebuild u"))?;
-        let u: Vec<f64> = r
-            .iter()
-            .zip(th)
-            .map(|(&rk, &tk)| c.update(rk, tk).clamp(-limit, limit))
-            .collect();
         log.notes.push(format!(
             "{name} has no u: the closed loop is replayed from the reference with the controller (gains {}); the u shown is the controller's output on the logged position (rebuilt, not measured), limited to +/-{limit} V",
             log.controller

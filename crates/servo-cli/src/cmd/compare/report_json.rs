@@ -100,7 +100,7 @@ pub(super) fn to_json(
                 "step": s.label, "effect": s.effect, "signal": k.name(), "unit": k.unit(),
                 "fit_pct": finite(f.fit_percent), "rmse": finite(f.rmse), "max_error": finite(f.max_abs_error),
                 "signals": s.cmp_fit.iter().map(|(k, f)| figures_json(*k, f)).collect::<Vec<_>>(),
-                "fitted_params": s.fitted,
+                "fitted_params": fitted_json(s),
             })
         })
         .collect();
@@ -248,4 +248,25 @@ pub(super) fn whiteness_json(r: &CompareReport) -> Value {
         "bound99": w.bound99, "lags_outside": w.lags_outside, "correlation_lags": w.correlation_lags,
         "autocorr": w.autocorr,
     })
+}
+
+/// The parameters fitted at one rung of the ladder, as JSON rows.
+fn fitted_json(s: &LadderStep) -> Vec<Value> {
+    s.params
+        .iter()
+        .map(|p| {
+            json!({
+                "effect": p.effect.map(|k| k.name()),
+                "key": p.key, "unit": p.unit, "value": p.value,
+                "std_err": p.std_err, "fitted": p.fitted,
+            })
+        })
+        .chain(s.custom.iter().map(|p| {
+            json!({
+                "effect": p.effect,
+                "key": p.key, "unit": p.unit, "value": p.value,
+                "std_err": p.std_err, "fitted": p.fitted,
+            })
+        }))
+        .collect()
 }

@@ -1,6 +1,7 @@
 //! Unit tests of `servo compare`'s replay controller and plot stacking.
 
 use super::*;
+use servo_core::compare::Controller;
 use servo_core::control::pid::PidConfig;
 
 #[test]

@@ -2,8 +2,57 @@
 //! 10 minutes at 1 kHz give 3 x 32769 points, and building them as values took longer than the
 //! estimate).
 
+use super::report::interval;
 use super::Estimate;
-use serde_json::Value;
+use serde_json::{json, Value};
+use servo_core::frf::analysis::FrfAnalysis;
+
+/// The `servo.frf/1` document of an analysis of the logs `names`.
+pub(super) fn json_document(a: &FrfAnalysis, names: &[String]) -> anyhow::Result<String> {
+    let mut frf = vec![("plant", points(&a.plant, -90.0))];
+    if let Some(l) = &a.loop_frf {
+        frf.push(("loop", points(l, -180.0)));
+    }
+    if let Some(t) = &a.t {
+        frf.push(("complementary_sensitivity", points(t, 0.0)));
+    }
+    let sp = &a.spectra;
+    let out = json!({
+        "schema": "servo.frf/1",
+        "mode": if a.closed { "closed-loop" } else { "open-loop" },
+        "logs": names,
+        "method": a.method,
+        "loop_from": a.loop_from,
+        "welch": {"window": sp.window, "segment_len": sp.segment_len, "segment_s": sp.segment_len as f64 * a.ts_s,
+                  "overlap": sp.overlap, "segments": sp.segments, "averages": sp.averages,
+                  "resolution_hz": a.resolution_hz, "confidence": a.welch.confidence},
+        "achieved": a.achieved.as_ref().map(|a| json!({
+            "crossover_rad_s": interval(&a.crossover_rad_s),
+            "phase_margin_deg": interval(&a.phase_margin_deg),
+            "gain_margin_db": interval(&a.gain_margin_db),
+            "phase_crossover_rad_s": interval(&a.phase_crossover_rad_s),
+            "band_rad_s": [a.band_rad_s.0, a.band_rad_s.1],
+            "notes": a.notes,
+        })),
+        "design": a.design.map(|m| json!({"crossover_rad_s": m.crossover_rad_s, "phase_margin_deg": m.phase_margin_deg,
+                "gain_margin_db": if m.gain_margin_db.is_finite() { json!(m.gain_margin_db) } else { Value::Null },
+                "loop": m.loop_words})),
+        "coherence": {"fraction_above_0_9": a.fraction_above_0_9, "band_hz_above_0_9": a.band_hz_above_0_9.map(|b| vec![b.0, b.1]),
+                      "no_information_rad_s": a.no_information_rad_s.iter().map(|r| vec![r.0, r.1]).collect::<Vec<_>>()},
+        "against_model": a.against_model.as_ref().map(|c| json!({
+            "sentences": c.sentences,
+            "bands": c.bands.iter().map(|b| json!({"quantity": b.quantity, "lo_rad_s": b.lo_rad_s, "hi_rad_s": b.hi_rad_s, "worst": b.worst})).collect::<Vec<_>>(),
+            "delay_s": c.delay.map(|d| json!({"value": d.delay_s, "ci": d.delay_ci_s, "rms_deg": d.delay_rms_deg, "pole_rad_s": d.pole_rad_s, "pole_rms_deg": d.pole_rms_deg})),
+            "resonance_rad_s": c.resonance.map(|r| json!({"value": r.omega_rad_s, "peak_db": r.peak_db})),
+        })),
+        "amplitude": a.amplitude.as_ref().map(|x| json!({"gain_change_db": x.gain_change_db, "bound_db": x.bound_db, "significant": x.significant, "sentence": x.sentence, "u_rms_v": a.u_rms_v})),
+        "notes": a.notes,
+    });
+    let Value::Object(rest) = &out else {
+        anyhow::bail!("internal error: the JSON document is not an object");
+    };
+    Ok(serde_json::to_string_pretty(&Doc { rest, frf })?)
+}
 
 /// One estimate's `frf` list, serialized point by point (no JSON value tree: a 10-minute log
 /// at 1 kHz gives 3 x 32769 points).

@@ -2,6 +2,7 @@
 //! the text report.
 
 use super::*;
+use servo_core::frf::analysis::FrfAnalysis;
 
 pub(super) fn interval(i: &Option<Interval>) -> Value {
     match i {
@@ -17,7 +18,71 @@ pub(super) fn fmt_i(i: &Option<Interval>, unit: &str, what: &str) -> String {
     }
 }
 
-pub(super) fn std_dev(x: &[f64]) -> f64 {
-    let m = x.iter().sum::<f64>() / x.len().max(1) as f64;
-    (x.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / x.len().max(1) as f64).sqrt()
+/// The text report of an analysis of `n_logs` logs.
+pub(super) fn print_text(a: &FrfAnalysis, n_logs: usize) {
+    let sp = &a.spectra;
+    let df = a.resolution_hz;
+    outln!(
+        "servo frf: {} log(s), {} at {:.0} Hz",
+        n_logs,
+        if a.closed { "closed loop" } else { "open loop" },
+        1.0 / a.ts_s
+    );
+    outln!("estimate: Welch/H1, Hann window of {} samples ({:.3} Hz resolution), {:.0} % overlap, {} segments (~{:.1} independent averages), {:.0} % bounds", sp.segment_len, df, 100.0 * sp.overlap, sp.segments, sp.averages, 100.0 * a.welch.confidence);
+    outln!("plant: {}", a.method);
+    match a.band_hz_above_0_9 {
+        Some((lo, hi)) => outln!("coherence: >= 0.9 in {:.0} % of the bins, between {lo:.3} and {hi:.2} Hz ({:.2}-{:.1} rad/s)", 100.0 * a.fraction_above_0_9, lo * std::f64::consts::TAU, hi * std::f64::consts::TAU),
+        None => outln!("coherence: never reaches 0.9: the data carry little information on the frequency response (steps and holds excite few frequencies; use a chirp or multisine)"),
+    }
+    let no_info = &a.no_information_rad_s;
+    let shown: Vec<String> = no_info
+        .iter()
+        .filter(|r| r.1 > r.0)
+        .take(6)
+        .map(|r| format!("{:.2}-{:.1}", r.0, r.1))
+        .collect();
+    if !shown.is_empty() {
+        outln!(
+            "no information (coherence < 0.5) at {} rad/s{}",
+            shown.join(", "),
+            if no_info.len() > 6 { ", ..." } else { "" }
+        );
+    }
+    if let Some(m) = &a.achieved {
+        outln!("achieved ({}):", a.loop_from);
+        outln!(
+            "  {}; {}; {}",
+            fmt_i(&m.crossover_rad_s, "rad/s", "crossover"),
+            fmt_i(&m.phase_margin_deg, "deg", "phase margin"),
+            fmt_i(&m.gain_margin_db, "dB", "gain margin")
+        );
+        for n in &m.notes {
+            outln!("  {n}");
+        }
+    }
+    if let Some(d) = &a.design {
+        outln!(
+            "design ({}): crossover {:.2} rad/s, phase margin {:.2} deg, gain margin {}",
+            d.loop_words,
+            d.crossover_rad_s,
+            d.phase_margin_deg,
+            if d.gain_margin_db.is_finite() {
+                format!("{:.2} dB", d.gain_margin_db)
+            } else {
+                "infinite".into()
+            }
+        );
+    }
+    if let Some(c) = &a.against_model {
+        outln!("against the model:");
+        for s in &c.sentences {
+            outln!("  - {s}");
+        }
+    }
+    if let Some(x) = &a.amplitude {
+        outln!("amplitude: {}", x.sentence);
+    }
+    for n in &a.notes {
+        outln!("note: {n}");
+    }
 }

@@ -1,6 +1,5 @@
 //! The closed-loop driver shared by `servo run`, `servo demo` and the identification
-//! experiments: sample -> control -> apply, once per control period, on any
-//! [`servo_hw::Backend`].
+//! experiments: sample -> control -> apply, once per control period, on any [`Backend`].
 //!
 //! Each period k: `sample()` gives the sensors at t_k; the speed estimator updates; the program
 //! gives the setpoint (a position reference for the PID, with optional feedforward from the
@@ -9,56 +8,117 @@
 //! voltage limit and applied with `apply(u_k)`, held until t_{k+1}. Row k of the record and of
 //! the log holds the measurements at t_k and u_k (servo's log convention).
 //!
-//! With [`RunConfig::progress`], long runs show their progress on stderr: run time elapsed and
-//! left, and the missed deadlines of a board.
+//! The pure parts (PID, speed estimator and controller, programs, step metrics) are in
+//! servo-core; this module only drives them on a backend. Samples stream to a [`LogSink`]; a
+//! [`RunMonitor`] may stop the loop early (`servo` does on Ctrl-C) and show its progress.
+//! Whatever happens, the backend is stopped at 0 V and the sink flushed before
+//! [`run_loop`] returns; on an error the returned [`RunError`] says whether 0 V was confirmed.
 //!
-//! Ctrl-C (with [`RunConfig::handle_ctrlc`]): the loop stops at the next sample, the backend is
-//! stopped at 0 V, the log is flushed and the output says [`StopReason::Interrupted`]; a second
-//! Ctrl-C exits at once with status 130. On a backend error the backend is also stopped and the
-//! log flushed before the error is returned.
+//! ```
+//! use servo_core::control::{PidConfig, PidGains, Program, Reference};
+//! use servo_hw::run::{run_loop, RunConfig, StopReason};
+//! use servo_hw::SimBackend;
+//!
+//! // The handout's Table 2 gearmotor on the simulator at T_s = 1 ms.
+//! let plant = servo_core::Plant::from_params(servo_core::PlantParams::TABLE2)?;
+//! let mut backend = SimBackend::new(&plant, Default::default(), 1e-3)?;
+//! let pid = PidConfig::new(PidGains { kp: 7.0476, ki: 86.121, kd: 0.14418, tl_s: 1.0 / 150.0 }, 1e-3);
+//! let program = Program::Position(Reference::parse("step:0.2")?);
+//! // Two seconds of a 0.2 rad step; samples into a Vec (an McapLog is also a sink).
+//! let mut samples = Vec::new();
+//! let out = run_loop(&mut backend, &RunConfig::closed_loop(program, pid, 2.0), Some(&mut samples))?;
+//! assert_eq!((out.stop, out.samples, samples.len()), (StopReason::Completed, 2000, 2000));
+//! // The 60 deg phase-margin design: 20-30 % overshoot, settled (5 % band) well within 2 s.
+//! let step = &out.summary.steps[0];
+//! assert!((10.0..40.0).contains(&step.overshoot_pct), "{step:?}");
+//! assert!(step.settling_time_s.is_some_and(|t| t < 1.0), "{step:?}");
+//! let theta = out.record.theta_l_rad.as_ref().unwrap();
+//! assert!((theta[1999] - 0.2).abs() < 0.01);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
-pub mod controller;
-pub mod program;
-pub mod speed;
-pub mod summary;
-
-pub use program::{Program, Setpoint, SpeedProfile};
-pub use speed::{SpeedEstimator, SpeedLoop, SpeedLoopConfig};
-pub use summary::{RunSummary, StepMetrics};
-
-use crate::io::{LoopMsg, McapLog};
-use anyhow::{bail, Context};
-use servo_core::control::{Feedforward, Pid, PidConfig};
+use crate::backend::{Backend, HwError};
+use servo_core::control::program::Setpoint;
+use servo_core::control::{
+    ControlError, Feedforward, Pid, PidConfig, Program, SpeedEstimator, SpeedLoop, SpeedLoopConfig,
+    SpeedProfile,
+};
+use servo_core::metrics::{RunSummary, SummaryAccumulator};
 use servo_core::record::Record;
-use servo_hw::Backend;
-use std::sync::atomic::{AtomicBool, Ordering};
+use servo_io::{LoopMsg, McapLog};
+
+pub mod experiments;
+pub mod logged;
+
+/// The error a [`LogSink`] returns (any error type).
+pub type SinkError = Box<dyn std::error::Error + Send + Sync + 'static>;
 
 /// Where each sample goes while the loop runs (an MCAP log, a test's buffer, ...).
+///
+/// Contract, as [`run_loop`] calls it:
+/// * [`LogSink::write_loop`] once per sample, in time order, after that sample's u was applied
+///   to the backend; the message is only borrowed for the call. An error stops the run: the
+///   backend is stopped at 0 V, then [`LogSink::flush`] is still called, and the run returns
+///   [`RunError::Sink`] (inside [`RunError::Aborted`]).
+/// * [`LogSink::flush`] exactly once, at the end of every run (completed, stopped early or
+///   failed), after the backend was stopped: everything written so far must then be durable.
+/// * The loop never finishes or closes the sink: a caller that wants a summary record or a
+///   finished file does that after the run (see [`logged`]).
+/// * Both methods are called from the loop's thread, between two control periods: a slow sink
+///   delays the next sample (boards count that as missed deadlines).
 pub trait LogSink {
     /// Records one sample.
-    fn write_loop(&mut self, msg: &LoopMsg) -> anyhow::Result<()>;
-    /// Makes everything written so far durable (called on stop, error and Ctrl-C).
-    fn flush(&mut self) -> anyhow::Result<()>;
+    fn write_loop(&mut self, msg: &LoopMsg) -> Result<(), SinkError>;
+    /// Makes everything written so far durable (called once, at the end of the run).
+    fn flush(&mut self) -> Result<(), SinkError>;
 }
 
 impl LogSink for McapLog {
-    fn write_loop(&mut self, msg: &LoopMsg) -> anyhow::Result<()> {
+    fn write_loop(&mut self, msg: &LoopMsg) -> Result<(), SinkError> {
         Ok(McapLog::write_loop(self, msg)?)
     }
-    fn flush(&mut self) -> anyhow::Result<()> {
+    fn flush(&mut self) -> Result<(), SinkError> {
         Ok(McapLog::flush(self)?)
     }
 }
 
 impl LogSink for Vec<LoopMsg> {
-    fn write_loop(&mut self, msg: &LoopMsg) -> anyhow::Result<()> {
+    fn write_loop(&mut self, msg: &LoopMsg) -> Result<(), SinkError> {
         self.push(*msg);
         Ok(())
     }
-    fn flush(&mut self) -> anyhow::Result<()> {
+    fn flush(&mut self) -> Result<(), SinkError> {
         Ok(())
     }
 }
+
+/// Watches a run from the loop's thread (all methods have do-nothing defaults).
+///
+/// Contract, as [`run_loop_monitored`] calls it: [`RunMonitor::warning`] before the first
+/// sample for each warning (also kept in [`RunOutput::warnings`]);
+/// [`RunMonitor::stop_requested`] before each sample (true: the loop stops there with
+/// [`StopReason::Interrupted`], the backend at 0 V); [`RunMonitor::sample`] after each sample
+/// was applied and logged; [`RunMonitor::finished`] once after the last sample, before the
+/// backend is stopped. Each call delays the loop by its own duration: keep them cheap.
+pub trait RunMonitor {
+    /// True to stop the run at the next sample (e.g. after Ctrl-C).
+    fn stop_requested(&mut self) -> bool {
+        false
+    }
+    /// After sample k at run time `t_s` [s] of `planned_s` [s].
+    fn sample(&mut self, t_s: f64, planned_s: f64, backend: &dyn Backend) {
+        let _ = (t_s, planned_s, backend);
+    }
+    /// A warning about the run's configuration (e.g. gains designed for another period).
+    fn warning(&mut self, text: &str) {
+        let _ = text;
+    }
+    /// After the last sample.
+    fn finished(&mut self) {}
+}
+
+/// The monitor that watches nothing: the run goes to its end.
+impl RunMonitor for () {}
 
 /// What to run.
 #[derive(Debug, Clone)]
@@ -76,21 +136,17 @@ pub struct RunConfig {
     pub u_limit_v: f64,
     /// Bandwidth of the speed estimator [rad/s].
     pub speed_bandwidth_rad_s: f64,
-    /// Stop cleanly on Ctrl-C (installs a process-wide handler once).
-    pub handle_ctrlc: bool,
     /// Keep every sample in [`RunOutput::record`]. Without it the record stays empty and the
     /// run's memory does not depend on its length: samples go only to the log sink and to the
     /// running summary ([`RunOutput::summary`]).
     pub keep_record: bool,
     /// The speed controller (required when the program has speed parts, [`Program::Speed`]).
     pub speed_loop: Option<SpeedLoopConfig>,
-    /// Live progress on stderr (None: silent).
-    pub progress: Option<Progress>,
 }
 
 impl RunConfig {
     /// A closed-loop run with defaults: no feedforward, 10 V limit, 50 Hz speed estimator,
-    /// Ctrl-C handled.
+    /// every sample kept.
     pub fn closed_loop(program: Program, pid: PidConfig, duration_s: f64) -> RunConfig {
         RunConfig {
             program,
@@ -99,10 +155,8 @@ impl RunConfig {
             feedforward: None,
             u_limit_v: 10.0,
             speed_bandwidth_rad_s: DEFAULT_SPEED_BANDWIDTH_RAD_S,
-            handle_ctrlc: true,
             keep_record: true,
             speed_loop: None,
-            progress: None,
         }
     }
     /// An open-loop run (voltage program) with the same defaults.
@@ -129,102 +183,23 @@ impl RunConfig {
 /// Default bandwidth of the speed estimator: 2 pi 50 Hz [rad/s].
 pub const DEFAULT_SPEED_BANDWIDTH_RAD_S: f64 = 2.0 * std::f64::consts::PI * 50.0;
 
-/// When and how [`run_loop`] shows its progress on stderr.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Progress {
-    /// What runs (`servo run`, `identify_friction`, ...), the start of each line.
-    pub label: String,
-    /// Wall-clock time between two updates [s]; the first comes after one interval, so short
-    /// runs print nothing.
-    pub interval_s: f64,
-    /// Rewrite one line in place (a terminal) instead of printing a line per update (a log).
-    pub in_place: bool,
-}
-
-/// How `--progress` is chosen on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
-pub enum ProgressMode {
-    /// When stderr is a terminal: one line updated in place twice a second.
-    #[default]
-    Auto,
-    /// Always: in place on a terminal, else a line every 2 s (for logs and CI).
-    Always,
-    /// Never.
-    Never,
-}
-
-impl Progress {
-    /// The progress `mode` asks for, labelled `label` (None: silent).
-    pub fn from_mode(mode: ProgressMode, label: &str) -> Option<Progress> {
-        use std::io::IsTerminal;
-        let tty = std::io::stderr().is_terminal();
-        let show = match mode {
-            ProgressMode::Auto => tty,
-            ProgressMode::Always => true,
-            ProgressMode::Never => false,
-        };
-        show.then(|| Progress {
-            label: label.to_string(),
-            interval_s: if tty { 0.5 } else { 2.0 },
-            in_place: tty,
-        })
-    }
-
-    /// The text of one update: run time elapsed and planned [s], time left, missed deadlines
-    /// (None: the backend has no deadlines).
-    pub fn line(&self, t_s: f64, total_s: f64, missed: Option<u64>) -> String {
-        let mut s = format!(
-            "{}: {t_s:.1} s of {total_s:.1} s, {:.1} s left",
-            self.label,
-            (total_s - t_s).max(0.0)
-        );
-        if let Some(m) = missed {
-            s.push_str(&format!(
-                ", {m} missed deadline{}",
-                if m == 1 { "" } else { "s" }
-            ));
-        }
-        s
-    }
-}
-
-/// The progress display of one run.
-struct ProgressState {
-    cfg: Progress,
-    start: std::time::Instant,
-    next_s: f64,
-    shown: bool,
-}
-
-impl ProgressState {
-    fn tick(&mut self, t_s: f64, total_s: f64, backend: &dyn Backend) {
-        let wall = self.start.elapsed().as_secs_f64();
-        if wall < self.next_s {
-            return;
-        }
-        self.next_s = wall + self.cfg.interval_s;
-        let line = self.cfg.line(t_s, total_s, backend.missed_deadlines());
-        if self.cfg.in_place {
-            eprint!("\r{line}\x1b[K");
-        } else {
-            eprintln!("{line}");
-        }
-        self.shown = true;
-    }
-    fn finish(&self) {
-        if self.shown && self.cfg.in_place {
-            eprint!("\r\x1b[K");
-        }
-    }
-}
-
 /// Why the loop ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StopReason {
     /// The whole duration ran.
     Completed,
-    /// Ctrl-C.
+    /// The monitor asked to stop ([`RunMonitor::stop_requested`]; Ctrl-C in `servo`).
     Interrupted,
+}
+
+impl StopReason {
+    /// As the log's summary records it (`completed`, `interrupted by Ctrl-C`).
+    pub fn describe(self) -> &'static str {
+        match self {
+            StopReason::Completed => "completed",
+            StopReason::Interrupted => "interrupted by Ctrl-C",
+        }
+    }
 }
 
 /// What a run produced.
@@ -243,6 +218,8 @@ pub struct RunOutput {
     pub last_time_s: f64,
     /// The figures of merit (5 % settling band), computed while the loop ran.
     pub summary: RunSummary,
+    /// Warnings about the configuration (also given to the monitor before the run).
+    pub warnings: Vec<String>,
 }
 
 impl RunOutput {
@@ -256,19 +233,11 @@ impl RunOutput {
     }
 }
 
-/// The error of a run stopped by Ctrl-C (after the board was stopped and the logs closed):
-/// `servo` exits with status 130 on it, like a shell.
-#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
-#[error("interrupted by Ctrl-C at t = {at_s:.3} s")]
-pub struct Interrupted {
-    /// Run time of the last sample [s].
-    pub at_s: f64,
-}
-
-/// How stopping the board went after the loop failed, attached as context to the loop's error:
-/// `servo run` claims 0 V only for [`StopOutcome::Acknowledged`] (the backend sent 0 V and the
-/// board confirmed, or the simulator applied it).
+/// How stopping the board went after the loop failed ([`RunError::Aborted`]): `servo run`
+/// claims 0 V only for [`StopOutcome::Acknowledged`] (the backend sent 0 V and the board
+/// confirmed, or the simulator applied it).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
 pub enum StopOutcome {
     #[error("run stopped, board at 0 V (acknowledged)")]
     Acknowledged,
@@ -276,34 +245,65 @@ pub enum StopOutcome {
     Failed(String),
 }
 
+/// Why a run failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RunError {
+    /// The configuration cannot run (checked before anything moves).
+    #[error("{0}")]
+    Config(String),
+    /// The PID configuration is invalid.
+    #[error("controller")]
+    Controller(#[source] ControlError),
+    /// The backend failed to give sample `k`.
+    #[error("sampling the board at sample {k}")]
+    Sample {
+        k: usize,
+        #[source]
+        source: Box<HwError>,
+    },
+    /// The backend failed to apply a voltage.
+    #[error("applying u = {u_v} V at t = {t_s} s")]
+    Apply {
+        u_v: f64,
+        t_s: f64,
+        #[source]
+        source: Box<HwError>,
+    },
+    /// A measurement or reference the controller cannot use.
+    #[error("non-finite measurement or reference at t = {t_s} s (theta_l = {theta_l_rad} rad)")]
+    NonFinite { t_s: f64, theta_l_rad: f64 },
+    /// The log sink refused a sample.
+    #[error("writing the log")]
+    Sink(#[source] SinkError),
+    /// The run went to its end (or was stopped) but stopping the board failed.
+    #[error("stopping the board (0 V)")]
+    Stop(#[source] Box<HwError>),
+    /// The run went to its end but the log sink could not flush.
+    #[error("flushing the log")]
+    Flush(#[source] SinkError),
+    /// The loop failed with `cause`; the board was then stopped with outcome `stop`.
+    #[error("{stop}")]
+    Aborted {
+        stop: StopOutcome,
+        #[source]
+        cause: Box<RunError>,
+    },
+}
+
+impl RunError {
+    /// How stopping the board went, for an error that stopped a running loop.
+    pub fn stop_outcome(&self) -> Option<&StopOutcome> {
+        match self {
+            RunError::Aborted { stop, .. } => Some(stop),
+            _ => None,
+        }
+    }
+}
+
 /// Longest run the loop accepts, in samples (about 3.2 years at 1 kHz): beyond, the sample
 /// index loses precision as a time.
 pub const MAX_SAMPLES: f64 = 1e11;
-
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-static HANDLER: std::sync::Once = std::sync::Once::new();
-
-/// Installs the Ctrl-C handler (once per process): the first Ctrl-C asks running loops to stop,
-/// the second exits with status 130.
-pub fn install_ctrlc_handler() {
-    HANDLER.call_once(|| {
-        let r = ctrlc::set_handler(|| {
-            if INTERRUPTED.swap(true, Ordering::SeqCst) {
-                eprintln!("\nsecond Ctrl-C: exiting without cleanup");
-                std::process::exit(130);
-            }
-            eprintln!("\nCtrl-C: stopping the loop (0 V) and closing the log; press again to exit at once");
-        });
-        if let Err(e) = r {
-            eprintln!("warning: cannot install the Ctrl-C handler ({e}); Ctrl-C will kill the run without closing the log");
-        }
-    });
-}
-
-/// True once Ctrl-C was pressed.
-pub fn interrupted() -> bool {
-    INTERRUPTED.load(Ordering::SeqCst)
-}
 
 /// The PID configuration that actually runs on a loop at period `ts_s` [s] with the voltage
 /// limit `u_limit_v` [V] (the tighter of the run's and the board's): `pid` with its output limits
@@ -318,59 +318,82 @@ pub fn effective_pid_config(pid: &PidConfig, u_limit_v: f64, ts_s: f64) -> PidCo
     c
 }
 
-/// Runs the loop on `backend`, streaming samples to `sink`.
+/// Runs the loop on `backend` to its end, streaming samples to `sink`.
 pub fn run_loop(
     backend: &mut dyn Backend,
     cfg: &RunConfig,
+    sink: Option<&mut dyn LogSink>,
+) -> Result<RunOutput, RunError> {
+    run_loop_monitored(backend, cfg, sink, &mut ())
+}
+
+/// The error text of `e` and its sources, `: `-separated.
+fn chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut src = e.source();
+    while let Some(c) = src {
+        s.push_str(&format!(": {c}"));
+        src = c.source();
+    }
+    s
+}
+
+/// Runs the loop on `backend`, streaming samples to `sink`, watched by `monitor`.
+pub fn run_loop_monitored(
+    backend: &mut dyn Backend,
+    cfg: &RunConfig,
     mut sink: Option<&mut dyn LogSink>,
-) -> anyhow::Result<RunOutput> {
+    monitor: &mut dyn RunMonitor,
+) -> Result<RunOutput, RunError> {
+    let bad = |text: String| Err(RunError::Config(text));
     let info = backend.info();
     let ts = info.sample_period_s;
     if !(ts.is_finite() && ts > 0.0) {
-        bail!("backend reports a sample period of {ts} s");
+        return bad(format!("backend reports a sample period of {ts} s"));
     }
     if !(cfg.duration_s.is_finite() && cfg.duration_s > 0.0) {
-        bail!("--duration must be > 0 s, got {}", cfg.duration_s);
+        return bad(format!("--duration must be > 0 s, got {}", cfg.duration_s));
     }
     if !(cfg.u_limit_v.is_finite() && cfg.u_limit_v > 0.0) {
-        bail!("the voltage limit must be > 0 V, got {}", cfg.u_limit_v);
+        return bad(format!(
+            "the voltage limit must be > 0 V, got {}",
+            cfg.u_limit_v
+        ));
     }
     let u_limit = cfg.u_limit_v.min(info.voltage_limit_v);
+    let mut warnings = Vec::new();
     let mut pid = match (&cfg.pid, cfg.program.needs_controller()) {
         (Some(p), _) => {
             if (p.ts_s - ts).abs() > 1e-9 * ts {
-                eprintln!(
-                    "warning: the gains were designed for T_s = {} s but the loop runs at {} s; using the loop's period",
+                warnings.push(format!(
+                    "the gains were designed for T_s = {} s but the loop runs at {} s; using the loop's period",
                     p.ts_s, ts
-                );
+                ));
             }
-            Some(Pid::new(effective_pid_config(p, u_limit, ts)).context("controller")?)
+            Some(Pid::new(effective_pid_config(p, u_limit, ts)).map_err(RunError::Controller)?)
         }
-        (None, true) => bail!(
+        (None, true) => return bad(
             "the program has closed-loop (position) parts but no controller was given (--gains)"
+                .into(),
         ),
         (None, false) => None,
     };
     let mut speed_ctl = match (&cfg.speed_loop, cfg.program.needs_speed_loop()) {
         (Some(c), _) => Some(SpeedLoop::new(*c, ts)),
-        (None, true) => bail!("the program has speed-controlled parts but no speed controller"),
+        (None, true) => {
+            return bad("the program has speed-controlled parts but no speed controller".into())
+        }
         (None, false) => None,
     };
-    let mut progress = cfg.progress.clone().map(|p| ProgressState {
-        next_s: p.interval_s,
-        cfg: p,
-        start: std::time::Instant::now(),
-        shown: false,
-    });
-    if cfg.handle_ctrlc {
-        install_ctrlc_handler();
-    }
     let n_f = ((cfg.duration_s / ts) - 1e-9).ceil().max(1.0);
     if n_f > MAX_SAMPLES {
-        bail!(
+        return bad(format!(
             "--duration {} s at T_s = {ts} s is {n_f:e} samples; servo runs at most {MAX_SAMPLES:e}",
             cfg.duration_s
-        );
+        ));
+    }
+    for w in &warnings {
+        monitor.warning(w);
     }
     let n = n_f as usize;
     // Memory grows with the run only when the caller keeps the samples; then it grows as they
@@ -388,30 +411,31 @@ pub fn run_loop(
         ..Record::default()
     };
     let mut saturated = Vec::new();
-    let mut acc = summary::SummaryAccumulator::new(ts, 0.05);
+    let mut acc = SummaryAccumulator::new(ts, 0.05);
     let mut last_t = 0.0;
     let mut any_ref = false;
     let mut speed = SpeedEstimator::new(cfg.speed_bandwidth_rad_s, ts);
     let mut stop = StopReason::Completed;
     let mut was_open_loop = false;
-    let result: anyhow::Result<()> = (|| {
+    let result: Result<(), RunError> = (|| {
         for k in 0..n {
-            if cfg.handle_ctrlc && interrupted() {
+            if monitor.stop_requested() {
                 stop = StopReason::Interrupted;
                 break;
             }
-            let s = backend
-                .sample()
-                .with_context(|| format!("sampling the board at sample {k}"))?;
+            let s = backend.sample().map_err(|source| RunError::Sample {
+                k,
+                source: Box::new(source),
+            })?;
             // Run time from the sample index: the board clock may start anywhere.
             let t = k as f64 * ts;
             let omega = speed.update(s.theta_l_rad);
             let mut w_ref = f64::NAN;
             let (u, r, terms, sat) = match cfg.program.at(t) {
                 Setpoint::Position(r) => {
-                    let pid = pid
-                        .as_mut()
-                        .context("closed-loop segment without a controller")?;
+                    let pid = pid.as_mut().ok_or_else(|| {
+                        RunError::Config("closed-loop segment without a controller".into())
+                    })?;
                     if was_open_loop {
                         pid.reset();
                         was_open_loop = false;
@@ -422,10 +446,10 @@ pub fn run_loop(
                         .map_or(0.0, |f| f.for_sample(&r).total_v);
                     let o = pid.update(r.pos_rad, s.theta_l_rad, ff);
                     if o.invalid_input {
-                        bail!(
-                            "non-finite measurement or reference at t = {t} s (theta_l = {} rad)",
-                            s.theta_l_rad
-                        );
+                        return Err(RunError::NonFinite {
+                            t_s: t,
+                            theta_l_rad: s.theta_l_rad,
+                        });
                     }
                     (o.u_v, r.pos_rad, [o.p_v, o.i_v, o.d_v, o.ff_v], o.saturated)
                 }
@@ -439,17 +463,19 @@ pub fn run_loop(
                     alpha_l_rad_s2,
                 } => {
                     was_open_loop = true;
-                    let c = speed_ctl
-                        .as_mut()
-                        .context("speed segment without a speed controller")?;
+                    let c = speed_ctl.as_mut().ok_or_else(|| {
+                        RunError::Config("speed segment without a speed controller".into())
+                    })?;
                     let o = c.update(omega_l_rad_s, alpha_l_rad_s2, omega, u_limit);
                     w_ref = omega_l_rad_s;
                     (o.u_v, f64::NAN, [o.p_v, o.i_v, 0.0, o.ff_v], o.saturated)
                 }
             };
-            backend
-                .apply(u)
-                .with_context(|| format!("applying u = {u} V at t = {t} s"))?;
+            backend.apply(u).map_err(|source| RunError::Apply {
+                u_v: u,
+                t_s: t,
+                source: Box::new(source),
+            })?;
             acc.push(t, r, s.theta_l_rad, u, sat);
             last_t = t;
             any_ref |= !r.is_nan();
@@ -477,28 +503,28 @@ pub fn run_loop(
                     i_a_a: s.i_a_a,
                     saturated: sat,
                     ref_omega_l_rad_s: w_ref,
-                })?;
+                })
+                .map_err(RunError::Sink)?;
             }
-            if let Some(p) = progress.as_mut() {
-                p.tick(t, n as f64 * ts, &*backend);
-            }
+            monitor.sample(t, n as f64 * ts, &*backend);
         }
         Ok(())
     })();
-    if let Some(p) = &progress {
-        p.finish();
-    }
+    monitor.finished();
     // Always: 0 V, then make the log durable.
-    let stopped = backend.stop().context("stopping the board (0 V)");
+    let stopped = backend.stop();
     let flushed = sink.map_or(Ok(()), |s| s.flush());
     if let Err(e) = result {
-        return Err(match stopped {
-            Ok(()) => e.context(StopOutcome::Acknowledged),
-            Err(se) => e.context(StopOutcome::Failed(format!("{se:#}"))),
+        return Err(RunError::Aborted {
+            stop: match stopped {
+                Ok(()) => StopOutcome::Acknowledged,
+                Err(se) => StopOutcome::Failed(format!("stopping the board (0 V): {}", chain(&se))),
+            },
+            cause: Box::new(e),
         });
     }
-    stopped?;
-    flushed?;
+    stopped.map_err(|e| RunError::Stop(Box::new(e)))?;
+    flushed.map_err(RunError::Flush)?;
     if !any_ref {
         rec.ref_rad = None;
     }
@@ -510,6 +536,7 @@ pub fn run_loop(
         samples: acc.samples(),
         last_time_s: last_t,
         summary: acc.finish(),
+        warnings,
     })
 }
 
@@ -523,7 +550,8 @@ fn push(v: &mut Option<Vec<f64>>, x: f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use servo_hw::{BoardInfo, HwError, Sample};
+    use crate::{BoardInfo, Sample};
+    use servo_core::control::{PidConfig, Reference};
 
     /// A board whose angle is the integral of u (theta' = u), recording what it was told.
     struct Integrator {
@@ -587,14 +615,7 @@ mod tests {
             },
             1e-3,
         );
-        let cfg = RunConfig {
-            handle_ctrlc: false,
-            ..RunConfig::closed_loop(
-                Program::Position(servo_core::control::Reference::step(1.0, 0.0)),
-                pid,
-                0.5,
-            )
-        };
+        let cfg = RunConfig::closed_loop(Program::Position(Reference::step(1.0, 0.0)), pid, 0.5);
         let mut msgs: Vec<LoopMsg> = Vec::new();
         let out = run_loop(&mut b, &cfg, Some(&mut msgs)).unwrap();
         assert_eq!(out.record.len(), 500);
@@ -629,11 +650,8 @@ mod tests {
     #[test]
     fn open_loop_needs_no_controller_and_error_stops_the_board() {
         let mut b = board();
-        let p = Program::open_loop(servo_core::control::Reference::step(7.0, 0.0), 0.1).unwrap();
-        let cfg = RunConfig {
-            handle_ctrlc: false,
-            ..RunConfig::open_loop(p.clone(), 0.2)
-        };
+        let p = Program::open_loop(Reference::step(7.0, 0.0), 0.1).unwrap();
+        let cfg = RunConfig::open_loop(p.clone(), 0.2);
         let out = run_loop(&mut b, &cfg, None).unwrap();
         let u = out.record.u_v.as_ref().unwrap();
         assert_eq!(u[10], 5.0); // clipped at the board's 5 V
@@ -644,13 +662,13 @@ mod tests {
         let cfg2 = RunConfig {
             pid: None,
             ..RunConfig::closed_loop(
-                Program::Position(servo_core::control::Reference::step(1.0, 0.0)),
+                Program::Position(Reference::step(1.0, 0.0)),
                 PidConfig::new(Default::default(), 1e-3),
                 1.0,
             )
         };
         let mut b2 = board();
-        assert!(format!("{:#}", run_loop(&mut b2, &cfg2, None).unwrap_err()).contains("--gains"));
+        assert!(chain(&run_loop(&mut b2, &cfg2, None).unwrap_err()).contains("--gains"));
         assert!(b2.applied.is_empty());
         // A board error mid-run: the board is stopped, the error says where.
         let mut b3 = Integrator {
@@ -658,12 +676,68 @@ mod tests {
             ..board()
         };
         let mut msgs: Vec<LoopMsg> = Vec::new();
-        let e = format!(
-            "{:#}",
-            run_loop(&mut b3, &cfg, Some(&mut msgs)).unwrap_err()
-        );
+        let e = run_loop(&mut b3, &cfg, Some(&mut msgs)).unwrap_err();
+        assert_eq!(e.stop_outcome(), Some(&StopOutcome::Acknowledged));
+        let e = chain(&e);
         assert!(e.contains("sample 42") && e.contains("10 ms"), "{e}");
         assert_eq!(b3.stopped, 1);
         assert_eq!(msgs.len(), 42);
+    }
+
+    /// Stops after `after` samples and counts what it was told.
+    #[derive(Default)]
+    struct Stopper {
+        after: usize,
+        seen: usize,
+        warnings: Vec<String>,
+        finished: u32,
+    }
+
+    impl RunMonitor for Stopper {
+        fn stop_requested(&mut self) -> bool {
+            self.seen >= self.after
+        }
+        fn sample(&mut self, _t_s: f64, planned_s: f64, _backend: &dyn Backend) {
+            assert!((planned_s - 0.5).abs() < 1e-12);
+            self.seen += 1;
+        }
+        fn warning(&mut self, text: &str) {
+            self.warnings.push(text.to_string());
+        }
+        fn finished(&mut self) {
+            self.finished += 1;
+        }
+    }
+
+    #[test]
+    fn a_monitor_stops_the_run_and_hears_the_warnings() {
+        let mut b = board();
+        // Gains designed for 2 ms on a 1 ms board: a warning, the loop's period wins.
+        let pid = PidConfig::new(
+            servo_core::control::PidGains {
+                kp: 5.0,
+                ..Default::default()
+            },
+            2e-3,
+        );
+        let cfg = RunConfig::closed_loop(Program::Position(Reference::step(1.0, 0.0)), pid, 0.5);
+        let mut mon = Stopper {
+            after: 120,
+            ..Stopper::default()
+        };
+        let mut msgs: Vec<LoopMsg> = Vec::new();
+        let out = run_loop_monitored(&mut b, &cfg, Some(&mut msgs), &mut mon).unwrap();
+        assert_eq!(out.stop, StopReason::Interrupted);
+        assert_eq!((out.samples, msgs.len(), b.applied.len()), (120, 120, 120));
+        assert!((out.last_time_s - 0.119).abs() < 1e-12);
+        assert_eq!(b.stopped, 1);
+        assert_eq!(mon.finished, 1);
+        assert_eq!(mon.warnings.len(), 1);
+        assert!(
+            mon.warnings[0].contains("T_s = 0.002 s"),
+            "{:?}",
+            mon.warnings
+        );
+        assert_eq!(out.warnings, mon.warnings);
     }
 }

@@ -1,9 +1,17 @@
 //! Figures of merit of a run: tracking error RMS and maximum, overshoot and settling time of
 //! each reference step (5 % band, as in the handout's t_s,5%), time spent at the voltage limit.
+//!
+//! [`SummaryAccumulator`] computes them while a run goes, in memory independent of its length
+//! (the run loop of servo-hw feeds it); [`RunSummary::compute`] computes the same figures from a
+//! finished [`Record`].
 
-use servo_core::record::Record;
-use std::collections::BTreeMap;
-use std::fmt;
+use crate::math;
+use crate::record::Record;
+use alloc::collections::BTreeMap;
+use alloc::format;
+use alloc::string::{String, ToString};
+use alloc::vec::Vec;
+use core::fmt;
 
 /// One step of the reference and the response to it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -231,7 +239,7 @@ impl SummaryAccumulator {
         d.sort_by(f64::total_cmp);
         let typical = d.get(d.len() / 2).copied().unwrap_or(0.0);
         let thresh = (50.0 * typical).max(1e-6);
-        let block = std::mem::take(&mut self.block);
+        let block = core::mem::take(&mut self.block);
         for (j, &(t, r, y)) in block.iter().enumerate() {
             let k = first + j;
             let start = match self.r_prev {
@@ -283,7 +291,13 @@ impl SummaryAccumulator {
         if let Some(o) = self.open.take() {
             self.steps.push(o.close(self.n));
         }
-        let rms = |sq: f64, n: usize| if n == 0 { 0.0 } else { (sq / n as f64).sqrt() };
+        let rms = |sq: f64, n: usize| {
+            if n == 0 {
+                0.0
+            } else {
+                math::sqrt(sq / n as f64)
+            }
+        };
         RunSummary {
             duration_s: self.n as f64 * self.ts_s,
             samples: self.n,
@@ -299,7 +313,7 @@ impl SummaryAccumulator {
 
 impl fmt::Display for RunSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let deg = 180.0 / std::f64::consts::PI;
+        let deg = 180.0 / core::f64::consts::PI;
         writeln!(
             f,
             "run summary ({:.3} s, {} samples):",

@@ -2,17 +2,19 @@
 //! the feedforward selection `--ff`), the record of it that a run's log carries
 //! ([`LoggedController`]), and the one function that puts a PID configuration together from
 //! these layers ([`pid_config`]): `servo run` and `servo demo` run it, `servo compare` replays it.
+//!
+//! The option types derive `clap::Args`/`clap::ValueEnum` with the `clap` feature, so that a
+//! command-line tool can flatten [`PidOptions`] into its own arguments.
 
+use crate::error::{self as anyhow, anyhow, bail, Context};
 use crate::gains_file::GainsFile;
-use anyhow::{anyhow, bail, Context};
 use servo_core::control::{
     AntiWindup, DerivativeOn, Discretization, FeedforwardConfig, PidConfig, PidGains,
 };
 
 /// Anti-windup choice on the command line (and in a log's controller record).
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum AntiWindupArg {
     /// Not chosen here: the log's record (compare), else back-calculation when --kw or the gains
@@ -26,9 +28,8 @@ pub enum AntiWindupArg {
 }
 
 /// Derivative input on the command line (and in a log's controller record).
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum DerivativeOnArg {
     Error,
@@ -36,9 +37,8 @@ pub enum DerivativeOnArg {
 }
 
 /// Discretisation on the command line (and in a log's controller record).
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum DiscretizationArg {
     /// Not chosen here: the log's record (compare), else as the gains were designed
@@ -86,30 +86,61 @@ impl From<DerivativeOnArg> for DerivativeOn {
     }
 }
 
-/// The command-line name of a clap value (`tustin`, `back-calc`, ...).
-fn arg_name<T: clap::ValueEnum>(v: T) -> String {
-    v.to_possible_value()
-        .map(|p| p.get_name().to_string())
-        .unwrap_or_default()
+impl AntiWindupArg {
+    /// The option value (`auto`, `none`, `clamping`, `back-calc`), as on the command line and
+    /// in a log's controller record.
+    pub fn name(self) -> &'static str {
+        match self {
+            AntiWindupArg::Auto => "auto",
+            AntiWindupArg::None => "none",
+            AntiWindupArg::Clamping => "clamping",
+            AntiWindupArg::BackCalc => "back-calc",
+        }
+    }
+}
+
+impl DerivativeOnArg {
+    /// The option value (`error`, `measurement`).
+    pub fn name(self) -> &'static str {
+        match self {
+            DerivativeOnArg::Error => "error",
+            DerivativeOnArg::Measurement => "measurement",
+        }
+    }
+}
+
+impl DiscretizationArg {
+    /// The option value (`auto`, `backward-euler`, `tustin`).
+    pub fn name(self) -> &'static str {
+        match self {
+            DiscretizationArg::Auto => "auto",
+            DiscretizationArg::BackwardEuler => "backward-euler",
+            DiscretizationArg::Tustin => "tustin",
+        }
+    }
 }
 
 /// Options of the PID beyond its gains, as given on the command line of `servo run` and
 /// `servo compare` (`auto` or absent: not given, the next source decides).
-#[derive(Debug, Clone, Copy, PartialEq, clap::Args)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct PidOptions {
     /// Anti-windup scheme (auto: as the log records it for compare, else back-calculation when
     /// --kw or the gains file's kw gives K_w, else none).
-    #[arg(long = "anti-windup", value_enum, default_value = "auto")]
+    #[cfg_attr(
+        feature = "clap",
+        arg(long = "anti-windup", value_enum, default_value = "auto")
+    )]
     pub anti_windup: AntiWindupArg,
     /// Back-calculation anti-windup gain K_w [1/s] (overrides the log's and the gains file's kw).
-    #[arg(long, value_name = "PER_SECOND")]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "PER_SECOND"))]
     pub kw: Option<f64>,
     /// What the derivative acts on (default: as the log records it for compare, else the error).
-    #[arg(long = "derivative-on", value_enum)]
+    #[cfg_attr(feature = "clap", arg(long = "derivative-on", value_enum))]
     pub derivative_on: Option<DerivativeOnArg>,
     /// Discretisation of the integral and the derivative (auto: as the log records it for
     /// compare, else the gains file's `[design] discretization`, else backward Euler).
-    #[arg(long, value_enum, default_value = "auto")]
+    #[cfg_attr(feature = "clap", arg(long, value_enum, default_value = "auto"))]
     pub discretization: DiscretizationArg,
 }
 
@@ -126,7 +157,7 @@ impl Default for PidOptions {
 }
 
 /// The controller of a run as its log records it (MCAP metadata key
-/// [`crate::io::meta_keys::CONTROLLER_TOML`], a TOML table): everything needed to rebuild it
+/// [`crate::meta_keys::CONTROLLER_TOML`], a TOML table): everything needed to rebuild it
 /// exactly, with the value names of `servo run`'s options. The feedforward voltage itself is
 /// logged per sample (`ff_v` of the loop message). Every field is optional so that a record
 /// with fields missing still reads; the missing ones fall back to the next source.
@@ -217,6 +248,14 @@ impl LoggedController {
         }
         v
     }
+}
+
+/// The record of the controller as it ran, from a log's metadata (`None` for logs without one:
+/// CSV, open loop, or written before servo recorded it).
+pub fn logged_controller(meta: &crate::LogMeta) -> anyhow::Result<Option<LoggedController>> {
+    meta.get(crate::meta_keys::CONTROLLER_TOML)
+        .map(|t| LoggedController::parse(t).context("in the log's controller metadata"))
+        .transpose()
 }
 
 /// One part of a controller configuration, its value and where it came from.
@@ -359,7 +398,7 @@ pub fn pid_config(
     };
     parts.push(ControllerPart::new(
         "discretization",
-        arg_name(DiscretizationArg::from(discretization)),
+        DiscretizationArg::from(discretization).name().to_string(),
         match discretization {
             Discretization::BackwardEuler => "backward Euler".into(),
             Discretization::Tustin => "Tustin".into(),
@@ -384,8 +423,8 @@ pub fn pid_config(
     };
     parts.push(ControllerPart::new(
         "derivative_on",
-        arg_name(derivative_on),
-        format!("derivative on the {}", arg_name(derivative_on)),
+        derivative_on.name().to_string(),
+        format!("derivative on the {}", derivative_on.name()),
         s,
     ));
 
@@ -439,7 +478,7 @@ pub fn pid_config(
     };
     parts.push(ControllerPart::new(
         "anti_windup",
-        arg_name(scheme),
+        scheme.name().to_string(),
         words,
         &s,
     ));
@@ -468,6 +507,72 @@ pub fn pid_config(
     c.discretization = discretization;
     c.validate().map_err(|e| anyhow!("controller: {e}"))?;
     Ok(ResolvedPid { config: c, parts })
+}
+
+/// The period, the voltage limit and the PID of a run (`servo run`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunController {
+    /// Control period T_s [s].
+    pub ts_s: f64,
+    /// Symmetric limit of the driver input [V].
+    pub u_limit_v: f64,
+    /// The PID (None without a gains file: open loop).
+    pub pid: Option<PidConfig>,
+}
+
+/// The controller of a run: T_s from `ts_s` (`--ts`), else the gains file's `ts_s`, else 1 ms;
+/// the limit from `u_limit_v` (`--u-limit`), else the gains file's `u_limit_v`, else 10 V; the
+/// PID from the gains file (`gains`: the file and its name in messages) and the options, limited
+/// to +-the limit ([`pid_config`]).
+pub fn run_controller(
+    gains: Option<(&GainsFile, &str)>,
+    opts: &PidOptions,
+    ts_s: Option<f64>,
+    u_limit_v: Option<f64>,
+) -> anyhow::Result<RunController> {
+    let file = gains.map(|(g, _)| g);
+    let u_limit_v = u_limit_v
+        .or(file.and_then(|g| g.pid.u_limit_v))
+        .unwrap_or(10.0);
+    if !(u_limit_v.is_finite() && u_limit_v > 0.0) {
+        bail!("--u-limit must be > 0 V, got {u_limit_v}");
+    }
+    let ts_s = ts_s.or(file.map(|g| g.pid.ts_s)).unwrap_or(1e-3);
+    if !(ts_s.is_finite() && ts_s > 0.0 && ts_s <= 0.1) {
+        bail!("--ts must be a sample period in (0, 0.1] s, got {ts_s}");
+    }
+    let pid = gains
+        .map(|g| {
+            let src = PidSources {
+                opts,
+                logged: None,
+                gains_file: Some(g),
+            };
+            pid_config(&src, ts_s, Some((u_limit_v, String::new()))).map(|r| r.config)
+        })
+        .transpose()?;
+    Ok(RunController {
+        ts_s,
+        u_limit_v,
+        pid,
+    })
+}
+
+/// The feedforward of the `--ff` terms `terms` ([`parse_ff`]) with the constants of `model`
+/// (None: the nominal Table 2 model).
+pub fn feedforward(
+    terms: &str,
+    model: Option<&crate::model_file::ModelFile>,
+) -> anyhow::Result<servo_core::control::Feedforward> {
+    use servo_core::control::{Feedforward, FeedforwardParams};
+    let cfg = parse_ff(terms)?;
+    let plant = model
+        .cloned()
+        .unwrap_or_default()
+        .plant()
+        .context("--model")?;
+    Feedforward::new(FeedforwardParams::from_plant(&plant), cfg)
+        .map_err(|e| anyhow!("feedforward: {e}"))
 }
 
 /// Parses `--ff`: a comma list of `inertia` (J_eq and back-EMF), `friction` (viscous and
@@ -712,6 +817,39 @@ mod tests {
                 "feedforward"
             ]
         );
+    }
+
+    #[test]
+    fn option_names_are_the_serde_and_clap_names() {
+        fn check<T: serde::Serialize + Copy>(all: &[T], name: impl Fn(T) -> &'static str) {
+            for &v in all {
+                assert_eq!(
+                    serde_json::to_string(&v).unwrap(),
+                    format!("\"{}\"", name(v))
+                );
+            }
+        }
+        use AntiWindupArg as A;
+        use DiscretizationArg as D;
+        check(&[A::Auto, A::None, A::Clamping, A::BackCalc], A::name);
+        check(
+            &[DerivativeOnArg::Error, DerivativeOnArg::Measurement],
+            |d| d.name(),
+        );
+        check(&[D::Auto, D::BackwardEuler, D::Tustin], D::name);
+        #[cfg(feature = "clap")]
+        {
+            use clap::ValueEnum;
+            for a in A::value_variants() {
+                assert_eq!(a.to_possible_value().unwrap().get_name(), a.name());
+            }
+            for d in D::value_variants() {
+                assert_eq!(d.to_possible_value().unwrap().get_name(), d.name());
+            }
+            for d in DerivativeOnArg::value_variants() {
+                assert_eq!(d.to_possible_value().unwrap().get_name(), d.name());
+            }
+        }
     }
 
     #[test]

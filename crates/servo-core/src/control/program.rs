@@ -2,19 +2,40 @@
 //! (position references and open-loop voltages, e.g. from an experiment file), or a speed profile
 //! (the identification experiments' staircase and ramps, run by the speed controller).
 
-use servo_core::control::reference::TIME_EPS_S;
-use servo_core::control::sequence::{self, PlacedSegment, Segment, Target};
-use servo_core::control::{RefSample, Reference};
+use super::reference::TIME_EPS_S;
+use super::sequence::{self, PlacedSegment, Segment, SequenceError, Target};
+use super::{RefSample, Reference};
+use alloc::vec;
+use alloc::vec::Vec;
+
+/// Why a program could not be built.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ProgramError {
+    /// The open-loop voltage segment is not valid.
+    #[error("open-loop voltage program")]
+    OpenLoop(#[source] SequenceError),
+    /// A piece of a speed profile has a duration that is not a positive finite time.
+    #[error("speed profile piece {index}: duration must be > 0 s, got {duration_s}")]
+    PieceDuration { index: usize, duration_s: f64 },
+    /// A piece of a speed profile has a non-finite speed or acceleration.
+    #[error("speed profile piece {index}: non-finite speed {omega_l_rad_s} rad/s or acceleration {alpha_l_rad_s2} rad/s^2")]
+    PieceNotFinite {
+        index: usize,
+        omega_l_rad_s: f64,
+        alpha_l_rad_s2: f64,
+    },
+}
 
 /// The setpoint program of a run.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Program {
     /// Closed loop on one reference for the whole run.
     Position(Reference),
-    /// Segments one after the other (see [`servo_core::control::sequence`]).
+    /// Segments one after the other (see [`super::sequence`]).
     Segments(Vec<PlacedSegment>),
-    /// Closed loop on the load speed (the runner's speed controller,
-    /// [`crate::runner::RunConfig::speed_loop`]).
+    /// Closed loop on the load speed (the speed controller [`super::speed::SpeedLoop`] of the
+    /// run loop).
     Speed(SpeedProfile),
 }
 
@@ -45,9 +66,9 @@ impl From<sequence::Setpoint> for Setpoint {
 impl Program {
     /// Open loop: driver input u(t) [V] given by the generator `voltage` (its value read as V)
     /// for `duration_s`, 0 V after.
-    pub fn open_loop(voltage: Reference, duration_s: f64) -> anyhow::Result<Program> {
+    pub fn open_loop(voltage: Reference, duration_s: f64) -> Result<Program, ProgramError> {
         let p = PlacedSegment::after(&[], Segment::voltage(voltage, duration_s))
-            .map_err(|e| anyhow::anyhow!("open-loop voltage program: {e}"))?;
+            .map_err(ProgramError::OpenLoop)?;
         Ok(Program::Segments(vec![p]))
     }
 
@@ -128,27 +149,31 @@ impl SpeedProfile {
     }
 
     /// Appends a hold at `omega_l_rad_s` [rad/s] for `duration_s` [s] (0 rad/s: a rest).
-    pub fn hold(&mut self, duration_s: f64, omega_l_rad_s: f64) -> anyhow::Result<()> {
+    pub fn hold(&mut self, duration_s: f64, omega_l_rad_s: f64) -> Result<(), ProgramError> {
         self.push(duration_s, omega_l_rad_s, 0.0)
     }
 
     /// Appends a ramp from `from_rad_s` to `to_rad_s` [rad/s] over `duration_s` [s].
-    pub fn ramp(&mut self, duration_s: f64, from_rad_s: f64, to_rad_s: f64) -> anyhow::Result<()> {
+    pub fn ramp(
+        &mut self,
+        duration_s: f64,
+        from_rad_s: f64,
+        to_rad_s: f64,
+    ) -> Result<(), ProgramError> {
         self.push(duration_s, from_rad_s, (to_rad_s - from_rad_s) / duration_s)
     }
 
-    fn push(&mut self, duration_s: f64, omega: f64, alpha: f64) -> anyhow::Result<()> {
+    fn push(&mut self, duration_s: f64, omega: f64, alpha: f64) -> Result<(), ProgramError> {
+        let index = self.pieces.len();
         if !(duration_s.is_finite() && duration_s > 0.0) {
-            anyhow::bail!(
-                "speed profile piece {}: duration must be > 0 s, got {duration_s}",
-                self.pieces.len()
-            );
+            return Err(ProgramError::PieceDuration { index, duration_s });
         }
         if !(omega.is_finite() && alpha.is_finite()) {
-            anyhow::bail!(
-                "speed profile piece {}: non-finite speed {omega} rad/s or acceleration {alpha} rad/s^2",
-                self.pieces.len()
-            );
+            return Err(ProgramError::PieceNotFinite {
+                index,
+                omega_l_rad_s: omega,
+                alpha_l_rad_s2: alpha,
+            });
         }
         self.pieces.push(SpeedPiece {
             start_s: self.duration_s(),
@@ -170,7 +195,7 @@ impl SpeedProfile {
     }
 
     /// (load speed [rad/s], load acceleration [rad/s^2]) at `t_s` [s]. Times within 1 ns of a
-    /// boundary count as at it, as in [`servo_core::control::sequence`].
+    /// boundary count as at it, as in [`super::sequence`].
     pub fn at(&self, t_s: f64) -> (f64, f64) {
         if t_s < -TIME_EPS_S || t_s >= self.duration_s() - TIME_EPS_S {
             return (0.0, 0.0);

@@ -10,6 +10,11 @@
 //!
 //! i.e. a critically damped filter of the derivative with both poles at -w_b (continuous time).
 //! Unlike a finite difference it does not jump by one count per sample at low speed.
+//!
+//! Also the load-side speed controller of the identification experiments ([`SpeedLoop`]).
+//! Everything here is `no_std` and allocation-free.
+
+use crate::params::{ParamError, PlantParams};
 
 /// Tracking-loop speed estimator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -65,7 +70,7 @@ impl SpeedEstimator {
 pub const SPEED_LOOP_CROSSOVER_RAD_S: f64 = 50.0;
 
 /// The speed controller of the speed parts of a run (the identification staircase and ramps,
-/// [`crate::runner::Program::Speed`]): a PI on the load-speed estimate plus a back-EMF and
+/// [`super::program::Program::Speed`]): a PI on the load-speed estimate plus a back-EMF and
 /// inertia feedforward from nominal parameters,
 ///
 /// ```text
@@ -93,13 +98,12 @@ pub struct SpeedLoopConfig {
 impl SpeedLoopConfig {
     /// The speed loop for the nominal parameters `p` with crossover `omega_c_rad_s` [rad/s].
     pub fn from_params(
-        p: &servo_core::PlantParams,
+        p: &PlantParams,
         omega_c_rad_s: f64,
-    ) -> anyhow::Result<SpeedLoopConfig> {
-        p.validate()
-            .map_err(|e| anyhow::anyhow!("speed loop: parameters: {e}"))?;
+    ) -> Result<SpeedLoopConfig, SpeedLoopError> {
+        p.validate().map_err(SpeedLoopError::Params)?;
         if !(omega_c_rad_s.is_finite() && omega_c_rad_s > 0.0) {
-            anyhow::bail!("speed loop: crossover must be > 0 rad/s, got {omega_c_rad_s}");
+            return Err(SpeedLoopError::Crossover { omega_c_rad_s });
         }
         let (k_m_load, t_m) = (p.k_m() / p.n, p.t_m());
         let kp = omega_c_rad_s * t_m / k_m_load;
@@ -110,6 +114,18 @@ impl SpeedLoopConfig {
             ff_accel_v_s2_rad: p.r_eq() * p.j_eq() * p.n / (p.k_t * p.k_drv),
         })
     }
+}
+
+/// Why a speed loop could not be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SpeedLoopError {
+    /// The nominal parameters are not a valid plant.
+    #[error("speed loop: parameters")]
+    Params(#[source] ParamError),
+    /// The crossover is not a positive finite frequency.
+    #[error("speed loop: crossover must be > 0 rad/s, got {omega_c_rad_s}")]
+    Crossover { omega_c_rad_s: f64 },
 }
 
 /// One output of [`SpeedLoop::update`] [V].
@@ -224,7 +240,7 @@ mod tests {
     #[test]
     fn speed_loop_tracks_a_first_order_motor() {
         // The reduced model omega_l' = ((k_m/N) u - omega_l) / T_m, Table 2, exact speed.
-        let p = servo_core::PlantParams::TABLE2;
+        let p = PlantParams::TABLE2;
         let cfg = SpeedLoopConfig::from_params(&p, 50.0).unwrap();
         let ts = 1e-3;
         let mut c = SpeedLoop::new(cfg, ts);
