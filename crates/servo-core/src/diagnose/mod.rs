@@ -396,7 +396,8 @@ pub fn diagnose_dataset(
             }
         }
         if c.significant {
-            if let Some(k) = bal.and_then(|b| resonance_check(ds, b, solved.equation(eq))) {
+            let base_sol = sols.iter().copied().find(|s| s.equation == eq);
+            if let Some(k) = bal.and_then(|b| resonance_check(ds, b, base_sol, solved)) {
                 c.significant = k.passed;
                 c.checks.push(k);
                 if !c.significant {
@@ -532,23 +533,30 @@ pub fn diagnose_dataset(
 /// resonance is a second mass on a spring, which no catalogue effect of the rigid model holds
 /// (a gear play bends to it through its contact stiffness but does not ring at a fixed
 /// frequency). The check fails when the candidate's residual keeps at least half the base
-/// residual's mean square in the resonance band. `None` when the balance shows no resonance.
+/// residual's power in the resonance band, both measured on the held-out rows that both models
+/// weigh (see [`structure::resonance_kept`]). `None` when the balance shows no resonance.
 fn resonance_check(
     ds: &Dataset,
     b: &BalanceReport,
-    sol: Option<&EqSolution>,
+    base: Option<&EqSolution>,
+    cand: &Solved,
 ) -> Option<checks::Check> {
     let res = b.resonance.as_ref().filter(|_| b.above_noise)?;
-    let left = structure::resonance_left(ds, sol?, res);
-    let kept = left / res.band_ms.max(1e-300);
+    let sol = cand.equation(b.equation)?;
+    let contact = cand
+        .cfg
+        .slots
+        .iter()
+        .any(|s| s.kind.sim_role() == crate::effects::SimRole::Contact);
+    let kept = structure::resonance_kept(ds, base?, sol, contact, res);
     Some(checks::Check {
         name: "explains the resonance",
         passed: kept < 0.5,
         detail: alloc::format!(
-            "the {} residual rings near {:.1} Hz (damping ratio ~{:.2}, {:.0} % of it); with this effect {:.0} % of that band's power is still there (needs under 50 %){}",
+            "the {} residual rings near {:.1} Hz ({}, {:.0} % of it); with this effect {:.0} % of that band's power is still there on the rows both models weigh (needs under 50 %){}",
             b.equation.name(),
             res.freq_hz,
-            res.damping_ratio,
+            resonance::damping_phrase(res),
             100.0 * res.share,
             100.0 * kept,
             if kept < 0.5 {

@@ -19,8 +19,13 @@ use alloc::vec::Vec;
 pub struct Resonance {
     /// Peak frequency (damped natural frequency) [Hz].
     pub freq_hz: f64,
-    /// Damping ratio from the half-power half-width (window broadening removed) [1].
+    /// Damping ratio from the half-power half-width (window broadening removed) [1]; an upper
+    /// bound when `damping_resolved` is false.
     pub damping_ratio: f64,
+    /// Whether the peak is wider than the window alone makes it: otherwise the contiguous
+    /// stretches of the log are too short to resolve the damping, and `damping_ratio` is the
+    /// largest one the measured width allows.
+    pub damping_resolved: bool,
     /// Half-width of the band judged around the peak [Hz].
     pub band_hz: f64,
     /// Share of the held-out residual's power in the band (0..1).
@@ -190,8 +195,15 @@ pub fn find(
     if p < 2 || p + 2 >= grid.len() {
         return None;
     }
+    // The window alone makes a peak about `win_hw` wide: a narrower true peak is not resolved,
+    // and the measured width then only bounds the damping.
     let hw_true = math::sqrt((hw * hw - win_hw * win_hw).max(0.0));
-    let zeta = hw_true / f0;
+    let damping_resolved = hw_true >= 0.5 * win_hw;
+    let zeta = if damping_resolved {
+        hw_true
+    } else {
+        hw.max(0.5 * win_hw)
+    } / f0;
     if zeta > MAX_DAMPING {
         return None;
     }
@@ -250,6 +262,7 @@ pub fn find(
     Some(Resonance {
         freq_hz: f0,
         damping_ratio: zeta,
+        damping_resolved,
         band_hz: band,
         share,
         band_ms: ms,
@@ -285,4 +298,17 @@ pub fn band_ms(ds: &Dataset, rows: &Rows, idx: &[usize], r: &[f64], res: &Resona
             .map(|(a, b)| 0.375 * (b - a) as f64)
             .sum::<f64>()
             .max(1.0)
+}
+
+/// The damping ratio of `res` in words: its value, or the bound when the log's contiguous
+/// stretches are too short to resolve it.
+pub fn damping_phrase(res: &Resonance) -> alloc::string::String {
+    if res.damping_resolved {
+        alloc::format!("damping ratio ~{:.2}", res.damping_ratio)
+    } else {
+        alloc::format!(
+            "damping ratio below ~{:.2}: lighter than the log's contiguous stretches resolve",
+            res.damping_ratio
+        )
+    }
 }

@@ -681,8 +681,9 @@ pub fn analyse(
             sigs.push(Signature {
                 kind: "resonance",
                 description: alloc::format!(
-                    "rings as a resonance near {:.1} Hz (damping ratio ~{:.2}) after steps and reversals, at the same frequency whatever the speed (no harmonic of load or motor angle): e.g. a compliant shaft or coupling",
-                    res.freq_hz, res.damping_ratio
+                    "rings as a resonance near {:.1} Hz ({}) after steps and reversals, at the same frequency at slow and fast speeds (no harmonic of load or motor angle): a structural mode, e.g. a compliant shaft or coupling",
+                    res.freq_hz,
+                    super::resonance::damping_phrase(&res)
                 ),
                 share: res.share,
                 explained_rms: math::sqrt(res.band_ms),
@@ -753,16 +754,45 @@ fn experiment_for(balance: BalanceKind, top: Option<&Signature>) -> String {
     }
 }
 
-/// Mean square that the residual `sol` (a candidate's, on the same balance) leaves in the band of
-/// the resonance `res` found in the base model's residual [unit^2], on the same rows.
-pub fn resonance_left(ds: &Dataset, sol: &EqSolution, res: &super::resonance::Resonance) -> f64 {
-    let rows = if sol.equation == Equation::Electrical {
+/// Share of the resonance band's power that a candidate's residual `cand` keeps against the base
+/// model's residual `base` (same balance) [1]: both mean squares in the band of `res` on the
+/// held-out rows that BOTH weigh. A model with a gear play gives no weight to the rows near a
+/// reversal of the motor torque (`contact`: the candidate's model has a contact effect), which
+/// is where a resonance rings after each step: those rows leave both sums, so a candidate cannot
+/// "explain" the ringing by ignoring the rows it lives in.
+pub fn resonance_kept(
+    ds: &Dataset,
+    base: &EqSolution,
+    cand: &EqSolution,
+    contact: bool,
+    res: &super::resonance::Resonance,
+) -> f64 {
+    let rows = if cand.equation == Equation::Electrical {
         &ds.elec_rows
     } else {
         &ds.mech_rows
     };
-    let v = view(ds, rows, sol);
-    super::resonance::band_ms(ds, rows, &v.row_idx, &v.r, res)
+    let band = |sol: &EqSolution| {
+        let v = view(ds, rows, sol);
+        let keep: Vec<usize> = (0..v.row_idx.len())
+            .filter(|&j| {
+                !(contact
+                    && rows
+                        .gap_crossing
+                        .get(v.row_idx[j])
+                        .copied()
+                        .unwrap_or(false))
+            })
+            .collect();
+        let idx: Vec<usize> = keep.iter().map(|&j| v.row_idx[j]).collect();
+        let r: Vec<f64> = keep.iter().map(|&j| v.r[j]).collect();
+        super::resonance::band_ms(ds, rows, &idx, &r, res)
+    };
+    let before = band(base);
+    if before.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+        return 0.0;
+    }
+    band(cand) / before
 }
 
 /// Text of a balance report (for the verdict).
