@@ -22,6 +22,7 @@ pub mod checks;
 pub mod evidence;
 pub mod joint;
 pub mod regimes;
+pub mod resonance;
 pub mod structure;
 pub mod timing;
 pub mod user_effects;
@@ -394,6 +395,17 @@ pub fn diagnose_dataset(
                 }
             }
         }
+        if c.significant {
+            let base_sol = sols.iter().copied().find(|s| s.equation == eq);
+            if let Some(k) = bal.and_then(|b| resonance_check(ds, b, base_sol, solved)) {
+                c.significant = k.passed;
+                c.checks.push(k);
+                if !c.significant {
+                    c.experiment = Some(String::from(evidence::experiment(c.effect)));
+                    evidence::append_failed(&mut c);
+                }
+            }
+        }
         c
     });
     let mut ranking = judged;
@@ -577,6 +589,45 @@ pub(crate) fn structure_check(
             100.0 * left.map_or(0.0, |s| s.share),
             left.map_or(0.0, |s| s.explained_rms),
             unit = eq.unit()
+        ),
+    })
+}
+
+/// A candidate that leaves the resonance ringing in the balance it is judged on is a mimic: a
+/// resonance is a second mass on a spring, which no catalogue effect of the rigid model holds
+/// (a gear play bends to it through its contact stiffness but does not ring at a fixed
+/// frequency). The check fails when the candidate's residual keeps at least half the base
+/// residual's power in the resonance band, both measured on the held-out rows that both models
+/// weigh (see [`structure::resonance_kept`]). `None` when the balance shows no resonance.
+fn resonance_check(
+    ds: &Dataset,
+    b: &BalanceReport,
+    base: Option<&EqSolution>,
+    cand: &Solved,
+) -> Option<checks::Check> {
+    let res = b.resonance.as_ref().filter(|_| b.above_noise)?;
+    let sol = cand.equation(b.equation)?;
+    let contact = cand
+        .cfg
+        .slots
+        .iter()
+        .any(|s| s.kind.sim_role() == crate::effects::SimRole::Contact);
+    let kept = structure::resonance_kept(ds, base?, sol, contact, res);
+    Some(checks::Check {
+        name: "explains the resonance",
+        passed: kept < 0.5,
+        detail: alloc::format!(
+            "the {} residual rings near {:.1} Hz ({}, {:.0} % of it); with this effect {:.0} % of that band's power is still there on the rows both models weigh (needs under 50 %){}",
+            b.equation.name(),
+            res.freq_hz,
+            resonance::damping_phrase(res),
+            100.0 * res.share,
+            100.0 * kept,
+            if kept < 0.5 {
+                ""
+            } else {
+                ": a resonance (e.g. a compliant shaft or coupling) that this effect does not explain"
+            }
         ),
     })
 }

@@ -75,8 +75,8 @@ impl BalanceKind {
 /// One interpretable shape of a residual.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Signature {
-    /// Family: `speed`, `load_angle`, `motor_angle`, `time_drift`, `oscillation`, `current`,
-    /// `voltage`, `offset`.
+    /// Family: `speed`, `load_angle`, `motor_angle`, `time_drift`, `oscillation`, `resonance`,
+    /// `current`, `voltage`, `offset`.
     pub kind: &'static str,
     /// Plain-language description with the measured figure (shape, cycles per revolution, ...).
     pub description: String,
@@ -105,6 +105,8 @@ pub struct BalanceReport {
     pub above_noise: bool,
     /// The experiment that would tell the candidates apart.
     pub experiment: String,
+    /// A resonance that rings in the residual (named among the signatures as `resonance`).
+    pub resonance: Option<super::resonance::Resonance>,
 }
 
 /// Variance gains of the record's filter applied to white noise: (value, first derivative,
@@ -229,6 +231,9 @@ struct View {
 }
 
 const MAX_ROWS: usize = 12_000;
+
+/// A resonance's spectral peak must stand this many times above the median of the spectrum.
+const MIN_PROMINENCE: f64 = 8.0;
 
 fn view(ds: &Dataset, rows: &Rows, sol: &EqSolution) -> View {
     let n = rows.len().min(sol.resid.len());
@@ -662,6 +667,30 @@ pub fn analyse(
         };
         push("voltage", String::from(what), res);
     }
+    // A resonance: ringing after each step at a fixed frequency, which no steady sinusoid fits
+    // (its phase restarts at every excitation) but whose spectrum has a narrow peak.
+    let mut resonance = None;
+    {
+        let steady = sigs
+            .iter()
+            .find(|s| s.kind == "oscillation")
+            .map_or(0.0, |s| s.share);
+        if let Some(res) = super::resonance::find(ds, rows, &v.row_idx, &v.r, &v.omega_m)
+            .filter(|res| res.prominence >= MIN_PROMINENCE && res.share >= 2.0 * steady)
+        {
+            sigs.push(Signature {
+                kind: "resonance",
+                description: alloc::format!(
+                    "rings as a resonance near {:.1} Hz ({}) after steps and reversals, at the same frequency at slow and fast speeds (no harmonic of load or motor angle): a structural mode, e.g. a compliant shaft or coupling",
+                    res.freq_hz,
+                    super::resonance::damping_phrase(&res)
+                ),
+                share: res.share,
+                explained_rms: math::sqrt(res.band_ms),
+            });
+            resonance = Some(res);
+        }
+    }
     sigs.retain(|s| s.share >= th.min_signature_share && s.explained_rms > 0.0);
     sigs.sort_by(|a, b| b.share.total_cmp(&a.share));
     let structured = !sigs.is_empty() || ratio >= 2.0 * th.unexplained_ratio;
@@ -682,7 +711,16 @@ pub fn analyse(
     } else {
         BalanceKind::Torque
     };
-    let experiment = experiment_for(balance, sigs.first());
+    let resonance = resonance.filter(|_| sigs.iter().any(|s| s.kind == "resonance"));
+    let experiment = match (sigs.first(), resonance) {
+        (Some(s), Some(res)) if s.kind == "resonance" => alloc::format!(
+            "excite around {:.0} Hz with a small chirp (experiments/chirp.toml, e.g. {:.0} to {:.0} Hz) and run `servo frf` on the log, logging motor and load angles if you can: a compliant shaft or coupling shows a resonance peak and an antiresonance at fixed frequencies, whatever the amplitude and speed, and the motor and load angles differ there; a play would instead change with the amplitude",
+            res.freq_hz,
+            (0.5 * res.freq_hz).max(1.0),
+            2.0 * res.freq_hz
+        ),
+        _ => experiment_for(balance, sigs.first()),
+    };
     BalanceReport {
         equation: sol.equation,
         balance,
@@ -692,6 +730,7 @@ pub fn analyse(
         signatures: sigs,
         above_noise,
         experiment,
+        resonance,
     }
 }
 
@@ -713,6 +752,47 @@ fn experiment_for(balance: BalanceKind, top: Option<&Signature>) -> String {
         ),
         _ => String::from(base),
     }
+}
+
+/// Share of the resonance band's power that a candidate's residual `cand` keeps against the base
+/// model's residual `base` (same balance) [1]: both mean squares in the band of `res` on the
+/// held-out rows that BOTH weigh. A model with a gear play gives no weight to the rows near a
+/// reversal of the motor torque (`contact`: the candidate's model has a contact effect), which
+/// is where a resonance rings after each step: those rows leave both sums, so a candidate cannot
+/// "explain" the ringing by ignoring the rows it lives in.
+pub fn resonance_kept(
+    ds: &Dataset,
+    base: &EqSolution,
+    cand: &EqSolution,
+    contact: bool,
+    res: &super::resonance::Resonance,
+) -> f64 {
+    let rows = if cand.equation == Equation::Electrical {
+        &ds.elec_rows
+    } else {
+        &ds.mech_rows
+    };
+    let band = |sol: &EqSolution| {
+        let v = view(ds, rows, sol);
+        let keep: Vec<usize> = (0..v.row_idx.len())
+            .filter(|&j| {
+                !(contact
+                    && rows
+                        .gap_crossing
+                        .get(v.row_idx[j])
+                        .copied()
+                        .unwrap_or(false))
+            })
+            .collect();
+        let idx: Vec<usize> = keep.iter().map(|&j| v.row_idx[j]).collect();
+        let r: Vec<f64> = keep.iter().map(|&j| v.r[j]).collect();
+        super::resonance::band_ms(ds, rows, &idx, &r, res)
+    };
+    let before = band(base);
+    if before.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+        return 0.0;
+    }
+    band(cand) / before
 }
 
 /// Text of a balance report (for the verdict).

@@ -168,8 +168,9 @@ pub fn prediction_cost_stepped(
         let contact = plant_contact(plant);
         let half_gap = contact.map_or(0.0, |c| c.gap_rad) * 0.5;
         // With play, the motor side is put on the flank it presses on, the contact spring
-        // compressed by the torque the load needs (load side [rad]).
-        let offset_l = if half_gap > 0.0 {
+        // compressed by the torque the load needs (load side [rad]); without play (a compliance)
+        // the spring is wound up by that torque all the same.
+        let offset_l = if contact.is_some() {
             let tau_c = contact_torque_l(plant, w, r.accel_f[k0], u_prev, ds.opts.min_speed_rad_s);
             let k_c = contact.map_or(f64::INFINITY, |c| c.stiffness_nm_per_rad);
             half_gap * math::sign(tau_c) + tau_c / k_c

@@ -839,8 +839,11 @@ impl PlantSim {
             // Penetration beyond the flank (tiny negative values: on the flank after a
             // projection, up to rounding).
             let p = side * (side * delta - 0.5 * b.gap);
-            if side * p >= -1e-12 * b.gap.max(1e-9)
-                && side * (b.stiffness * p + b.damping * rate) > 0.0
+            // Without play the contact never opens: a compliance (shaft, coupling) is a
+            // linear spring-damper that pulls as well as pushes.
+            if b.gap <= 0.0
+                || (side * p >= -1e-12 * b.gap.max(1e-9)
+                    && side * (b.stiffness * p + b.damping * rate) > 0.0)
             {
                 mode |= CONTACT;
                 tau_offset = side * b.stiffness * 0.5 * b.gap;

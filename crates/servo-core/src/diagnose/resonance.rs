@@ -1,0 +1,314 @@
+//! A resonance in a balance's residual: a lightly damped oscillation that rings after each step
+//! or reversal (a compliant shaft or coupling, a flexible mount), at a frequency fixed by
+//! stiffness and inertia whatever the speed.
+//!
+//! Ringing restarts with a new phase and amplitude at every excitation, so no single steady
+//! sinusoid fits it; its power spectrum does: a narrow peak at the damped natural frequency f_d
+//! whose half-power half-width is about zeta f_d. The spectrum is averaged over the contiguous
+//! runs of rows (Welch-like, Hann window, each run its own segment), the peak and its width are
+//! found on the fit rows and the share of the residual in that band is judged on the held-out
+//! rows. A periodic torque in angle moves its frequency with speed: the peak must stay at the
+//! same frequency in the slow and the fast half of the runs when their speeds differ.
+
+use crate::fit::dataset::{Dataset, Rows};
+use crate::math;
+use alloc::vec::Vec;
+
+/// A resonance found in a residual.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Resonance {
+    /// Peak frequency (damped natural frequency) [Hz].
+    pub freq_hz: f64,
+    /// Damping ratio from the half-power half-width (window broadening removed) [1]; an upper
+    /// bound when `damping_resolved` is false.
+    pub damping_ratio: f64,
+    /// Whether the peak is wider than the window alone makes it: otherwise the contiguous
+    /// stretches of the log are too short to resolve the damping, and `damping_ratio` is the
+    /// largest one the measured width allows.
+    pub damping_resolved: bool,
+    /// Half-width of the band judged around the peak [Hz].
+    pub band_hz: f64,
+    /// Share of the held-out residual's power in the band (0..1).
+    pub share: f64,
+    /// Mean square of the held-out residual in the band [unit^2].
+    pub band_ms: f64,
+    /// Peak power over the median power of the held-out spectrum [1].
+    pub prominence: f64,
+}
+
+/// Largest damping ratio still called a resonance (a broader hump is no resonance).
+const MAX_DAMPING: f64 = 0.25;
+/// Shortest run of contiguous rows used as a segment.
+const MIN_RUN: usize = 12;
+
+/// Contiguous runs of rows: (first, end) into `idx`, same record, uniform spacing, one side of
+/// the fit / held-out split. Returns the runs and the row period [s].
+fn runs(ds: &Dataset, rows: &Rows, idx: &[usize]) -> (Vec<(usize, usize)>, f64) {
+    let mut diffs: Vec<usize> = idx
+        .windows(2)
+        .filter(|w| rows.rec[w[0]] == rows.rec[w[1]] && rows.k[w[1]] > rows.k[w[0]])
+        .map(|w| rows.k[w[1]] - rows.k[w[0]])
+        .collect();
+    if diffs.is_empty() {
+        return (Vec::new(), 0.0);
+    }
+    diffs.sort_unstable();
+    let step = diffs[diffs.len() / 2];
+    let mut out = Vec::new();
+    let mut start = 0;
+    for j in 1..=idx.len() {
+        let brk = j == idx.len() || {
+            let (a, b) = (idx[j - 1], idx[j]);
+            rows.rec[a] != rows.rec[b]
+                || rows.k[b] != rows.k[a] + step
+                || rows.fit[a] != rows.fit[b]
+        };
+        if brk {
+            if j - start >= MIN_RUN {
+                out.push((start, j));
+            }
+            start = j;
+        }
+    }
+    let dt = out
+        .first()
+        .map_or(0.0, |&(a, _)| ds.recs[rows.rec[idx[a]]].dt_s * step as f64);
+    (out, dt)
+}
+
+/// Averaged spectrum of `r` over `segs` on the grid `grid` [Hz]: (sum of |X(f)|^2, sum over
+/// segments of the windowed energy).
+fn spectrum(r: &[f64], segs: &[(usize, usize)], dt: f64, grid: &[f64]) -> (Vec<f64>, f64) {
+    let mut s = alloc::vec![0.0; grid.len()];
+    let mut energy = 0.0;
+    let tau = core::f64::consts::TAU;
+    for &(a, b) in segs {
+        let n = b - a;
+        let m = r[a..b].iter().sum::<f64>() / n as f64;
+        let x: Vec<f64> = (0..n)
+            .map(|i| {
+                let w = 0.5 - 0.5 * math::cos(tau * (i as f64 + 0.5) / n as f64);
+                (r[a + i] - m) * w
+            })
+            .collect();
+        energy += x.iter().map(|v| v * v).sum::<f64>();
+        for (g, &f) in grid.iter().enumerate() {
+            let (c1, s1) = (math::cos(tau * f * dt), math::sin(tau * f * dt));
+            let (mut c, mut sn) = (1.0, 0.0);
+            let (mut re, mut im) = (0.0, 0.0);
+            for &v in &x {
+                re += v * c;
+                im += v * sn;
+                let nc = c * c1 - sn * s1;
+                sn = sn * c1 + c * s1;
+                c = nc;
+            }
+            s[g] += re * re + im * im;
+        }
+    }
+    (s, energy)
+}
+
+fn median(v: &[f64]) -> f64 {
+    let mut s: Vec<f64> = v.to_vec();
+    s.sort_by(|a, b| a.total_cmp(b));
+    s.get(s.len() / 2).copied().unwrap_or(0.0)
+}
+
+/// Peak of `s` (index) and its half-power half-width [Hz] on a uniform grid of step `df`.
+fn peak_width(s: &[f64], df: f64) -> Option<(usize, f64)> {
+    let (p, &top) = s.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
+    if top.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+        return None;
+    }
+    let half = 0.5 * top;
+    let side = |dir: isize| -> Option<f64> {
+        let mut j = p as isize;
+        loop {
+            let nx = j + dir;
+            if nx < 0 || nx as usize >= s.len() {
+                return None;
+            }
+            if s[nx as usize] < half {
+                let (a, b) = (s[j as usize], s[nx as usize]);
+                let frac = (a - half) / (a - b).max(1e-300);
+                return Some(((j - p as isize).abs() as f64 + frac) * df);
+            }
+            j = nx;
+        }
+    };
+    let w = match (side(-1), side(1)) {
+        (Some(a), Some(b)) => 0.5 * (a + b),
+        _ => return None,
+    };
+    Some((p, w))
+}
+
+/// Finds a resonance in a balance's residual over `rows`, at the view's rows `idx`
+/// (indices into `rows`, in time order) with residual values `r`. `omega_m` holds the motor speed
+/// at the same rows.
+pub fn find(
+    ds: &Dataset,
+    rows: &Rows,
+    idx: &[usize],
+    r: &[f64],
+    omega_m: &[f64],
+) -> Option<Resonance> {
+    let (segs, dt) = runs(ds, rows, idx);
+    if segs.len() < 4 || dt <= 0.0 {
+        return None;
+    }
+    let mut lens: Vec<f64> = segs.iter().map(|(a, b)| (b - a) as f64 * dt).collect();
+    lens.sort_by(|a, b| a.total_cmp(b));
+    let t_seg = lens[lens.len() / 2];
+    // Hann main lobe: half-power half-width about 0.72 / T.
+    let win_hw = 0.72 / t_seg;
+    let df = 0.25;
+    let f_lo = (3.0 * win_hw).max(2.0);
+    let f_hi = 0.45 / dt;
+    if f_hi <= f_lo + 4.0 * df {
+        return None;
+    }
+    let n_grid = ((f_hi - f_lo) / df) as usize;
+    let grid: Vec<f64> = (0..=n_grid).map(|j| f_lo + df * j as f64).collect();
+    let (fit, hold): (Vec<(usize, usize)>, Vec<(usize, usize)>) =
+        segs.iter().partition(|&&(a, _)| rows.fit[idx[a]]);
+    let (fit, hold) = if hold.is_empty() || fit.is_empty() {
+        // Without held-out rows, judge on every other run.
+        segs.iter()
+            .enumerate()
+            .fold((Vec::new(), Vec::new()), |(mut f, mut h), (i, s)| {
+                if i % 2 == 0 {
+                    f.push(*s);
+                } else {
+                    h.push(*s);
+                }
+                (f, h)
+            })
+    } else {
+        (fit, hold)
+    };
+    let (s_fit, _) = spectrum(r, &fit, dt, &grid);
+    let (p, hw) = peak_width(&s_fit, df)?;
+    let f0 = grid[p];
+    // Not at the edges of the band scanned.
+    if p < 2 || p + 2 >= grid.len() {
+        return None;
+    }
+    // The window alone makes a peak about `win_hw` wide: a narrower true peak is not resolved,
+    // and the measured width then only bounds the damping.
+    let hw_true = math::sqrt((hw * hw - win_hw * win_hw).max(0.0));
+    let damping_resolved = hw_true >= 0.5 * win_hw;
+    let zeta = if damping_resolved {
+        hw_true
+    } else {
+        hw.max(0.5 * win_hw)
+    } / f0;
+    if zeta > MAX_DAMPING {
+        return None;
+    }
+    let band = 2.0 * hw.max(win_hw);
+    let (s_hold, e_hold) = spectrum(r, &hold, dt, &grid);
+    let in_band: f64 = grid
+        .iter()
+        .zip(&s_hold)
+        .filter(|(f, _)| (**f - f0).abs() <= band)
+        .map(|(_, s)| s)
+        .sum::<f64>()
+        * df;
+    // One-sided integral of |X(f)|^2 over 0..fs/2 equals fs/2 times the windowed energy.
+    let total = 0.5 / dt * e_hold;
+    if total <= 0.0 {
+        return None;
+    }
+    let share = (in_band / total).min(1.0);
+    let top_hold = grid
+        .iter()
+        .zip(&s_hold)
+        .filter(|(f, _)| (**f - f0).abs() <= band)
+        .map(|(_, s)| *s)
+        .fold(0.0, f64::max);
+    let prominence = top_hold / median(&s_hold).max(1e-300);
+    // The same frequency at two speeds: split the runs by their mean |speed|.
+    let mean_speed = |&(a, b): &(usize, usize)| {
+        omega_m[a..b].iter().map(|w| w.abs()).sum::<f64>() / (b - a) as f64
+    };
+    let mut by_speed: Vec<(f64, (usize, usize))> =
+        segs.iter().map(|s| (mean_speed(s), *s)).collect();
+    by_speed.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mid = by_speed.len() / 2;
+    let (slow, fast) = by_speed.split_at(mid);
+    let speed =
+        |h: &[(f64, (usize, usize))]| h.iter().map(|x| x.0).sum::<f64>() / h.len().max(1) as f64;
+    if slow.len() >= 2 && fast.len() >= 2 && speed(fast) > 1.3 * speed(slow) {
+        let seg = |h: &[(f64, (usize, usize))]| h.iter().map(|x| x.1).collect::<Vec<_>>();
+        let (a, _) = spectrum(r, &seg(slow), dt, &grid);
+        let (b, _) = spectrum(r, &seg(fast), dt, &grid);
+        let fa = peak_width(&a, df).map(|(i, _)| grid[i]);
+        let fb = peak_width(&b, df).map(|(i, _)| grid[i]);
+        if let (Some(fa), Some(fb)) = (fa, fb) {
+            if (fa - fb).abs() > band {
+                return None;
+            }
+        }
+    }
+    let ms = in_band
+        / (0.5 / dt)
+        / hold
+            .iter()
+            .map(|(a, b)| 0.375 * (b - a) as f64)
+            .sum::<f64>()
+            .max(1.0);
+    Some(Resonance {
+        freq_hz: f0,
+        damping_ratio: zeta,
+        damping_resolved,
+        band_hz: band,
+        share,
+        band_ms: ms,
+        prominence,
+    })
+}
+
+/// Mean square of `r` in the band of `res` on the held-out runs (the same runs and grid as
+/// [`find`]): how much of the resonance a candidate leaves.
+pub fn band_ms(ds: &Dataset, rows: &Rows, idx: &[usize], r: &[f64], res: &Resonance) -> f64 {
+    let (segs, dt) = runs(ds, rows, idx);
+    if segs.is_empty() || dt <= 0.0 {
+        return 0.0;
+    }
+    let df = 0.25;
+    let n = (2.0 * res.band_hz / df) as usize;
+    let grid: Vec<f64> = (0..=n)
+        .map(|j| res.freq_hz - res.band_hz + df * j as f64)
+        .filter(|f| *f > 0.0)
+        .collect();
+    let hold: Vec<(usize, usize)> = segs
+        .iter()
+        .copied()
+        .filter(|&(a, _)| !rows.fit[idx[a]])
+        .collect();
+    let hold = if hold.is_empty() { segs } else { hold };
+    let (s, _) = spectrum(r, &hold, dt, &grid);
+    let in_band = s.iter().sum::<f64>() * df;
+    in_band
+        / (0.5 / dt)
+        / hold
+            .iter()
+            .map(|(a, b)| 0.375 * (b - a) as f64)
+            .sum::<f64>()
+            .max(1.0)
+}
+
+/// The damping ratio of `res` in words: its value, or the bound when the log's contiguous
+/// stretches are too short to resolve it.
+pub fn damping_phrase(res: &Resonance) -> alloc::string::String {
+    if res.damping_resolved {
+        alloc::format!("damping ratio ~{:.2}", res.damping_ratio)
+    } else {
+        alloc::format!(
+            "damping ratio below ~{:.2}: lighter than the log's contiguous stretches resolve",
+            res.damping_ratio
+        )
+    }
+}
