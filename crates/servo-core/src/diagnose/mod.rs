@@ -65,9 +65,10 @@ pub struct DiagnoseOptions {
     /// Practical-significance and "unexplained" thresholds.
     pub thresholds: Thresholds,
     /// When no single candidate passes and a balance is above its noise floor, how many of the
-    /// best candidates to try in pairs ([`joint`]; 0: none). Off by default: on Stribeck +
-    /// backlash + delay the pair search names the breakaway given the play on two seeds of
-    /// three, but not yet the play given the breakaway.
+    /// best candidates to try in pairs ([`joint`]; 0: none). Off by default (experimental): on
+    /// a breakaway friction, a gear play and a delay hidden together, the pair search names the
+    /// breakaway given the play on two seeds of three, but not yet the play given the
+    /// breakaway.
     pub joint_candidates: usize,
 }
 
