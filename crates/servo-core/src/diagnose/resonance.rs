@@ -171,8 +171,9 @@ pub fn find(
     }
     let n_grid = ((f_hi - f_lo) / df) as usize;
     let grid: Vec<f64> = (0..=n_grid).map(|j| f_lo + df * j as f64).collect();
-    let (fit, hold): (Vec<(usize, usize)>, Vec<(usize, usize)>) =
-        segs.iter().partition(|&&(a, _)| rows.fit[idx[a]]);
+    // Contiguous runs (first, past-the-end row) on fit rows and on held-out rows.
+    type Runs = Vec<(usize, usize)>;
+    let (fit, hold): (Runs, Runs) = segs.iter().partition(|&&(a, _)| rows.fit[idx[a]]);
     let (fit, hold) = if hold.is_empty() || fit.is_empty() {
         // Without held-out rows, judge on every other run.
         segs.iter()
