@@ -196,6 +196,25 @@ impl LoopMsg {
         ]
     }
 
+    /// The message of fields 1-11 in the order of [`LoopMsg::f64_fields`], field 12 and 13.
+    fn from_f64_fields(v: [f64; 11], saturated: bool, ref_omega_l_rad_s: f64) -> LoopMsg {
+        LoopMsg {
+            time_s: v[0],
+            ref_rad: v[1],
+            theta_l_rad: v[2],
+            omega_l_rad_s: v[3],
+            err_rad: v[4],
+            u_v: v[5],
+            ff_v: v[6],
+            p_v: v[7],
+            i_v: v[8],
+            d_v: v[9],
+            i_a_a: v[10],
+            saturated,
+            ref_omega_l_rad_s,
+        }
+    }
+
     /// Appends the message in protobuf wire format (`servo.Loop`, [`loop_descriptor_set`]):
     /// fields 1-11 and 13 as 64-bit doubles, 12 as a bool; 110 bytes, no number formatting.
     pub fn write_protobuf(&self, out: &mut Vec<u8>) {
@@ -239,21 +258,7 @@ impl LoopMsg {
             a.copy_from_slice(&b[at + 1..at + 9]);
             *x = f64::from_le_bytes(a);
         }
-        Some(LoopMsg {
-            time_s: v[0],
-            ref_rad: v[1],
-            theta_l_rad: v[2],
-            omega_l_rad_s: v[3],
-            err_rad: v[4],
-            u_v: v[5],
-            ff_v: v[6],
-            p_v: v[7],
-            i_v: v[8],
-            d_v: v[9],
-            i_a_a: v[10],
-            saturated: b[100] == 1,
-            ref_omega_l_rad_s,
-        })
+        Some(Self::from_f64_fields(v, b[100] == 1, ref_omega_l_rad_s))
     }
 
     /// Parses a protobuf `servo.Loop` message (fields absent from the bytes take proto3's
@@ -307,21 +312,7 @@ impl LoopMsg {
                 w => return Err(format!("field {field}: unsupported wire type {w}")),
             }
         }
-        Ok(LoopMsg {
-            time_s: v[0],
-            ref_rad: v[1],
-            theta_l_rad: v[2],
-            omega_l_rad_s: v[3],
-            err_rad: v[4],
-            u_v: v[5],
-            ff_v: v[6],
-            p_v: v[7],
-            i_v: v[8],
-            d_v: v[9],
-            i_a_a: v[10],
-            saturated,
-            ref_omega_l_rad_s: ref_omega,
-        })
+        Ok(Self::from_f64_fields(v, saturated, ref_omega))
     }
 }
 
@@ -372,6 +363,29 @@ mod nullable {
     /// A field left out: null.
     pub fn absent() -> f64 {
         f64::NAN
+    }
+}
+
+/// Sample `k` of a made-up 1 kHz run for the log tests: every field different from message to
+/// message, NaN where a value does not apply (no reference for k < 3, no speed reference up
+/// to k = 900), `saturated` every 7th.
+#[cfg(test)]
+pub(crate) fn test_msg(k: usize) -> LoopMsg {
+    let t = k as f64 * 1e-3;
+    LoopMsg {
+        time_s: t,
+        ref_rad: if k < 3 { f64::NAN } else { 1.5 },
+        theta_l_rad: (t * 7.0).sin() / 3.0,
+        omega_l_rad_s: (t * 7.0).cos() * 7.0 / 3.0,
+        err_rad: 1.5 - (t * 7.0).sin() / 3.0,
+        u_v: (k as f64 * 0.37).sin() * 10.0,
+        ff_v: 0.1,
+        p_v: 1.0 / (k as f64 + 1.0),
+        i_v: -0.25,
+        d_v: 1e-9 * k as f64,
+        i_a_a: 0.01 * k as f64,
+        saturated: k.is_multiple_of(7),
+        ref_omega_l_rad_s: if k > 900 { 2.5 } else { f64::NAN },
     }
 }
 

@@ -687,24 +687,7 @@ mod tests {
     use super::super::mcap_write::{McapLog, McapLogOptions};
     use super::*;
 
-    fn msg(k: usize) -> LoopMsg {
-        let t = k as f64 * 1e-3;
-        LoopMsg {
-            time_s: t,
-            ref_rad: if k < 3 { f64::NAN } else { 1.5 },
-            theta_l_rad: (t * 7.0).sin() / 3.0,
-            omega_l_rad_s: (t * 7.0).cos() * 7.0 / 3.0,
-            err_rad: 1.5 - (t * 7.0).sin() / 3.0,
-            u_v: (k as f64 * 0.37).sin() * 10.0,
-            ff_v: 0.1,
-            p_v: 1.0 / (k as f64 + 1.0),
-            i_v: -0.25,
-            d_v: 1e-9 * k as f64,
-            i_a_a: 0.01 * k as f64,
-            saturated: k.is_multiple_of(7),
-            ref_omega_l_rad_s: f64::NAN,
-        }
-    }
+    use crate::loop_msg::test_msg as msg;
 
     fn write(path: &Path, n: usize, finish: bool) {
         let mut meta = BTreeMap::new();

@@ -837,24 +837,7 @@ mod tests {
     use super::*;
     use crate::mcap_read::read_mcap;
 
-    fn msg(k: usize) -> LoopMsg {
-        let t = k as f64 * 1e-3;
-        LoopMsg {
-            time_s: t,
-            ref_rad: if k < 3 { f64::NAN } else { 1.5 },
-            theta_l_rad: (t * 7.0).sin() / 3.0,
-            omega_l_rad_s: (t * 7.0).cos() * 7.0 / 3.0,
-            err_rad: 1.5 - (t * 7.0).sin() / 3.0,
-            u_v: (k as f64 * 0.37).sin() * 10.0,
-            ff_v: 0.0,
-            p_v: 1.0 / (k as f64 + 1.0),
-            i_v: -0.25,
-            d_v: 1e-9 * k as f64,
-            i_a_a: 0.01 * k as f64,
-            saturated: k.is_multiple_of(7),
-            ref_omega_l_rad_s: if k > 900 { 2.5 } else { f64::NAN },
-        }
-    }
+    use crate::loop_msg::test_msg as msg;
 
     /// The writer thread's first I/O error (here the reader of a FIFO goes away after 64 KiB:
     /// EPIPE) is reported by a later `write_loop` with the file and the cause, then by `flush`
