@@ -797,10 +797,15 @@ pub fn resonance_kept(
 
 /// Text of a balance report (for the verdict).
 pub fn describe(b: &BalanceReport) -> String {
-    let mut s = alloc::format!(
-        "the {} balance ({}) leaves {:.2e} {} RMS, {:.1} times its noise floor ({:.2e} {})",
-        b.balance.name(),
-        b.equation.name(),
+    // "the torque balance", or "the electrical balance (u-driven balance)" where the balance
+    // was judged through another equation.
+    let mut s = alloc::format!("the {} balance", b.balance.name());
+    if b.equation.name() != alloc::format!("{} balance", b.balance.name()) {
+        let _ = write!(s, " ({})", b.equation.name());
+    }
+    let _ = write!(
+        s,
+        " leaves {:.2e} {} RMS, {:.1} times its noise floor ({:.2e} {})",
         b.rms,
         b.equation.unit(),
         b.ratio_to_noise,
@@ -810,10 +815,12 @@ pub fn describe(b: &BalanceReport) -> String {
     if b.signatures.is_empty() {
         s.push_str("; no simple shape of speed, angle, time, current or voltage carries it");
     } else {
-        s.push_str("; it ");
+        // The shapes' descriptions are phrases of either kind ("a constant offset of ...",
+        // "drifts with time ..."): listed after a colon, not as the verb of a sentence.
+        s.push_str("; shapes that carry it: ");
         for (i, sig) in b.signatures.iter().take(3).enumerate() {
             if i > 0 {
-                s.push_str("; also ");
+                s.push_str("; ");
             }
             let _ = write!(
                 s,
