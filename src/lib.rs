@@ -152,3 +152,21 @@ pub fn qemu_image() -> Option<PathBuf> {
     eprintln!("SKIP: {why}");
     None
 }
+
+/// The machine as the tests share it: real-time tests (a board, QEMU or a pseudo-terminal
+/// paced by the wall clock) hold it alone through [`realtime`]; tests that load every core
+/// (a diagnosis runs its candidates on all of them) hold it shared through [`cpu_heavy`]. On a
+/// 2-core CI machine a diagnosis beside a QEMU board starves the emulated board's loop into
+/// missed deadlines that say nothing about servo.
+static MACHINE: std::sync::RwLock<()> = std::sync::RwLock::new(());
+
+/// Exclusive use of the machine for a real-time test (waits for the CPU-heavy tests to end).
+pub fn realtime() -> std::sync::RwLockWriteGuard<'static, ()> {
+    MACHINE.write().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Shared use of the machine for a test that loads every core (waits while a real-time test
+/// runs).
+pub fn cpu_heavy() -> std::sync::RwLockReadGuard<'static, ()> {
+    MACHINE.read().unwrap_or_else(|e| e.into_inner())
+}

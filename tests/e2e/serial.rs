@@ -347,11 +347,10 @@ fn diff(sim: &[(f64, f64)], run: &[(f64, f64)]) -> (f64, f64) {
     ((ss / n as f64).sqrt(), mx)
 }
 
-/// The real-time tests run one at a time: they would only steal each other's CPU.
-static REALTIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn realtime() -> std::sync::MutexGuard<'static, ()> {
-    REALTIME.lock().unwrap_or_else(|e| e.into_inner())
+/// The real-time tests run one at a time and never beside a test that loads every core (a
+/// diagnosis): either would steal the board's CPU (see `servo_e2e::realtime`).
+fn realtime() -> std::sync::RwLockWriteGuard<'static, ()> {
+    servo_e2e::realtime()
 }
 
 fn handshake_reports_the_board(kind: Kind) {
