@@ -1206,84 +1206,138 @@ fn three_hidden_effects_with_backlash_are_found_with_their_parameters() {
 }
 
 /// A compliant shaft between motor and load (outside the catalogue: a two-mass resonance, not a
-/// gear play), in the other simulator: a 1.2 N m/rad shaft at the load with light damping and
-/// half the inertia on each side, a resonance near 30 Hz that the position loop excites at every
-/// step. A gear play fits it well (the contact is a spring too) but is refused: the same contact
-/// without play (a linear spring-damper) predicts the held-out motion better, or the play leaves
-/// the ringing in the torque balance. Status "unexplained", nothing named, the torque balance
-/// named far above its noise floor, with a resonance signature at the shaft's frequency (the
-/// same at slow and fast speeds) and a chirp / `servo frf` experiment.
+/// gear play), in the other simulator: light damping (damping ratio ~0.05) and half the inertia
+/// on each side, a resonance that the position loop excites at every step. A gear play fits it
+/// well (the contact is a spring too) but is refused: the same contact without play (a linear
+/// spring-damper) predicts the held-out motion better, or the play leaves the ringing in the
+/// torque balance. On every case: status "unexplained", nothing named, the torque balance named
+/// far above its noise floor.
+///
+/// Stiffnesses 0.6 and 1.2 N m/rad (modes at 21.0 and 29.8 Hz) lie inside the band the torque
+/// balance's rows resolve (up to 45 Hz: 100 Hz rows after the 25 Hz filter): there the
+/// resonance is named first, at the shaft's frequency within 10 %, damping ratio below 0.25,
+/// with a chirp / `servo frf` experiment. Seed 51 at 1.2 N m/rad named a gear play before the
+/// resonance's threshold became a stated false-alarm rate (its peak is 20 times its local
+/// background). At 3 N m/rad (47.1 Hz) the mode lies above that band: the verdict must still be
+/// "unexplained" with nothing named, any resonance it names must be at the shaft's frequency,
+/// and otherwise it says which band it searched.
 #[test]
 fn compliant_shaft_is_unexplained_and_not_a_gear_play() {
     let _cpu = servo_e2e::cpu_heavy();
-    let (k, c, frac) = (1.2, 6e-4, 0.5);
+    let frac = 0.5;
+    let (n, j) = (PlantParams::TABLE2.n, 7.0e-7);
+    let cases: [(f64, u64); 7] = [
+        (1.2, 49),
+        (1.2, 50),
+        (1.2, 51),
+        (1.2, 54),
+        (0.6, 52),
+        (3.0, 49),
+        (3.0, 53),
+    ];
+    let failures: Vec<String> = cases
+        .iter()
+        .filter_map(|&(k, seed)| {
+            std::panic::catch_unwind(|| check_compliant_shaft(k, frac, n, j, seed))
+                .err()
+                .map(|e| {
+                    e.downcast_ref::<String>()
+                        .cloned()
+                        .unwrap_or_else(|| format!("k {k} seed {seed} failed"))
+                })
+        })
+        .collect();
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// One compliant-shaft case of [`compliant_shaft_is_unexplained_and_not_a_gear_play`]: stiffness
+/// `k` [N m/rad] at the load, damping ratio ~0.047 on the two-body reduced inertia, `frac` of
+/// J_eq `j` on the load side, gear ratio `n`.
+fn check_compliant_shaft(k: f64, frac: f64, n: f64, j: f64, seed: u64) {
+    let tag = format!("k {k} N m/rad seed {seed}");
+    // Damping c = 6e-4 N m s/rad at 1.2 N m/rad, scaled to keep the damping ratio.
     let shaft = Mechanism {
-        shaft: Some((k, c, frac)),
+        shaft: Some((k, 6e-4 * (k / 1.2).sqrt(), frac)),
         ..Mechanism::NONE
     };
     // The two-mass mode: k / N^2 between J_eq (1 - frac) and J_eq frac (motor side).
-    let (n, j) = (PlantParams::TABLE2.n, 7.0e-7);
     let f_hz = ((k / (n * n)) * (1.0 / (j * (1.0 - frac)) + 1.0 / (j * frac))).sqrt()
         / std::f64::consts::TAU;
-    for seed in [49u64, 50] {
-        let d = diagnose_other(&shaft, &format!("compliant shaft {seed}"), seed);
-        assert!(d.winner().is_none(), "[seed {seed}] named: {}", d.verdict);
-        assert_eq!(
-            d.status,
-            diagnose::Status::Unexplained,
-            "[seed {seed}] {}",
-            d.verdict
-        );
-        let torque = d
-            .unexplained
-            .iter()
-            .find(|b| b.balance.name() == "torque")
-            .unwrap_or_else(|| panic!("[seed {seed}] torque balance not named: {}", d.verdict));
-        assert!(
-            torque.ratio_to_noise > 10.0,
-            "[seed {seed}] {}",
-            torque.ratio_to_noise
-        );
-        assert!(d.verdict.contains("torque balance"), "{}", d.verdict);
+    let d = diagnose_other(&shaft, &format!("compliant shaft {tag}"), seed);
+    assert!(d.winner().is_none(), "[{tag}] named: {}", d.verdict);
+    assert_eq!(
+        d.status,
+        diagnose::Status::Unexplained,
+        "[{tag}] {}",
+        d.verdict
+    );
+    let torque = d
+        .unexplained
+        .iter()
+        .find(|b| b.balance.name() == "torque")
+        .unwrap_or_else(|| panic!("[{tag}] torque balance not named: {}", d.verdict));
+    assert!(
+        torque.ratio_to_noise > 10.0,
+        "[{tag}] {}",
+        torque.ratio_to_noise
+    );
+    assert!(d.verdict.contains("torque balance"), "{}", d.verdict);
+    let band = torque
+        .resonance_band_hz
+        .unwrap_or_else(|| panic!("[{tag}] no band searched: {}", d.verdict));
+    match torque.resonance.as_ref() {
         // The resonance, named first, at the shaft's frequency, lightly damped.
-        let res = torque
-            .resonance
-            .as_ref()
-            .unwrap_or_else(|| panic!("[seed {seed}] no resonance found: {}", d.verdict));
-        assert_eq!(
-            torque.signatures.first().map(|s| s.kind),
-            Some("resonance"),
-            "[seed {seed}] {:?}",
-            torque.signatures
-        );
-        assert!(
-            (res.freq_hz / f_hz - 1.0).abs() < 0.1,
-            "[seed {seed}] resonance at {:.1} Hz, shaft mode {f_hz:.1} Hz",
-            res.freq_hz
-        );
-        assert!(res.damping_ratio < 0.25, "[seed {seed}] {res:?}");
-        assert!(
-            torque.experiment.contains("chirp") && torque.experiment.contains("servo frf"),
-            "[seed {seed}] {}",
-            torque.experiment
-        );
-        // The gear play, when it passes the statistics, is refused as a compliance or as a play
-        // that leaves the ringing.
-        if let Some(b) = d
-            .ranking
-            .iter()
-            .find(|c| c.effect == EffectKind::Backlash && !c.checks.is_empty())
-        {
-            let refused = b.checks.iter().any(|k| {
-                !k.passed
-                    && (k.name == "play, not a compliance" || k.name == "explains the resonance")
-            });
+        Some(res) => {
+            assert_eq!(
+                torque.signatures.first().map(|s| s.kind),
+                Some("resonance"),
+                "[{tag}] {:?}",
+                torque.signatures
+            );
             assert!(
-                refused,
-                "[seed {seed}] backlash not refused as a compliance: {:?}",
-                b.checks
+                (res.freq_hz / f_hz - 1.0).abs() < 0.1,
+                "[{tag}] resonance at {:.1} Hz, shaft mode {f_hz:.1} Hz",
+                res.freq_hz
+            );
+            assert!(res.damping_ratio < 0.25, "[{tag}] {res:?}");
+            assert!(
+                torque.experiment.contains("chirp") && torque.experiment.contains("servo frf"),
+                "[{tag}] {}",
+                torque.experiment
             );
         }
+        // Only a mode beyond the band searched may go unnamed, and the verdict says so.
+        None => {
+            assert!(
+                f_hz > 0.9 * band.1,
+                "[{tag}] no resonance found at {f_hz:.1} Hz inside {band:?} Hz: {}",
+                d.verdict
+            );
+            assert!(
+                d.verdict.contains("the band these rows resolve"),
+                "[{tag}] {}",
+                d.verdict
+            );
+        }
+    }
+    // The gear play, when it passes the statistics, is refused as a compliance or as a play
+    // that leaves the ringing.
+    if let Some(b) = d
+        .ranking
+        .iter()
+        .find(|c| c.effect == EffectKind::Backlash && !c.checks.is_empty())
+    {
+        let refused = b.checks.iter().any(|k| {
+            !k.passed
+                && (k.name == "play, not a compliance"
+                    || k.name == "explains the resonance"
+                    || k.name == "gap > 0")
+        });
+        assert!(
+            refused,
+            "[{tag}] backlash not refused as a compliance: {:?}",
+            b.checks
+        );
     }
 }
 

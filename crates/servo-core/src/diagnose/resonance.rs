@@ -32,8 +32,43 @@ pub struct Resonance {
     pub share: f64,
     /// Mean square of the held-out residual in the band [unit^2].
     pub band_ms: f64,
-    /// Peak power over the median power of the held-out spectrum [1].
+    /// Peak power of the held-out spectrum in the band over its local background: the median
+    /// power between half and twice the peak frequency, outside the band [1].
     pub prominence: f64,
+    /// Prominence a peak of pure noise exceeds with probability [`FALSE_ALARM`] (at least
+    /// [`MIN_PROMINENCE`]): see [`prominence_needed`] [1].
+    pub prominence_needed: f64,
+}
+
+/// Probability that noise alone, with a locally flat spectrum, puts a peak in the judged band
+/// at or above [`Resonance::prominence_needed`] (per balance and diagnosis).
+pub const FALSE_ALARM: f64 = 1e-3;
+/// Smallest prominence called a resonance whatever the statistics: a peak less than three times
+/// its background is no structural mode a user can act on.
+pub const MIN_PROMINENCE: f64 = 3.0;
+
+/// Upper-tail quantile of the standard normal distribution: z with P(Z > z) = `p` (0 < p <= 0.5;
+/// Abramowitz & Stegun 26.2.23, error below 4.5e-4).
+fn normal_upper_quantile(p: f64) -> f64 {
+    let p = p.clamp(1e-300, 0.5);
+    let t = math::sqrt(-2.0 * math::ln(p));
+    t - (2.515517 + 0.802853 * t + 0.010328 * t * t)
+        / (1.0 + 1.432788 * t + 0.189269 * t * t + 0.001308 * t * t * t)
+}
+
+/// The prominence (peak over median) that noise exceeds with probability `alpha` in an averaged
+/// periodogram of `k_eff` independent segments, the peak being the largest of `bins`
+/// independent frequency bins. Each bin of such a spectrum, over its expected value, is a
+/// chi-square with 2 K degrees of freedom divided by 2 K; its quantiles and median come from the
+/// Wilson-Hilferty approximation (chi2_nu / nu ~ (1 - 2/(9 nu) + z sqrt(2/(9 nu)))^3), and the
+/// largest of `bins` exceeds the quantile 1 - alpha / bins with probability about alpha.
+pub fn prominence_needed(k_eff: f64, bins: f64, alpha: f64) -> f64 {
+    let nu = 2.0 * k_eff.max(1.0);
+    let c = 2.0 / (9.0 * nu);
+    let z = normal_upper_quantile(alpha / bins.max(1.0));
+    let q = (1.0 - c + z * math::sqrt(c)).powi(3);
+    let med = (1.0 - c).powi(3);
+    (q / med).max(MIN_PROMINENCE)
 }
 
 /// Largest damping ratio still called a resonance (a broader hump is no resonance).
@@ -144,6 +179,21 @@ fn peak_width(s: &[f64], df: f64) -> Option<(usize, f64)> {
     Some((p, w))
 }
 
+/// Frequency band [Hz] in which [`find`] looks for a resonance at the view's rows `idx`: from
+/// three Hann main-lobe half-widths of the median contiguous run (at least 2 Hz) to 0.45 times
+/// the rows' sampling rate. `None` when the rows hold too few contiguous runs for a spectrum.
+/// A structural mode above the band (a stiff coupling) cannot show in this balance.
+pub fn scanned_band(ds: &Dataset, rows: &Rows, idx: &[usize]) -> Option<(f64, f64)> {
+    let (segs, dt) = runs(ds, rows, idx);
+    if segs.len() < 4 || dt <= 0.0 {
+        return None;
+    }
+    let mut lens: Vec<f64> = segs.iter().map(|(a, b)| (b - a) as f64 * dt).collect();
+    lens.sort_by(|a, b| a.total_cmp(b));
+    let t_seg = lens[lens.len() / 2];
+    Some(((3.0 * 0.72 / t_seg).max(2.0), 0.45 / dt))
+}
+
 /// Finds a resonance in a balance's residual over `rows`, at the view's rows `idx`
 /// (indices into `rows`, in time order) with residual values `r`. `omega_m` holds the motor speed
 /// at the same rows.
@@ -229,7 +279,36 @@ pub fn find(
         .filter(|(f, _)| (**f - f0).abs() <= band)
         .map(|(_, s)| *s)
         .fold(0.0, f64::max);
-    let prominence = top_hold / median(&s_hold).max(1e-300);
+    // The background: the median of the held-out spectrum from half to twice the peak frequency,
+    // outside the band (a residual's spectrum is seldom flat over the whole scan, and a global
+    // median under- or over-states the level around the peak); the global median where that
+    // octave holds too few bins.
+    let local: Vec<f64> = grid
+        .iter()
+        .zip(&s_hold)
+        .filter(|(f, _)| **f > 0.5 * f0 && **f < 2.0 * f0 && (**f - f0).abs() > band)
+        .map(|(_, s)| *s)
+        .collect();
+    let background = if local.len() >= 8 {
+        median(&local)
+    } else {
+        median(&s_hold)
+    };
+    let prominence = top_hold / background.max(1e-300);
+    // Its false-alarm threshold: the held-out runs are the averaged segments (weighted by their
+    // length: K = (sum n)^2 / sum n^2), the band holds about 2 band T independent bins (the
+    // spectral resolution of a run of T seconds is 1/T), and the peak frequency was chosen on
+    // the fit rows, so only the band's bins are searched on the held-out ones.
+    let (sum_n, sum_n2) = hold.iter().fold((0.0, 0.0), |(a, b), &(i, j)| {
+        let n = (j - i) as f64;
+        (a + n, b + n * n)
+    });
+    let k_eff = if sum_n2 > 0.0 {
+        sum_n * sum_n / sum_n2
+    } else {
+        1.0
+    };
+    let needed = prominence_needed(k_eff, 2.0 * band * t_seg, FALSE_ALARM);
     // The same frequency at two speeds: split the runs by their mean |speed|.
     let mean_speed = |&(a, b): &(usize, usize)| {
         omega_m[a..b].iter().map(|w| w.abs()).sum::<f64>() / (b - a) as f64
@@ -268,6 +347,7 @@ pub fn find(
         share,
         band_ms: ms,
         prominence,
+        prominence_needed: needed,
     })
 }
 

@@ -107,6 +107,9 @@ pub struct BalanceReport {
     pub experiment: String,
     /// A resonance that rings in the residual (named among the signatures as `resonance`).
     pub resonance: Option<super::resonance::Resonance>,
+    /// The band a resonance was looked for in [Hz] (`None`: too few contiguous rows): a mode
+    /// above it (a stiff coupling) cannot show in this balance.
+    pub resonance_band_hz: Option<(f64, f64)>,
 }
 
 /// Variance gains of the record's filter applied to white noise: (value, first derivative,
@@ -231,9 +234,6 @@ struct View {
 }
 
 const MAX_ROWS: usize = 12_000;
-
-/// A resonance's spectral peak must stand this many times above the median of the spectrum.
-const MIN_PROMINENCE: f64 = 8.0;
 
 fn view(ds: &Dataset, rows: &Rows, sol: &EqSolution) -> View {
     let n = rows.len().min(sol.resid.len());
@@ -676,14 +676,17 @@ pub fn analyse(
             .find(|s| s.kind == "oscillation")
             .map_or(0.0, |s| s.share);
         if let Some(res) = super::resonance::find(ds, rows, &v.row_idx, &v.r, &v.omega_m)
-            .filter(|res| res.prominence >= MIN_PROMINENCE && res.share >= 2.0 * steady)
+            .filter(|res| res.prominence >= res.prominence_needed && res.share >= 2.0 * steady)
         {
             sigs.push(Signature {
                 kind: "resonance",
                 description: alloc::format!(
-                    "rings as a resonance near {:.1} Hz ({}) after steps and reversals, at the same frequency at slow and fast speeds (no harmonic of load or motor angle): a structural mode, e.g. a compliant shaft or coupling",
+                    "rings as a resonance near {:.1} Hz ({}; spectral peak {:.1} times its local background, where noise alone exceeds {:.1} with probability {}) after steps and reversals, at the same frequency at slow and fast speeds (no harmonic of load or motor angle): a structural mode, e.g. a compliant shaft or coupling",
                     res.freq_hz,
-                    super::resonance::damping_phrase(&res)
+                    super::resonance::damping_phrase(&res),
+                    res.prominence,
+                    res.prominence_needed,
+                    super::resonance::FALSE_ALARM
                 ),
                 share: res.share,
                 explained_rms: math::sqrt(res.band_ms),
@@ -731,6 +734,7 @@ pub fn analyse(
         above_noise,
         experiment,
         resonance,
+        resonance_band_hz: super::resonance::scanned_band(ds, rows, &v.row_idx),
     }
 }
 
@@ -829,6 +833,13 @@ pub fn describe(b: &BalanceReport) -> String {
                 100.0 * sig.share
             );
         }
+    }
+    if let (true, None, Some((lo, hi))) = (b.above_noise, &b.resonance, b.resonance_band_hz) {
+        // Say what was not seen: a stiff coupling's mode above the rows' band is not ruled out.
+        let _ = write!(
+            s,
+            "; no resonance stands out between {lo:.0} and {hi:.0} Hz, the band these rows resolve (a structural mode above it, e.g. a stiff shaft or coupling, cannot show here: a chirp to a higher frequency analysed with `servo frf` would)"
+        );
     }
     let _ = write!(s, ". To tell the candidates apart: {}.", b.experiment);
     s
