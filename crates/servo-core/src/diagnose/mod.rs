@@ -599,14 +599,18 @@ pub(crate) fn structure_check(
 /// (a gear play bends to it through its contact stiffness but does not ring at a fixed
 /// frequency). The check fails when the candidate's residual keeps at least half the base
 /// residual's power in the resonance band, both measured on the held-out rows that both models
-/// weigh (see [`structure::resonance_kept`]). `None` when the balance shows no resonance.
+/// weigh (see [`structure::resonance_kept`]). `None` when the balance shows no resonance, or one
+/// too weak to refuse a candidate ([`resonance::REFUSE_PROMINENCE`]).
 fn resonance_check(
     ds: &Dataset,
     b: &BalanceReport,
     base: Option<&EqSolution>,
     cand: &Solved,
 ) -> Option<checks::Check> {
-    let res = b.resonance.as_ref().filter(|_| b.above_noise)?;
+    let res = b
+        .resonance
+        .as_ref()
+        .filter(|r| b.above_noise && r.prominence >= resonance::REFUSE_PROMINENCE)?;
     let sol = cand.equation(b.equation)?;
     let contact = cand
         .cfg

@@ -63,15 +63,6 @@ pub(super) fn balance_json(b: &BalanceReport) -> Value {
             "explained_rms": f(s.explained_rms),
         })).collect::<Vec<_>>(),
         "experiment": b.experiment,
-        "resonance": b.resonance.map(|r| json!({
-            "freq_hz": f(r.freq_hz),
-            "damping_ratio": f(r.damping_ratio),
-            "damping_resolved": r.damping_resolved,
-            "prominence": f(r.prominence),
-            "prominence_needed": f(r.prominence_needed),
-            "false_alarm_probability": f(servo_core::diagnose::resonance::FALSE_ALARM),
-        })),
-        "resonance_band_hz": b.resonance_band_hz.map(|(lo, hi)| [f(lo), f(hi)]),
     })
 }
 
