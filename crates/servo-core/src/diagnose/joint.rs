@@ -50,7 +50,7 @@ pub(super) struct Context<'a> {
 }
 
 impl Context<'_> {
-    fn floor_of(&self, eq: Equation) -> f64 {
+    pub(super) fn floor_of(&self, eq: Equation) -> f64 {
         self.floors
             .iter()
             .find(|(e, _)| *e == eq)
@@ -60,7 +60,7 @@ impl Context<'_> {
 
 /// The candidates worth pairing: not significant alone, fitted, with a held-out simulation drop
 /// of at least the minimum, best first, at most [`super::DiagnoseOptions::joint_candidates`].
-fn seeds<'a>(
+pub(super) fn seeds<'a>(
     cx: &Context,
     fits: &'a [(EffectKind, Result<Solved, FitError>)],
     ranking: &[Candidate],

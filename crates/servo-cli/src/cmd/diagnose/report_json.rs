@@ -94,6 +94,7 @@ pub(super) fn rung_json(r: &Rung) -> Value {
     json!({
         "added": r.added.map(|k| k.name()),
         "added_with": r.added_with.map(|k| k.name()),
+        "added_also": r.added_also.iter().map(|k| k.name()).collect::<Vec<_>>(),
         "equations": r.equations.iter().map(|(e, rms)| json!({ "equation": e.name(), "unit": e.unit(), "rms": f(*rms) })).collect::<Vec<_>>(),
         "oe_cost_rad": r.oe_cost_rad.map(f),
         "effects": r.plant.effects.iter().map(|e| e.to_string()).collect::<Vec<_>>(),

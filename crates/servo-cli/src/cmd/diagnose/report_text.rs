@@ -7,7 +7,12 @@ use super::*;
 pub(super) fn headline(ladder: &[Rung], last: &Diagnosis) -> String {
     let added: Vec<String> = ladder
         .iter()
-        .flat_map(|r| r.added.into_iter().chain(r.added_with))
+        .flat_map(|r| {
+            r.added
+                .into_iter()
+                .chain(r.added_with)
+                .chain(r.added_also.iter().copied())
+        })
         .map(|k| k.name().to_string())
         .collect();
     let status = match last.status {
@@ -115,12 +120,13 @@ pub(super) fn text_report(
 pub(super) fn ladder_text(ladder: &[Rung]) -> String {
     let mut s = String::new();
     for r in ladder {
-        let name = r
-            .added
-            .map_or("starting model".to_string(), |k| match r.added_with {
-                Some(w) => format!("+ {k} + {w}"),
-                None => format!("+ {k}"),
-            });
+        let name = r.added.map_or("starting model".to_string(), |k| {
+            let mut s = format!("+ {k}");
+            for w in r.added_with.iter().chain(&r.added_also) {
+                s.push_str(&format!(" + {w}"));
+            }
+            s
+        });
         let eqs: Vec<String> = r
             .equations
             .iter()

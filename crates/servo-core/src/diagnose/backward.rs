@@ -1,0 +1,645 @@
+//! Several effects found together: backward elimination from a joint simulation fit.
+//!
+//! The forward search adds one effect at a time. Effects that interact are missed: a gear play
+//! and a breakaway friction both live at the low speeds around reversals, and neither passes
+//! alone (each only helps once the other is in the model); an input delay named first absorbs
+//! the lag the play adds after each reversal and comes out too long. The standard remedy
+//! (stepwise regression) is backward elimination from a joint fit:
+//!
+//! 1. **Joint fit.** When no single candidate passes and a balance is still above its noise
+//!    floor, the effects already in the model beyond friction (named by earlier steps) and the
+//!    best candidates by held-out simulation drop ([`super::DiagnoseOptions::joint_candidates`]
+//!    of them) are fitted together: first by the usual equation-error fit (base refitted), then
+//!    on the simulation cost of the fit blocks over long segments (several reversals each),
+//!    where the motion shows every one of them. A coarse grid over two nonlinear parameters of
+//!    different members (e.g. a play's gap and a breakaway's speed scale, the pair that trades
+//!    off at low speed), the linear ones re-solved by least squares at each point, then a
+//!    coordinate refinement of every parameter, J_eq and the Coulomb level. The effects named
+//!    earlier are re-estimated too (a delay sized without the play).
+//! 2. **Drop-one test.** Each new member is judged given all the others, against the joint
+//!    model without it (re-tuned on the simulation): every check of a single candidate (the
+//!    information criterion of its balance, held-out residual and simulation drops, its noise
+//!    floor and structured share, its physical constraints, "explains the structure it fits",
+//!    agreement across both halves of the data with the others in the model). The member with
+//!    the smallest held-out simulation contribution among those that fail is removed, the
+//!    others are re-tuned, and the test is repeated, until every survivor passes (or none is
+//!    left).
+//! 3. **Guard.** The survivors together must cut the held-out simulation error materially
+//!    against the model holding none of them.
+//!
+//! The survivors are named together, with their jointly fitted parameters. A set of mimics (effects
+//! bending together to soak up a mechanism outside the catalogue) must pass every guard, each
+//! given the others.
+
+use super::{
+    checks, joint, judge, on_simulation, par_map, structure, structure_check, Candidate, Reference,
+};
+use crate::effects::{EffectKind, SearchScale, Span};
+use crate::fit::model::Config;
+use crate::fit::oe::{self, Part};
+use crate::fit::{search, set_effect, to_plant, Dataset, EffectToFit, FitError, Solved};
+use crate::math;
+use crate::plant::Plant;
+use alloc::vec::Vec;
+
+/// Horizon of the segments the joint model is tuned on [s]: long enough to hold several
+/// reversals (a gap shows as an offset after each one, blurred on short segments started from
+/// an uncertain contact state).
+const LONG_HORIZON_S: f64 = 0.75;
+/// Grid points per parameter of the coarse two-parameter grid.
+const GRID_POINTS: usize = 6;
+/// Starts of the joint refinement (the best grid points).
+const STARTS: usize = 3;
+/// At most this many long segments (spread over the logs) for the joint fit (a play's own
+/// refinement uses 90; each evaluation here is one of several hundred).
+const MAX_SEGMENTS: usize = 45;
+
+/// A parameter tuned on the simulation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Target {
+    Effect(EffectKind, &'static str),
+    JEq,
+    TauSf,
+}
+
+fn get(p: &Plant, t: Target) -> Option<f64> {
+    match t {
+        Target::Effect(k, key) => p.effects.value(k, key),
+        Target::JEq => Some(p.params.j_eq()),
+        Target::TauSf => Some(p.tau_sf()),
+    }
+}
+
+fn with(p: &Plant, t: Target, x: f64) -> Option<Plant> {
+    let mut q = *p;
+    match t {
+        Target::Effect(k, key) => q.effects.get_mut(k)?.set(key, x).ok()?,
+        Target::JEq => q.params.j_eq = Some(x),
+        Target::TauSf => {
+            q.params.tau_sf = Some(x);
+            if q.effects.contains(EffectKind::Coulomb) {
+                set_effect(&mut q, EffectKind::Coulomb, &[x]).ok()?;
+            }
+        }
+    }
+    Some(q)
+}
+
+/// The parameters of `p` tuned on the simulation, with how far they may move in the first
+/// pass: those of the members judged on the simulation (no balance sees them: a gear play's
+/// gap), those the other members declare sensitive in the motion
+/// ([`crate::effects::EffectModel::polish`]: a breakaway's level and speed scale), J_eq and the
+/// Coulomb level. The rest keep their equation-error values (a delay, which the electrical
+/// balance resolves far more sharply than the motion does, is refitted there with the others in
+/// the model, see [`search`]).
+fn targets(p: &Plant, members: &[EffectKind]) -> Vec<(Target, Span)> {
+    let mut out = Vec::new();
+    for &k in members {
+        if !p.effects.contains(k) {
+            continue;
+        }
+        if on_simulation(k) {
+            for spec in k.params() {
+                if k.model().fittable(spec.key) {
+                    out.push((Target::Effect(k, spec.key), Span::Scale(1.5)));
+                }
+            }
+        } else {
+            for &(key, span) in k.model().polish() {
+                out.push((Target::Effect(k, key), span));
+            }
+            // Its other searched parameters (a delay sized in the electrical balance to a
+            // fraction of a sample only by the motion), within 40 %.
+            for spec in k.params() {
+                let searched = spec.nonlinear
+                    && k.model().fittable(spec.key)
+                    && k.model().search(spec.key).scale != SearchScale::Integer;
+                if searched && !out.iter().any(|(t, _)| *t == Target::Effect(k, spec.key)) {
+                    out.push((Target::Effect(k, spec.key), Span::Scale(1.4)));
+                }
+            }
+        }
+    }
+    out.push((Target::JEq, Span::Scale(1.15)));
+    if p.effects.contains(EffectKind::Coulomb) {
+        out.push((Target::TauSf, Span::Scale(1.1)));
+    }
+    out
+}
+
+/// The simulation cost of the fit blocks over long segments.
+struct Tuner<'a> {
+    ds: &'a Dataset,
+    segs: Vec<(usize, usize)>,
+    horizon_s: f64,
+}
+
+impl Tuner<'_> {
+    fn cost(&self, p: &Plant, bound: f64) -> f64 {
+        oe::prediction_cost_bounded(self.ds, p, &self.segs, self.horizon_s, bound)
+            .unwrap_or(f64::INFINITY)
+    }
+
+    /// Coordinate refinement of `ts` from `p`, `passes` times: per parameter a grid over its
+    /// span (narrowed by `shrink` at each pass; a scale on a log axis) then a golden-section
+    /// search, a change kept only when it lowers the cost.
+    fn refine(&self, p: &Plant, ts: &[(Target, Span)], passes: &[f64]) -> (Plant, f64) {
+        let mut best = *p;
+        let mut c_best = self.cost(&best, f64::INFINITY);
+        for &shrink in passes {
+            for &(t, span) in ts {
+                let Some(x0) = get(&best, t) else { continue };
+                if !x0.is_finite() {
+                    continue;
+                }
+                // Search coordinates: ln x for a scale, x for an additive span.
+                let (grid, to_x): (Vec<f64>, fn(f64) -> f64) = match span {
+                    Span::Scale(f) if x0 > 0.0 => {
+                        let d = shrink * math::ln(f);
+                        let l0 = math::ln(x0);
+                        (search::linspace(l0 - d, l0 + d, 5), math::exp)
+                    }
+                    Span::Add(d) => {
+                        let d = shrink * d;
+                        (search::linspace(x0 - d, x0 + d, 5), |x| x)
+                    }
+                    Span::Scale(_) => continue,
+                };
+                let from = best;
+                let r = search::grid_then_golden_bounded(
+                    &grid,
+                    |l, bound| {
+                        with(&from, t, to_x(l)).map_or(f64::INFINITY, |q| self.cost(&q, bound))
+                    },
+                    8,
+                );
+                if let Some((l, c)) = r {
+                    if c < c_best {
+                        if let Some(q) = with(&from, t, to_x(l)) {
+                            best = q;
+                            c_best = c;
+                        }
+                    }
+                }
+            }
+        }
+        (best, c_best)
+    }
+}
+
+/// The result of the backward elimination: the survivors (best first), judged each given the
+/// others, every one carrying the joint model in its `plant`.
+pub(super) fn search(
+    cx: &joint::Context,
+    fits: &[(EffectKind, Result<Solved, FitError>)],
+    ranking: &[Candidate],
+) -> Option<Vec<Candidate>> {
+    let ds = cx.ds;
+    let mut fresh: Vec<EffectKind> = joint::seeds(cx, fits, ranking)
+        .into_iter()
+        .map(|(k, _)| k)
+        .collect();
+    // Also the candidates with clear evidence in their own balance that failed only the
+    // simulation (an input delay whose motion another missing effect spoils): the information
+    // criterion, the held-out residual drop and the noise floor of their balance pass.
+    let th = &cx.opts.thresholds;
+    let min_red = 100.0 * (1.0 - math::sqrt(1.0 - cx.opts.min_eq_drop));
+    for c in ranking {
+        if fresh.len() >= cx.opts.joint_candidates + 2 {
+            break;
+        }
+        let fitted = fits.iter().any(|(k, r)| *k == c.effect && r.is_ok());
+        if !c.significant
+            && fitted
+            && !fresh.contains(&c.effect)
+            && !on_simulation(c.effect)
+            && c.bic_gain > cx.opts.min_bic_gain
+            && c.error_reduction_pct >= min_red
+            && c.noise_ratio >= th.min_noise_ratio
+        {
+            fresh.push(c.effect);
+        }
+    }
+    if fresh.len() < 2 {
+        return None;
+    }
+    let named: Vec<EffectKind> = cx
+        .model
+        .effects
+        .iter()
+        .map(|e| e.kind)
+        .filter(|k| !matches!(*k, EffectKind::Viscous | EffectKind::Coulomb))
+        .filter(|k| k.params().iter().any(|p| k.model().fittable(p.key)))
+        .collect();
+    // The effects named earlier are searched again in their balances with the new ones in the
+    // model (with a gear play, the rows where the motor crosses the gap get no weight there).
+    let to_fit: Vec<EffectToFit> = named
+        .iter()
+        .chain(&fresh)
+        .map(|&k| EffectToFit::all(k))
+        .collect();
+    let start = ds.fit_config(cx.model, &to_fit).ok()?;
+    let tuner = Tuner {
+        ds,
+        segs: oe::segments_with(
+            ds,
+            Part::Fit,
+            LONG_HORIZON_S.max(ds.opts.oe_horizon_s),
+            3,
+            MAX_SEGMENTS,
+        ),
+        horizon_s: LONG_HORIZON_S.max(ds.opts.oe_horizon_s),
+    };
+    let gridded = super::timing::timed(
+        || "backward: grid".into(),
+        || grid_stage(cx, &tuner, &start, &fresh),
+    );
+    let all: Vec<EffectKind> = named.iter().chain(&fresh).copied().collect();
+    trace(|| {
+        alloc::format!(
+            "named {named:?} fresh {fresh:?}; start {} cost {:.4e}",
+            show(&start.plant, &all),
+            tuner.cost(&start.plant, f64::INFINITY)
+        )
+    });
+    let (mut full, c_full) = super::timing::timed(
+        || "backward: joint refinement".into(),
+        || {
+            par_map(&gridded, cx.opts.parallel, |g| {
+                trace(|| {
+                    alloc::format!(
+                        "grid start {} cost {:.4e}",
+                        show(g, &all),
+                        tuner.cost(g, f64::INFINITY)
+                    )
+                });
+                tuner.refine(g, &targets(g, &all), &[1.0, 0.5])
+            })
+            .into_iter()
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+        },
+    )?;
+    trace(|| alloc::format!("joint {} cost {c_full:.4e}", show(&full, &all)));
+    let mut survivors = fresh.clone();
+    loop {
+        if survivors.is_empty() {
+            return None;
+        }
+        let members: Vec<EffectKind> = named.iter().chain(&survivors).copied().collect();
+        let judged: Vec<(Candidate, f64)> = par_map(&survivors, cx.opts.parallel, |&m| {
+            drop_one(cx, &tuner, &full, &members, m)
+        })
+        .into_iter()
+        .flatten()
+        .collect();
+        if judged.len() < survivors.len() {
+            trace(|| "a drop-one test could not be computed".into());
+            return None;
+        }
+        for (c, d) in &judged {
+            trace(|| {
+                alloc::format!("drop {}: significant {} contribution {d:.1} % eq {:.1} % bic {:.1} failed {:?}", c.effect, c.significant, c.error_reduction_pct, c.bic_gain, c.failed_check().map(|k| (k.name, &k.detail)))
+            });
+        }
+        let weakest = judged
+            .iter()
+            .filter(|(c, _)| !c.significant)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(c, _)| c.effect);
+        match weakest {
+            Some(w) => {
+                survivors.retain(|k| *k != w);
+                if let Some(p) = without(&full, w) {
+                    let left: Vec<EffectKind> = named.iter().chain(&survivors).copied().collect();
+                    full = tuner.refine(&p, &targets(&p, &left), &[0.5]).0;
+                }
+            }
+            None => {
+                let total = 1.0
+                    - oe::prediction_cost(ds, &full, Part::Holdout)?
+                        / cx.reference.oe_holdout?.max(1e-300);
+                let need = if survivors.iter().any(|k| on_simulation(*k)) {
+                    cx.opts.min_simulation_oe_drop
+                } else {
+                    cx.opts.min_oe_drop
+                };
+                trace(|| {
+                    alloc::format!(
+                        "survivors {survivors:?} total held-out drop {:.1} % (needs {:.1} %)",
+                        100.0 * total,
+                        100.0 * need
+                    )
+                });
+                if total < need {
+                    return None;
+                }
+                let mut out: Vec<(Candidate, f64)> = judged;
+                out.sort_by(|a, b| b.1.total_cmp(&a.1));
+                let names: Vec<EffectKind> = out.iter().map(|(c, _)| c.effect).collect();
+                return Some(
+                    out.into_iter()
+                        .map(|(mut c, _)| {
+                            c.joint_with = names.iter().copied().find(|k| *k != c.effect);
+                            c.plant = full;
+                            c.evidence =
+                                note(cx, &full, &named, &names, c.effect, total, &c.evidence);
+                            c
+                        })
+                        .collect(),
+                );
+            }
+        }
+    }
+}
+
+/// `p` without `kind`.
+fn without(p: &Plant, kind: EffectKind) -> Option<Plant> {
+    let mut q = *p;
+    q.effects.remove(kind)?;
+    Some(q)
+}
+
+/// The coarse grid over two nonlinear parameters of different new members (a member judged on
+/// the simulation first), the linear parameters re-solved by least squares at every point, J_eq
+/// and the Coulomb level kept at their start values. Returns the [`STARTS`] best models (grid
+/// points or the start), best first: the joint cost has local optima (a wide gap beside a
+/// breakaway at the wrong speed), so the refinement starts from each.
+fn grid_stage(
+    cx: &joint::Context,
+    tuner: &Tuner,
+    start: &Solved,
+    fresh: &[EffectKind],
+) -> Vec<Plant> {
+    let ds = cx.ds;
+    let mut order: Vec<EffectKind> = fresh.to_vec();
+    order.sort_by_key(|k| !on_simulation(*k));
+    let mut axes: Vec<(usize, &'static str)> = Vec::new();
+    for k in order {
+        if axes.len() == 2 {
+            break;
+        }
+        let Some(i) = start.cfg.slots.iter().position(|s| s.kind == k) else {
+            continue;
+        };
+        if let Some(p) = k
+            .params()
+            .iter()
+            .find(|p| p.nonlinear && k.model().fittable(p.key))
+        {
+            axes.push((i, p.key));
+        }
+    }
+    let c_start = tuner.cost(&start.plant, f64::INFINITY);
+    if axes.len() < 2 {
+        return alloc::vec![start.plant];
+    }
+    let values = |(i, key): (usize, &'static str)| -> Vec<f64> {
+        let g: Vec<f64> = ds
+            .grid(&start.cfg.slots[i], key)
+            .into_iter()
+            .filter(|v| *v > 0.0)
+            .collect();
+        if g.len() <= GRID_POINTS {
+            return g;
+        }
+        // Evenly over the grid (log-spaced grids stay log-spaced).
+        (0..GRID_POINTS)
+            .map(|j| g[(j * (g.len() - 1)) / (GRID_POINTS - 1)])
+            .collect()
+    };
+    let (ga, gb) = (values(axes[0]), values(axes[1]));
+    let mut points = Vec::new();
+    for &a in &ga {
+        for &b in &gb {
+            points.push((a, b));
+        }
+    }
+    let keep = |plant: &mut Plant| {
+        plant.params.j_eq = Some(start.plant.params.j_eq());
+        let t = start.plant.tau_sf();
+        plant.params.tau_sf = Some(t);
+        if plant.effects.contains(EffectKind::Coulomb) {
+            let _ = set_effect(plant, EffectKind::Coulomb, &[t]);
+        }
+    };
+    // The members' parameters the motion is sensitive to (their polish list) other than the
+    // grid's axes.
+    let amplitudes: Vec<Target> = fresh
+        .iter()
+        .filter(|k| !on_simulation(**k))
+        .flat_map(|&k| k.model().polish().iter().map(move |(key, _)| (k, *key)))
+        .filter(|&(k, key)| {
+            !axes
+                .iter()
+                .any(|&(i, a)| start.cfg.slots[i].kind == k && a == key)
+        })
+        .map(|(k, key)| Target::Effect(k, key))
+        .collect();
+    let costs = par_map(&points, cx.opts.parallel, |&(a, b)| {
+        let mut cfg: Config = start.cfg.clone();
+        cfg.slots[axes[0].0].set(axes[0].1, a);
+        cfg.slots[axes[1].0].set(axes[1].1, b);
+        let s = ds.solve_config(&cfg).ok()?;
+        let mut p = to_plant(&s.cfg, &s.mech, s.elec.as_ref()).ok()?;
+        // Nonlinear values of the effects named earlier: those of the start.
+        for e in start.plant.effects.iter() {
+            if !cfg.slots.iter().any(|s| s.kind == e.kind) || p.effects.contains(e.kind) {
+                continue;
+            }
+            p.effects.insert(*e);
+        }
+        keep(&mut p);
+        // The least-squares amplitude of a member beside a play still mis-sized is no guide
+        // (a breakaway fitted as a narrow spike at low speed): the amplitudes the motion is
+        // sensitive to are searched at each point, from a quarter to one and a half times it.
+        let mut c = tuner.cost(&p, c_start);
+        for &t in &amplitudes {
+            let Some(x0) = get(&p, t).filter(|x| *x > 0.0) else {
+                continue;
+            };
+            let l0 = math::ln(x0);
+            let grid = search::linspace(l0 - math::ln(4.0), l0 + math::ln(1.5), 4);
+            let from = p;
+            if let Some((l, cl)) = search::grid_then_golden_bounded(
+                &grid,
+                |l, bound| {
+                    with(&from, t, math::exp(l)).map_or(f64::INFINITY, |q| tuner.cost(&q, bound))
+                },
+                3,
+            ) {
+                if cl < c {
+                    if let Some(q) = with(&from, t, math::exp(l)) {
+                        p = q;
+                        c = cl;
+                    }
+                }
+            }
+        }
+        Some((c, p))
+    });
+    let mut best: Vec<(f64, Plant)> = costs
+        .into_iter()
+        .flatten()
+        .filter(|(c, _)| c.is_finite())
+        .collect();
+    best.push((c_start, start.plant));
+    best.sort_by(|a, b| a.0.total_cmp(&b.0));
+    best.truncate(STARTS);
+    best.into_iter().map(|(_, p)| p).collect()
+}
+
+/// The equation-error solution of `plant`'s configuration (its nonlinear parameters fixed, the
+/// linear ones and the base re-solved) carrying `plant` itself as the model the simulation judges.
+fn solved_at(ds: &Dataset, plant: &Plant) -> Option<Solved> {
+    let cfg = ds.config(plant, &[], ds.opts.refit_base);
+    let mut s = ds.solve_config(&cfg).ok()?;
+    s.plant = *plant;
+    Some(s)
+}
+
+/// Judges member `m` of the joint model `full` given all the other `members`: against `full`
+/// without `m`, re-tuned on the simulation. Returns the candidate and its held-out simulation
+/// drop.
+fn drop_one(
+    cx: &joint::Context,
+    tuner: &Tuner,
+    full: &Plant,
+    members: &[EffectKind],
+    m: EffectKind,
+) -> Option<(Candidate, f64)> {
+    let ds = cx.ds;
+    let others: Vec<EffectKind> = members.iter().copied().filter(|k| *k != m).collect();
+    let reduced = without(full, m)?;
+    let (reduced, _) = tuner.refine(&reduced, &targets(&reduced, &others), &[0.5]);
+    let reference = Reference {
+        oe_holdout: oe::prediction_cost(ds, &reduced, Part::Holdout),
+        plant: reduced,
+    };
+    let o_solved = solved_at(ds, &reduced)?;
+    let j_solved = solved_at(ds, full)?;
+    let eq = Config::equation_of(m, ds.has_current);
+    let floor = cx.floor_of(eq);
+    let before = structure::analyse(
+        ds,
+        o_solved.equation(eq)?,
+        floor,
+        &cx.opts.thresholds,
+        ds.gear_ratio,
+    );
+    let mut c = judge(
+        ds, &o_solved, &reference, cx.noise_a, floor, before.rms, m, &j_solved, cx.opts,
+    );
+    let contribution = c.oe_reduction_pct.unwrap_or(f64::NEG_INFINITY);
+    if c.significant && !on_simulation(m) && m != EffectKind::Coulomb {
+        if let Some(k) = structure_check(
+            ds,
+            &before,
+            j_solved.equation(eq)?,
+            floor,
+            &cx.opts.thresholds,
+        ) {
+            c.significant &= k.passed;
+            c.checks.push(k);
+        }
+    }
+    if c.significant && cx.electrical_broken && m.is_mechanical() && !on_simulation(m) {
+        c.significant = false;
+    }
+    if c.significant {
+        // Agreement across both halves, refitted with the others in the model.
+        let cons = checks::consistency(ds, &reduced, &c, &cx.opts.thresholds);
+        c.significant = cons.iter().all(|k| k.passed);
+        c.checks.extend(cons);
+    }
+    if c.significant {
+        let hooks = m.model().fit_hooks();
+        if let Some(note) = hooks.and_then(|h| h.candidate_note(ds, &reduced, &c)) {
+            c.evidence.push_str(&note);
+        }
+        if let Some((cond, note)) = hooks.and_then(|h| h.conditional(ds, &reduced, &c)) {
+            c.evidence.push_str(&note);
+            c.conditional = Some(cond);
+        }
+        c.experiment = None;
+    }
+    Some((c, contribution))
+}
+
+/// The evidence of a survivor: found together with the others, how.
+fn note(
+    cx: &joint::Context,
+    full: &Plant,
+    named: &[EffectKind],
+    survivors: &[EffectKind],
+    m: EffectKind,
+    total: f64,
+    evidence: &str,
+) -> alloc::string::String {
+    use core::fmt::Write;
+    let mut s = alloc::string::String::new();
+    let others: Vec<&str> = survivors
+        .iter()
+        .filter(|k| **k != m)
+        .map(|k| k.name())
+        .collect();
+    let _ = write!(
+        s,
+        "Found together with {}: no single effect passed; {m} is material given the others (judged against the joint model without it, backward elimination from a joint simulation fit).",
+        if others.is_empty() { "the effects already in the model".into() } else { others.join(", ") }
+    );
+    if !named.is_empty() {
+        let re: Vec<alloc::string::String> = named
+            .iter()
+            .filter_map(|k| {
+                let p = re_estimated(cx, full, *k)?;
+                Some(alloc::format!("{k} ({p})"))
+            })
+            .collect();
+        if !re.is_empty() {
+            let _ = write!(s, " Re-estimated with them: {}.", re.join(", "));
+        }
+    }
+    let _ = write!(
+        s,
+        " Together they cut the held-out simulation error by {:.1} %. {evidence}",
+        100.0 * total
+    );
+    s
+}
+
+/// The main parameter of an effect already in the model, before and after the joint fit.
+fn re_estimated(cx: &joint::Context, full: &Plant, k: EffectKind) -> Option<alloc::string::String> {
+    let spec = k.params().iter().find(|p| k.model().fittable(p.key))?;
+    let before = cx.model.effects.value(k, spec.key)?;
+    let after = full.effects.value(k, spec.key)?;
+    Some(alloc::format!(
+        "{} {before:.4e} -> {after:.4e} {}",
+        spec.key,
+        spec.unit
+    ))
+}
+
+/// Prints a line of the search to stderr when `SERVO_DIAG_TRACE` is set (std builds).
+#[cfg(feature = "std")]
+fn trace(line: impl FnOnce() -> alloc::string::String) {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    if *ON.get_or_init(|| std::env::var_os("SERVO_DIAG_TRACE").is_some()) {
+        std::eprintln!("[backward] {}", line());
+    }
+}
+
+#[cfg(not(feature = "std"))]
+fn trace(_line: impl FnOnce() -> alloc::string::String) {}
+
+/// The members' parameters in `p`, for the trace.
+fn show(p: &Plant, members: &[EffectKind]) -> alloc::string::String {
+    let mut s = alloc::format!("J_eq {:.4e} tau_sf {:.4e}", p.params.j_eq(), p.tau_sf());
+    for &k in members {
+        for spec in k.params() {
+            if let Some(v) = p.effects.value(k, spec.key) {
+                s.push_str(&alloc::format!(" {k}.{} {v:.4e}", spec.key));
+            }
+        }
+    }
+    s
+}
