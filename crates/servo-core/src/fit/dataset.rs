@@ -178,8 +178,7 @@ pub struct Dataset {
 ///
 /// A search only *locates* a nonlinear parameter (a harmonic, a speed scale, a limit, a delay);
 /// its interval from a minute of data holding reversals, accelerations and slow motion is
-/// already far tighter than any check needs (the searched value of a 10-minute log's Stribeck
-/// speed or cogging harmonic is the same on one minute as on two). Every linear parameter,
+/// already far tighter than any check needs. Every linear parameter,
 /// residual and check is then computed on all the data ([`Dataset::search_set`]), so a drift
 /// or a difference between the log's halves is still seen. Halving the budget from two minutes
 /// halves the cost of the equation searches on long logs.
