@@ -696,6 +696,7 @@ pub(crate) fn par_map<T: Sync, R: Send>(
                         loop {
                             let i = next.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
                             let Some(item) = items.get(i) else { break };
+                            let _busy = Busy::hold();
                             done.push((i, f(item)));
                         }
                         done
@@ -721,6 +722,54 @@ pub(crate) fn par_map<T: Sync, R: Send>(
     }
     let _ = parallel;
     items.iter().map(f).collect()
+}
+
+/// Threads of the diagnosis working right now: the workers of [`par_map`] while they run an
+/// item, and the second half of a split cost evaluation ([`idle_core`]).
+#[cfg(feature = "std")]
+static BUSY: core::sync::atomic::AtomicUsize = core::sync::atomic::AtomicUsize::new(0);
+
+/// One working thread counted in [`BUSY`] while held.
+#[cfg(feature = "std")]
+pub(crate) struct Busy;
+
+#[cfg(feature = "std")]
+impl Busy {
+    fn hold() -> Busy {
+        BUSY.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+        Busy
+    }
+}
+
+#[cfg(feature = "std")]
+impl Drop for Busy {
+    fn drop(&mut self) {
+        BUSY.fetch_sub(1, core::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+/// A core no thread of a diagnosis works on, counted busy while the returned guard is held;
+/// `None` when every core is taken. Independent work inside one task (the segments of one
+/// simulation cost, [`crate::fit::oe::prediction_cost_stepped`]) runs on it: the serial parts
+/// of a diagnosis and its last task, which would leave the other cores idle, then use them.
+/// The caller, when it is a worker of [`par_map`], is already counted.
+#[cfg(feature = "std")]
+pub(crate) fn idle_core() -> Option<Busy> {
+    use core::sync::atomic::Ordering;
+    // Read once: the query reads the scheduler's affinity and the cgroup's quota.
+    static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    let cores = *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let mut now = BUSY.load(Ordering::Relaxed);
+    loop {
+        // The caller itself works on one core (counted or not).
+        if now.max(1) + 1 > cores {
+            return None;
+        }
+        match BUSY.compare_exchange_weak(now, now + 1, Ordering::Relaxed, Ordering::Relaxed) {
+            Ok(_) => return Some(Busy),
+            Err(v) => now = v,
+        }
+    }
 }
 
 /// Robust estimate of the white current-sensor noise [A]: MAD of first differences / sqrt(2).

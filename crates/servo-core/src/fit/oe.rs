@@ -128,7 +128,70 @@ pub const SEARCH_SUBSTEP_S: f64 = 250e-6;
 /// As [`prediction_cost_bounded`] with the simulator's largest internal sub-step
 /// `max_substep_s` [s] (see [`crate::sim::PlantSim::with_max_substep`]; [`SEARCH_SUBSTEP_S`] for
 /// the grid of a search).
+///
+/// The segments are independent simulations: with at least [`SPLIT_MIN_SAMPLES`] samples they
+/// are summed in two halves, always (so the value never depends on the machine's load), and the
+/// two halves run on two threads when a core is idle (std builds, see
+/// [`crate::diagnose::idle_core`]): the long simulations that end a diagnosis (a gear play's
+/// refinement, the checks of a significant candidate) then use both cores.
 pub fn prediction_cost_stepped(
+    ds: &Dataset,
+    plant: &Plant,
+    segs: &[(usize, usize)],
+    horizon_s: f64,
+    bound_rad: f64,
+    max_substep_s: f64,
+) -> Option<f64> {
+    let samples = |s: &[(usize, usize)]| -> usize {
+        s.iter()
+            .map(|&(ri, _)| ((horizon_s / ds.recs[ri].dt_s) as usize).max(2))
+            .sum()
+    };
+    let total = samples(segs);
+    if segs.len() < 2 || total < SPLIT_MIN_SAMPLES {
+        return cost_serial(ds, plant, segs, horizon_s, bound_rad, max_substep_s);
+    }
+    let (a, b) = segs.split_at(segs.len() / 2);
+    // Each half stops early against the whole sum's limit (bound^2 times every sample): a half
+    // alone above it puts the whole above it.
+    let half = |s: &[(usize, usize)]| -> Option<(f64, usize)> {
+        let n = samples(s);
+        let bound = bound_rad * math::sqrt(total as f64 / n.max(1) as f64);
+        let rms = cost_serial(ds, plant, s, horizon_s, bound, max_substep_s)?;
+        Some((rms * rms * n as f64, n))
+    };
+    let (ra, rb) = both(|| half(a), || half(b));
+    let ((sa, na), (sb, nb)) = (ra?, rb?);
+    if !(sa.is_finite() && sb.is_finite()) {
+        return Some(f64::INFINITY);
+    }
+    Some(math::sqrt((sa + sb) / (na + nb).max(1) as f64))
+}
+
+/// Fewest simulated samples of one cost evaluation summed in two halves (possibly on two
+/// threads, see [`prediction_cost_stepped`]): a thread costs tens of microseconds, a sample
+/// about a microsecond.
+pub const SPLIT_MIN_SAMPLES: usize = 4_000;
+
+/// `(fa(), fb())`, on two threads when a core is idle (std builds), else in turn.
+fn both<A: Send, B: Send>(fa: impl FnOnce() -> A + Send, fb: impl FnOnce() -> B + Send) -> (A, B) {
+    #[cfg(feature = "std")]
+    if let Some(_held) = crate::diagnose::idle_core() {
+        return std::thread::scope(|s| {
+            let h = s.spawn(fb);
+            let a = fa();
+            match h.join() {
+                Ok(b) => (a, b),
+                // A bug, not a data problem: surface it as the serial run would.
+                Err(e) => std::panic::resume_unwind(e),
+            }
+        });
+    }
+    (fa(), fb())
+}
+
+/// [`prediction_cost_stepped`] on one thread.
+fn cost_serial(
     ds: &Dataset,
     plant: &Plant,
     segs: &[(usize, usize)],
