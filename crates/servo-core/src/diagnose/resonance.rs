@@ -50,7 +50,7 @@ pub const MIN_PROMINENCE: f64 = 3.0;
 /// Prominence a resonance needs to refuse a catalogue candidate that leaves it (the check
 /// "explains the resonance"), above the one that names it. A model missing a play, a friction or
 /// a direction-dependent friction also leaves humps in its residual near the position loop's
-/// bandwidth (3.2 to 8.3 times their local background on the diagnose tests' hidden backlash,
+/// bandwidth (3.2 to 8.3 times their local background on the diagnose tests' hidden gear play,
 /// asymmetry and two-effect logs, 17.8-26.3 Hz): such a hump may be described, but must not
 /// refuse the effect that causes it. A shaft's ringing stands 20 to 150 times above its
 /// background (0.6 and 1.2 N m/rad, seeds 49-54).
