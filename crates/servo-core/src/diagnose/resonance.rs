@@ -193,6 +193,17 @@ fn peak_width(s: &[f64], df: f64) -> Option<(usize, f64)> {
 /// the rows' sampling rate. `None` when the rows hold too few contiguous runs for a spectrum.
 /// A structural mode above the band (a stiff coupling) cannot show in this balance.
 pub fn scanned_band(ds: &Dataset, rows: &Rows, idx: &[usize]) -> Option<(f64, f64)> {
+    let (_, dt, t_seg) = spectral_runs(ds, rows, idx)?;
+    Some(((3.0 * 0.72 / t_seg).max(2.0), 0.45 / dt))
+}
+
+/// The contiguous runs of the view's rows `idx` ([`runs`]), their sample period [s] and their
+/// median length [s] (the window of the averaged spectrum); `None` with fewer than 4 runs.
+fn spectral_runs(
+    ds: &Dataset,
+    rows: &Rows,
+    idx: &[usize],
+) -> Option<(Vec<(usize, usize)>, f64, f64)> {
     let (segs, dt) = runs(ds, rows, idx);
     if segs.len() < 4 || dt <= 0.0 {
         return None;
@@ -200,7 +211,7 @@ pub fn scanned_band(ds: &Dataset, rows: &Rows, idx: &[usize]) -> Option<(f64, f6
     let mut lens: Vec<f64> = segs.iter().map(|(a, b)| (b - a) as f64 * dt).collect();
     lens.sort_by(|a, b| a.total_cmp(b));
     let t_seg = lens[lens.len() / 2];
-    Some(((3.0 * 0.72 / t_seg).max(2.0), 0.45 / dt))
+    Some((segs, dt, t_seg))
 }
 
 /// Finds a resonance in a balance's residual over `rows`, at the view's rows `idx`
@@ -213,13 +224,7 @@ pub fn find(
     r: &[f64],
     omega_m: &[f64],
 ) -> Option<Resonance> {
-    let (segs, dt) = runs(ds, rows, idx);
-    if segs.len() < 4 || dt <= 0.0 {
-        return None;
-    }
-    let mut lens: Vec<f64> = segs.iter().map(|(a, b)| (b - a) as f64 * dt).collect();
-    lens.sort_by(|a, b| a.total_cmp(b));
-    let t_seg = lens[lens.len() / 2];
+    let (segs, dt, t_seg) = spectral_runs(ds, rows, idx)?;
     // Hann main lobe: half-power half-width about 0.72 / T.
     let win_hw = 0.72 / t_seg;
     let df = 0.25;

@@ -142,11 +142,7 @@ pub fn prediction_cost_stepped(
     bound_rad: f64,
     max_substep_s: f64,
 ) -> Option<f64> {
-    let samples = |s: &[(usize, usize)]| -> usize {
-        s.iter()
-            .map(|&(ri, _)| ((horizon_s / ds.recs[ri].dt_s) as usize).max(2))
-            .sum()
-    };
+    let samples = |s: &[(usize, usize)]| simulated_samples(ds, s, horizon_s);
     let total = samples(segs);
     if segs.len() < 2 || total < SPLIT_MIN_SAMPLES {
         return cost_serial(ds, plant, segs, horizon_s, bound_rad, max_substep_s);
@@ -190,6 +186,14 @@ fn both<A: Send, B: Send>(fa: impl FnOnce() -> A + Send, fb: impl FnOnce() -> B 
     (fa(), fb())
 }
 
+/// Samples simulated over the segments `segs` (record, start) of `horizon_s` [s] each: at least
+/// 2 per segment.
+fn simulated_samples(ds: &Dataset, segs: &[(usize, usize)], horizon_s: f64) -> usize {
+    segs.iter()
+        .map(|&(ri, _)| ((horizon_s / ds.recs[ri].dt_s) as usize).max(2))
+        .sum()
+}
+
 /// [`prediction_cost_stepped`] on one thread.
 fn cost_serial(
     ds: &Dataset,
@@ -203,10 +207,7 @@ fn cost_serial(
         return None;
     }
     let p = &plant.params;
-    let total: usize = segs
-        .iter()
-        .map(|&(ri, _)| ((horizon_s / ds.recs[ri].dt_s) as usize).max(2))
-        .sum();
+    let total = simulated_samples(ds, segs, horizon_s);
     let limit = bound_rad * bound_rad * total as f64;
     let (mut sum, mut count) = (0.0, 0usize);
     // One simulator per sample period, reset at every segment: building one discretises every
