@@ -197,13 +197,13 @@ pub fn scanned_band(ds: &Dataset, rows: &Rows, idx: &[usize]) -> Option<(f64, f6
     Some(((3.0 * 0.72 / t_seg).max(2.0), 0.45 / dt))
 }
 
+/// Contiguous runs (start, end) of a view's rows, their sample period [s] and their median
+/// length [s].
+type SpectralRuns = (Vec<(usize, usize)>, f64, f64);
+
 /// The contiguous runs of the view's rows `idx` ([`runs`]), their sample period [s] and their
 /// median length [s] (the window of the averaged spectrum); `None` with fewer than 4 runs.
-fn spectral_runs(
-    ds: &Dataset,
-    rows: &Rows,
-    idx: &[usize],
-) -> Option<(Vec<(usize, usize)>, f64, f64)> {
+fn spectral_runs(ds: &Dataset, rows: &Rows, idx: &[usize]) -> Option<SpectralRuns> {
     let (segs, dt) = runs(ds, rows, idx);
     if segs.len() < 4 || dt <= 0.0 {
         return None;
