@@ -31,9 +31,7 @@
 //! bending together to soak up a mechanism outside the catalogue) must pass every guard, each
 //! given the others.
 
-use super::{
-    checks, joint, judge, on_simulation, par_map, structure, structure_check, Candidate, Reference,
-};
+use super::{joint, on_simulation, par_map, Candidate, Reference};
 use crate::effects::{EffectKind, SearchScale, Span};
 use crate::fit::model::Config;
 use crate::fit::oe::{self, Part};
@@ -517,49 +515,10 @@ fn drop_one(
     };
     let o_solved = solved_at(ds, &reduced)?;
     let j_solved = solved_at(ds, full)?;
-    let eq = Config::equation_of(m, ds.has_current);
-    let floor = cx.floor_of(eq);
-    let before = structure::analyse(
-        ds,
-        o_solved.equation(eq)?,
-        floor,
-        &cx.opts.thresholds,
-        ds.gear_ratio,
-    );
-    let mut c = judge(
-        ds, &o_solved, &reference, cx.noise_a, floor, before.rms, m, &j_solved, cx.opts,
-    );
+    let mut c = joint::judge_given(cx, m, &o_solved, &reference, &j_solved)?;
     let contribution = c.oe_reduction_pct.unwrap_or(f64::NEG_INFINITY);
-    if c.significant && !on_simulation(m) && m != EffectKind::Coulomb {
-        if let Some(k) = structure_check(
-            ds,
-            &before,
-            j_solved.equation(eq)?,
-            floor,
-            &cx.opts.thresholds,
-        ) {
-            c.significant &= k.passed;
-            c.checks.push(k);
-        }
-    }
-    if c.significant && cx.electrical_broken && m.is_mechanical() && !on_simulation(m) {
-        c.significant = false;
-    }
-    if c.significant {
-        // Agreement across both halves, refitted with the others in the model.
-        let cons = checks::consistency(ds, &reduced, &c, &cx.opts.thresholds);
-        c.significant = cons.iter().all(|k| k.passed);
-        c.checks.extend(cons);
-    }
-    if c.significant {
-        let hooks = m.model().fit_hooks();
-        if let Some(note) = hooks.and_then(|h| h.candidate_note(ds, &reduced, &c)) {
-            c.evidence.push_str(&note);
-        }
-        if let Some((cond, note)) = hooks.and_then(|h| h.conditional(ds, &reduced, &c)) {
-            c.evidence.push_str(&note);
-            c.conditional = Some(cond);
-        }
+    // Agreement across both halves, refitted with the others in the model.
+    if c.significant && joint::confirm_given(cx, &mut c, &reduced) {
         c.experiment = None;
     }
     Some((c, contribution))

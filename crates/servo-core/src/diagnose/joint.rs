@@ -198,6 +198,22 @@ fn judge_member(
     (o, o_alone, o_ref): (EffectKind, &Solved, &Reference),
     joint: &Solved,
 ) -> Option<Candidate> {
+    let mut c = judge_given(cx, m, o_alone, o_ref, joint)?;
+    c.joint_with = Some(o);
+    Some(c)
+}
+
+/// Judges `m` in the joint fit `joint` against the model without it (`o_alone`, its simulation
+/// reference `o_ref`): every check of a single candidate but the agreement across parts of the
+/// data ([`confirm_given`]). Shared by the pairs and the backward elimination. `None` when a
+/// balance is missing.
+pub(super) fn judge_given(
+    cx: &Context,
+    m: EffectKind,
+    o_alone: &Solved,
+    o_ref: &Reference,
+    joint: &Solved,
+) -> Option<Candidate> {
     let ds = cx.ds;
     let th = &cx.opts.thresholds;
     let eq = Config::equation_of(m, ds.has_current);
@@ -206,7 +222,6 @@ fn judge_member(
     let mut c = judge(
         ds, o_alone, o_ref, cx.noise_a, floor, before.rms, m, joint, cx.opts,
     );
-    c.joint_with = Some(o);
     if c.significant && !on_simulation(m) && m != EffectKind::Coulomb {
         if let Some(k) = structure_check(ds, &before, joint.equation(eq)?, floor, th) {
             c.significant &= k.passed;
@@ -224,7 +239,6 @@ fn judge_member(
 /// independent parts of the data, refitted with the other member in the model, then its notes.
 /// Returns whether it passed.
 fn confirm_member(cx: &Context, c: &mut Candidate, joint: &Solved) -> bool {
-    let ds = cx.ds;
     let Some(o) = c.joint_with else {
         return false;
     };
@@ -233,26 +247,37 @@ fn confirm_member(cx: &Context, c: &mut Candidate, joint: &Solved) -> bool {
     };
     let mut given = *cx.model;
     given.effects.insert(*other);
-    let cons = checks::consistency(ds, &given, c, &cx.opts.thresholds);
+    if !confirm_given(cx, c, &given) {
+        return false;
+    }
+    let m = c.effect;
+    c.evidence = alloc::format!(
+        "Found together with {o}: no single effect passed, and {m} is material once {o} is in the model (judged against the model with {o} alone, fitted jointly with it). {}",
+        c.evidence
+    );
+    c.experiment = None;
+    true
+}
+
+/// The agreement of `c` across independent parts of the data, refitted on `given` (the joint
+/// model without `c`), then its effect's notes. Marks `c` not significant and returns false when
+/// a part disagrees.
+pub(super) fn confirm_given(cx: &Context, c: &mut Candidate, given: &Plant) -> bool {
+    let ds = cx.ds;
+    let cons = checks::consistency(ds, given, c, &cx.opts.thresholds);
     let ok = cons.iter().all(|k| k.passed);
     c.checks.extend(cons);
     if !ok {
         c.significant = false;
         return false;
     }
-    let m = c.effect;
-    let hooks = m.model().fit_hooks();
-    if let Some(note) = hooks.and_then(|h| h.candidate_note(ds, &given, c)) {
+    let hooks = c.effect.model().fit_hooks();
+    if let Some(note) = hooks.and_then(|h| h.candidate_note(ds, given, c)) {
         c.evidence.push_str(&note);
     }
-    if let Some((cond, note)) = hooks.and_then(|h| h.conditional(ds, &given, c)) {
+    if let Some((cond, note)) = hooks.and_then(|h| h.conditional(ds, given, c)) {
         c.evidence.push_str(&note);
         c.conditional = Some(cond);
     }
-    c.evidence = alloc::format!(
-        "Found together with {o}: no single effect passed, and {m} is material once {o} is in the model (judged against the model with {o} alone, fitted jointly with it). {}",
-        c.evidence
-    );
-    c.experiment = None;
     true
 }
