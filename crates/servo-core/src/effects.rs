@@ -541,6 +541,22 @@ pub trait FitHooks: Sync + Send {
         let _ = (ds, model, c);
         None
     }
+    /// A mechanism outside the catalogue that this effect's own simulation machinery can size
+    /// (a gear play's contact without the gap: a linear shaft or coupling), fitted on the data
+    /// `ds` from the model `start` (it lacks this effect; the diagnosis asks from the user's
+    /// model and from its simulation reference and keeps the fit with the lower error on the
+    /// fit blocks). Asked only when no catalogue effect passes and a balance is above its noise
+    /// floor; reported as a signature when it predicts the held-out motion materially better
+    /// than the reference ([`crate::diagnose::DiagnoseOptions::min_simulation_oe_drop`]).
+    /// `None`: none, or it cannot be sized on these data.
+    fn neighbour(
+        &self,
+        ds: &crate::fit::Dataset,
+        start: &crate::plant::Plant,
+    ) -> Option<crate::diagnose::checks::Neighbour> {
+        let _ = (ds, start);
+        None
+    }
     /// A note on a significant candidate (e.g. what its estimate is conditional on).
     fn candidate_note(
         &self,

@@ -148,6 +148,7 @@ impl Diagnose {
                 "status": last.status.name(),
                 "unexplained": last.unexplained.iter().map(balance_json).collect::<Vec<_>>(),
                 "balances": last.balances.iter().map(balance_json).collect::<Vec<_>>(),
+                "neighbours": last.neighbours.iter().map(|n| neighbour_json(n, last.base.oe_cost_rad)).collect::<Vec<_>>(),
                 "thresholds": thresholds_json(&opts.thresholds),
                 "ranking": last.ranking.iter().map(candidate_json).collect::<Vec<_>>(),
                 "verdict": last.verdict,

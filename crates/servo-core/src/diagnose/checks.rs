@@ -48,6 +48,31 @@ pub struct Conditional {
     pub rows: Vec<(f64, f64, f64)>,
 }
 
+/// A mechanism outside the catalogue that an effect's own simulation machinery can size (a gear
+/// play's contact without its gap: a linear shaft or coupling), fitted from the simulation
+/// reference ([`crate::effects::FitHooks::neighbour`]). The diagnosis reports it among the
+/// signatures of its balance when no catalogue effect passes and it predicts the held-out motion
+/// materially better than the reference: a lead on the missing term, not a named effect.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Neighbour {
+    /// Family, used as the signature's kind (e.g. `"compliance"`).
+    pub kind: &'static str,
+    /// The balance whose error it would explain.
+    pub balance: super::structure::BalanceKind,
+    /// What it is, with its fitted parameters and their units.
+    pub description: String,
+    /// Its fitted parameters: (key, unit, value), e.g. `("stiffness", "N m/rad", 2.9)`.
+    pub params: Vec<(&'static str, &'static str, f64)>,
+    /// Held-out simulation error (RMS load angle) with it [rad]; the diagnosis's reference has
+    /// [`super::BaseSummary::oe_cost_rad`].
+    pub heldout_oe_rad: f64,
+    /// Simulation error on the fit blocks with it [rad]: chooses among fits from different
+    /// starting models.
+    pub fit_oe_rad: f64,
+    /// The experiment that would confirm it.
+    pub experiment: String,
+}
+
 impl Conditional {
     /// Smallest and largest value of `key` over the rows.
     pub fn range(&self) -> (f64, f64) {

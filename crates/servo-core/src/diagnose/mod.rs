@@ -22,6 +22,7 @@ mod backward;
 pub mod checks;
 pub mod evidence;
 pub mod joint;
+pub mod neighbours;
 pub mod regimes;
 pub mod resonance;
 pub mod structure;
@@ -190,6 +191,10 @@ pub struct Diagnosis {
     pub balances: Vec<BalanceReport>,
     /// The balances left unexplained (status `Unexplained`; empty otherwise).
     pub unexplained: Vec<BalanceReport>,
+    /// Leads beyond the catalogue (status `Unexplained`): mechanisms outside it, fitted on the
+    /// simulation, that predict the held-out motion materially better ([`neighbours`]); each is
+    /// also a signature of its balance.
+    pub neighbours: Vec<checks::Neighbour>,
 }
 
 impl Diagnosis {
@@ -550,6 +555,21 @@ pub fn diagnose_dataset(
     } else {
         Status::Unexplained
     };
+    let mut unexplained = unexplained;
+    let mut leads = Vec::new();
+    if status == Status::Unexplained {
+        // Leads beyond the catalogue: a mechanism the candidates' own machinery sizes (a gear
+        // play's contact without play: a shaft) that predicts the motion materially better.
+        if let (Some(c0), true) = (reference.oe_holdout, ds.has_input) {
+            let found = timing::timed(
+                || "neighbours outside the catalogue".into(),
+                || neighbours::find(ds, &kinds, &[model, &reference.plant], c0, opts),
+            );
+            neighbours::attach(&mut unexplained, &found);
+            neighbours::attach(&mut balances, &found);
+            leads = found.into_iter().map(|(n, _)| n).collect();
+        }
+    }
     let mut verdict = evidence::verdict(status, &ranking, &unexplained, &th);
     if !ds.has_input {
         verdict.push_str(" No log records the input voltage u: judged on the torque balance alone (information criterion and held-out residual), without a simulation check; input effects and effects judged on the simulation were not tried.");
@@ -561,6 +581,7 @@ pub fn diagnose_dataset(
         status,
         balances,
         unexplained,
+        neighbours: leads,
     })
 }
 

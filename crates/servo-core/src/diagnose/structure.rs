@@ -80,10 +80,27 @@ pub struct Signature {
     pub kind: &'static str,
     /// Plain-language description with the measured figure (shape, cycles per revolution, ...).
     pub description: String,
-    /// Share of the held-out residual variance it explains (0..1).
+    /// Share of the held-out residual variance it explains (0..1); of the held-out simulation
+    /// error's mean square when `on_simulation`.
     pub share: f64,
-    /// RMS of what it explains on held-out rows [unit of the balance].
+    /// RMS of what it explains on held-out rows [unit of the balance]; of the held-out
+    /// simulated load angle [rad] when `on_simulation`.
     pub explained_rms: f64,
+    /// Measured on the simulation of the motion (a mechanism outside the catalogue fitted as a
+    /// model, [`super::checks::Neighbour`]), not on the balance's residual.
+    pub on_simulation: bool,
+}
+
+impl Signature {
+    /// What [`Signature::share`] is a share of, for a sentence: "residual" or "simulation
+    /// error's mean square".
+    pub fn share_of(&self) -> &'static str {
+        if self.on_simulation {
+            "simulation error's mean square"
+        } else {
+            "residual"
+        }
+    }
 }
 
 /// The residual of one balance after the model's base parameters are refitted.
@@ -452,6 +469,7 @@ pub fn analyse(
             description,
             share,
             explained_rms: rms_x,
+            on_simulation: false,
         });
     };
     // Constant offset.
@@ -690,6 +708,7 @@ pub fn analyse(
                 ),
                 share: res.share,
                 explained_rms: math::sqrt(res.band_ms),
+                on_simulation: false,
             });
             resonance = Some(res);
         }
@@ -828,9 +847,10 @@ pub fn describe(b: &BalanceReport) -> String {
             }
             let _ = write!(
                 s,
-                "{} ({:.0} % of the held-out residual)",
+                "{} ({:.0} % of the held-out {})",
                 sig.description,
-                100.0 * sig.share
+                100.0 * sig.share,
+                sig.share_of()
             );
         }
     }

@@ -149,8 +149,9 @@ impl EffectModel for Backlash {
 
 #[cfg(feature = "alloc")]
 mod fit {
-    use super::{Backlash, GAP_MAX_RAD, LONG_HORIZON_S};
-    use crate::diagnose::checks::{get, Check, Conditional};
+    use super::{Backlash, GAP_MAX_RAD, LONG_HORIZON_S, PARAMS};
+    use crate::diagnose::checks::{get, Check, Conditional, Neighbour};
+    use crate::diagnose::structure::BalanceKind;
     use crate::diagnose::Candidate;
     use crate::math;
     use crate::effects::{EffectKind, FitHooks};
@@ -209,6 +210,9 @@ mod fit {
             c: &Candidate,
         ) -> Option<(Conditional, String)> {
             stiffness_study(ds, model, c)
+        }
+        fn neighbour(&self, ds: &Dataset, start: &Plant) -> Option<Neighbour> {
+            shaft_neighbour(ds, start)
         }
     }
 
@@ -439,21 +443,43 @@ mod fit {
     }
 
 
-    /// Is it play, or a compliance? A gear play and a compliant shaft both put a spring between
-    /// motor and load; only the play lets them separate. The same contact with no gap (a linear
-    /// spring-damper that pulls as well as pushes: a shaft or coupling), its stiffness searched
-    /// from 1 % of the assumed one up to it (11 values, then a golden-section search), its
-    /// damping at three damping ratios (0.05, 0.2, 0.7, on the two-body reduced inertia) and the
-    /// load side holding the assumed share of the inertia or half of it, is sized on the
-    /// simulation of the fit blocks; the inertia split is then searched over 10-90 % at the
-    /// resonance frequency the grid found ([`split_at_frequency`]); then the damping ratio
-    /// between the grid's values and, as
-    /// the play's own fit does, J_eq (+-15 %) and the Coulomb level (+-10 %) are tuned with it,
-    /// and the stiffness once more. The play passes
-    /// when it predicts the held-out motion better than the best such compliance. A shaft that
-    /// winds up (a resonance between the two inertias) then is not named as a gear play.
-    fn play_not_compliance(ds: &Dataset, cand: &Plant) -> Option<Check> {
-        use oe::{prediction_cost, prediction_cost_bounded, Part};
+    /// A linear shaft or coupling between motor and load, sized on the simulation: the gear
+    /// play's contact with no gap (a spring-damper that pulls as well as pushes), fitted by
+    /// [`fit_shaft`].
+    struct Shaft {
+        /// Stiffness at the load [N m/rad].
+        k: f64,
+        /// Damping ratio on the two-body reduced inertia [1].
+        zeta: f64,
+        /// Share of J_eq on the load side [1].
+        frac: f64,
+        /// Factor on J_eq tuned with it [1] (the Coulomb level's is in `plant`).
+        js: f64,
+        /// The model with the shaft.
+        plant: Plant,
+    }
+
+    impl Shaft {
+        /// The two-mass (antiresonance-free) natural frequency [Hz]: sqrt(k / J_red) / 2 pi,
+        /// J_red = frac (1 - frac) J_l with J_l = J_eq N^2 the whole inertia at the load.
+        fn freq_hz(&self) -> f64 {
+            let p = &self.plant.params;
+            let j_red = self.frac * (1.0 - self.frac) * p.j_eq() * p.n * p.n;
+            math::sqrt(self.k / j_red.max(1e-300)) / (2.0 * core::f64::consts::PI)
+        }
+    }
+
+    /// Fits a linear shaft in place of the gear play of `cand` (which must hold the effect, its
+    /// stiffness the upper end of the search): its stiffness searched from 1 % of the
+    /// assumed one up to it (11 values, then a golden-section search), its damping at three
+    /// damping ratios (0.05, 0.2, 0.7, on the two-body reduced inertia) and the load side
+    /// holding the assumed share of the inertia or half of it, is sized on the simulation of the
+    /// fit blocks; the inertia split is then searched over 10-90 % at the resonance frequency
+    /// the grid found ([`split_at_frequency`]); then the damping ratio between the grid's values
+    /// and, as the play's own fit does, J_eq (+-15 %) and the Coulomb level (+-10 %) are tuned
+    /// with it, and the stiffness once more.
+    fn fit_shaft(ds: &Dataset, cand: &Plant) -> Option<Shaft> {
+        use oe::{prediction_cost_bounded, Part};
         let e = cand.effects.get(EffectKind::Backlash)?;
         let k0 = e.get("stiffness")?;
         let f = e.get("load_inertia_fraction")?.clamp(0.05, 0.95);
@@ -537,7 +563,73 @@ mod fit {
             1.0
         };
         let k = stiffness(k, zeta, js, ts);
-        let spring = prediction_cost(ds, &with(k, zeta, frac, js, ts)?, Part::Holdout)?;
+        Some(Shaft {
+            k,
+            zeta,
+            frac,
+            js,
+            plant: with(k, zeta, frac, js, ts)?,
+        })
+    }
+
+    /// A linear shaft or coupling in place of a gear play ([`fit_shaft`] from `start` with the
+    /// contact's assumed stiffness, damping and inertia split, no gap): the two-mass mechanism
+    /// the catalogue lacks. Its stiffness, natural frequency, damping ratio and inertia split
+    /// tell a user where to look; they are reported whether or not its resonance lies in the
+    /// band the torque balance's rows resolve (a stiff coupling's mode above it still shows in
+    /// the motion after each reversal). `None` without a logged input (nothing to simulate) or
+    /// when `start` already holds a play.
+    fn shaft_neighbour(ds: &Dataset, start: &Plant) -> Option<Neighbour> {
+        if !ds.has_input || start.effects.contains(EffectKind::Backlash) {
+            return None;
+        }
+        let mut q = *start;
+        let assumed: Vec<f64> = PARAMS.iter().map(|p| p.default.unwrap_or(0.0)).collect();
+        set(&mut q, EffectKind::Backlash, &assumed).ok()?;
+        let shaft = fit_shaft(ds, &q)?;
+        let oe = oe::prediction_cost(ds, &shaft.plant, oe::Part::Holdout)?;
+        let fit_oe = oe::prediction_cost(ds, &shaft.plant, oe::Part::Fit)?;
+        let f_hz = shaft.freq_hz();
+        Some(Neighbour {
+            kind: "compliance",
+            balance: BalanceKind::Torque,
+            description: alloc::format!(
+                "a compliance between motor and load (a shaft or coupling that winds up, outside the catalogue; sized on the simulation as a gear play's contact without play): a two-mass mode near {f_hz:.1} Hz, damping ratio {:.2}, stiffness {:.3} N m/rad at the load with {:.2} of the inertia on the load side (the motion pins down the frequency best; stiffness and split trade off along it), J_eq x {:.3}",
+                shaft.zeta, shaft.k, shaft.frac, shaft.js
+            ),
+            params: alloc::vec![
+                ("stiffness", "N m/rad", shaft.k),
+                ("frequency", "Hz", f_hz),
+                ("damping_ratio", "-", shaft.zeta),
+                ("load_inertia_fraction", "-", shaft.frac),
+                ("j_eq_factor", "-", shaft.js),
+            ],
+            heldout_oe_rad: oe,
+            fit_oe_rad: fit_oe,
+            experiment: alloc::format!(
+                "excite up to about {:.0} Hz with a small chirp (experiments/chirp.toml) and run `servo frf` on the log, logging motor and load angles if you can: a shaft or coupling shows a resonance near {f_hz:.0} Hz (and an antiresonance) at the same frequency whatever the amplitude, and the two angles differ there; a gear play would instead change with the amplitude",
+                2.0 * f_hz
+            ),
+        })
+    }
+
+    /// Is it play, or a compliance? A gear play and a compliant shaft both put a spring between
+    /// motor and load; only the play lets them separate. The same contact with no gap (a linear
+    /// spring-damper that pulls as well as pushes: a shaft or coupling, [`fit_shaft`]) is sized
+    /// on the simulation of the fit blocks. The play passes when it predicts the held-out motion
+    /// better than the best such compliance. A shaft that winds up (a resonance between the two
+    /// inertias) then is not named as a gear play.
+    fn play_not_compliance(ds: &Dataset, cand: &Plant) -> Option<Check> {
+        use oe::{prediction_cost, Part};
+        let Shaft {
+            k,
+            zeta,
+            frac,
+            js,
+            plant,
+            ..
+        } = fit_shaft(ds, cand)?;
+        let spring = prediction_cost(ds, &plant, Part::Holdout)?;
         let play = prediction_cost(ds, cand, Part::Holdout)?;
         // The play is refused only when the shaft predicts clearly better: within 5 % the two
         // are not told apart by these data (a weak play's dead band is a few samples wide), and

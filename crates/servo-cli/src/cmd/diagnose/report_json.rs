@@ -2,6 +2,7 @@
 //! (docs/schemas/diagnose.json).
 
 use super::*;
+use servo_core::diagnose::checks::Neighbour;
 
 pub(super) fn f(v: f64) -> Value {
     if v.is_finite() {
@@ -61,8 +62,23 @@ pub(super) fn balance_json(b: &BalanceReport) -> Value {
             "description": s.description,
             "share_of_heldout_residual": f(s.share),
             "explained_rms": f(s.explained_rms),
+            "measured_on": if s.on_simulation { "simulation" } else { "balance" },
         })).collect::<Vec<_>>(),
         "experiment": b.experiment,
+    })
+}
+
+/// A lead beyond the catalogue ([`servo_core::diagnose::checks::Neighbour`]); `reference_rad`:
+/// the reference's held-out simulation error.
+pub(super) fn neighbour_json(n: &Neighbour, reference_rad: Option<f64>) -> Value {
+    json!({
+        "kind": n.kind,
+        "balance": n.balance.name(),
+        "description": n.description,
+        "parameters": n.params.iter().map(|(key, unit, value)| json!({ "key": key, "unit": unit, "value": f(*value) })).collect::<Vec<_>>(),
+        "heldout_oe_cost_rad": f(n.heldout_oe_rad),
+        "oe_reduction_pct": reference_rad.map_or(Value::Null, |c0| f(100.0 * (1.0 - n.heldout_oe_rad / c0))),
+        "experiment": n.experiment,
     })
 }
 

@@ -68,9 +68,10 @@ pub(super) fn text_report(
             b.equation.unit(),
             b.ratio_to_noise,
             b.signatures.first().map_or(String::new(), |g| format!(
-                "; strongest shape: {} ({:.0} % of the held-out residual)",
+                "; strongest shape: {} ({:.0} % of the held-out {})",
                 g.description,
-                100.0 * g.share
+                100.0 * g.share,
+                g.share_of()
             ))
         );
     }

@@ -1,0 +1,99 @@
+//! Leads beyond the catalogue: mechanisms the catalogue lacks that the candidates' own
+//! simulation machinery can size ([`crate::effects::FitHooks::neighbour`], e.g. a gear play's
+//! contact without its gap: a linear shaft or coupling).
+//!
+//! Asked only when the verdict is "unexplained" (no catalogue effect passes, a balance is above
+//! its noise floor). A neighbour is reported among the signatures of its balance when it predicts
+//! the held-out motion better than the simulation reference by at least the drop asked of an
+//! effect judged on the simulation
+//! ([`super::DiagnoseOptions::min_simulation_oe_drop`]). It is a lead on the missing term, with
+//! its fitted parameters and the experiment that would confirm it, never a named effect: the
+//! status stays "unexplained".
+
+use super::checks::Neighbour;
+use super::structure::{BalanceReport, Signature};
+use super::{par_map, DiagnoseOptions};
+use crate::effects::EffectKind;
+use crate::fit::Dataset;
+use crate::math;
+use crate::plant::Plant;
+use alloc::vec::Vec;
+
+/// The neighbours of the candidate `kinds`, each fitted from every model of `starts` (the best
+/// on the fit blocks kept), that predict the held-out motion better than the reference
+/// (held-out simulation error `reference_oe_rad` [rad]) by the drop asked, as signatures
+/// (measured on the simulation), strongest first, each with the neighbour it came from.
+pub(super) fn find(
+    ds: &Dataset,
+    kinds: &[EffectKind],
+    starts: &[&Plant],
+    reference_oe_rad: f64,
+    opts: &DiagnoseOptions,
+) -> Vec<(Neighbour, Signature)> {
+    if !(reference_oe_rad.is_finite() && reference_oe_rad > 0.0) {
+        return Vec::new();
+    }
+    let jobs: Vec<(EffectKind, &Plant)> = kinds
+        .iter()
+        .copied()
+        .filter(|k| k.model().fit_hooks().is_some())
+        .flat_map(|k| starts.iter().map(move |p| (k, *p)))
+        .collect();
+    let fitted = par_map(&jobs, opts.parallel, |(k, start)| {
+        k.model()
+            .fit_hooks()
+            .and_then(|h| h.neighbour(ds, start))
+            .map(|n| (*k, n))
+    });
+    // Per kind, the fit from the start that does best on the fit blocks.
+    let mut found: Vec<(EffectKind, Neighbour)> = Vec::new();
+    for (k, n) in fitted.into_iter().flatten() {
+        match found.iter_mut().find(|(kk, _)| *kk == k) {
+            Some(slot) if n.fit_oe_rad < slot.1.fit_oe_rad => slot.1 = n,
+            Some(_) => {}
+            None => found.push((k, n)),
+        }
+    }
+    let found = found.into_iter().map(|(_, n)| n);
+    let c0 = reference_oe_rad;
+    let mut out: Vec<(Neighbour, Signature)> = found
+        .filter(|n| n.heldout_oe_rad.is_finite())
+        .filter_map(|n| {
+            let c = n.heldout_oe_rad;
+            let drop = 1.0 - c / c0;
+            (drop >= opts.min_simulation_oe_drop).then(|| {
+                let sig = Signature {
+                    kind: n.kind,
+                    description: alloc::format!(
+                        "{}; it predicts the held-out motion {:.0} % better than the model ({:.2e} -> {:.2e} rad RMS)",
+                        n.description,
+                        100.0 * drop,
+                        c0,
+                        c
+                    ),
+                    share: 1.0 - (c / c0) * (c / c0),
+                    explained_rms: math::sqrt((c0 * c0 - c * c).max(0.0)),
+                    on_simulation: true,
+                };
+                (n, sig)
+            })
+        })
+        .collect();
+    out.sort_by(|a, b| b.1.share.total_cmp(&a.1.share));
+    out
+}
+
+/// Adds each neighbour's signature to the report of its balance in `reports` (where present):
+/// after a resonance the balance itself shows (the direct evidence stays first), otherwise
+/// first, and then its experiment becomes the balance's.
+pub(super) fn attach(reports: &mut [BalanceReport], found: &[(Neighbour, Signature)]) {
+    for (n, sig) in found.iter().rev() {
+        for b in reports.iter_mut().filter(|b| b.balance == n.balance) {
+            let at = usize::from(b.signatures.first().is_some_and(|s| s.kind == "resonance"));
+            b.signatures.insert(at, sig.clone());
+            if at == 0 {
+                b.experiment = n.experiment.clone();
+            }
+        }
+    }
+}
