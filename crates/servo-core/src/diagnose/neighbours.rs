@@ -97,3 +97,70 @@ pub(super) fn attach(reports: &mut [BalanceReport], found: &[(Neighbour, Signatu
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::structure::BalanceKind;
+    use crate::fit::model::Equation;
+    use alloc::string::String;
+
+    fn sig(kind: &'static str) -> Signature {
+        Signature {
+            kind,
+            description: String::from(kind),
+            share: 0.5,
+            explained_rms: 1.0,
+            on_simulation: kind == "compliance",
+        }
+    }
+
+    fn report(balance: BalanceKind, first: Option<&'static str>) -> BalanceReport {
+        BalanceReport {
+            equation: Equation::Torque,
+            balance,
+            rms: 1.0,
+            floor: 0.1,
+            ratio_to_noise: 10.0,
+            signatures: first.into_iter().map(sig).collect(),
+            above_noise: true,
+            experiment: String::from("before"),
+            resonance: None,
+            resonance_band_hz: None,
+        }
+    }
+
+    fn lead() -> (Neighbour, Signature) {
+        let n = Neighbour {
+            kind: "compliance",
+            balance: BalanceKind::Torque,
+            description: String::from("shaft"),
+            params: alloc::vec![("frequency", "Hz", 47.0)],
+            heldout_oe_rad: 0.07,
+            fit_oe_rad: 0.06,
+            experiment: String::from("chirp"),
+        };
+        (n, sig("compliance"))
+    }
+
+    /// The lead goes first (and its experiment becomes the balance's) unless the balance shows
+    /// a resonance itself; other balances are left alone.
+    #[test]
+    fn a_lead_follows_a_resonance_and_otherwise_comes_first() {
+        let mut reports = [
+            report(BalanceKind::Torque, Some("speed")),
+            report(BalanceKind::Torque, Some("resonance")),
+            report(BalanceKind::Electrical, Some("offset")),
+        ];
+        attach(&mut reports, &[lead()]);
+        let kinds: Vec<Vec<&str>> = reports
+            .iter()
+            .map(|b| b.signatures.iter().map(|s| s.kind).collect())
+            .collect();
+        assert_eq!(kinds[0], ["compliance", "speed"]);
+        assert_eq!(reports[0].experiment, "chirp");
+        assert_eq!(kinds[1], ["resonance", "compliance"]);
+        assert_eq!(reports[1].experiment, "before");
+        assert_eq!(kinds[2], ["offset"]);
+    }
+}
