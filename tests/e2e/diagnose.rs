@@ -1143,20 +1143,11 @@ fn three_hidden_effects_are_found_with_their_parameters() {
 /// stiction the play's simulation drop is small), so they are found together, as a pair each
 /// member of which is material given the other (`diagnose::joint`). Three seeds.
 fn check_three_with_backlash(seed: u64) {
-    check_hidden_together(
-        &[
-            "stribeck:tau_s=0.02,omega_s=0.5",
-            "backlash:gap=0.03",
-            "delay:delay=0.003",
-        ],
-        seed,
-    );
-}
-
-/// Effects `specs` hidden together (one of them a gear play) are all added by the loop, every
-/// step but the last "missing", their main parameters (and a breakaway's speed scale) within
-/// 25 % (see [`check_three_with_backlash`]).
-fn check_hidden_together(specs: &[&str], seed: u64) {
+    let specs = [
+        "stribeck:tau_s=0.02,omega_s=0.5",
+        "backlash:gap=0.03",
+        "delay:delay=0.003",
+    ];
     let hidden: Vec<Effect> = specs.iter().map(|s| Effect::parse(s).unwrap()).collect();
     let plant = truth(&hidden);
     let logs = logs(&plant, seed);
@@ -1213,7 +1204,7 @@ fn check_hidden_together(specs: &[&str], seed: u64) {
 }
 
 #[test]
-#[ignore = "does not hold yet (#10): with the joint search on (diagnose::backward, then diagnose::joint), the joint simulation fit re-estimates the delay (2.9-3.9 ms for 3.0) but settles on a gap of 0.06-0.08 rad for 0.03 (a local optimum of the simulation cost), and the play then fails its drop-one test (information criterion negative on the fit segments) on seeds 23 and 24"]
+#[ignore = "does not hold yet (#10): with the joint search on (diagnose::backward: trimmed simulation cost, base tuned first) seeds 24 and 25 pass (gap +10/+12 %, delay -21/-17 %), but on seed 23 the joint fit settles on a gap of 0.051 rad for 0.03 and the breakaway fails its drop-one test; the search costs 1-2 min per diagnosis, so it stays off by default"]
 fn three_hidden_effects_with_backlash_are_found_with_their_parameters() {
     let _cpu = servo_e2e::cpu_heavy();
     every_seed([23, 24, 25], check_three_with_backlash);
@@ -1485,14 +1476,4 @@ fn backlash_gap_with_an_unknown_contact_stiffness() {
         cond["estimated"].is_object() || (range[0] <= 0.03 && 0.03 <= range[1]),
         "{cond}"
     );
-}
-
-#[test]
-#[ignore = "scratch"]
-fn scratch_three_bl_seed() {
-    let seed: u64 = std::env::var("SEED").unwrap().parse().unwrap();
-    match std::env::var("SPECS") {
-        Ok(v) => check_hidden_together(&v.split(';').collect::<Vec<_>>(), seed),
-        Err(_) => check_three_with_backlash(seed),
-    }
 }

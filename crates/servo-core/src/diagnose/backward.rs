@@ -11,14 +11,19 @@
 //!    best candidates by held-out simulation drop ([`super::DiagnoseOptions::joint_candidates`]
 //!    of them) are fitted together: first by the usual equation-error fit (base refitted), then
 //!    on the simulation cost of the fit blocks over long segments (several reversals each),
-//!    where the motion shows every one of them. A coarse grid over two nonlinear parameters of
-//!    different members (e.g. a play's gap and a breakaway's speed scale, the pair that trades
-//!    off at low speed), the linear ones re-solved by least squares at each point, then a
-//!    coordinate refinement of every parameter, J_eq and the Coulomb level. The effects named
-//!    earlier are re-estimated too (a delay sized without the play).
+//!    where the motion shows every one of them, trimmed of its worst fifth ([`trimmed`]: a few
+//!    segments start from a state no measurement fixes and carry most of the plain cost). A
+//!    coarse grid over two nonlinear parameters of different members (e.g. a play's gap and a
+//!    breakaway's speed scale, the pair that trades off at low speed), the linear ones
+//!    re-solved by least squares at each point, then a coordinate refinement from the best
+//!    points: the base first (the Coulomb level, B_eq, R_a, J_eq), then every member's
+//!    parameters. The effects named earlier are re-estimated too (a delay sized without the
+//!    play).
 //! 2. **Drop-one test.** Each new member is judged given all the others, against the joint
 //!    model without it (re-tuned on the simulation): every check of a single candidate (the
-//!    information criterion of its balance, held-out residual and simulation drops, its noise
+//!    information criterion of its balance (for a play, judged on the motion alone, that of
+//!    the trimmed cost it was tuned on, [`on_tuned_cost`]), held-out residual and simulation
+//!    drops, its noise
 //!    floor and structured share, its physical constraints, "explains the structure it fits",
 //!    agreement across both halves of the data with the others in the model). The member with
 //!    the smallest held-out simulation contribution among those that fail is removed, the
@@ -330,7 +335,14 @@ pub(super) fn search(
             .min_by(|a, b| a.1.total_cmp(&b.1))
         },
     )?;
-    trace(|| alloc::format!("joint {} r_a {} b_eq {:e} cost {c_full:.4e}", show(&full, &all), full.params.r_a, full.params.b_eq()));
+    trace(|| {
+        alloc::format!(
+            "joint {} r_a {} b_eq {:e} cost {c_full:.4e}",
+            show(&full, &all),
+            full.params.r_a,
+            full.params.b_eq()
+        )
+    });
     let mut survivors = fresh.clone();
     loop {
         if survivors.is_empty() {
@@ -566,7 +578,9 @@ fn drop_one(
         oe_holdout: oe::prediction_cost(ds, &reduced, Part::Holdout),
         plant: reduced,
     };
-    trace(|| alloc::format!("drop {m}: reduced {} | costs fit short {:?} vs {:?}, hold short {:?} vs {:?}, long fit {:.4e} vs {:.4e}", show(&reduced, &others), oe::prediction_cost(ds, &reduced, Part::Fit), oe::prediction_cost(ds, full, Part::Fit), oe::prediction_cost(ds, &reduced, Part::Holdout), oe::prediction_cost(ds, full, Part::Holdout), tuner.cost(&reduced, f64::INFINITY), tuner.cost(full, f64::INFINITY)));
+    trace(|| {
+        alloc::format!("drop {m}: reduced {} | costs fit short {:?} vs {:?}, hold short {:?} vs {:?}, long fit {:.4e} vs {:.4e}", show(&reduced, &others), oe::prediction_cost(ds, &reduced, Part::Fit), oe::prediction_cost(ds, full, Part::Fit), oe::prediction_cost(ds, &reduced, Part::Holdout), oe::prediction_cost(ds, full, Part::Holdout), tuner.cost(&reduced, f64::INFINITY), tuner.cost(full, f64::INFINITY))
+    });
     let o_solved = solved_at(ds, &reduced)?;
     let j_solved = solved_at(ds, full)?;
     let mut c = joint::judge_given(cx, m, &o_solved, &reference, &j_solved)?;
