@@ -70,8 +70,9 @@ pub struct DiagnoseOptions {
     /// named, then eliminate backward ([`backward`]; failing that, to try in pairs, [`joint`]);
     /// 0: none. Off by default (experimental): on a breakaway friction, a gear play and a delay
     /// hidden together (the three-effect test, joint model tuned on a trimmed simulation cost)
-    /// it names all three on seeds 24 and 25 with the gap within 12 % and the delay 17-21 %
-    /// short, but not on seed 23, and it costs 1-2 minutes per diagnosis of a 28 s log.
+    /// it names all three on seeds 24 and 25 (gap within 18 %, delay 17-21 % short, the
+    /// breakaway 29-30 % off on seed 24) but only the delay on seed 23, and it costs 1-2
+    /// minutes per diagnosis of a 28 s log.
     pub joint_candidates: usize,
 }
 
