@@ -1204,7 +1204,7 @@ fn check_three_with_backlash(seed: u64) {
 }
 
 #[test]
-#[ignore = "does not hold yet (#10): with the joint search on (diagnose::backward, then diagnose::joint), the joint simulation fit re-estimates the delay (2.9-3.9 ms for 3.0) but settles on a gap of 0.06-0.08 rad for 0.03 (a local optimum of the simulation cost), and the play then fails its drop-one test (information criterion negative on the fit segments) on seeds 23 and 24"]
+#[ignore = "does not hold yet (#10): with the joint search on (diagnose::backward: trimmed simulation cost, base tuned first) seed 25 passes (gap +12 %, delay -17 %) and seed 24 names all three but with tau_s +29 % and omega_s -30 % (gap +18 %); on seed 23 only the delay is named (4.0 ms), the joint fit settling on a wide gap; the search costs 1-2 min per diagnosis, so it stays off by default"]
 fn three_hidden_effects_with_backlash_are_found_with_their_parameters() {
     let _cpu = servo_e2e::cpu_heavy();
     every_seed([23, 24, 25], check_three_with_backlash);

@@ -11,14 +11,19 @@
 //!    best candidates by held-out simulation drop ([`super::DiagnoseOptions::joint_candidates`]
 //!    of them) are fitted together: first by the usual equation-error fit (base refitted), then
 //!    on the simulation cost of the fit blocks over long segments (several reversals each),
-//!    where the motion shows every one of them. A coarse grid over two nonlinear parameters of
-//!    different members (e.g. a play's gap and a breakaway's speed scale, the pair that trades
-//!    off at low speed), the linear ones re-solved by least squares at each point, then a
-//!    coordinate refinement of every parameter, J_eq and the Coulomb level. The effects named
-//!    earlier are re-estimated too (a delay sized without the play).
+//!    where the motion shows every one of them, trimmed of its worst fifth ([`trimmed`]: a few
+//!    segments start from a state no measurement fixes and carry most of the plain cost). A
+//!    coarse grid over two nonlinear parameters of different members (e.g. a play's gap and a
+//!    breakaway's speed scale, the pair that trades off at low speed), the linear ones
+//!    re-solved by least squares at each point, then a coordinate refinement from the best
+//!    points: the base first (the Coulomb level, B_eq, R_a, J_eq), then every member's
+//!    parameters. The effects named earlier are re-estimated too (a delay sized without the
+//!    play).
 //! 2. **Drop-one test.** Each new member is judged given all the others, against the joint
 //!    model without it (re-tuned on the simulation): every check of a single candidate (the
-//!    information criterion of its balance, held-out residual and simulation drops, its noise
+//!    information criterion of its balance (for a play, judged on the motion alone, that of
+//!    the trimmed cost it was tuned on, [`on_tuned_cost`]), held-out residual and simulation
+//!    drops, its noise
 //!    floor and structured share, its physical constraints, "explains the structure it fits",
 //!    agreement across both halves of the data with the others in the model). The member with
 //!    the smallest held-out simulation contribution among those that fail is removed, the
@@ -46,6 +51,8 @@ use alloc::vec::Vec;
 const LONG_HORIZON_S: f64 = 0.75;
 /// Grid points per parameter of the coarse two-parameter grid.
 const GRID_POINTS: usize = 6;
+/// Share of the segments the tuning cost leaves out, the worst ones ([`trimmed`]).
+const TRIM: f64 = 0.2;
 /// Starts of the joint refinement (the best grid points).
 const STARTS: usize = 3;
 /// At most this many long segments (spread over the logs) for the joint fit (a play's own
@@ -58,6 +65,10 @@ enum Target {
     Effect(EffectKind, &'static str),
     JEq,
     TauSf,
+    /// The armature resistance: sized in the electrical balance before the delay (or a play)
+    /// was in the model, it sets the torque a voltage produces in the simulation.
+    RA,
+    BEq,
 }
 
 fn get(p: &Plant, t: Target) -> Option<f64> {
@@ -65,6 +76,8 @@ fn get(p: &Plant, t: Target) -> Option<f64> {
         Target::Effect(k, key) => p.effects.value(k, key),
         Target::JEq => Some(p.params.j_eq()),
         Target::TauSf => Some(p.tau_sf()),
+        Target::RA => Some(p.params.r_a),
+        Target::BEq => Some(p.params.b_eq()),
     }
 }
 
@@ -73,6 +86,8 @@ fn with(p: &Plant, t: Target, x: f64) -> Option<Plant> {
     match t {
         Target::Effect(k, key) => q.effects.get_mut(k)?.set(key, x).ok()?,
         Target::JEq => q.params.j_eq = Some(x),
+        Target::RA => q.params.r_a = x,
+        Target::BEq => q.params.b_eq = Some(x),
         Target::TauSf => {
             q.params.tau_sf = Some(x);
             if q.effects.contains(EffectKind::Coulomb) {
@@ -119,9 +134,17 @@ fn targets(p: &Plant, members: &[EffectKind]) -> Vec<(Target, Span)> {
         }
     }
     out.push((Target::JEq, Span::Scale(1.15)));
+    // The armature resistance and the viscous coefficient, sized in their balances before the
+    // members were in the model (a missing delay biases the electrical balance, a play the
+    // torque balance): each sets the torque a voltage produces and the speed it holds.
+    out.push((Target::RA, Span::Scale(1.05)));
+    out.push((Target::BEq, Span::Scale(1.3)));
     if p.effects.contains(EffectKind::Coulomb) {
         out.push((Target::TauSf, Span::Scale(1.1)));
     }
+    // The base first: a member tuned before it bends to absorb the base's bias (a play wider
+    // and a breakaway broader for an inertia 3 % light and a resistance 1.5 % high).
+    out.reverse();
     out
 }
 
@@ -133,9 +156,15 @@ struct Tuner<'a> {
 }
 
 impl Tuner<'_> {
-    fn cost(&self, p: &Plant, bound: f64) -> f64 {
-        oe::prediction_cost_bounded(self.ds, p, &self.segs, self.horizon_s, bound)
-            .unwrap_or(f64::INFINITY)
+    /// The trimmed simulation cost of `p` ([`trimmed`], [`TRIM`]); `bound` is not used (a
+    /// trimmed sum cannot stop early), kept for the searches' signature.
+    fn cost(&self, p: &Plant, _bound: f64) -> f64 {
+        trimmed(self.ds, p, &self.segs, self.horizon_s, TRIM).unwrap_or(f64::INFINITY)
+    }
+
+    /// How many segments the trimmed cost keeps.
+    fn kept(&self) -> usize {
+        kept(self.segs.len(), TRIM)
     }
 
     /// Coordinate refinement of `ts` from `p`, `passes` times: per parameter a grid over its
@@ -183,6 +212,35 @@ impl Tuner<'_> {
         }
         (best, c_best)
     }
+}
+
+/// The trimmed simulation cost [rad]: the RMS error over the segments but the worst `trim`
+/// share of them (a least-trimmed-squares cost).
+///
+/// With a gear play and a breakaway friction, a few segments cannot be predicted whatever the
+/// parameters: their start state is fixed by no measurement (the motor somewhere inside the gap,
+/// the load stuck or slipping near a set point, where the loop hunts). On seed 24 of the
+/// three-effect test the true model's plain cost over the long fit segments is 0.33 rad (its
+/// held-out cost on short segments 0.06 rad): those few segments carry most of it, and a wrong
+/// model (gap 0.049 rad, breakaway speed 1.3 rad/s for 0.03 and 0.5) scores lower (0.32-0.38).
+/// Without the worst fifth, the true model scores 0.086 rad against 0.148 for the wrong one.
+fn trimmed(
+    ds: &Dataset,
+    p: &Plant,
+    segs: &[(usize, usize)],
+    horizon_s: f64,
+    trim: f64,
+) -> Option<f64> {
+    let mut c = oe::segment_costs(ds, p, segs, horizon_s)?;
+    c.sort_by(|a, b| a.total_cmp(b));
+    let keep = kept(c.len(), trim);
+    let s: f64 = c.iter().take(keep).map(|x| x * x).sum();
+    Some(math::sqrt(s / keep.max(1) as f64))
+}
+
+/// How many of `n` segments a cost trimmed by `trim` keeps (at least one).
+fn kept(n: usize, trim: f64) -> usize {
+    (libm::ceil(n as f64 * (1.0 - trim)) as usize).clamp(1, n.max(1))
 }
 
 /// The result of the backward elimination: the survivors (best first), judged each given the
@@ -277,7 +335,14 @@ pub(super) fn search(
             .min_by(|a, b| a.1.total_cmp(&b.1))
         },
     )?;
-    trace(|| alloc::format!("joint {} cost {c_full:.4e}", show(&full, &all)));
+    trace(|| {
+        alloc::format!(
+            "joint {} r_a {} b_eq {:e} cost {c_full:.4e}",
+            show(&full, &all),
+            full.params.r_a,
+            full.params.b_eq()
+        )
+    });
     let mut survivors = fresh.clone();
     loop {
         if survivors.is_empty() {
@@ -513,15 +578,72 @@ fn drop_one(
         oe_holdout: oe::prediction_cost(ds, &reduced, Part::Holdout),
         plant: reduced,
     };
+    trace(|| {
+        alloc::format!("drop {m}: reduced {} | costs fit short {:?} vs {:?}, hold short {:?} vs {:?}, long fit {:.4e} vs {:.4e}", show(&reduced, &others), oe::prediction_cost(ds, &reduced, Part::Fit), oe::prediction_cost(ds, full, Part::Fit), oe::prediction_cost(ds, &reduced, Part::Holdout), oe::prediction_cost(ds, full, Part::Holdout), tuner.cost(&reduced, f64::INFINITY), tuner.cost(full, f64::INFINITY))
+    });
     let o_solved = solved_at(ds, &reduced)?;
     let j_solved = solved_at(ds, full)?;
     let mut c = joint::judge_given(cx, m, &o_solved, &reference, &j_solved)?;
+    if on_simulation(m) && !c.significant && c.checks.is_empty() {
+        on_tuned_cost(cx, tuner, &mut c, full, &reduced);
+    }
     let contribution = c.oe_reduction_pct.unwrap_or(f64::NEG_INFINITY);
     // Agreement across both halves, refitted with the others in the model.
     if c.significant && joint::confirm_given(cx, &mut c, &reduced) {
         c.experiment = None;
     }
     Some((c, contribution))
+}
+
+/// The information criterion of a member judged on the simulation alone (a gear play), on the
+/// cost the joint model is tuned on: the trimmed simulation cost of the long fit segments
+/// ([`trimmed`]), one term per segment kept, instead of the plain cost of the short ones.
+///
+/// A play's only evidence is the motion, and the plain cost of the fit blocks is carried by the
+/// few segments no model predicts (on seed 24 of the three-effect test, the play leaves it
+/// unchanged, 0.354 against 0.356 rad, while it halves the held-out error, 0.27 to 0.13 rad, and
+/// the trimmed cost). When the held-out simulation drop passes and this criterion does, the
+/// member gets the checks of a candidate that passed statistically (its physical constraints,
+/// "play, not a compliance"); `c` is left as it was otherwise.
+fn on_tuned_cost(
+    cx: &joint::Context,
+    tuner: &Tuner,
+    c: &mut Candidate,
+    full: &Plant,
+    reduced: &Plant,
+) {
+    let opts = cx.opts;
+    let held_out = c
+        .oe_reduction_pct
+        .is_some_and(|d| d >= 100.0 * opts.min_simulation_oe_drop.max(opts.min_oe_drop));
+    let (x, y) = (
+        tuner.cost(reduced, f64::INFINITY),
+        tuner.cost(full, f64::INFINITY),
+    );
+    if !(held_out && x.is_finite() && y > 0.0) {
+        return;
+    }
+    let n = tuner.kept() as f64;
+    let q = c
+        .effect
+        .params()
+        .iter()
+        .filter(|p| p.nonlinear && c.effect.model().fittable(p.key))
+        .count() as f64;
+    let bic = n * math::ln(x * x / (y * y)) - 3.0 * q * math::ln(n);
+    trace(|| {
+        alloc::format!(
+            "{} on the tuned cost: {x:.4e} -> {y:.4e} rad over {n} segments, criterion {bic:.1}",
+            c.effect
+        )
+    });
+    if bic <= opts.min_bic_gain {
+        return;
+    }
+    c.bic_gain = bic;
+    let found = super::checks::constraints(cx.ds, c.effect, &c.params, full, reduced);
+    c.significant = found.iter().all(|k| k.passed);
+    c.checks.extend(found);
 }
 
 /// The evidence of a survivor: found together with the others, how.

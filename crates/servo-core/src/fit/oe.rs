@@ -194,6 +194,29 @@ fn simulated_samples(ds: &Dataset, segs: &[(usize, usize)], horizon_s: f64) -> u
         .sum()
 }
 
+/// The RMS prediction error [rad] of each segment of `segs` on its own (horizon `horizon_s`
+/// [s]), in the order given: for robust costs that let a few unpredictable segments (a start
+/// state no measurement fixes) weigh no more than the others.
+pub fn segment_costs(
+    ds: &Dataset,
+    plant: &Plant,
+    segs: &[(usize, usize)],
+    horizon_s: f64,
+) -> Option<Vec<f64>> {
+    segs.iter()
+        .map(|s| {
+            cost_serial(
+                ds,
+                plant,
+                core::slice::from_ref(s),
+                horizon_s,
+                f64::INFINITY,
+                crate::sim::MAX_SUBSTEP_S,
+            )
+        })
+        .collect()
+}
+
 /// [`prediction_cost_stepped`] on one thread.
 fn cost_serial(
     ds: &Dataset,
