@@ -365,7 +365,7 @@ pub fn diagnose_dataset(
             && b.above_noise
             && b.ratio_to_noise >= th.electrical_block_ratio
     });
-    let judged = timing::timed(|| "judge the candidates".into(), || par_map(&fits, opts.parallel, |(kind, res)| {
+    let judged = par_map(&fits, opts.parallel, |(kind, res)| {
         let kind = *kind;
         let solved = match res {
             Ok(s) => s,
@@ -411,7 +411,7 @@ pub fn diagnose_dataset(
             }
         }
         c
-    }));
+    });
     let mut ranking = judged;
     // A drive-side effect that explains most of the electrical residual (an input delay, a dead
     // zone) accounts for it: the measurements are then not suspect.
