@@ -277,23 +277,6 @@ mod fit {
                 .and_then(|p| oe::prediction_cost_bounded(ds, &p, segs, h, bound))
                 .unwrap_or(f64::INFINITY)
         };
-        // J_eq and the Coulomb level are nuisance parameters of the gap's search: when the gap
-        // is sized after them (on the full-fidelity simulation), they are searched on the
-        // search sub-step ([`oe::SEARCH_SUBSTEP_S`], 2.5 times cheaper); when the gap is kept,
-        // they are the result and get the full fidelity.
-        let nuisance_substep = if fit_gap {
-            oe::SEARCH_SUBSTEP_S
-        } else {
-            crate::sim::MAX_SUBSTEP_S
-        };
-        let cost_nuisance =
-            |segs: &[(usize, usize)], h: f64, gap: f64, j_eq: f64, bound: f64| -> f64 {
-                plant_with(gap, j_eq, tau_cell.get())
-                    .and_then(|p| {
-                        oe::prediction_cost_stepped(ds, &p, segs, h, bound, nuisance_substep)
-                    })
-                    .unwrap_or(f64::INFINITY)
-            };
         let h0 = ds.opts.oe_horizon_s;
         let (mut gap, mut j_eq) = if fit_gap {
             let mut best = (f64::NAN, j0, f64::INFINITY);
@@ -342,7 +325,7 @@ mod fit {
                 let jc = j_eq;
                 if let Some((s, _)) = search::grid_then_golden_bounded(
                     &grid,
-                    |s, bound| cost_nuisance(segs, h, gap, jc * s, bound),
+                    |s, bound| cost(segs, h, gap, jc * s, bound),
                     iters,
                 ) {
                     j_eq = jc * s;
@@ -354,7 +337,7 @@ mod fit {
                 let grid = search::linspace(0.9, 1.1, 5);
                 let f = |s: f64, bound: f64| {
                     tau_cell.set(tc * s);
-                    let c = cost_nuisance(segs, h, gap, j_eq, bound);
+                    let c = cost(segs, h, gap, j_eq, bound);
                     tau_cell.set(tc);
                     c
                 };
