@@ -422,47 +422,32 @@ fn filtered_pairs(
     c_m: f64,
     ms: &[fn(f64) -> f64],
 ) -> Vec<Vec<Vec<f64>>> {
-    let mut full: Vec<[Vec<f64>; 2]> = ms
+    let n = v.row_idx.len();
+    let mut out: Vec<Vec<Vec<f64>>> = ms
         .iter()
-        .map(|_| {
-            [
-                Vec::with_capacity(rows.len()),
-                Vec::with_capacity(rows.len()),
-            ]
-        })
+        .map(|_| alloc::vec![Vec::with_capacity(n), Vec::with_capacity(n)])
         .collect();
-    let mut cur: Option<(usize, Vec<[Vec<f64>; 2]>)> = None;
-    for (&ri, &k) in rows.rec.iter().zip(&rows.k) {
-        if cur.as_ref().map(|(c, _)| *c) != Some(ri) {
-            let r = &ds.recs[ri];
-            let sin: Vec<f64> = r.theta_m_rad.iter().map(|t| math::sin(c_m * t)).collect();
-            let cos: Vec<f64> = r.theta_m_rad.iter().map(|t| math::cos(c_m * t)).collect();
-            let per_mod = ms
-                .iter()
-                .map(|m| {
-                    [&sin, &cos].map(|f| {
-                        let raw: Vec<f64> =
-                            f.iter().zip(&r.omega_raw).map(|(x, w)| x * m(*w)).collect();
-                        r.filt(&raw)
-                    })
-                })
-                .collect();
-            cur = Some((ri, per_mod));
-        }
-        if let Some((_, per_mod)) = &cur {
-            for (out, cols) in full.iter_mut().zip(per_mod) {
-                out[0].push(cols[0][k]);
-                out[1].push(cols[1][k]);
+    // The view's rows, in runs of one record each: a record is filtered whole, once per run, and
+    // only the view's rows of it are kept (one record-length column alive at a time).
+    let mut start = 0;
+    while start < n {
+        let ri = rows.rec[v.row_idx[start]];
+        let end = (start..n)
+            .find(|&j| rows.rec[v.row_idx[j]] != ri)
+            .unwrap_or(n);
+        let r = &ds.recs[ri];
+        let sin: Vec<f64> = r.theta_m_rad.iter().map(|t| math::sin(c_m * t)).collect();
+        let cos: Vec<f64> = r.theta_m_rad.iter().map(|t| math::cos(c_m * t)).collect();
+        for (m, pair) in ms.iter().zip(out.iter_mut()) {
+            for (f, col) in [&sin, &cos].into_iter().zip(pair.iter_mut()) {
+                let raw: Vec<f64> = f.iter().zip(&r.omega_raw).map(|(x, w)| x * m(*w)).collect();
+                let filtered = r.filt(&raw);
+                col.extend(v.row_idx[start..end].iter().map(|&i| filtered[rows.k[i]]));
             }
         }
+        start = end;
     }
-    full.into_iter()
-        .map(|cols| {
-            cols.into_iter()
-                .map(|col| v.row_idx.iter().map(|&i| col[i]).collect())
-                .collect()
-        })
-        .collect()
+    out
 }
 
 fn pow_odd(x: &[f64], p: f64) -> Vec<f64> {
