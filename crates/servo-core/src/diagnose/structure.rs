@@ -365,28 +365,44 @@ fn peaks(rs: &[&[f64]], x: &[f64], grid: impl Iterator<Item = f64>) -> Vec<Optio
         .collect();
     let mut best: Vec<Option<(f64, f64)>> = rs.iter().map(|_| None).collect();
     let dc = if cs.len() > 1 { cs[1] - cs[0] } else { 0.0 };
-    // Phasors advanced by rotation along the uniform grid of c.
-    let mut re: Vec<f64> = x.iter().map(|&t| math::cos(cs[0] * t)).collect();
-    let mut im: Vec<f64> = x.iter().map(|&t| math::sin(cs[0] * t)).collect();
-    let rot_c: Vec<f64> = x.iter().map(|&t| math::cos(dc * t)).collect();
-    let rot_s: Vec<f64> = x.iter().map(|&t| math::sin(dc * t)).collect();
-    for (j, &c) in cs.iter().enumerate() {
-        if j > 0 {
-            for i in 0..n {
-                let (a, b) = (re[i], im[i]);
-                re[i] = a * rot_c[i] - b * rot_s[i];
-                im[i] = a * rot_s[i] + b * rot_c[i];
+    let start: Vec<[f64; 4]> = x
+        .iter()
+        .map(|&t| {
+            [
+                math::cos(cs[0] * t),
+                math::sin(cs[0] * t),
+                math::cos(dc * t),
+                math::sin(dc * t),
+            ]
+        })
+        .collect();
+    // Phasors advanced by rotation along the uniform grid of c. The rotation and the sums of up
+    // to four signals share one pass over the rows; each sum still runs in row order (the same
+    // arithmetic as one pass per signal), but the sums are independent, so the core overlaps
+    // them.
+    for (group, best) in centred.chunks(4).zip(best.chunks_mut(4)) {
+        let d: Vec<[f64; 4]> = (0..n)
+            .map(|i| core::array::from_fn(|s| group.get(s).map_or(0.0, |g| g[i])))
+            .collect();
+        let mut ph = start.clone();
+        for (j, &c) in cs.iter().enumerate() {
+            let (mut sc, mut ss) = ([0.0f64; 4], [0.0f64; 4]);
+            for (p, di) in ph.iter_mut().zip(&d) {
+                if j > 0 {
+                    let (a, b) = (p[0], p[1]);
+                    p[0] = a * p[2] - b * p[3];
+                    p[1] = a * p[3] + b * p[2];
+                }
+                for s in 0..4 {
+                    sc[s] += di[s] * p[0];
+                    ss[s] += di[s] * p[1];
+                }
             }
-        }
-        for (d, best) in centred.iter().zip(best.iter_mut()) {
-            let (mut sc, mut ss) = (0.0, 0.0);
-            for i in 0..n {
-                sc += d[i] * re[i];
-                ss += d[i] * im[i];
-            }
-            let p = sc * sc + ss * ss;
-            if best.is_none_or(|(_, bp)| p > bp) {
-                *best = Some((c, p));
+            for (s, best) in best.iter_mut().enumerate() {
+                let pw = sc[s] * sc[s] + ss[s] * ss[s];
+                if best.is_none_or(|(_, bp)| pw > bp) {
+                    *best = Some((c, pw));
+                }
             }
         }
     }
@@ -412,25 +428,41 @@ fn pair(x: &[f64], c: f64, scale: Option<&[f64]>) -> Vec<Vec<f64>> {
     alloc::vec![s, co]
 }
 
-/// sin and cos of `c_m` times the motor angle, modulated by `m(omega_m)`, through each record's
-/// filter, at the rows of the view.
-fn filtered_pair(
+/// sin and cos of `c_m` times the motor angle, modulated by each `m(omega_m)` of `ms`, through
+/// each record's filter, at the rows of the view: one pair of columns per modulation, in the
+/// order of `ms`. The sin and cos of each record are computed once and shared by the
+/// modulations.
+fn filtered_pairs(
     ds: &Dataset,
     rows: &Rows,
     v: &View,
     c_m: f64,
-    m: fn(f64) -> f64,
-) -> Vec<Vec<f64>> {
-    let mut out = Vec::new();
-    for f in [math::sin as fn(f64) -> f64, math::cos] {
-        let col = ds.column(rows, |r: &RecData| {
-            r.theta_m_rad
-                .iter()
-                .zip(&r.omega_raw)
-                .map(|(t, w)| f(c_m * t) * m(*w))
-                .collect()
-        });
-        out.push(v.row_idx.iter().map(|&i| col[i]).collect());
+    ms: &[fn(f64) -> f64],
+) -> Vec<Vec<Vec<f64>>> {
+    let n = v.row_idx.len();
+    let mut out: Vec<Vec<Vec<f64>>> = ms
+        .iter()
+        .map(|_| alloc::vec![Vec::with_capacity(n), Vec::with_capacity(n)])
+        .collect();
+    // The view's rows, in runs of one record each: a record is filtered whole, once per run, and
+    // only the view's rows of it are kept (one record-length column alive at a time).
+    let mut start = 0;
+    while start < n {
+        let ri = rows.rec[v.row_idx[start]];
+        let end = (start..n)
+            .find(|&j| rows.rec[v.row_idx[j]] != ri)
+            .unwrap_or(n);
+        let r = &ds.recs[ri];
+        let sin: Vec<f64> = r.theta_m_rad.iter().map(|t| math::sin(c_m * t)).collect();
+        let cos: Vec<f64> = r.theta_m_rad.iter().map(|t| math::cos(c_m * t)).collect();
+        for (m, pair) in ms.iter().zip(out.iter_mut()) {
+            for (f, col) in [&sin, &cos].into_iter().zip(pair.iter_mut()) {
+                let raw: Vec<f64> = f.iter().zip(&r.omega_raw).map(|(x, w)| x * m(*w)).collect();
+                let filtered = r.filt(&raw);
+                col.extend(v.row_idx[start..end].iter().map(|&i| filtered[rows.k[i]]));
+            }
+        }
+        start = end;
     }
     out
 }
@@ -580,13 +612,32 @@ pub fn analyse(
             .collect();
         let refs: Vec<&[f64]> = fit_rs.iter().map(|r| r.as_slice()).collect();
         let found = peaks(&refs, &fit_x, grid(0.5, n * 45.0, 0.1));
-        let mut best: Option<(f64, usize, (f64, f64))> = None;
-        for (mi, ((_, m), c)) in mods.iter().zip(found).enumerate() {
-            let Some(c) = c else {
+        // The regressors of the modulations whose peaks fall at the same c are built together.
+        let mut cols_of: Vec<Option<Vec<Vec<f64>>>> = mods.iter().map(|_| None).collect();
+        for (mi, c) in found.iter().enumerate() {
+            let Some(c) = *c else {
                 continue;
             };
-            let cols = filtered_pair(ds, rows, &v, c / n, *m);
-            let res = held_out(&v, &cols);
+            if cols_of[mi].is_some() {
+                continue;
+            }
+            let same: Vec<usize> = (mi..mods.len())
+                .filter(|&mj| found[mj] == Some(c))
+                .collect();
+            let ms: Vec<fn(f64) -> f64> = same.iter().map(|&mj| mods[mj].1).collect();
+            for (mj, cols) in same
+                .into_iter()
+                .zip(filtered_pairs(ds, rows, &v, c / n, &ms))
+            {
+                cols_of[mj] = Some(cols);
+            }
+        }
+        let mut best: Option<(f64, usize, (f64, f64))> = None;
+        for (mi, (c, cols)) in found.iter().zip(&cols_of).enumerate() {
+            let (Some(c), Some(cols)) = (*c, cols) else {
+                continue;
+            };
+            let res = held_out(&v, cols);
             if best.as_ref().is_none_or(|b| res.0 > b.2 .0) {
                 best = Some((c, mi, res));
             }

@@ -78,11 +78,24 @@ impl Butter2 {
     /// a constant input leaves the filter in that state).
     fn run(&self, x: &mut [f64]) {
         let Some(&x0) = x.first() else { return };
+        self.run_from(x0, x.iter_mut());
+    }
+
+    /// As [`Butter2::run`] on `x` reversed (last sample first), in place: the same arithmetic in
+    /// the same order as reversing, running and reversing back, without the two copies.
+    fn run_backwards(&self, x: &mut [f64]) {
+        let Some(&x0) = x.last() else { return };
+        self.run_from(x0, x.iter_mut().rev());
+    }
+
+    /// Filters the samples of `xs` in place, in the order given, from the steady state of `x0`.
+    #[inline(always)]
+    fn run_from<'a>(&self, x0: f64, xs: impl Iterator<Item = &'a mut f64>) {
         let [b0, b1, b2] = self.b;
         let [a1, a2] = self.a;
         let mut z1 = x0 - b0 * x0;
         let mut z2 = b2 * x0 - a2 * x0;
-        for v in x.iter_mut() {
+        for v in xs {
             let xin = *v;
             let y = b0 * xin + z1;
             z1 = b1 * xin - a1 * y + z2;
@@ -169,9 +182,7 @@ impl ZeroPhase {
             buf.push(2.0 * x[n - 1] - x[n - 1 - k]);
         }
         self.biquad.run(&mut buf);
-        buf.reverse();
-        self.biquad.run(&mut buf);
-        buf.reverse();
+        self.biquad.run_backwards(&mut buf);
         buf.truncate(pad + n);
         buf.drain(..pad);
         buf
