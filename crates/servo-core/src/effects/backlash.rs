@@ -460,7 +460,8 @@ mod fit {
     }
 
     impl Shaft {
-        /// The two-mass (antiresonance-free) natural frequency [Hz]: sqrt(k / J_red) / 2 pi,
+        /// The two-mass natural frequency [Hz] (motor and load swinging against each other on the
+        /// shaft): sqrt(k / J_red) / 2 pi,
         /// J_red = frac (1 - frac) J_l with J_l = J_eq N^2 the whole inertia at the load.
         fn freq_hz(&self) -> f64 {
             let p = &self.plant.params;
