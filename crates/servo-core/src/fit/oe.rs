@@ -196,25 +196,37 @@ fn simulated_samples(ds: &Dataset, segs: &[(usize, usize)], horizon_s: f64) -> u
 
 /// The RMS prediction error [rad] of each segment of `segs` on its own (horizon `horizon_s`
 /// [s]), in the order given: for robust costs that let a few unpredictable segments (a start
-/// state no measurement fixes) weigh no more than the others.
+/// state no measurement fixes) weigh no more than the others. One simulator serves every
+/// segment, as in [`prediction_cost_stepped`].
 pub fn segment_costs(
     ds: &Dataset,
     plant: &Plant,
     segs: &[(usize, usize)],
     horizon_s: f64,
 ) -> Option<Vec<f64>> {
-    segs.iter()
-        .map(|s| {
-            cost_serial(
-                ds,
-                plant,
-                core::slice::from_ref(s),
-                horizon_s,
-                f64::INFINITY,
-                crate::sim::MAX_SUBSTEP_S,
-            )
-        })
-        .collect()
+    let mut out = Vec::with_capacity(segs.len());
+    let (mut sum, mut count) = (0.0, 0usize);
+    simulate_segments(
+        ds,
+        plant,
+        segs,
+        horizon_s,
+        crate::sim::MAX_SUBSTEP_S,
+        |ev| {
+            match ev {
+                Sample::Error(e) => {
+                    sum += e * e;
+                    count += 1;
+                }
+                Sample::SegmentEnd => {
+                    out.push(math::sqrt(sum / count.max(1) as f64));
+                    (sum, count) = (0.0, 0);
+                }
+            }
+            true
+        },
+    )?;
+    Some(out)
 }
 
 /// [`prediction_cost_stepped`] on one thread.
@@ -229,10 +241,45 @@ fn cost_serial(
     if segs.is_empty() {
         return None;
     }
-    let p = &plant.params;
     let total = simulated_samples(ds, segs, horizon_s);
     let limit = bound_rad * bound_rad * total as f64;
     let (mut sum, mut count) = (0.0, 0usize);
+    let ended = simulate_segments(ds, plant, segs, horizon_s, max_substep_s, |ev| match ev {
+        Sample::Error(e) => {
+            sum += e * e;
+            count += 1;
+            true
+        }
+        Sample::SegmentEnd => sum <= limit,
+    })?;
+    if !ended {
+        return Some(f64::INFINITY);
+    }
+    Some(math::sqrt(sum / count.max(1) as f64))
+}
+
+/// What [`simulate_segments`] reports, in order.
+enum Sample {
+    /// The prediction error of one sample [rad, measured angle].
+    Error(f64),
+    /// The end of a segment.
+    SegmentEnd,
+}
+
+/// Simulates each segment of `segs` (record, start) over `horizon_s` [s] from its measured
+/// state, one simulator per sample period, and reports each sample's error and each segment's
+/// end to `visit`, which returns false (at a segment's end) to stop. `Some(true)`: every
+/// segment ran; `Some(false)`: stopped; `None`: a non-finite error or a simulator that cannot
+/// be built.
+fn simulate_segments(
+    ds: &Dataset,
+    plant: &Plant,
+    segs: &[(usize, usize)],
+    horizon_s: f64,
+    max_substep_s: f64,
+    mut visit: impl FnMut(Sample) -> bool,
+) -> Option<bool> {
+    let p = &plant.params;
     // One simulator per sample period, reset at every segment: building one discretises every
     // contact mode (matrix exponentials), which costs as much as a segment's steps.
     let mut sim: Option<PlantSim> = None;
@@ -291,14 +338,13 @@ fn cost_serial(
             if !e.is_finite() {
                 return None;
             }
-            sum += e * e;
-            count += 1;
+            visit(Sample::Error(e));
         }
-        if sum > limit {
-            return Some(f64::INFINITY);
+        if !visit(Sample::SegmentEnd) {
+            return Some(false);
         }
     }
-    Some(math::sqrt(sum / count.max(1) as f64))
+    Some(true)
 }
 
 /// The contact (gear play) of `plant`, if it has a contact effect.
@@ -321,4 +367,41 @@ fn contact_torque_l(plant: &Plant, omega: f64, accel: f64, u_prev: f64, min_spee
     }
     let tau_m = f * p.j_eq() * accel + f * plant.b_eq() * omega;
     tau_m * p.n + plant.tau_sf() * math::sign(omega)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::tests::{open_loop_log, truth};
+    use crate::fit::FitOptions;
+
+    /// Each segment's cost from the shared simulator is the cost of that segment alone, and
+    /// the costs of all of them make up the whole cost.
+    #[test]
+    fn segment_costs_are_each_segment_alone() {
+        let plant = truth();
+        let rec = open_loop_log(&plant, 6.0, 3, true);
+        let ds = Dataset::new(&[rec], &plant.params, &FitOptions::default()).unwrap();
+        let segs = segments(&ds, Part::Fit);
+        assert!(segs.len() >= 3, "{} segments", segs.len());
+        let h = ds.opts.oe_horizon_s;
+        let each = segment_costs(&ds, &plant, &segs, h).unwrap();
+        assert_eq!(each.len(), segs.len());
+        for (s, c) in segs.iter().zip(&each) {
+            let alone = prediction_cost_over(&ds, &plant, core::slice::from_ref(s), h).unwrap();
+            assert_eq!(*c, alone);
+        }
+        let n: Vec<f64> = segs
+            .iter()
+            .map(|&(ri, _)| ((h / ds.recs[ri].dt_s) as usize).max(2) as f64)
+            .collect();
+        let ms: f64 =
+            each.iter().zip(&n).map(|(c, n)| c * c * n).sum::<f64>() / n.iter().sum::<f64>();
+        let whole = prediction_cost_over(&ds, &plant, &segs, h).unwrap();
+        assert!(
+            (math::sqrt(ms) / whole - 1.0).abs() < 1e-9,
+            "{} vs {whole}",
+            math::sqrt(ms)
+        );
+    }
 }
