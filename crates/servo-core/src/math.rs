@@ -100,6 +100,13 @@ impl core::fmt::Display for Num {
     }
 }
 
+/// The element a full ascending sort (total order) of `v` would put at index `k` (clamped to
+/// the last), selected in linear time; `v` is reordered. `None` when `v` is empty.
+pub fn order_statistic(v: &mut [f64], k: usize) -> Option<f64> {
+    let k = k.min(v.len().checked_sub(1)?);
+    Some(*v.select_nth_unstable_by(k, f64::total_cmp).1)
+}
+
 #[cfg(test)]
 mod num_tests {
     use super::Num;

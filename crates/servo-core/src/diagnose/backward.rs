@@ -624,13 +624,7 @@ fn on_tuned_cost(
         return;
     }
     let n = tuner.kept() as f64;
-    let q = c
-        .effect
-        .params()
-        .iter()
-        .filter(|p| p.nonlinear && c.effect.model().fittable(p.key))
-        .count() as f64;
-    let bic = n * math::ln(x * x / (y * y)) - 3.0 * q * math::ln(n);
+    let bic = super::simulation_bic(x, y, n, c.effect);
     trace(|| {
         alloc::format!(
             "{} on the tuned cost: {x:.4e} -> {y:.4e} rad over {n} segments, criterion {bic:.1}",

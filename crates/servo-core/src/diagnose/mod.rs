@@ -544,7 +544,7 @@ pub fn diagnose_dataset(
         current_noise_a: noise,
     };
     let winner = ranking.first().filter(|c| c.significant).is_some();
-    let unexplained: Vec<BalanceReport> = if winner {
+    let mut unexplained: Vec<BalanceReport> = if winner {
         Vec::new()
     } else {
         balances.iter().filter(|b| b.above_noise).cloned().collect()
@@ -556,7 +556,6 @@ pub fn diagnose_dataset(
     } else {
         Status::Unexplained
     };
-    let mut unexplained = unexplained;
     let mut leads = Vec::new();
     if status == Status::Unexplained {
         // Leads beyond the catalogue: a mechanism the candidates' own machinery sizes (a gear
@@ -804,9 +803,8 @@ fn current_noise(ds: &Dataset) -> Option<f64> {
     if d.is_empty() {
         return None;
     }
-    // The median: the element a full sort would put there, selected in linear time.
     let mid = d.len() / 2;
-    let median = *d.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
+    let median = math::order_statistic(&mut d, mid)?;
     Some(median / 0.6745 / core::f64::consts::SQRT_2)
 }
 
@@ -824,6 +822,18 @@ fn lag1(r: &[f64]) -> f64 {
     } else {
         0.0
     }
+}
+
+/// The information criterion of `kind` judged on the simulation alone (a gear play): the
+/// simulation cost `x` [rad] without it against `y` with it over `n` independent terms, each
+/// nonlinear parameter searched costing three (as in the equation's criterion).
+/// `-inf` when `y` is not positive.
+pub(crate) fn simulation_bic(x: f64, y: f64, n: f64, kind: EffectKind) -> f64 {
+    if y <= 0.0 {
+        return f64::NEG_INFINITY;
+    }
+    let q = nonlinear_searched(kind) as f64;
+    n * math::ln(x * x / (y * y)) - 3.0 * q * math::ln(n)
 }
 
 fn nonlinear_searched(kind: EffectKind) -> usize {
@@ -893,9 +903,7 @@ fn judge(
         let fit_b = oe::prediction_cost(ds, &reference.plant, Part::Fit);
         let fit_c = oe::prediction_cost(ds, &cand.plant, Part::Fit);
         match (fit_b, fit_c) {
-            (Some(x), Some(y)) if y > 0.0 => {
-                n_eff * math::ln(x * x / (y * y)) - 3.0 * q_nl * math::ln(n_eff)
-            }
+            (Some(x), Some(y)) => simulation_bic(x, y, n_eff, kind),
             _ => f64::NEG_INFINITY,
         }
     } else {

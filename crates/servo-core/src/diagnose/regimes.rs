@@ -90,12 +90,8 @@ pub fn label(ds: &Dataset, rows: &Rows) -> RowRegimes {
         // (selected in linear time; the rows of a 10-minute log made the sort a tenth of a
         // diagnosis's judging pass).
         let mut acc: Vec<f64> = r.accel_f.iter().map(|a| a.abs()).collect();
-        let at = ((acc.len() * 95) / 100).min(acc.len().saturating_sub(1));
-        let a95 = if acc.is_empty() {
-            0.0
-        } else {
-            *acc.select_nth_unstable_by(at, |a, b| a.total_cmp(b)).1
-        };
+        let at = (acc.len() * 95) / 100;
+        let a95 = math::order_statistic(&mut acc, at).unwrap_or(0.0);
         a_ref.push(a95.max(1e-9));
     }
     for (&ri, &k) in rows.rec.iter().zip(&rows.k) {
