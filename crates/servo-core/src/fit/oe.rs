@@ -150,13 +150,36 @@ pub fn prediction_cost_stepped(
     let (a, b) = segs.split_at(segs.len() / 2);
     // Each half stops early against the whole sum's limit (bound^2 times every sample): a half
     // alone above it puts the whole above it.
-    let half = |s: &[(usize, usize)]| -> Option<(f64, usize)> {
-        let n = samples(s);
+    let half_limit = |n: usize| {
         let bound = bound_rad * math::sqrt(total as f64 / n.max(1) as f64);
-        let rms = cost_serial(ds, plant, s, horizon_s, bound, max_substep_s)?;
+        bound * bound * n as f64
+    };
+    // A half's squared errors summed as the whole cost weighs them (from its RMS).
+    let weighed = |r: SumOrStop, n: usize| -> Option<(f64, usize)> {
+        let rms = r?.map_or(f64::INFINITY, |(sum, count)| rms_of(sum, count));
         Some((rms * rms * n as f64, n))
     };
-    let (ra, rb) = both(|| half(a), || half(b));
+    let (na, nb) = (samples(a), samples(b));
+    let (ra, rb) = match idle_core_guard() {
+        Some(_held) => both(
+            || weighed(sum_serial(ds, plant, a, horizon_s, half_limit(na), max_substep_s), na),
+            || weighed(sum_serial(ds, plant, b, horizon_s, half_limit(nb), max_substep_s), nb),
+        ),
+        None => {
+            // In turn: the second half stops as soon as the first half's sum and its own exceed
+            // the limit (the first half's sum as the whole cost weighs it; a first half already
+            // above the limit decides alone).
+            let ra = weighed(sum_serial(ds, plant, a, horizon_s, half_limit(na), max_substep_s), na);
+            match ra {
+                Some((sa, _)) if sa.is_finite() => {
+                    let lb = half_limit(nb) - sa;
+                    let rb = weighed(sum_serial(ds, plant, b, horizon_s, lb, max_substep_s), nb);
+                    (ra, rb)
+                }
+                _ => (ra, Some((f64::INFINITY, nb))),
+            }
+        }
+    };
     let ((sa, na), (sb, nb)) = (ra?, rb?);
     if !(sa.is_finite() && sb.is_finite()) {
         return Some(f64::INFINITY);
@@ -169,11 +192,24 @@ pub fn prediction_cost_stepped(
 /// about a microsecond.
 pub const SPLIT_MIN_SAMPLES: usize = 4_000;
 
-/// `(fa(), fb())`, on two threads when a core is idle (std builds), else in turn.
+/// A core for the second half of a split cost, held while the guard lives (std builds, see
+/// [`crate::diagnose::idle_core`]); `None` when every core is taken (or without std).
+fn idle_core_guard() -> Option<impl Sized> {
+    #[cfg(feature = "std")]
+    {
+        crate::diagnose::idle_core()
+    }
+    #[cfg(not(feature = "std"))]
+    {
+        None::<()>
+    }
+}
+
+/// `(fa(), fb())` on two threads (std builds; the caller holds an idle core), else in turn.
 fn both<A: Send, B: Send>(fa: impl FnOnce() -> A + Send, fb: impl FnOnce() -> B + Send) -> (A, B) {
     #[cfg(feature = "std")]
-    if let Some(_held) = crate::diagnose::idle_core() {
-        return std::thread::scope(|s| {
+    {
+        std::thread::scope(|s| {
             let h = s.spawn(fb);
             let a = fa();
             match h.join() {
@@ -181,9 +217,12 @@ fn both<A: Send, B: Send>(fa: impl FnOnce() -> A + Send, fb: impl FnOnce() -> B 
                 // A bug, not a data problem: surface it as the serial run would.
                 Err(e) => std::panic::resume_unwind(e),
             }
-        });
+        })
     }
-    (fa(), fb())
+    #[cfg(not(feature = "std"))]
+    {
+        (fa(), fb())
+    }
 }
 
 /// Samples simulated over the segments `segs` (record, start) of `horizon_s` [s] each: at least
@@ -238,24 +277,46 @@ fn cost_serial(
     bound_rad: f64,
     max_substep_s: f64,
 ) -> Option<f64> {
+    let total = simulated_samples(ds, segs, horizon_s);
+    let limit = bound_rad * bound_rad * total as f64;
+    let r = sum_serial(ds, plant, segs, horizon_s, limit, max_substep_s)?;
+    Some(r.map_or(f64::INFINITY, |(sum, count)| rms_of(sum, count)))
+}
+
+/// What [`sum_serial`] returns: `None` when the model cannot be simulated (or no segment),
+/// `Some(None)` when it stopped above the limit, else the sum of the squared errors [rad^2]
+/// and the number of samples.
+type SumOrStop = Option<Option<(f64, usize)>>;
+
+/// RMS [rad] of `count` errors whose squares sum to `sum` [rad^2].
+fn rms_of(sum: f64, count: usize) -> f64 {
+    math::sqrt(sum / count.max(1) as f64)
+}
+
+/// The squared prediction errors over `segs` summed on one thread, stopping as soon as the sum
+/// exceeds `limit_rad2` [rad^2] (the squares only add up: a sum above the limit at any sample
+/// stays above it at the end).
+fn sum_serial(
+    ds: &Dataset,
+    plant: &Plant,
+    segs: &[(usize, usize)],
+    horizon_s: f64,
+    limit_rad2: f64,
+    max_substep_s: f64,
+) -> SumOrStop {
     if segs.is_empty() {
         return None;
     }
-    let total = simulated_samples(ds, segs, horizon_s);
-    let limit = bound_rad * bound_rad * total as f64;
     let (mut sum, mut count) = (0.0, 0usize);
     let ended = simulate_segments(ds, plant, segs, horizon_s, max_substep_s, |ev| match ev {
         Sample::Error(e) => {
             sum += e * e;
             count += 1;
-            true
+            sum <= limit_rad2
         }
-        Sample::SegmentEnd => sum <= limit,
+        Sample::SegmentEnd => sum <= limit_rad2,
     })?;
-    if !ended {
-        return Some(f64::INFINITY);
-    }
-    Some(math::sqrt(sum / count.max(1) as f64))
+    Some(ended.then_some((sum, count)))
 }
 
 /// What [`simulate_segments`] reports, in order.
@@ -270,7 +331,8 @@ enum Sample {
 /// state, one simulator per sample period, and reports each sample's error and each segment's
 /// end to `visit`, which returns false (at a segment's end) to stop. `Some(true)`: every
 /// segment ran; `Some(false)`: stopped; `None`: a non-finite error or a simulator that cannot
-/// be built.
+/// be built. `visit` may also stop at a sample (returning false), which ends the simulation
+/// there.
 fn simulate_segments(
     ds: &Dataset,
     plant: &Plant,
@@ -338,7 +400,9 @@ fn simulate_segments(
             if !e.is_finite() {
                 return None;
             }
-            visit(Sample::Error(e));
+            if !visit(Sample::Error(e)) {
+                return Some(false);
+            }
         }
         if !visit(Sample::SegmentEnd) {
             return Some(false);
