@@ -4,7 +4,7 @@
 //! Re-initialising every segment from the measurement keeps an integrating plant from drifting
 //! and works the same on open-loop and closed-loop logs (the logged u drives the model).
 
-use super::dataset::Dataset;
+use super::dataset::{Dataset, RecData};
 use crate::math;
 use crate::plant::Plant;
 use crate::sim::{PlantSim, PlantState};
@@ -341,74 +341,121 @@ fn simulate_segments(
     max_substep_s: f64,
     mut visit: impl FnMut(Sample) -> bool,
 ) -> Option<bool> {
-    let p = &plant.params;
-    // One simulator per sample period, reset at every segment: building one discretises every
-    // contact mode (matrix exponentials), which costs as much as a segment's steps.
-    let mut sim: Option<PlantSim> = None;
-    for &(ri, k0) in segs {
-        let r = &ds.recs[ri];
-        let h = ((horizon_s / r.dt_s) as usize).max(2);
-        if sim.as_ref().is_none_or(|s| s.dt_s() != r.dt_s) {
-            sim = Some(PlantSim::with_max_substep(plant, r.dt_s, max_substep_s).ok()?);
+    // Two simulators per sample period, reset at every segment: building one discretises every
+    // contact mode (matrix exponentials), which costs as much as a segment's steps; the second
+    // is a copy. Two segments on the same period are simulated side by side
+    // ([`PlantSim::step_pair`]: each exactly as alone, the two chains of arithmetic overlapped)
+    // and their errors then reported in order, as if one after the other.
+    let mut sims: Option<(PlantSim, PlantSim)> = None;
+    let mut errs: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
+    let mut next = 0;
+    while let Some(&first) = segs.get(next) {
+        let dt_s = ds.recs[first.0].dt_s;
+        if sims.as_ref().is_none_or(|(s, _)| s.dt_s() != dt_s) {
+            let sim = PlantSim::with_max_substep(plant, dt_s, max_substep_s).ok()?;
+            sims = Some((sim.clone(), sim));
         }
-        let sim = sim.as_mut()?;
-        let w = r.omega_f[k0];
-        let u_prev = r.u_v[k0.saturating_sub(1)];
-        let i = match &r.i_f {
-            Some(i) => i[k0],
-            None => (p.k_drv * u_prev - p.k_e * w) / p.r_eq(),
-        };
-        let th = r.theta_m_rad[k0];
-        // With a gear play (a contact effect) and the load angle measured, start in contact on
-        // the driving flank.
-        let contact = plant_contact(plant);
-        let half_gap = contact.map_or(0.0, |c| c.gap_rad) * 0.5;
-        // With play, the motor side is put on the flank it presses on, the contact spring
-        // compressed by the torque the load needs (load side [rad]); without play (a compliance)
-        // the spring is wound up by that torque all the same.
-        let offset_l = if contact.is_some() {
-            let tau_c = contact_torque_l(plant, w, r.accel_f[k0], u_prev, ds.opts.min_speed_rad_s);
-            let k_c = contact.map_or(f64::INFINITY, |c| c.stiffness_nm_per_rad);
-            half_gap * math::sign(tau_c) + tau_c / k_c
-        } else {
-            0.0
-        };
-        let (th_m, th_l) = if r.angle_is_load {
-            (th + p.n * offset_l, th / p.n)
-        } else {
-            (th, th / p.n - offset_l)
-        };
-        sim.reset(PlantState {
-            time_s: r.time_s[k0],
-            u_in_v: u_prev,
-            u_drv_v: p.k_drv * u_prev,
-            i_a_a: i,
-            omega_m_rad_s: w,
-            theta_m_rad: th_m,
-            omega_l_rad_s: w / p.n,
-            theta_l_rad: th_l,
-            ..PlantState::default()
-        });
-        for j in 0..h {
-            let s = sim.step(r.u_v[k0 + j]);
-            let out = if r.angle_is_load {
-                s.theta_l_rad * p.n
-            } else {
-                s.theta_m_rad
-            };
-            let e = out - r.theta_m_rad[k0 + j + 1];
-            if !e.is_finite() {
-                return None;
+        let (a, b) = sims.as_mut()?;
+        let second = segs
+            .get(next + 1)
+            .copied()
+            .filter(|&(rj, _)| ds.recs[rj].dt_s == dt_s);
+        let r = &ds.recs[first.0];
+        let h = ((horizon_s / r.dt_s) as usize).max(2);
+        for e in errs.iter_mut() {
+            e.clear();
+        }
+        a.reset(start_state(ds, plant, first));
+        let [ea, eb] = &mut errs;
+        match second {
+            Some(sb) => {
+                let rb = &ds.recs[sb.0];
+                b.reset(start_state(ds, plant, sb));
+                for j in 0..h {
+                    a.step_pair(b, r.u_v[first.1 + j], rb.u_v[sb.1 + j]);
+                    ea.push(angle_error(plant, r, first.1 + j + 1, a.state()));
+                    eb.push(angle_error(plant, rb, sb.1 + j + 1, b.state()));
+                }
             }
-            if !visit(Sample::Error(e)) {
+            None => {
+                for j in 0..h {
+                    a.step(r.u_v[first.1 + j]);
+                    ea.push(angle_error(plant, r, first.1 + j + 1, a.state()));
+                }
+            }
+        }
+        let done = if second.is_some() { 2 } else { 1 };
+        for seg_errs in errs.iter().take(done) {
+            for &e in seg_errs {
+                if !e.is_finite() {
+                    return None;
+                }
+                if !visit(Sample::Error(e)) {
+                    return Some(false);
+                }
+            }
+            if !visit(Sample::SegmentEnd) {
                 return Some(false);
             }
         }
-        if !visit(Sample::SegmentEnd) {
-            return Some(false);
-        }
+        next += done;
     }
     Some(true)
+}
+
+/// The simulated angle's error [rad, as measured] against sample `k` of record `r`.
+#[inline]
+fn angle_error(plant: &Plant, r: &RecData, k: usize, s: &PlantState) -> f64 {
+    let out = if r.angle_is_load {
+        s.theta_l_rad * plant.params.n
+    } else {
+        s.theta_m_rad
+    };
+    out - r.theta_m_rad[k]
+}
+
+/// The state a segment (record, start row) is simulated from: the measured one, with a gear
+/// play's motor side on the flank it presses on.
+fn start_state(ds: &Dataset, plant: &Plant, (ri, k0): (usize, usize)) -> PlantState {
+    let p = &plant.params;
+    let r = &ds.recs[ri];
+    let w = r.omega_f[k0];
+    let u_prev = r.u_v[k0.saturating_sub(1)];
+    let i = match &r.i_f {
+        Some(i) => i[k0],
+        None => (p.k_drv * u_prev - p.k_e * w) / p.r_eq(),
+    };
+    let th = r.theta_m_rad[k0];
+    // With a gear play (a contact effect) and the load angle measured, start in contact on
+    // the driving flank.
+    let contact = plant_contact(plant);
+    let half_gap = contact.map_or(0.0, |c| c.gap_rad) * 0.5;
+    // With play, the motor side is put on the flank it presses on, the contact spring
+    // compressed by the torque the load needs (load side [rad]); without play (a compliance)
+    // the spring is wound up by that torque all the same.
+    let offset_l = if contact.is_some() {
+        let tau_c = contact_torque_l(plant, w, r.accel_f[k0], u_prev, ds.opts.min_speed_rad_s);
+        let k_c = contact.map_or(f64::INFINITY, |c| c.stiffness_nm_per_rad);
+        half_gap * math::sign(tau_c) + tau_c / k_c
+    } else {
+        0.0
+    };
+    let (th_m, th_l) = if r.angle_is_load {
+        (th + p.n * offset_l, th / p.n)
+    } else {
+        (th, th / p.n - offset_l)
+    };
+    PlantState {
+        time_s: r.time_s[k0],
+        u_in_v: u_prev,
+        u_drv_v: p.k_drv * u_prev,
+        i_a_a: i,
+        omega_m_rad_s: w,
+        theta_m_rad: th_m,
+        omega_l_rad_s: w / p.n,
+        theta_l_rad: th_l,
+        ..PlantState::default()
+    }
 }
 
 /// The contact (gear play) of `plant`, if it has a contact effect.

@@ -252,6 +252,14 @@ impl SmoothSide {
     }
 }
 
+/// One control period's delayed inputs (this period's `new` and the last one's `old` [V], for a
+/// delay that switches inside the period) and whether the stuck shortcut already stepped it.
+struct Period {
+    new: f64,
+    old: f64,
+    held: bool,
+}
+
 /// Mode index: bit 0 stuck, bit 1 in contact.
 const STUCK: usize = 1;
 const CONTACT: usize = 2;
@@ -558,6 +566,87 @@ impl PlantSim {
     /// Applies driver input `u_v` [V] for one control period (zero-order hold) and returns the
     /// state at the end of it. A non-finite `u_v` is treated as 0 V.
     pub fn step(&mut self, u_v: f64) -> &PlantState {
+        let period = self.begin_period(u_v);
+        let mut carry = None;
+        match self.switch_at {
+            None if period.held => {}
+            None => {
+                for _ in 0..self.substeps {
+                    carry = self.substep(0, period.new, carry);
+                }
+            }
+            Some((j, split)) => {
+                for i in 0..self.substeps {
+                    carry = self.switched_substep(i, j, split, &period, carry);
+                }
+            }
+        }
+        self.end_period(period.new);
+        &self.state
+    }
+
+    /// [`Self::step`] of two simulators of the same plant and period at once: `self` with input
+    /// `u_v` [V], `other` with `other_u_v` [V]. Each ends in exactly the state its own
+    /// [`Self::step`] would give (the same operations in the same order); their sub-steps
+    /// alternate, so that the processor overlaps the two independent chains of arithmetic (one
+    /// simulation is a chain of dependent operations that leaves most of a core idle).
+    ///
+    /// Two simulators that differ in sub-steps or in where a delayed input switches are stepped
+    /// in turn.
+    pub fn step_pair(&mut self, other: &mut PlantSim, u_v: f64, other_u_v: f64) {
+        if self.substeps != other.substeps || self.switch_at != other.switch_at {
+            self.step(u_v);
+            other.step(other_u_v);
+            return;
+        }
+        let (pa, pb) = (self.begin_period(u_v), other.begin_period(other_u_v));
+        let (mut ca, mut cb) = (None, None);
+        match self.switch_at {
+            None => {
+                for _ in 0..self.substeps {
+                    if !pa.held {
+                        ca = self.substep(0, pa.new, ca);
+                    }
+                    if !pb.held {
+                        cb = other.substep(0, pb.new, cb);
+                    }
+                }
+            }
+            Some((j, split)) => {
+                for i in 0..self.substeps {
+                    ca = self.switched_substep(i, j, split, &pa, ca);
+                    cb = other.switched_substep(i, j, split, &pb, cb);
+                }
+            }
+        }
+        self.end_period(pa.new);
+        other.end_period(pb.new);
+    }
+
+    /// Sub-step `i` of a period whose delayed input switches at sub-step `j` (`split`: inside
+    /// it, which then runs as its two parts).
+    #[inline]
+    fn switched_substep(
+        &mut self,
+        i: usize,
+        j: usize,
+        split: bool,
+        period: &Period,
+        carry: Option<(f64, f64)>,
+    ) -> Option<(f64, f64)> {
+        if i == j && split {
+            let carry = self.substep(1, period.old, carry);
+            self.substep(2, period.new, carry)
+        } else {
+            self.substep(0, if i < j { period.old } else { period.new }, carry)
+        }
+    }
+
+    /// The start of a control period with driver input `u_v` [V]: the input effects and the
+    /// delay line, and whether dry friction holds the shaft over the whole period (then already
+    /// stepped, see [`Self::stays_stuck_over_period`]).
+    #[inline]
+    fn begin_period(&mut self, u_v: f64) -> Period {
         let mut u = if u_v.is_finite() {
             self.input.apply(u_v)
         } else {
@@ -577,31 +666,17 @@ impl PlantSim {
         self.history[self.head] = u;
         let new = self.history[(self.head + DELAY_CAPACITY - self.delay_k) % DELAY_CAPACITY];
         let old = self.history[(self.head + DELAY_CAPACITY - self.delay_k - 1) % DELAY_CAPACITY];
-        let mut carry = None;
-        let switch_at = self.switch_at;
-        let held = switch_at.is_none() && self.stuck && self.stays_stuck_over_period(new);
-        match switch_at {
-            None if held => {}
-            None => {
-                for _ in 0..self.substeps {
-                    carry = self.substep(0, new, carry);
-                }
-            }
-            Some((j, split)) => {
-                for i in 0..self.substeps {
-                    if i == j && split {
-                        carry = self.substep(1, old, carry);
-                        carry = self.substep(2, new, carry);
-                    } else {
-                        carry = self.substep(0, if i < j { old } else { new }, carry);
-                    }
-                }
-            }
-        }
+        let held = self.switch_at.is_none() && self.stuck && self.stays_stuck_over_period(new);
+        Period { new, old, held }
+    }
+
+    /// The end of a control period whose delayed input was `new` [V]: time and the published
+    /// state.
+    #[inline]
+    fn end_period(&mut self, new: f64) {
         self.u_in_v = new;
         self.steps += 1;
         self.publish(self.steps as f64 * self.dt_s);
-        &self.state
     }
 
     /// Shortcut for a rigid drivetrain held by dry friction: one exact step over the whole period
