@@ -793,6 +793,28 @@ pub(crate) fn idle_core() -> Option<Busy> {
     }
 }
 
+/// `(fa(), fb())`: on two threads when a core is idle (std builds, see [`idle_core`]), else in
+/// turn; the results are the same either way. For independent parts of the serial work of a
+/// diagnosis (preparing the data set), which would otherwise leave a core idle.
+pub(crate) fn join<A: Send, B: Send>(
+    fa: impl FnOnce() -> A + Send,
+    fb: impl FnOnce() -> B + Send,
+) -> (A, B) {
+    #[cfg(feature = "std")]
+    if let Some(_held) = idle_core() {
+        return std::thread::scope(|s| {
+            let h = s.spawn(fb);
+            let a = fa();
+            match h.join() {
+                Ok(b) => (a, b),
+                // A bug, not a data problem: surface it as the serial run would.
+                Err(e) => std::panic::resume_unwind(e),
+            }
+        });
+    }
+    (fa(), fb())
+}
+
 /// Robust estimate of the white current-sensor noise [A]: MAD of first differences / sqrt(2).
 fn current_noise(ds: &Dataset) -> Option<f64> {
     let mut d: Vec<f64> = Vec::new();

@@ -510,23 +510,43 @@ fn prepare(
     // A cut-off beyond the filter's range (the light one is 3x the user's) is clamped into it.
     let filter = ZeroPhase::clamped(opts.filter_hz, dt);
     let light = ZeroPhase::clamped(opts.filter_hz * 3.0, dt);
-    let omega_f = filter.derivative(&theta_m);
-    let accel_f = derivative(&omega_f, dt);
-    let omega_raw = light.derivative(&theta_m);
+    if let Some(k) = r.i_a_a.as_ref().and_then(|i| i.iter().position(|v| !v.is_finite())) {
+        return Err(FitError::BadRecord(alloc::format!(
+            "{src}: i_a is not finite at row {k}"
+        )));
+    }
     let tau_e = params.t_drv() + params.l_a / params.r_eq();
-    let (i_raw, i_f, di_f, i_torque_f) = match &r.i_a_a {
-        Some(i) => {
-            if let Some(k) = i.iter().position(|v| !v.is_finite()) {
-                return Err(FitError::BadRecord(alloc::format!(
-                    "{src}: i_a is not finite at row {k}"
-                )));
-            }
-            let f = filter.apply(i);
-            let d = derivative(&f, dt);
-            let t = torque_current_f(&filter, i, &accel_f, dt, tau_e, params.k_e / params.r_eq());
-            (Some(i.clone()), Some(f), Some(d), Some(t))
-        }
-        None => (None, None, None, None),
+    // Two independent halves (on two threads when a core is idle, the same values either way):
+    // the motion and the torque current that needs its acceleration; the light speed, the
+    // filtered current and the motor angle's phasor.
+    let ((omega_f, accel_f, i_torque_f), (omega_raw, i_filtered, motor_phasor)) =
+        crate::diagnose::join(
+            || {
+                let omega_f = filter.derivative(&theta_m);
+                let accel_f = derivative(&omega_f, dt);
+                let t = r.i_a_a.as_ref().map(|i| {
+                    torque_current_f(&filter, i, &accel_f, dt, tau_e, params.k_e / params.r_eq())
+                });
+                (omega_f, accel_f, t)
+            },
+            || {
+                let omega_raw = light.derivative(&theta_m);
+                let f = r.i_a_a.as_ref().map(|i| {
+                    let f = filter.apply(i);
+                    let d = derivative(&f, dt);
+                    (f, d)
+                });
+                let phasor: Vec<[f64; 2]> = theta_m
+                    .iter()
+                    .map(|&t| [math::cos(t), math::sin(t)])
+                    .collect();
+                (omega_raw, f, phasor)
+            },
+        );
+    let i_raw = r.i_a_a.clone();
+    let (i_f, di_f) = match i_filtered {
+        Some((f, d)) => (Some(f), Some(d)),
+        None => (None, None),
     };
     Ok(RecData {
         source: src,
@@ -534,10 +554,7 @@ fn prepare(
         time_s: r.time_s.clone(),
         u_v: u,
         has_u,
-        motor_phasor: theta_m
-            .iter()
-            .map(|&t| [math::cos(t), math::sin(t)])
-            .collect(),
+        motor_phasor,
         theta_m_rad: theta_m,
         angle_is_load,
         omega_raw,
