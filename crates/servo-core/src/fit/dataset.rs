@@ -510,7 +510,11 @@ fn prepare(
     // A cut-off beyond the filter's range (the light one is 3x the user's) is clamped into it.
     let filter = ZeroPhase::clamped(opts.filter_hz, dt);
     let light = ZeroPhase::clamped(opts.filter_hz * 3.0, dt);
-    if let Some(k) = r.i_a_a.as_ref().and_then(|i| i.iter().position(|v| !v.is_finite())) {
+    if let Some(k) = r
+        .i_a_a
+        .as_ref()
+        .and_then(|i| i.iter().position(|v| !v.is_finite()))
+    {
         return Err(FitError::BadRecord(alloc::format!(
             "{src}: i_a is not finite at row {k}"
         )));

@@ -162,14 +162,27 @@ pub fn prediction_cost_stepped(
     let (na, nb) = (samples(a), samples(b));
     let (ra, rb) = match idle_core_guard() {
         Some(_held) => both(
-            || weighed(sum_serial(ds, plant, a, horizon_s, half_limit(na), max_substep_s), na),
-            || weighed(sum_serial(ds, plant, b, horizon_s, half_limit(nb), max_substep_s), nb),
+            || {
+                weighed(
+                    sum_serial(ds, plant, a, horizon_s, half_limit(na), max_substep_s),
+                    na,
+                )
+            },
+            || {
+                weighed(
+                    sum_serial(ds, plant, b, horizon_s, half_limit(nb), max_substep_s),
+                    nb,
+                )
+            },
         ),
         None => {
             // In turn: the second half stops as soon as the first half's sum and its own exceed
             // the limit (the first half's sum as the whole cost weighs it; a first half already
             // above the limit decides alone).
-            let ra = weighed(sum_serial(ds, plant, a, horizon_s, half_limit(na), max_substep_s), na);
+            let ra = weighed(
+                sum_serial(ds, plant, a, horizon_s, half_limit(na), max_substep_s),
+                na,
+            );
             match ra {
                 Some((sa, _)) if sa.is_finite() => {
                     let lb = half_limit(nb) - sa;
