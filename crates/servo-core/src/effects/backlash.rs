@@ -250,6 +250,7 @@ mod fit {
         let short = oe::segments(ds, oe::Part::Fit);
         let long_h = LONG_HORIZON_S.max(ds.opts.oe_horizon_s);
         let long = oe::segments_with(ds, oe::Part::Fit, long_h, 3, 90);
+        let h0 = ds.opts.oe_horizon_s;
         let tau0 = base.tau_sf();
         let tau_cell = core::cell::Cell::new(tau0);
         // An input delay already in the model was sized without the play (see
@@ -276,12 +277,34 @@ mod fit {
             }
             Some(p)
         };
-        let cost = |segs: &[(usize, usize)], h: f64, gap: f64, j_eq: f64, bound: f64| -> f64 {
-            plant_with(gap, j_eq, tau_cell.get())
+        // The costs computed in full (finite) per phase and model: the searches below start
+        // each grid at the value the search before settled on (a grid's middle point is
+        // exactly the last best J_eq, Coulomb level or gap), which is then not simulated again.
+        let memo: core::cell::RefCell<Vec<(CostKey, f64)>> = core::cell::RefCell::new(Vec::new());
+        let cost = |phase: usize, gap: f64, j_eq: f64, bound: f64| -> f64 {
+            let (segs, h) = if phase == 0 { (&short, h0) } else { (&long, long_h) };
+            let tau = tau_cell.get();
+            let key: CostKey = [
+                phase as u64,
+                gap.to_bits(),
+                j_eq.to_bits(),
+                tau.to_bits(),
+                delay_cell.get().to_bits(),
+            ];
+            if let Some(&(_, c)) = memo.borrow().iter().find(|(k, _)| *k == key) {
+                // The full cost: a search may be given any value above its bound.
+                return c;
+            }
+            let c = plant_with(gap, j_eq, tau)
                 .and_then(|p| oe::prediction_cost_bounded(ds, &p, segs, h, bound))
-                .unwrap_or(f64::INFINITY)
+                .unwrap_or(f64::INFINITY);
+            // A finite cost was computed in full (an evaluation stopped at its bound is
+            // infinite).
+            if c.is_finite() {
+                memo.borrow_mut().push((key, c));
+            }
+            c
         };
-        let h0 = ds.opts.oe_horizon_s;
         let (mut gap, mut j_eq) = if fit_gap {
             let mut best = (f64::NAN, j0, f64::INFINITY);
             // The plant of a grid point (the Coulomb level and a delay at their start values),
@@ -320,7 +343,7 @@ mod fit {
             (solved.cfg.slots[i].get("gap"), j0)
         };
         let step = hi / 15.0;
-        for (segs, h, j_span, iters) in [(&short, h0, 0.15, 8), (&long, long_h, 0.05, 8)] {
+        for (phase, segs, j_span, iters) in [(0, &short, 0.15, 8), (1, &long, 0.05, 8)] {
             if segs.is_empty() {
                 continue;
             }
@@ -329,7 +352,7 @@ mod fit {
                 let jc = j_eq;
                 if let Some((s, _)) = search::grid_then_golden_bounded(
                     &grid,
-                    |s, bound| cost(segs, h, gap, jc * s, bound),
+                    |s, bound| cost(phase, gap, jc * s, bound),
                     iters,
                 ) {
                     j_eq = jc * s;
@@ -341,7 +364,7 @@ mod fit {
                 let grid = search::linspace(0.9, 1.1, 5);
                 let f = |s: f64, bound: f64| {
                     tau_cell.set(tc * s);
-                    let c = cost(segs, h, gap, j_eq, bound);
+                    let c = cost(phase, gap, j_eq, bound);
                     tau_cell.set(tc);
                     c
                 };
@@ -350,13 +373,13 @@ mod fit {
                 }
             }
             if fit_gap && delay_slot.is_some() {
-                refine_delay(ds, &delay_cell, |bound| cost(segs, h, gap, j_eq, bound), iters);
+                refine_delay(ds, &delay_cell, |bound| cost(phase, gap, j_eq, bound), iters);
             }
             if fit_gap {
                 let grid = search::linspace((gap - step).max(0.0), gap + step, 5);
                 if let Some((g, _)) = search::grid_then_golden_bounded(
                     &grid,
-                    |g, bound| cost(segs, h, g, j_eq, bound),
+                    |g, bound| cost(phase, g, j_eq, bound),
                     iters,
                 ) {
                     gap = g;
@@ -373,6 +396,10 @@ mod fit {
         solved.plant = refined;
         Ok(())
     }
+
+    /// What a cost of [`refine`] is computed on: phase (0 short segments, 1 long), and the bits
+    /// of the gap, J_eq, the Coulomb level and an input delay.
+    type CostKey = [u64; 5];
 
     /// The grid of gaps of [`refine`]: 16 gaps over 0..`hi` [rad], each with the J_eq that best
     /// goes with it on `cost(gap, j_eq, bound)` (+-15 % of `j0`, or `j0` alone when `fit_j` is

@@ -934,7 +934,7 @@ impl PlantSim {
         let d = &self.disc[li][mode];
         let x0 = self.x;
         let inp = [u, tm0, tl0, tau_offset];
-        let mut xp = if self.ns == 4 {
+        let xp = if self.ns == 4 {
             advance::<4>(d, &x0, &inp)
         } else {
             advance::<6>(d, &x0, &inp)
@@ -942,10 +942,16 @@ impl PlantSim {
         let (tm1, tl1) = self.nonlinear_torques(&xp);
         let (dm, dl) = (tm1 - tm0, tl1 - tl0);
         let d = &self.disc[li][mode];
-        for i in 0..self.ns {
-            xp[i] += d.g1[i][0] * dm + d.g1[i][1] * dl;
+        // Stored one element at a time: a copy of the whole array would read back, in wider
+        // loads, the element-wide stores just made (a stalled store forwarding on x86).
+        let ns = self.ns;
+        for (i, x) in self.x.iter_mut().enumerate() {
+            *x = if i < ns {
+                xp[i] + (d.g1[i][0] * dm + d.g1[i][1] * dl)
+            } else {
+                xp[i]
+            };
         }
-        self.x = xp;
         let mut next = Some((tm1, tl1));
         let w = self.fb_w();
         if mode & STUCK != 0 {
