@@ -456,9 +456,11 @@ fn filtered_pairs(
         let sin: Vec<f64> = r.theta_m_rad.iter().map(|t| math::sin(c_m * t)).collect();
         let cos: Vec<f64> = r.theta_m_rad.iter().map(|t| math::cos(c_m * t)).collect();
         for (m, pair) in ms.iter().zip(out.iter_mut()) {
-            for (f, col) in [&sin, &cos].into_iter().zip(pair.iter_mut()) {
-                let raw: Vec<f64> = f.iter().zip(&r.omega_raw).map(|(x, w)| x * m(*w)).collect();
-                let filtered = r.filt(&raw);
+            let modulated = |f: &[f64]| -> Vec<f64> {
+                f.iter().zip(&r.omega_raw).map(|(x, w)| x * m(*w)).collect()
+            };
+            let (fs, fc) = r.filt_pair(&modulated(&sin), &modulated(&cos));
+            for (filtered, col) in [&fs, &fc].into_iter().zip(pair.iter_mut()) {
                 col.extend(v.row_idx[start..end].iter().map(|&i| filtered[rows.k[i]]));
             }
         }

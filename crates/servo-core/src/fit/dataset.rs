@@ -55,6 +55,27 @@ impl RecData {
         self.filter.apply(raw)
     }
 
+    /// [`Self::filt`] of two signals at once (the same values, filtered in lockstep).
+    pub fn filt_pair(&self, a: &[f64], b: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        self.filter.apply_pair(a, b)
+    }
+
+    /// [`Self::filt`] of every signal of `raw`, two at a time ([`Self::filt_pair`]).
+    pub fn filt_all(&self, raw: &[Vec<f64>]) -> Vec<Vec<f64>> {
+        let mut out = Vec::with_capacity(raw.len());
+        for two in raw.chunks(2) {
+            match two {
+                [a, b] => {
+                    let (fa, fb) = self.filt_pair(a, b);
+                    out.push(fa);
+                    out.push(fb);
+                }
+                _ => out.extend(two.iter().map(|c| self.filt(c))),
+            }
+        }
+        out
+    }
+
     /// The logged input with a transformation per sample (input nonlinearity), then seen through
     /// the zero-order hold shifted by `shift_s` [s] and averaged over one sample centred on each
     /// row: row k gets the mean of the held input over [t_k - dt/2 - shift, t_k + dt/2 - shift].
@@ -374,7 +395,8 @@ impl Dataset {
             if cur.as_ref().map(|c| c.0) != Some(ri) {
                 let r = &self.recs[ri];
                 let (x, y) = raw(r);
-                cur = Some((ri, r.filt(&x), r.filt(&y)));
+                let (fx, fy) = r.filt_pair(&x, &y);
+                cur = Some((ri, fx, fy));
             }
             if let Some((_, x, y)) = &cur {
                 a.push(x[k]);

@@ -457,7 +457,7 @@ fn columns(
     for (&ri, &k) in rows.rec.iter().zip(&rows.k) {
         if cur.as_ref().map(|c| c.0) != Some(ri) {
             let r = &ds.recs[ri];
-            cur = Some((ri, raw(r).iter().map(|c| r.filt(c)).collect()));
+            cur = Some((ri, r.filt_all(&raw(r))));
         }
         if let Some((_, cs)) = &cur {
             for (o, c) in out.iter_mut().zip(cs) {

@@ -802,11 +802,18 @@ impl PlantSim {
 
     /// Smooth (motor side, load side) torques at `x` [N m], reusing the last values while the
     /// angles are unchanged (when every effect allows it).
-    #[inline]
+    #[inline(always)]
     fn smooth_cached(&mut self, x: &[f64; NS]) -> (f64, f64) {
         if !self.smooth_m.is_active() && !self.smooth_l.is_active() && !self.custom_torque {
             return (0.0, 0.0);
         }
+        self.smooth_cached_active(x)
+    }
+
+    /// [`Self::smooth_cached`] with some smooth or user torque active (out of line: the check
+    /// above stays inline in every sub-step).
+    #[inline(never)]
+    fn smooth_cached_active(&mut self, x: &[f64; NS]) -> (f64, f64) {
         let sig = self.signals(x);
         let (cm, cl) = self.custom_torques(&sig);
         let tau_m = self.smooth_m.cached(x[3], &sig) + cm;
