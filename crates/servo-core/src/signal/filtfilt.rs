@@ -299,6 +299,17 @@ mod tests {
         (math::hypot(s / m, c / m), math::atan2(c, s))
     }
 
+    /// Two signals filtered in lockstep get exactly the values each gets alone.
+    #[test]
+    fn a_pair_is_filtered_exactly_as_each_alone() {
+        let f = ZeroPhase::new(20.0, DT).unwrap();
+        let x = sine(3.0, 0.2, 2000);
+        let y: Vec<f64> = sine(11.0, 1.0, 2000).iter().map(|v| v * v).collect();
+        let (fx, fy) = f.apply_pair(&x, &y);
+        assert_eq!(fx, f.apply(&x));
+        assert_eq!(fy, f.apply(&y));
+    }
+
     #[test]
     fn dc_passes_with_unit_gain_everywhere() {
         let x = [2.5; 500];

@@ -1145,6 +1145,33 @@ mod tests {
         assert!((sim.state().time_s - 2.0).abs() < 1e-12);
     }
 
+    /// Two simulators stepped as a pair end every period exactly where each alone does, with
+    /// dry friction (stuck spells), a gear play and a delay that switches inside the period.
+    #[test]
+    fn a_pair_steps_exactly_as_each_alone() {
+        for specs in [
+            &["coulomb:tau_sf=0.009", "backlash:gap=0.03"][..],
+            &["coulomb:tau_sf=0.009", "delay:delay=0.00125"][..],
+        ] {
+            let p = plant_with(specs);
+            let mut a = PlantSim::new(&p, 1e-3).unwrap();
+            let mut b = a.clone();
+            let (mut a2, mut b2) = (a.clone(), a.clone());
+            for k in 0..3000 {
+                let t = k as f64 * 1e-3;
+                let (ua, ub) = (
+                    3.0 * math::sin(7.0 * t),
+                    if k % 400 < 200 { 2.0 } else { -0.3 },
+                );
+                a.step_pair(&mut b, ua, ub);
+                a2.step(ua);
+                b2.step(ub);
+                assert_eq!(a.state(), a2.state(), "{specs:?} at {k}");
+                assert_eq!(b.state(), b2.state(), "{specs:?} at {k}");
+            }
+        }
+    }
+
     #[test]
     fn rejects_a_bad_period() {
         assert!(matches!(
