@@ -120,6 +120,7 @@ fn fmt_params(params: &[ParamEstimate]) -> String {
 #[allow(clippy::too_many_arguments)]
 pub fn describe(
     ds: &Dataset,
+    labels: &regimes::Labels,
     kind: EffectKind,
     eq: Equation,
     b: &EqSolution,
@@ -157,20 +158,15 @@ pub fn describe(
         }
     }
     // Where it helps.
-    let rows = if eq == Equation::Electrical {
-        &ds.elec_rows
-    } else {
-        &ds.mech_rows
-    };
-    let reg = regimes::label(ds, rows);
+    let reg = labels.of(eq);
     let gain: Vec<f64> = b
         .resid
         .iter()
         .zip(&c.resid)
         .map(|(x, y)| x * x - y * y)
         .collect();
-    let sh = regimes::shares(&reg, &gain);
-    let occ = regimes::occupancy(&reg);
+    let sh = regimes::shares(reg, &gain);
+    let occ = regimes::occupancy(reg);
     let best = (0..5)
         .filter(|&i| occ[i] > 0.0)
         .max_by(|&i, &j| (sh[i] / occ[i]).total_cmp(&(sh[j] / occ[j])))

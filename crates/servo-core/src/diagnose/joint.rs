@@ -46,6 +46,8 @@ pub(super) struct Context<'a> {
     pub electrical_broken: bool,
     /// The simulation reference of the diagnosis (the model holding neither member).
     pub reference: &'a Reference,
+    /// The regime labels of both balances' rows.
+    pub labels: &'a super::regimes::Labels,
     pub opts: &'a DiagnoseOptions,
 }
 
@@ -220,7 +222,7 @@ pub(super) fn judge_given(
     let floor = cx.floor_of(eq);
     let before = structure::analyse(ds, o_alone.equation(eq)?, floor, th, ds.gear_ratio);
     let mut c = judge(
-        ds, o_alone, o_ref, cx.noise_a, floor, before.rms, m, joint, cx.opts,
+        ds, cx.labels, o_alone, o_ref, cx.noise_a, floor, before.rms, m, joint, cx.opts,
     );
     if c.significant && !on_simulation(m) && m != EffectKind::Coulomb {
         if let Some(k) = structure_check(ds, &before, joint.equation(eq)?, floor, th) {

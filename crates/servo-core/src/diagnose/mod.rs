@@ -371,6 +371,7 @@ pub fn diagnose_dataset(
             && b.above_noise
             && b.ratio_to_noise >= th.electrical_block_ratio
     });
+    let labels = regimes::Labels::new(ds);
     let judged = par_map(&fits, opts.parallel, |(kind, res)| {
         let kind = *kind;
         let solved = match res {
@@ -381,6 +382,7 @@ pub fn diagnose_dataset(
         let bal = balances.iter().find(|b| b.equation == eq);
         let mut c = judge(
             ds,
+            &labels,
             &base,
             &reference,
             noise,
@@ -507,6 +509,7 @@ pub fn diagnose_dataset(
             floors: &floors,
             electrical_broken: electrical_broken.is_some(),
             reference: &reference,
+            labels: &labels,
             opts,
         };
         // Backward elimination from a joint simulation fit of the effects already named and
@@ -523,18 +526,13 @@ pub fn diagnose_dataset(
     }
     let mut equations = Vec::new();
     for sol in core::iter::once(&base.mech).chain(base.elec.as_ref()) {
-        let rows = if sol.equation == Equation::Electrical {
-            &ds.elec_rows
-        } else {
-            &ds.mech_rows
-        };
-        let reg = regimes::label(ds, rows);
+        let reg = labels.of(sol.equation);
         let sq: Vec<f64> = sol.resid.iter().map(|r| r * r).collect();
         equations.push((
             sol.equation,
             sol.rms(),
-            regimes::shares(&reg, &sq),
-            regimes::occupancy(&reg),
+            regimes::shares(reg, &sq),
+            regimes::occupancy(reg),
         ));
     }
     let summary = BaseSummary {
@@ -883,6 +881,7 @@ struct Reference {
 #[allow(clippy::too_many_arguments)]
 fn judge(
     ds: &Dataset,
+    labels: &regimes::Labels,
     base: &Solved,
     reference: &Reference,
     noise_a: Option<f64>,
@@ -1021,6 +1020,7 @@ fn judge(
     let significant = statistically && found.iter().all(|c| c.passed);
     let ev = evidence::describe(
         ds,
+        labels,
         kind,
         eq,
         b,

@@ -51,6 +51,32 @@ pub struct RowRegimes {
     pub flags: Vec<[bool; 5]>,
 }
 
+/// The regime labels of both equations' rows ([`label`] of the torque balance's and of the
+/// electrical balance's rows), made once per diagnosis: every candidate's evidence and the base
+/// summary read them.
+#[derive(Debug, Clone)]
+pub struct Labels {
+    pub mech: RowRegimes,
+    pub elec: RowRegimes,
+}
+
+impl Labels {
+    /// Labels the rows of both equations of `ds` (the two on two threads when a core is idle).
+    pub fn new(ds: &Dataset) -> Labels {
+        let (mech, elec) = super::join(|| label(ds, &ds.mech_rows), || label(ds, &ds.elec_rows));
+        Labels { mech, elec }
+    }
+
+    /// The labels of the rows of `eq` (the electrical balance's, or the torque balance's).
+    pub fn of(&self, eq: crate::fit::model::Equation) -> &RowRegimes {
+        if eq == crate::fit::model::Equation::Electrical {
+            &self.elec
+        } else {
+            &self.mech
+        }
+    }
+}
+
 /// Labels the rows of one equation.
 pub fn label(ds: &Dataset, rows: &Rows) -> RowRegimes {
     let o = &ds.opts;
