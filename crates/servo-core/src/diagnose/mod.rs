@@ -800,17 +800,26 @@ pub(crate) fn join<A: Send, B: Send>(
 ) -> (A, B) {
     #[cfg(feature = "std")]
     if let Some(_held) = idle_core() {
-        return std::thread::scope(|s| {
-            let h = s.spawn(fb);
-            let a = fa();
-            match h.join() {
-                Ok(b) => (a, b),
-                // A bug, not a data problem: surface it as the serial run would.
-                Err(e) => std::panic::resume_unwind(e),
-            }
-        });
+        return on_two_threads(fa, fb);
     }
     (fa(), fb())
+}
+
+/// `(fa(), fb())`, `fb` on a second thread: for a caller that already holds an [`idle_core`]
+/// for it. A panic in `fb` (a bug, not a data problem) is raised here as the serial run would.
+#[cfg(feature = "std")]
+pub(crate) fn on_two_threads<A: Send, B: Send>(
+    fa: impl FnOnce() -> A + Send,
+    fb: impl FnOnce() -> B + Send,
+) -> (A, B) {
+    std::thread::scope(|s| {
+        let h = s.spawn(fb);
+        let a = fa();
+        match h.join() {
+            Ok(b) => (a, b),
+            Err(e) => std::panic::resume_unwind(e),
+        }
+    })
 }
 
 /// Robust estimate of the white current-sensor noise [A]: MAD of first differences / sqrt(2).

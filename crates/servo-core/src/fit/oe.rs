@@ -222,15 +222,7 @@ fn idle_core_guard() -> Option<impl Sized> {
 fn both<A: Send, B: Send>(fa: impl FnOnce() -> A + Send, fb: impl FnOnce() -> B + Send) -> (A, B) {
     #[cfg(feature = "std")]
     {
-        std::thread::scope(|s| {
-            let h = s.spawn(fb);
-            let a = fa();
-            match h.join() {
-                Ok(b) => (a, b),
-                // A bug, not a data problem: surface it as the serial run would.
-                Err(e) => std::panic::resume_unwind(e),
-            }
-        })
+        crate::diagnose::on_two_threads(fa, fb)
     }
     #[cfg(not(feature = "std"))]
     {

@@ -1149,8 +1149,14 @@ mod tests {
     /// dry friction (stuck spells), a gear play and a delay that switches inside the period.
     #[test]
     fn a_pair_steps_exactly_as_each_alone() {
+        // The gear play found through the registry (its contact role), not by name.
+        let play = EffectKind::ALL
+            .into_iter()
+            .find(|k| k.sim_role() == SimRole::Contact)
+            .unwrap();
+        let play = alloc::format!("{play}:gap=0.03");
         for specs in [
-            &["coulomb:tau_sf=0.009", "backlash:gap=0.03"][..],
+            &["coulomb:tau_sf=0.009", play.as_str()][..],
             &["coulomb:tau_sf=0.009", "delay:delay=0.00125"][..],
         ] {
             let p = plant_with(specs);
