@@ -150,47 +150,25 @@ pub fn prediction_cost_stepped(
     let (a, b) = segs.split_at(segs.len() / 2);
     // Each half stops early against the whole sum's limit (bound^2 times every sample): a half
     // alone above it puts the whole above it.
-    let half_limit = |n: usize| {
-        let bound = bound_rad * math::sqrt(total as f64 / n.max(1) as f64);
-        bound * bound * n as f64
-    };
-    // A half's squared errors summed as the whole cost weighs them (from its RMS).
-    let weighed = |r: SumOrStop, n: usize| -> Option<(f64, usize)> {
-        let rms = r?.map_or(f64::INFINITY, |(sum, count)| rms_of(sum, count));
+    let limit = bound_rad * bound_rad * total as f64;
+    // A half's squared errors, as the whole cost weighs them (from its RMS), and its samples.
+    let half = |s: &[(usize, usize)], limit: f64| -> Option<(f64, usize)> {
+        let n = samples(s);
+        let r = sum_serial(ds, plant, s, horizon_s, limit, max_substep_s)?;
+        let rms = r.map_or(f64::INFINITY, |(sum, count)| rms_of(sum, count));
         Some((rms * rms * n as f64, n))
     };
-    let (na, nb) = (samples(a), samples(b));
     let (ra, rb) = match idle_core_guard() {
-        Some(_held) => both(
-            || {
-                weighed(
-                    sum_serial(ds, plant, a, horizon_s, half_limit(na), max_substep_s),
-                    na,
-                )
-            },
-            || {
-                weighed(
-                    sum_serial(ds, plant, b, horizon_s, half_limit(nb), max_substep_s),
-                    nb,
-                )
-            },
-        ),
+        Some(_held) => both(|| half(a, limit), || half(b, limit)),
         None => {
-            // In turn: the second half stops as soon as the first half's sum and its own exceed
-            // the limit (the first half's sum as the whole cost weighs it; a first half already
-            // above the limit decides alone).
-            let ra = weighed(
-                sum_serial(ds, plant, a, horizon_s, half_limit(na), max_substep_s),
-                na,
-            );
-            match ra {
-                Some((sa, _)) if sa.is_finite() => {
-                    let lb = half_limit(nb) - sa;
-                    let rb = weighed(sum_serial(ds, plant, b, horizon_s, lb, max_substep_s), nb);
-                    (ra, rb)
-                }
-                _ => (ra, Some((f64::INFINITY, nb))),
-            }
+            // In turn: the second half stops as soon as both sums together exceed the limit (a
+            // first half already above it decides alone).
+            let ra = half(a, limit);
+            let rb = match ra {
+                Some((sa, _)) if sa.is_finite() => half(b, limit - sa),
+                _ => Some((f64::INFINITY, samples(b))),
+            };
+            (ra, rb)
         }
     };
     let ((sa, na), (sb, nb)) = (ra?, rb?);
@@ -334,10 +312,9 @@ enum Sample {
 
 /// Simulates each segment of `segs` (record, start) over `horizon_s` [s] from its measured
 /// state, one simulator per sample period, and reports each sample's error and each segment's
-/// end to `visit`, which returns false (at a segment's end) to stop. `Some(true)`: every
-/// segment ran; `Some(false)`: stopped; `None`: a non-finite error or a simulator that cannot
-/// be built. `visit` may also stop at a sample (returning false), which ends the simulation
-/// there.
+/// end, in order, to `visit`, which returns false (at a sample or a segment's end) to stop.
+/// `Some(true)`: every segment ran; `Some(false)`: stopped; `None`: a non-finite error or a
+/// simulator that cannot be built.
 fn simulate_segments(
     ds: &Dataset,
     plant: &Plant,

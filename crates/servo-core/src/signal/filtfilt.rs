@@ -88,7 +88,6 @@ impl Butter2 {
         self.run_from(x0, x.iter_mut().rev());
     }
 
-    /// Filters the samples of `xs` in place, in the order given, from the steady state of `x0`.
     /// [`Self::run`] of two signals of one length at once (each exactly as alone): the two
     /// recursions interleaved, for a core to overlap their chains of dependent operations.
     fn run_pair(&self, x: &mut [f64], y: &mut [f64]) {
@@ -135,6 +134,7 @@ impl Butter2 {
         }
     }
 
+    /// Filters the samples of `xs` in place, in the order given, from the steady state of `x0`.
     #[inline(always)]
     fn run_from<'a>(&self, x0: f64, xs: impl Iterator<Item = &'a mut f64>) {
         let [b0, b1, b2] = self.b;
