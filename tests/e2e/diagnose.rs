@@ -382,8 +382,9 @@ fn two_hidden_mechanical_effects_are_found_one_after_the_other() {
 /// A gear play and an input delay (two at once, both acting at every reversal): the delay is
 /// named first, sized in the electrical balance, where the play biases it (the balance infers
 /// the motor speed from the load angle; 3.9-4.4 ms for 3.0 ms); the play is named next, and with
-/// it in the model the delay is sized again (`Dataset::fit_config` re-searches the input effects
-/// when a play enters, then refines the delay with the gap on the simulation). Both are added,
+/// it in the model the delay is sized again (`Dataset::fit_config` also fits a play entering
+/// from the input effects re-searched with it, then refines the delay with the gap on the
+/// simulation, and keeps the start that predicts the fit blocks better). Both are added,
 /// with their main parameters within 25 %, and the simulation error falls along the ladder.
 fn check_play_and_delay(seed: u64) {
     let specs = ["backlash:gap=0.03", "delay:delay=0.003"];

@@ -475,25 +475,19 @@ impl Dataset {
         self.fit_config_searched(&with_custom, effects)
     }
 
-    /// When `cfg` searches the parameters of a gear play (a contact effect entering the model),
-    /// marks the input effects already in the model (those sized in the electrical balance, when
-    /// the current is logged) to be searched again, and returns true.
-    ///
-    /// The electrical balance infers the motor speed (its back-EMF) from the load angle. With a
-    /// play the motor leads the load through the contact and crosses the gap at every reversal
-    /// of its torque, so an input effect sized before the play was in the model absorbs the
-    /// difference: on three seeds with a 0.03 rad play and a 3.0 ms delay, the delay came out
-    /// 3.9-4.3 ms. With the play in the configuration those rows get no weight in the balance
-    /// ([`model`]), and the play's own refinement sizes the delay with the gap on the
-    /// simulation (3.3-3.4 ms).
-    fn play_enters(&self, cfg: &mut model::Config) -> bool {
+    /// When `cfg` searches the parameters of a gear play (a contact effect entering the model)
+    /// and `resize` is set, marks the input effects already in the model (those sized in the
+    /// electrical balance, when the current is logged) to be searched again. Returns whether a
+    /// play is searched, and whether there are such effects (marked or not).
+    fn play_enters(&self, cfg: &mut model::Config, resize: bool) -> (bool, bool) {
         let entering = cfg
             .slots
             .iter()
             .any(|s| s.kind.sim_role() == SimRole::Contact && s.fit.iter().any(|f| *f));
         if !entering || !self.has_current {
-            return entering;
+            return (entering, false);
         }
+        let mut found = false;
         for slot in cfg.slots.iter_mut() {
             let kind = slot.kind;
             if kind.is_mechanical() || slot.fit.iter().any(|f| *f) {
@@ -501,21 +495,55 @@ impl Dataset {
             }
             for (j, p) in kind.params().iter().enumerate() {
                 if p.nonlinear && kind.model().fittable(p.key) {
-                    slot.fit[j] = true;
+                    found = true;
+                    slot.fit[j] |= resize;
                 }
             }
         }
-        true
+        (true, found)
     }
 
     /// [`Dataset::fit_config`] once the user effects' nonlinear parameters are set.
+    ///
+    /// A gear play entering a model that already holds input effects is fitted from two starts,
+    /// and the one that predicts the fit blocks better (simulation cost) is kept: those effects
+    /// as they are, and those effects searched again in the electrical balance with the play
+    /// in it ([`Self::play_enters`]). That balance infers the motor speed (its back-EMF) from
+    /// the load angle; with a play the motor leads the load through the contact and crosses
+    /// the gap at every reversal of its torque, so an input effect sized before the play
+    /// absorbs the difference (on five seeds of open- and closed-loop logs with a 0.03 rad play
+    /// and a 3.0 ms delay, the delay came out 3.9-4.4 ms; re-sized, 3.1-3.4 ms). On
+    /// closed-loop logs alone the bias was small and the re-sized start predicted worse.
     fn fit_config_searched(
         &self,
         base: &Plant,
         effects: &[EffectToFit],
     ) -> Result<Solved, FitError> {
+        let (kept, resized) = self.fit_config_started(base, effects, false)?;
+        if !resized {
+            return Ok(kept);
+        }
+        let Ok((other, _)) = self.fit_config_started(base, effects, true) else {
+            return Ok(kept);
+        };
+        let cost = |s: &Solved| oe::prediction_cost(self, &s.plant, oe::Part::Fit);
+        Ok(match (cost(&kept), cost(&other)) {
+            (Some(a), Some(b)) if b < a => other,
+            _ => kept,
+        })
+    }
+
+    /// [`Dataset::fit_config_searched`] from one start: with `resize`, the input effects in the
+    /// model are searched again when a play enters. Returns the fit and whether `resize` would
+    /// change anything here (a play entering beside input effects, current logged).
+    fn fit_config_started(
+        &self,
+        base: &Plant,
+        effects: &[EffectToFit],
+        resize: bool,
+    ) -> Result<(Solved, bool), FitError> {
         let mut cfg = self.config(base, effects, self.opts.refit_base);
-        let play_searched = self.play_enters(&mut cfg);
+        let (play_searched, resizable) = self.play_enters(&mut cfg, resize);
         let searched: Vec<(usize, &'static str)> = cfg
             .slots
             .iter()
@@ -642,7 +670,7 @@ impl Dataset {
             }
         }
         self.polish_on_simulation(&mut solved, effects)?;
-        Ok(solved)
+        Ok((solved, resizable))
     }
 
     /// Refines, on the simulation cost of the fit blocks, the parameters of the fitted effects
