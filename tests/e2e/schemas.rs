@@ -135,6 +135,9 @@ fn every_command_output_follows_its_schema() {
     json(&[
         "diagnose", &run, &chirp, "--model", &model, "--auto", "--json",
     ]);
+    // a joint search of one candidate is no joint search: refused, naming the flag
+    let (ok, _, err) = servo(&["diagnose", &run, "--model", &model, "--joint", "1"]);
+    assert!(!ok && err.contains("--joint"), "{err}");
     json(&[
         "frf", &chirp, "--gains", &gains, "--model", &model, "--json",
     ]);

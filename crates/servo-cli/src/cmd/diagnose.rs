@@ -57,6 +57,13 @@ pub struct Diagnose {
     /// Only try these effects (comma-separated catalogue names).
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
+    /// When no single effect passes and a balance is still above its noise floor: how many of
+    /// the best candidates to fit together with the effects already named, on the simulation,
+    /// then eliminate backward until each survivor passes every check given the others
+    /// (effects that hide each other, e.g. a gear play and a breakaway friction). 0: off. Adds
+    /// about 5 s to 2 min to such a diagnosis.
+    #[arg(long, value_name = "N", default_value_t = DiagnoseOptions::default().joint_candidates)]
+    pub joint: usize,
     /// Cut-off of the zero-phase filter applied before differentiating [Hz].
     #[arg(long, default_value_t = 25.0)]
     pub filter_hz: f64,
@@ -105,6 +112,12 @@ impl Diagnose {
         }
         let mut opts = DiagnoseOptions::default();
         opts.fit.filter_hz = self.filter_hz;
+        if self.joint == 1 {
+            anyhow::bail!(
+                "--joint must be 0 (off) or at least 2 candidates (a joint fit needs two), got 1"
+            );
+        }
+        opts.joint_candidates = self.joint;
         for name in &self.only {
             let k = EffectKind::from_name(name.trim()).ok_or_else(|| {
                 anyhow!(

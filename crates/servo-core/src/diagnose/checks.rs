@@ -126,16 +126,17 @@ fn compared(kind: EffectKind) -> &'static [&'static str] {
 fn refit_on(
     ds: &Dataset,
     model: &Plant,
-    kind: EffectKind,
+    to_fit: EffectToFit,
     keep: &dyn Fn(usize, usize) -> bool,
 ) -> Option<Vec<ParamEstimate>> {
+    let kind = to_fit.effect.kind;
     let mut sub = ds.clone();
     for rows in [&mut sub.mech_rows, &mut sub.elec_rows] {
         for i in 0..rows.len() {
             rows.fit[i] = keep(rows.rec[i], rows.k[i]);
         }
     }
-    let solved = sub.fit_config(model, &[EffectToFit::all(kind)]).ok()?;
+    let solved = sub.fit_config(model, &[to_fit]).ok()?;
     Some(
         sub.estimates(&solved)
             .into_iter()
@@ -192,6 +193,19 @@ fn agree(
 /// every log, and (for effects that should not depend on speed: periodic torques, Coulomb
 /// friction) slow and fast motion. A mechanism is the same everywhere; a mimic is not.
 pub fn consistency(ds: &Dataset, model: &Plant, c: &Candidate, th: &Thresholds) -> Vec<Check> {
+    consistency_with(ds, model, c, th, EffectToFit::all(c.effect))
+}
+
+/// [`consistency`] with the candidate refitted as `to_fit` says (its parameters not marked keep
+/// the values `to_fit` carries): a member of a joint model whose nonlinear parameters were tuned
+/// on the motion, where its balance cannot pin them, is compared on its levels alone.
+pub fn consistency_with(
+    ds: &Dataset,
+    model: &Plant,
+    c: &Candidate,
+    th: &Thresholds,
+    to_fit: EffectToFit,
+) -> Vec<Check> {
     let kind = c.effect;
     let mut out = Vec::new();
     if compared(kind).is_empty() {
@@ -201,8 +215,8 @@ pub fn consistency(ds: &Dataset, model: &Plant, c: &Candidate, th: &Thresholds) 
     let first = |ri: usize, k: usize| k < lens[ri] / 2;
     let second = |ri: usize, k: usize| k >= lens[ri] / 2;
     if let (Some(a), Some(b)) = (
-        refit_on(ds, model, kind, &first),
-        refit_on(ds, model, kind, &second),
+        refit_on(ds, model, to_fit, &first),
+        refit_on(ds, model, to_fit, &second),
     ) {
         out.push(agree(
             "same in both halves",
@@ -225,8 +239,8 @@ pub fn consistency(ds: &Dataset, model: &Plant, c: &Candidate, th: &Thresholds) 
         let slow = |ri: usize, k: usize| ds.recs[ri].omega_f[k].abs() < med;
         let fast = |ri: usize, k: usize| ds.recs[ri].omega_f[k].abs() >= med;
         if let (Some(a), Some(b)) = (
-            refit_on(ds, model, kind, &slow),
-            refit_on(ds, model, kind, &fast),
+            refit_on(ds, model, to_fit, &slow),
+            refit_on(ds, model, to_fit, &fast),
         ) {
             out.push(agree(
                 "same at slow and fast speed",

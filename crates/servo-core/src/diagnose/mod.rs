@@ -69,11 +69,12 @@ pub struct DiagnoseOptions {
     /// When no single candidate passes and a balance is above its noise floor, how many of the
     /// best candidates (by held-out simulation drop) to fit jointly with the effects already
     /// named, then eliminate backward ([`backward`]; failing that, to try in pairs, [`joint`]);
-    /// 0: none. Off by default (experimental): on a breakaway friction, a gear play and a delay
-    /// hidden together (the three-effect test, joint model tuned on a trimmed simulation cost)
-    /// it names all three on seeds 24 and 25 (gap within 18 %, delay 17-21 % short, the
-    /// breakaway 29-30 % off on seed 24) but only the delay on seed 23, and it costs 1-2
-    /// minutes per diagnosis of a 28 s log.
+    /// 0: none (2 at least otherwise). Default 3. The candidates acting where a gear play acts
+    /// (sharing a regime with it) and those with clear evidence in their own balance join them.
+    /// On a breakaway friction, a gear play and a delay hidden together (28 s of open- and
+    /// closed-loop logs) it names all three with their main parameters within 25 % on 5 of 7
+    /// seeds (on the other two the breakaway comes out 26 % and 38 % high); it adds 5-30 s to
+    /// a diagnosis that ends "unexplained" on such logs, and 0.5-2 minutes when it finds a set.
     pub joint_candidates: usize,
 }
 
@@ -92,7 +93,7 @@ impl Default for DiagnoseOptions {
             extra_candidates: Vec::new(),
             parallel: true,
             thresholds: Thresholds::default(),
-            joint_candidates: 0,
+            joint_candidates: 3,
         }
     }
 }
@@ -279,7 +280,7 @@ pub fn diagnose_dataset(
     model: &Plant,
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, FitError> {
-    let base = timing::timed(|| "base fit".into(), || ds.fit_config(model, &[]))?;
+    let base = timing::timed(|| "base fit".into(), || base_fit(ds, model))?;
     let noise = current_noise(ds);
     let th = opts.thresholds;
     let sols: Vec<&EqSolution> = core::iter::once(&base.mech)
@@ -391,6 +392,7 @@ pub fn diagnose_dataset(
             kind,
             solved,
             opts,
+            false,
         );
         // A mimic leaves the structure it was meant to explain: the shape that carried the
         // balance's residual is still there, above the noise floor, after adding it.
@@ -873,6 +875,34 @@ fn nonlinear_searched(kind: EffectKind) -> usize {
 }
 
 /// Is `kind` judged on the simulation alone (no regressors; a gear play)?
+/// The base model of a diagnosis: `model` with its linear parameters (base and effects)
+/// re-solved in their balances, its nonlinear ones kept.
+///
+/// When `model` holds an effect judged on the simulation (a gear play), those balances leave
+/// out the rows around torque reversals, where the motor crosses the gap and the load angle
+/// says nothing of it, and they cannot see the play itself: the values `model` was given, tuned
+/// on the simulation with the play (by its refinement or a joint fit, [`backward`]), are then
+/// kept when they predict the motion of the fit blocks better (on the cost the joint fit is
+/// tuned on, [`backward::motion_cost`]) than the re-solved ones. A breakaway friction found
+/// beside a play at tau_s 0.017 N m (0.020 true) came back from the torque balance at 0.012,
+/// and one at 0.020 at 0.026 (the breakaway lives at the reversals the balance leaves out).
+/// The balances' residuals are those of the re-solved model either way.
+fn base_fit(ds: &Dataset, model: &Plant) -> Result<Solved, FitError> {
+    let mut s = ds.fit_config(model, &[])?;
+    if ds.has_input && model.effects.iter().any(|e| on_simulation(e.kind)) {
+        let (solved, given) = (
+            backward::motion_cost(ds, &s.plant),
+            backward::motion_cost(ds, model),
+        );
+        if let (Some(a), Some(b)) = (solved, given) {
+            if b < a {
+                s.plant = *model;
+            }
+        }
+    }
+    Ok(s)
+}
+
 pub(crate) fn on_simulation(kind: EffectKind) -> bool {
     kind.model()
         .fit_hooks()
@@ -899,6 +929,7 @@ fn judge(
     kind: EffectKind,
     cand: &Solved,
     opts: &DiagnoseOptions,
+    given_others: bool,
 ) -> Candidate {
     let eq = fit::model::Config::equation_of(kind, ds.has_current);
     let params: Vec<ParamEstimate> = ds
@@ -994,6 +1025,18 @@ fn judge(
     } else {
         0.0
     };
+    // A member of a joint model tuned on the simulation (`given_others`: judged given the other
+    // members, [`backward`]) is found in the motion first: its share of the model's structured
+    // error is also measured there, as its held-out simulation drop. Beside a gear play, whose
+    // contact transients at every reversal stay in the torque balance (no regressor holds
+    // them) and whose reversal rows that balance leaves out, a breakaway friction explains a
+    // small share of the balance (23 % on seed 24 of the three-effect test) while removing 86 %
+    // of the held-out simulation error.
+    let motion_share = if given_others {
+        oe_drop.unwrap_or(0.0).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     let mut found: Vec<checks::Check> = Vec::new();
     if statistically {
         let unit = eq.unit();
@@ -1007,11 +1050,19 @@ fn judge(
                     th.min_noise_ratio
                 ),
             });
+            let in_motion = if given_others {
+                alloc::format!(
+                    ", or its held-out simulation drop given the other members, {:.0} %",
+                    100.0 * motion_share
+                )
+            } else {
+                String::new()
+            };
             found.push(checks::Check {
                 name: "material share of the structured error",
-                passed: structured_share >= th.min_structured_share,
+                passed: structured_share.max(motion_share) >= th.min_structured_share,
                 detail: alloc::format!(
-                    "explains {:.0} % of the structured (above-noise) error of the {} (needs {:.0} %)",
+                    "explains {:.0} % of the structured (above-noise) error of the {}{in_motion} (needs {:.0} %)",
                     100.0 * structured_share,
                     eq.name(),
                     100.0 * th.min_structured_share
