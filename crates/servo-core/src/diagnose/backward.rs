@@ -7,9 +7,10 @@
 //! (stepwise regression) is backward elimination from a joint fit:
 //!
 //! 1. **Joint fit.** When no single candidate passes and a balance is still above its noise
-//!    floor, the effects already in the model beyond friction (named by earlier steps) and the
+//!    floor, the effects already in the model beyond friction (named by earlier steps), the
 //!    best candidates by held-out simulation drop ([`super::DiagnoseOptions::joint_candidates`]
-//!    of them) are fitted together: first by the usual equation-error fit (base refitted), then
+//!    of them), those with clear evidence in their own balance and those acting where a play
+//!    acts ([`partners`]) are fitted together: first by the usual equation-error fit (base refitted), then
 //!    on the simulation cost of the fit blocks over long segments (several reversals each),
 //!    where the motion shows every one of them, trimmed of its worst fifth ([`trimmed`]: a few
 //!    segments start from a state no measurement fixes and carry most of the plain cost). A
@@ -17,7 +18,8 @@
 //!    breakaway's speed scale, the pair that trades off at low speed), the linear ones
 //!    re-solved by least squares at each point, then a coordinate refinement from the best
 //!    points: the base first (the Coulomb level, B_eq, R_a, J_eq), then every member's
-//!    parameters. The effects named earlier are re-estimated too (a delay sized without the
+//!    parameters; then restarts with the play's gap at half and 0.7 times its value
+//!    ([`narrower`]). The effects named earlier are re-estimated too (a delay sized without the
 //!    play).
 //! 2. **Drop-one test.** Each new member is judged given all the others, against the joint
 //!    model without it (re-tuned on the simulation): every check of a single candidate (the
@@ -28,7 +30,8 @@
 //!    agreement across both halves of the data with the others in the model). The member with
 //!    the smallest held-out simulation contribution among those that fail is removed, the
 //!    others are re-tuned, and the test is repeated, until every survivor passes (or none is
-//!    left).
+//!    left). A lone survivor (no effect named earlier either) is left to the single
+//!    candidates' verdict: it hid nothing.
 //! 3. **Guard.** The survivors together must cut the held-out simulation error materially
 //!    against the model holding none of them.
 //!

@@ -874,7 +874,6 @@ fn nonlinear_searched(kind: EffectKind) -> usize {
         .count()
 }
 
-/// Is `kind` judged on the simulation alone (no regressors; a gear play)?
 /// The base model of a diagnosis: `model` with its linear parameters (base and effects)
 /// re-solved in their balances, its nonlinear ones kept.
 ///
@@ -903,6 +902,7 @@ fn base_fit(ds: &Dataset, model: &Plant) -> Result<Solved, FitError> {
     Ok(s)
 }
 
+/// Is `kind` judged on the simulation alone (no regressors; a gear play)?
 pub(crate) fn on_simulation(kind: EffectKind) -> bool {
     kind.model()
         .fit_hooks()
@@ -917,6 +917,11 @@ struct Reference {
     oe_holdout: Option<f64>,
 }
 
+/// Judges candidate `kind` fitted as `cand` against `base` (its balance: `balance_rms` over the
+/// noise floor `balance_floor`) and the simulation `reference`: the information criterion, the
+/// held-out residual and simulation drops, then the practical-significance checks and the
+/// effect's constraints. `given_others`: `kind` is a member of a joint model judged given the
+/// other members (its share of the structured error may be measured in the motion).
 #[allow(clippy::too_many_arguments)]
 fn judge(
     ds: &Dataset,
