@@ -293,8 +293,8 @@ pub(super) fn search(
     // And the effects that act where a member judged on the simulation acts (a gear play: at
     // reversals and in accelerations), whatever their own drop: alone, a breakaway friction
     // beside an unmodelled play and delay makes the simulation worse (-14 % and below on two
-    // seeds of the three-effect test) and ranks below a cogging mimic, yet it is the play's
-    // natural partner (each hides the other at the reversals).
+    // seeds of the three-effect test) and ranks below a periodic-torque mimic, yet it is the
+    // play's natural partner (each hides the other at the reversals).
     let plays: Vec<EffectKind> = fresh
         .iter()
         .copied()
@@ -409,8 +409,8 @@ pub(super) fn search(
                 if let Some(p) = without(&full, w) {
                     let left: Vec<EffectKind> = named.iter().chain(&survivors).copied().collect();
                     // The full refinement again: the members left had bent to the one
-                    // removed (a gap tuned beside a cogging mimic came out 0.052 rad for
-                    // 0.030, and one pass at half the span left it at 0.043).
+                    // removed (a gap tuned beside a periodic-torque mimic came out 0.052 rad
+                    // for 0.030, and one pass at half the span left it at 0.043).
                     full = tuner.refine(&p, &targets(&p, &left), &[1.0, 0.5]).0;
                 }
             }
@@ -508,8 +508,9 @@ pub(super) fn motion_cost(ds: &Dataset, p: &Plant) -> Option<f64> {
     Some(Tuner::new(ds).cost(p, f64::INFINITY)).filter(|c| c.is_finite())
 }
 
-/// Whether `a` and `b` act in a common regime of the motion ([`crate::effects::EffectModel::regimes`]:
-/// a gear play and a breakaway friction both at the reversals), where each can hide the other.
+/// Whether `a` and `b` act in a common regime of the motion
+/// ([`crate::effects::EffectModel::regimes`]: a gear play and a breakaway friction both at the
+/// reversals), where each can hide the other.
 fn partners(a: EffectKind, b: EffectKind) -> bool {
     let rb = b.model().regimes();
     a.model().regimes().iter().any(|r| rb.contains(r))
