@@ -93,6 +93,11 @@ impl Diagnose {
     /// ladder and the diagnoses (used by `servo demo`).
     pub fn run_report(self) -> anyhow::Result<(Vec<Rung>, Vec<Diagnosis>)> {
         keep_freed_memory();
+        if self.joint == 1 {
+            anyhow::bail!(
+                "--joint must be 0 (off) or at least 2 candidates (a joint fit needs two), got 1"
+            );
+        }
         let model_file = ModelFile::load(&self.model)?;
         let model = model_file.plant()?;
         let mut records = Vec::new();
@@ -112,11 +117,6 @@ impl Diagnose {
         }
         let mut opts = DiagnoseOptions::default();
         opts.fit.filter_hz = self.filter_hz;
-        if self.joint == 1 {
-            anyhow::bail!(
-                "--joint must be 0 (off) or at least 2 candidates (a joint fit needs two), got 1"
-            );
-        }
         opts.joint_candidates = self.joint;
         for name in &self.only {
             let k = EffectKind::from_name(name.trim()).ok_or_else(|| {

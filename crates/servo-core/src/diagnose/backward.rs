@@ -274,22 +274,18 @@ pub(super) fn search(
     // criterion, the held-out residual drop and the noise floor of their balance pass.
     let th = &cx.opts.thresholds;
     let min_red = 100.0 * (1.0 - math::sqrt(1.0 - cx.opts.min_eq_drop));
-    for c in ranking {
-        if fresh.len() >= cx.opts.joint_candidates + 2 {
-            break;
-        }
-        let fitted = fits.iter().any(|(k, r)| *k == c.effect && r.is_ok());
-        if !c.significant
-            && fitted
-            && !fresh.contains(&c.effect)
-            && !on_simulation(c.effect)
-            && c.bic_gain > cx.opts.min_bic_gain
-            && c.error_reduction_pct >= min_red
-            && c.noise_ratio >= th.min_noise_ratio
-        {
-            fresh.push(c.effect);
-        }
-    }
+    join_from(
+        ranking,
+        fits,
+        &mut fresh,
+        cx.opts.joint_candidates + 2,
+        |c| {
+            !on_simulation(c.effect)
+                && c.bic_gain > cx.opts.min_bic_gain
+                && c.error_reduction_pct >= min_red
+                && c.noise_ratio >= th.min_noise_ratio
+        },
+    );
     // And the effects that act where a member judged on the simulation acts (a gear play: at
     // reversals and in accelerations), whatever their own drop: alone, a breakaway friction
     // beside an unmodelled play and delay makes the simulation worse (-14 % and below on two
@@ -300,16 +296,13 @@ pub(super) fn search(
         .copied()
         .filter(|k| on_simulation(*k))
         .collect();
-    for c in ranking {
-        if fresh.len() >= cx.opts.joint_candidates + 2 {
-            break;
-        }
-        let fitted = fits.iter().any(|(k, r)| *k == c.effect && r.is_ok());
-        let partner = plays.iter().any(|p| partners(*p, c.effect));
-        if !c.significant && fitted && partner && !fresh.contains(&c.effect) {
-            fresh.push(c.effect);
-        }
-    }
+    join_from(
+        ranking,
+        fits,
+        &mut fresh,
+        cx.opts.joint_candidates + 2,
+        |c| plays.iter().any(|p| partners(*p, c.effect)),
+    );
     if fresh.len() < 2 {
         return None;
     }
@@ -502,10 +495,31 @@ fn narrower(
     .unwrap_or((full, c_full))
 }
 
-/// The cost a joint model is tuned on ([`Tuner`]): the trimmed simulation error [rad] of `p`
-/// over the long fit segments of `ds`. `None` when nothing could be simulated.
-pub(super) fn motion_cost(ds: &Dataset, p: &Plant) -> Option<f64> {
-    Some(Tuner::new(ds).cost(p, f64::INFINITY)).filter(|c| c.is_finite())
+/// The cost a joint model is tuned on ([`Tuner`]) of each of `plants`: the trimmed simulation
+/// error [rad] over the long fit segments of `ds`. `None` when nothing could be simulated.
+pub(super) fn motion_costs<const N: usize>(ds: &Dataset, plants: [&Plant; N]) -> [Option<f64>; N] {
+    let tuner = Tuner::new(ds);
+    plants.map(|p| Some(tuner.cost(p, f64::INFINITY)).filter(|c| c.is_finite()))
+}
+
+/// Adds to `fresh`, in ranking order and while it holds fewer than `cap`, every candidate not
+/// yet in it that failed alone, was fitted, and satisfies `pred`.
+fn join_from(
+    ranking: &[Candidate],
+    fits: &[(EffectKind, Result<Solved, FitError>)],
+    fresh: &mut Vec<EffectKind>,
+    cap: usize,
+    pred: impl Fn(&Candidate) -> bool,
+) {
+    for c in ranking {
+        if fresh.len() >= cap {
+            break;
+        }
+        let fitted = fits.iter().any(|(k, r)| *k == c.effect && r.is_ok());
+        if !c.significant && fitted && !fresh.contains(&c.effect) && pred(c) {
+            fresh.push(c.effect);
+        }
+    }
 }
 
 /// Whether `a` and `b` act in a common regime of the motion
@@ -697,16 +711,10 @@ fn drop_one(
     });
     let o_solved = solved_at(ds, &reduced)?;
     let j_solved = solved_at(ds, full)?;
-    let mut c = joint::judge_given(cx, m, &o_solved, &reference, &j_solved)?;
+    let (mut c, before) = joint::judge_given(cx, m, &o_solved, &reference, &j_solved)?;
     if on_simulation(m) && !c.significant && c.checks.is_empty() {
         on_tuned_cost(cx, tuner, &mut c, full, &reduced);
-        let eq = Config::equation_of(m, ds.has_current);
-        let floor = cx.floor_of(eq);
-        if let Some(sol) = o_solved.equation(eq) {
-            let before =
-                super::structure::analyse(ds, sol, floor, &cx.opts.thresholds, ds.gear_ratio);
-            joint::resonance_given(ds, &mut c, &before, &o_solved, &j_solved);
-        }
+        joint::resonance_given(ds, &mut c, &before, &o_solved, &j_solved);
     }
     let contribution = c.oe_reduction_pct.unwrap_or(f64::NEG_INFINITY);
     // Agreement across both halves, refitted with the others in the model.

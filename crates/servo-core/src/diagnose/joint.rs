@@ -200,7 +200,7 @@ fn judge_member(
     (o, o_alone, o_ref): (EffectKind, &Solved, &Reference),
     joint: &Solved,
 ) -> Option<Candidate> {
-    let mut c = judge_given(cx, m, o_alone, o_ref, joint)?;
+    let (mut c, _) = judge_given(cx, m, o_alone, o_ref, joint)?;
     c.joint_with = Some(o);
     Some(c)
 }
@@ -215,7 +215,7 @@ pub(super) fn judge_given(
     o_alone: &Solved,
     o_ref: &Reference,
     joint: &Solved,
-) -> Option<Candidate> {
+) -> Option<(Candidate, structure::BalanceReport)> {
     let ds = cx.ds;
     let th = &cx.opts.thresholds;
     let eq = Config::equation_of(m, ds.has_current);
@@ -240,7 +240,7 @@ pub(super) fn judge_given(
         }
     }
     resonance_given(ds, &mut c, &before, o_alone, joint);
-    Some(c)
+    Some((c, before))
 }
 
 /// The check of a single candidate that it explains the resonance its balance rings with

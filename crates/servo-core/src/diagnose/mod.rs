@@ -882,18 +882,14 @@ fn nonlinear_searched(kind: EffectKind) -> usize {
 /// says nothing of it, and they cannot see the play itself: the values `model` was given, tuned
 /// on the simulation with the play (by its refinement or a joint fit, [`backward`]), are then
 /// kept when they predict the motion of the fit blocks better (on the cost the joint fit is
-/// tuned on, [`backward::motion_cost`]) than the re-solved ones. A breakaway friction found
+/// tuned on, [`backward::motion_costs`]) than the re-solved ones. A breakaway friction found
 /// beside a play at tau_s 0.017 N m (0.020 true) came back from the torque balance at 0.012,
 /// and one at 0.020 at 0.026 (the breakaway lives at the reversals the balance leaves out).
 /// The balances' residuals are those of the re-solved model either way.
 fn base_fit(ds: &Dataset, model: &Plant) -> Result<Solved, FitError> {
     let mut s = ds.fit_config(model, &[])?;
     if ds.has_input && model.effects.iter().any(|e| on_simulation(e.kind)) {
-        let (solved, given) = (
-            backward::motion_cost(ds, &s.plant),
-            backward::motion_cost(ds, model),
-        );
-        if let (Some(a), Some(b)) = (solved, given) {
+        if let [Some(a), Some(b)] = backward::motion_costs(ds, [&s.plant, model]) {
             if b < a {
                 s.plant = *model;
             }
