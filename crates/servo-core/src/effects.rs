@@ -878,7 +878,7 @@ impl fmt::Display for ParamsSummary {
 }
 
 /// Displays the registry as a Markdown table (effect, where it acts, parameters with units and
-/// meaning, the experiment that resolves it): the table of README.md.
+/// meaning, the experiment that resolves it): the table of the guide (docs/guide/src/effects.md).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct CatalogueTable;
 impl fmt::Display for CatalogueTable {

@@ -17,7 +17,7 @@ use alloc::vec::Vec;
 use core::fmt::Write;
 
 /// Thresholds of the practical-significance gates and of "unexplained" (stated in the output and
-/// the README).
+/// the guide, docs/guide/src/verdict.md).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Thresholds {
     /// An effect must explain at least this multiple of its balance's noise floor (RMS).
