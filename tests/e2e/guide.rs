@@ -100,7 +100,14 @@ fn blocks(text: &str) -> Vec<Block> {
             None => {
                 if let Some((c, n)) = fence_of(t) {
                     let info = t[n..].trim().to_string();
-                    open = Some(((c, n), Block { info, line: i + 1, lines: Vec::new() }));
+                    open = Some((
+                        (c, n),
+                        Block {
+                            info,
+                            line: i + 1,
+                            lines: Vec::new(),
+                        },
+                    ));
                 }
             }
             Some(((c, n), mut b)) => match fence_of(t) {
@@ -237,7 +244,7 @@ struct Help {
     flags: BTreeSet<String>,
 }
 
-fn help_of(path: &[String], cache: &mut HashMap<Vec<String>, Help>) -> &Help {
+fn help_of<'a>(path: &[String], cache: &'a mut HashMap<Vec<String>, Help>) -> &'a Help {
     cache.entry(path.to_vec()).or_insert_with(|| {
         let out = Command::new(servo_bin())
             .args(path)
@@ -347,13 +354,20 @@ fn every_documented_command_parses() {
             for cmd in servo_commands(&b.lines) {
                 n += 1;
                 if let Err(e) = check_command(&cmd, &mut cache) {
-                    errors.push(format!("{} (block at line {}): {e}", d.path.display(), b.line));
+                    errors.push(format!(
+                        "{} (block at line {}): {e}",
+                        d.path.display(),
+                        b.line
+                    ));
                 }
             }
         }
     }
     eprintln!("{n} documented servo commands checked");
-    assert!(n >= 50, "only {n} servo commands found in the README and the guide");
+    assert!(
+        n >= 50,
+        "only {n} servo commands found in the README and the guide"
+    );
     assert!(errors.is_empty(), "{}", errors.join("\n"));
 }
 
@@ -372,7 +386,14 @@ fn the_command_checker_catches_wrong_commands() {
     assert_eq!(cmds[0].stdout_to.as_deref(), Some("plant.toml"));
     assert_eq!(
         cmds[1].args,
-        ["compare", "a.mat", "--columns", "time=s.time,u=s.signals(1).values", "--model", "m.toml"]
+        [
+            "compare",
+            "a.mat",
+            "--columns",
+            "time=s.time,u=s.signals(1).values",
+            "--model",
+            "m.toml"
+        ]
     );
     assert_eq!(cmds[2].args, ["log", "recover", "b.mcap", "-o", "f.mcap"]);
     for c in &cmds {
@@ -385,7 +406,10 @@ fn the_command_checker_catches_wrong_commands() {
         "servo run --plant-effect=backlash --no-such-flag",
     ] {
         let c = &parse(bad)[0];
-        assert!(check_command(c, &mut cache).is_err(), "{bad} passed the check");
+        assert!(
+            check_command(c, &mut cache).is_err(),
+            "{bad} passed the check"
+        );
     }
     assert!(is_checked_sh("sh") && is_checked_sh("console"));
     assert!(!is_checked_sh("sh,no-run") && !is_checked_sh("sh no-run") && !is_checked_sh("toml"));
@@ -443,7 +467,10 @@ fn the_readme_story_runs_as_written() {
         "README.md must start with the demo and the test command"
     );
     let lines = readme.text.lines().count();
-    assert!(lines < 150, "README.md has {lines} lines: the depth belongs in the guide");
+    assert!(
+        lines < 150,
+        "README.md has {lines} lines: the depth belongs in the guide"
+    );
 
     let story = story_after(readme, "## The story in ten commands");
     let guide = docs
@@ -455,7 +482,12 @@ fn the_readme_story_runs_as_written() {
         story_after(guide, "## The story, one command at a time"),
         "the guide's story differs from the README's"
     );
-    assert_eq!(story.len(), 10, "the story in ten commands has {}", story.len());
+    assert_eq!(
+        story.len(),
+        10,
+        "the story in ten commands has {}",
+        story.len()
+    );
 
     let _machine = servo_e2e::cpu_heavy();
     let dir = tempfile::tempdir().unwrap();
@@ -474,13 +506,26 @@ fn the_readme_story_runs_as_written() {
             cmd.args.join(" "),
             String::from_utf8_lossy(&out.stderr)
         );
-        eprintln!("servo {}: {:.1} s", cmd.args.join(" "), t.elapsed().as_secs_f64());
+        eprintln!(
+            "servo {}: {:.1} s",
+            cmd.args.join(" "),
+            t.elapsed().as_secs_f64()
+        );
         if let Some(f) = &cmd.stdout_to {
             std::fs::write(dir.path().join(f), &out.stdout).unwrap();
         }
         outputs.push((cmd.args.clone(), stdout));
     }
-    for f in ["plant.toml", "gains.toml", "run.mcap", "model.toml", "cmp.svg", "report.html", "model2.toml", "run.csv"] {
+    for f in [
+        "plant.toml",
+        "gains.toml",
+        "run.mcap",
+        "model.toml",
+        "cmp.svg",
+        "report.html",
+        "model2.toml",
+        "run.csv",
+    ] {
         let len = std::fs::metadata(dir.path().join(f))
             .unwrap_or_else(|e| panic!("the story left no {f}: {e}"))
             .len();
@@ -646,12 +691,18 @@ fn every_link_resolves() {
     }
     // SUMMARY.md and the chapters on disk agree.
     let summary = read(&src.join("SUMMARY.md"));
-    let listed: BTreeSet<String> = links(&summary).into_iter().filter(|t| !t.is_empty()).collect();
+    let listed: BTreeSet<String> = links(&summary)
+        .into_iter()
+        .filter(|t| !t.is_empty())
+        .collect();
     for d in &docs {
         if d.path.starts_with(&src) && !d.path.ends_with("SUMMARY.md") {
             let name = d.path.file_name().unwrap().to_string_lossy().into_owned();
             if !listed.contains(&name) {
-                errors.push(format!("{}: a chapter SUMMARY.md does not list", d.path.display()));
+                errors.push(format!(
+                    "{}: a chapter SUMMARY.md does not list",
+                    d.path.display()
+                ));
             }
         }
     }
@@ -665,7 +716,14 @@ fn every_link_resolves() {
 fn the_link_checker_sees_links_and_anchors() {
     let text = "# Top: the `x` part\n\nSee [a](b.md#c-d) and `[not](code.md)`.\n```sh\n[no](x.md)\n```\n## C, d\n";
     assert_eq!(links(text), ["b.md#c-d"]);
-    assert!(anchors(text).contains("top-the-x-part"), "{:?}", anchors(text));
+    assert!(
+        anchors(text).contains("top-the-x-part"),
+        "{:?}",
+        anchors(text)
+    );
     assert!(anchors(text).contains("c-d"));
-    assert_eq!(slug("Benchmark: does the QEMU board sustain 1 kHz?"), "benchmark-does-the-qemu-board-sustain-1-khz");
+    assert_eq!(
+        slug("Benchmark: does the QEMU board sustain 1 kHz?"),
+        "benchmark-does-the-qemu-board-sustain-1-khz"
+    );
 }
