@@ -507,7 +507,7 @@ pub trait FitHooks: Sync + Send {
         params: &[crate::fit::ParamEstimate],
         cand: &crate::plant::Plant,
         base: &crate::plant::Plant,
-    ) -> alloc::vec::Vec<crate::diagnose::checks::Check> {
+    ) -> alloc::vec::Vec<crate::verdict::Check> {
         let _ = (ds, params, cand, base);
         alloc::vec::Vec::new()
     }
@@ -536,8 +536,8 @@ pub trait FitHooks: Sync + Send {
         &self,
         ds: &crate::fit::Dataset,
         model: &crate::plant::Plant,
-        c: &crate::diagnose::Candidate,
-    ) -> Option<(crate::diagnose::checks::Conditional, alloc::string::String)> {
+        c: &crate::verdict::Candidate,
+    ) -> Option<(crate::verdict::Conditional, alloc::string::String)> {
         let _ = (ds, model, c);
         None
     }
@@ -553,7 +553,7 @@ pub trait FitHooks: Sync + Send {
         &self,
         ds: &crate::fit::Dataset,
         start: &crate::plant::Plant,
-    ) -> Option<crate::diagnose::checks::Neighbour> {
+    ) -> Option<crate::verdict::Neighbour> {
         let _ = (ds, start);
         None
     }
@@ -562,7 +562,7 @@ pub trait FitHooks: Sync + Send {
         &self,
         ds: &crate::fit::Dataset,
         model: &crate::plant::Plant,
-        c: &crate::diagnose::Candidate,
+        c: &crate::verdict::Candidate,
     ) -> Option<alloc::string::String> {
         let _ = (ds, model, c);
         None

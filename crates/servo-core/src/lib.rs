@@ -43,6 +43,8 @@ pub mod linalg;
 pub mod math;
 #[cfg(feature = "alloc")]
 pub mod metrics;
+#[cfg(feature = "alloc")]
+mod par;
 pub mod params;
 pub mod plant;
 pub mod protocol;
@@ -52,6 +54,8 @@ pub mod safety;
 #[cfg(feature = "alloc")]
 pub mod signal;
 pub mod sim;
+#[cfg(feature = "alloc")]
+pub mod verdict;
 
 pub use design::DesignError;
 pub use effects::{Effect, EffectKind, Effects};

@@ -124,3 +124,20 @@ mod num_tests {
         assert_eq!(format!("{}", Num(f64::INFINITY)), "inf");
     }
 }
+
+/// `n` points from `a` to `b` inclusive, spaced evenly.
+#[cfg(feature = "alloc")]
+pub fn linspace(a: f64, b: f64, n: usize) -> alloc::vec::Vec<f64> {
+    if n < 2 {
+        return alloc::vec![a];
+    }
+    (0..n)
+        .map(|i| a + (b - a) * i as f64 / (n - 1) as f64)
+        .collect()
+}
+
+/// `n` points from `a` to `b` inclusive, spaced evenly on a log scale (a, b > 0).
+#[cfg(feature = "alloc")]
+pub fn logspace(a: f64, b: f64, n: usize) -> alloc::vec::Vec<f64> {
+    linspace(ln(a), ln(b), n).into_iter().map(exp).collect()
+}

@@ -64,12 +64,95 @@ pub trait Backend {
     /// Commands 0 V and ends the run.
     fn stop(&mut self) -> Result<(), HwError>;
     /// Loop-timing and link statistics, for backends with a real link (serial); `None` else.
-    fn link_stats(&self) -> Option<crate::serial::LinkStats> {
+    fn link_stats(&self) -> Option<LinkStats> {
         None
     }
     /// Periods whose command reached the board too late so far (cheap: for live progress while
     /// the loop runs); `None` for backends without a deadline (the simulator).
     fn missed_deadlines(&self) -> Option<u64> {
         None
+    }
+}
+
+/// Loop-timing and link statistics of a run over a real link (the serial backend's,
+/// [`crate::serial`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LinkStats {
+    /// Samples received in order.
+    pub samples: u64,
+    /// Nominal period [s].
+    pub period_s: f64,
+    /// |arrival interval − period|: median, 99th percentile, max [s].
+    pub jitter_p50_s: f64,
+    pub jitter_p99_s: f64,
+    pub jitter_max_s: f64,
+    /// Board-measured round trip, sample out → command in: median, p99, max [s].
+    pub rtt_p50_s: f64,
+    pub rtt_p99_s: f64,
+    pub rtt_max_s: f64,
+    /// Periods whose command reached the board after the next sample was due (or never).
+    pub missed_deadlines: u64,
+    /// Frames rejected by CRC.
+    pub crc_errors: u64,
+    /// Frames rejected for COBS/length/type errors.
+    pub framing_errors: u64,
+    /// Samples never received (gaps in the sequence).
+    pub lost_frames: u64,
+    /// Samples received with a sequence number older than one already seen.
+    pub out_of_order: u64,
+}
+
+impl std::fmt::Display for LinkStats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let us = |s: f64| s * 1e6;
+        writeln!(
+            f,
+            "serial link: {} samples at {:.0} us period",
+            self.samples,
+            us(self.period_s)
+        )?;
+        writeln!(
+            f,
+            "  period jitter [us]: p50 {:.0}  p99 {:.0}  max {:.0}",
+            us(self.jitter_p50_s),
+            us(self.jitter_p99_s),
+            us(self.jitter_max_s)
+        )?;
+        writeln!(
+            f,
+            "  round trip [us]:    p50 {:.0}  p99 {:.0}  max {:.0}",
+            us(self.rtt_p50_s),
+            us(self.rtt_p99_s),
+            us(self.rtt_max_s)
+        )?;
+        write!(
+            f,
+            "  missed deadlines {}  CRC errors {}  framing errors {}  lost frames {}  out-of-order {}",
+            self.missed_deadlines, self.crc_errors, self.framing_errors, self.lost_frames, self.out_of_order
+        )
+    }
+}
+
+impl LinkStats {
+    /// The figures as key/value strings with units in the keys (for the log's summary record).
+    pub fn to_map(&self) -> std::collections::BTreeMap<String, String> {
+        let mut m = std::collections::BTreeMap::new();
+        let mut put = |k: &str, v: String| {
+            m.insert(format!("link_{k}"), v);
+        };
+        put("samples", self.samples.to_string());
+        put("period_s", self.period_s.to_string());
+        put("jitter_p50_s", self.jitter_p50_s.to_string());
+        put("jitter_p99_s", self.jitter_p99_s.to_string());
+        put("jitter_max_s", self.jitter_max_s.to_string());
+        put("rtt_p50_s", self.rtt_p50_s.to_string());
+        put("rtt_p99_s", self.rtt_p99_s.to_string());
+        put("rtt_max_s", self.rtt_max_s.to_string());
+        put("missed_deadlines", self.missed_deadlines.to_string());
+        put("crc_errors", self.crc_errors.to_string());
+        put("framing_errors", self.framing_errors.to_string());
+        put("lost_frames", self.lost_frames.to_string());
+        put("out_of_order", self.out_of_order.to_string());
+        m
     }
 }

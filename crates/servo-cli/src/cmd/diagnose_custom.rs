@@ -1,13 +1,13 @@
 //! The user-defined part of `servo diagnose`: user effects from `--effects` as candidates, and
-//! `--discover` (see `servo_core::custom::discover`).
+//! `--discover` (see `servo_core::fit::discover`).
 
 use crate::effects_file::{self, EffectsFile};
 use anyhow::{anyhow, Context};
 use serde_json::{json, Value};
-use servo_core::custom::discover::Judged;
 use servo_core::custom::CustomActive;
 use servo_core::diagnose::user_effects::{self, judge_user_effects};
 use servo_core::diagnose::{DiagnoseOptions, Diagnosis};
+use servo_core::fit::discover::Judged;
 use servo_core::record::Record;
 use servo_core::Plant;
 use std::fmt::Write as _;

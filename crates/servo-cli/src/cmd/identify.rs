@@ -128,42 +128,9 @@ pub struct Identify {
     #[arg(long = "ramp")]
     pub ramp: bool,
 
-    /// Recipes of the `--ramp` experiments (TOML); default: the recipes built into servo (the
-    /// same as experiments/identify_friction.toml and experiments/identify_inertia.toml).
-    #[arg(long = "friction-recipe", value_name = "TOML")]
-    pub friction_recipe: Option<PathBuf>,
-    #[arg(long = "inertia-recipe", value_name = "TOML")]
-    pub inertia_recipe: Option<PathBuf>,
-
-    /// Backend of the `--ramp` experiments: the simulator (`--plant`) or a board on `--port`
-    /// (`servo board --pty`/`--qemu` or real firmware). The staircase turns the load for many
-    /// revolutions: start the board with wide position limits (e.g. `--theta-min-rad -1e6
-    /// --theta-max-rad 1e6`); the host's own position limits are off for these runs.
-    #[arg(long, value_enum, default_value = "sim")]
-    pub backend: crate::cmd::run::BackendKind,
-    /// Serial port of the board (`--backend serial`).
-    #[arg(long, value_name = "PATH", default_value = "/dev/ttyACM0")]
-    pub port: String,
-    /// Baud rate of the serial port [bit/s] (ignored by USB CDC and pseudo-terminals).
-    #[arg(long, value_name = "BAUD", default_value_t = 115_200)]
-    pub baud: u32,
-    /// A board silent for this long during a run is lost: 0 V, error [ms].
-    #[arg(long = "board-timeout-ms", value_name = "MS", default_value_t = 250.0)]
-    pub board_timeout_ms: f64,
-
-    /// Live progress of the `--ramp` experiments on stderr (elapsed, left, missed deadlines):
-    /// `auto` on a terminal, `always`, `never`.
-    #[arg(long, value_enum, default_value = "auto")]
-    pub progress: crate::live::ProgressMode,
-
-    /// Directory for the `--ramp` logs.
-    #[arg(long = "log-dir", value_name = "DIR", default_value = ".")]
-    pub log_dir: PathBuf,
-
-    /// Simulated plant for `--ramp` on the simulator; default: the lab plant of `servo params`
-    /// (friction as measured on real SRV-02s).
+    /// The backend, recipes, progress and log directory of `--ramp`.
     #[command(flatten)]
-    pub plant: crate::plant_args::PlantArgs,
+    pub ramp_args: crate::cmd::identify_ramp::RampArgs,
 }
 
 /// Everything identified, with where it came from.
@@ -223,7 +190,8 @@ impl Identify {
             logs.push(path.clone());
         }
         if self.ramp {
-            for path in crate::cmd::identify_ramp::run_experiments(&self, &params.params)? {
+            for path in crate::cmd::identify_ramp::run_experiments(&self.ramp_args, &params.params)?
+            {
                 let rec = crate::io::read_log(&path, None)
                     .with_context(|| format!("reading log {}", path.display()))?;
                 if !self.json {

@@ -17,17 +17,57 @@ use servo_hw::run::experiments::{identification_experiments, run_experiment, Exp
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::identify::Identify;
 pub use crate::io::recipe_file::{
     FrictionRecipe, InertiaRecipe, BUILT_IN, FRICTION_RECIPE, INERTIA_RECIPE,
 };
 use crate::live::{self, CliMonitor, Progress};
 use servo_hw::run::StopReason;
 
+/// The options of `servo identify --ramp` (flattened into [`super::identify::Identify`]).
+#[derive(Debug, clap::Args)]
+pub struct RampArgs {
+    /// Recipes of the `--ramp` experiments (TOML); default: the recipes built into servo (the
+    /// same as experiments/identify_friction.toml and experiments/identify_inertia.toml).
+    #[arg(long = "friction-recipe", value_name = "TOML")]
+    pub friction_recipe: Option<PathBuf>,
+    #[arg(long = "inertia-recipe", value_name = "TOML")]
+    pub inertia_recipe: Option<PathBuf>,
+
+    /// Backend of the `--ramp` experiments: the simulator (`--plant`) or a board on `--port`
+    /// (`servo board --pty`/`--qemu` or real firmware). The staircase turns the load for many
+    /// revolutions: start the board with wide position limits (e.g. `--theta-min-rad -1e6
+    /// --theta-max-rad 1e6`); the host's own position limits are off for these runs.
+    #[arg(long, value_enum, default_value = "sim")]
+    pub backend: crate::cmd::run::BackendKind,
+    /// Serial port of the board (`--backend serial`).
+    #[arg(long, value_name = "PATH", default_value = "/dev/ttyACM0")]
+    pub port: String,
+    /// Baud rate of the serial port [bit/s] (ignored by USB CDC and pseudo-terminals).
+    #[arg(long, value_name = "BAUD", default_value_t = 115_200)]
+    pub baud: u32,
+    /// A board silent for this long during a run is lost: 0 V, error [ms].
+    #[arg(long = "board-timeout-ms", value_name = "MS", default_value_t = 250.0)]
+    pub board_timeout_ms: f64,
+
+    /// Live progress of the `--ramp` experiments on stderr (elapsed, left, missed deadlines):
+    /// `auto` on a terminal, `always`, `never`.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub progress: crate::live::ProgressMode,
+
+    /// Directory for the `--ramp` logs.
+    #[arg(long = "log-dir", value_name = "DIR", default_value = ".")]
+    pub log_dir: PathBuf,
+
+    /// Simulated plant for `--ramp` on the simulator; default: the lab plant of `servo params`
+    /// (friction as measured on real SRV-02s).
+    #[command(flatten)]
+    pub plant: crate::plant_args::PlantArgs,
+}
+
 /// The backend of one experiment: the simulator of the command's plant options, or the board on
 /// `--port` with the host's position limits off (the staircase turns the load for many
 /// revolutions; the board keeps its own).
-fn open_backend(args: &Identify) -> anyhow::Result<Box<dyn Backend>> {
+fn open_backend(args: &RampArgs) -> anyhow::Result<Box<dyn Backend>> {
     if args.backend == crate::cmd::run::BackendKind::Serial {
         let cfg = servo_hw::SerialConfig {
             port: args.port.clone(),
@@ -53,7 +93,7 @@ fn open_backend(args: &Identify) -> anyhow::Result<Box<dyn Backend>> {
 
 /// Runs both experiments on the command's backend through the library's runner, logs each to
 /// MCAP in `--log-dir` (identify_friction.mcap, identify_inertia.mcap) and returns the paths.
-pub fn run_experiments(args: &Identify, p: &PlantParams) -> anyhow::Result<Vec<PathBuf>> {
+pub fn run_experiments(args: &RampArgs, p: &PlantParams) -> anyhow::Result<Vec<PathBuf>> {
     let built_in = PathBuf::from(BUILT_IN);
     let friction_recipe = args.friction_recipe.clone().unwrap_or(built_in.clone());
     let inertia_recipe = args.inertia_recipe.clone().unwrap_or(built_in);

@@ -22,7 +22,7 @@ pub mod ladder;
 pub mod logs;
 pub mod measured;
 pub mod periodic;
-pub mod quantum;
+pub use crate::signal::quantum;
 pub mod regimes;
 pub mod replay;
 pub mod report;

@@ -573,11 +573,6 @@ impl Reference {
             }
         }
     }
-
-    /// Parses the text syntax of the [module documentation](self).
-    pub fn parse(text: &str) -> Result<Reference, RefParseError> {
-        crate::control::reference_parse::parse(text)
-    }
 }
 
 impl core::str::FromStr for Reference {

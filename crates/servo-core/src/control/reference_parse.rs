@@ -332,6 +332,14 @@ pub(crate) fn parse(text: &str) -> Result<Reference, RefParseError> {
     Ok(r)
 }
 
+impl Reference {
+    /// Parses the text syntax of the [module documentation](super::reference). (Here, beside
+    /// the parser, so that the reference's types do not import their parser.)
+    pub fn parse(text: &str) -> Result<Reference, RefParseError> {
+        parse(text)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

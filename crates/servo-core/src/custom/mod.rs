@@ -23,18 +23,13 @@
 //! loading the same definition again returns the same one), so that a [`Plant`](crate::Plant)
 //! stays `Copy` and holds its active user effects by reference ([`CustomSlots`]), as it holds its
 //! catalogue effects. The simulator evaluates them at every sub-step, the fit estimates their
-//! parameters ([`fit`]), the diagnosis tries them as candidates, and [`discover`] proposes new
-//! ones from the residual.
+//! parameters ([`crate::fit::custom`]), the diagnosis tries them as candidates, and
+//! [`crate::fit::discover`] proposes new ones from the residual.
 
 // Errors carry their strings inline (no heap), like the catalogue's `EffectError`.
 #![allow(clippy::result_large_err)]
 
 pub mod expr;
-
-#[cfg(feature = "alloc")]
-pub mod discover;
-#[cfg(feature = "alloc")]
-pub mod fit;
 
 #[cfg(feature = "alloc")]
 pub use expr::{ExprError, Program};

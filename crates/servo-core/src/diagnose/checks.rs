@@ -13,93 +13,9 @@ use crate::effects::EffectKind;
 use crate::fit::{Dataset, EffectToFit, ParamEstimate};
 use crate::math;
 use crate::plant::Plant;
+pub use crate::verdict::{get, u_resolution, Check, Conditional, Neighbour};
 use alloc::string::String;
 use alloc::vec::Vec;
-
-/// One check and its outcome.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Check {
-    /// Short name, e.g. `"tau_s > tau_sf"`, `"same in both halves"`.
-    pub name: &'static str,
-    pub passed: bool,
-    /// The figures behind the outcome.
-    pub detail: String,
-}
-
-/// A parameter that the data size only together with another one they do not pin down (a
-/// gear play against the contact stiffness): the parameter refitted at each value of the other
-/// over a plausible range, judged on the held-out simulation error.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Conditional {
-    /// The parameter reported (e.g. `"gap"`) and its unit.
-    pub key: &'static str,
-    pub unit: &'static str,
-    /// The parameter it is conditional on (e.g. `"stiffness"`) and its unit.
-    pub on: &'static str,
-    pub on_unit: &'static str,
-    /// The value of `on` the candidate was sized with (a default unless estimated).
-    pub assumed: f64,
-    /// `Some((value of on, value of key))` when one value of `on` predicts the held-out motion
-    /// clearly best: then `on` is estimated with `key`; `None`: `key` is conditional on the
-    /// assumed value.
-    pub estimated: Option<(f64, f64)>,
-    /// Per value of `on`, ascending: (value of on, refitted value of key, held-out simulation
-    /// error [rad]).
-    pub rows: Vec<(f64, f64, f64)>,
-}
-
-/// A mechanism outside the catalogue that an effect's own simulation machinery can size (a gear
-/// play's contact without its gap: a linear shaft or coupling), fitted from the simulation
-/// reference ([`crate::effects::FitHooks::neighbour`]). The diagnosis reports it among the
-/// signatures of its balance when no catalogue effect passes and it predicts the held-out motion
-/// materially better than the reference: a lead on the missing term, not a named effect.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Neighbour {
-    /// Family, used as the signature's kind (e.g. `"compliance"`).
-    pub kind: &'static str,
-    /// The balance whose error it would explain.
-    pub balance: super::structure::BalanceKind,
-    /// What it is, with its fitted parameters and their units.
-    pub description: String,
-    /// Its fitted parameters: (key, unit, value), e.g. `("stiffness", "N m/rad", 2.9)`.
-    pub params: Vec<(&'static str, &'static str, f64)>,
-    /// Held-out simulation error (RMS load angle) with it [rad]; the diagnosis's reference has
-    /// [`super::BaseSummary::oe_cost_rad`].
-    pub heldout_oe_rad: f64,
-    /// Simulation error on the fit blocks with it [rad]: chooses among fits from different
-    /// starting models.
-    pub fit_oe_rad: f64,
-    /// The experiment that would confirm it.
-    pub experiment: String,
-}
-
-impl Conditional {
-    /// Smallest and largest value of `key` over the rows.
-    pub fn range(&self) -> (f64, f64) {
-        self.rows
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), r| {
-                (a.min(r.1), b.max(r.1))
-            })
-    }
-}
-
-/// The value of `key` among `params`.
-pub fn get(params: &[ParamEstimate], key: &str) -> Option<f64> {
-    params.iter().find(|p| p.key == key).map(|p| p.value)
-}
-
-/// The resolution of the commanded u [V]: its grid spacing when u is quantised (a DAC, a PWM
-/// count), else the smallest step between distinct values near zero.
-pub fn u_resolution(ds: &Dataset) -> f64 {
-    let mut q = 0.0f64;
-    for r in ds.recs.iter().filter(|r| r.has_u) {
-        if let Some(g) = crate::compare::quantum::encoder_quantum(&r.u_v) {
-            q = q.max(g);
-        }
-    }
-    q
-}
 
 /// The effect's constraints and the physical meaning of the fitted parameters in these data
 /// ([`crate::effects::FitHooks::constraints`]).

@@ -29,7 +29,10 @@ pub mod structure;
 pub mod timing;
 pub mod user_effects;
 
+pub use crate::verdict::Candidate;
 pub use structure::{BalanceKind, BalanceReport, Signature, Thresholds};
+
+pub(crate) use crate::par::{join, par_map};
 
 use crate::effects::{EffectKind, SimRole};
 use crate::fit::model::{EqSolution, Equation};
@@ -95,52 +98,6 @@ impl Default for DiagnoseOptions {
             thresholds: Thresholds::default(),
             joint_candidates: 3,
         }
-    }
-}
-
-/// One candidate effect, fitted and judged.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Candidate {
-    pub effect: EffectKind,
-    /// Passed every guard (information criterion, held-out equation drop, held-out output error).
-    pub significant: bool,
-    /// Whether its fitted torque (or voltage) is above the sensor-noise floor.
-    pub resolvable: bool,
-    /// RMS reduction of its own equation's residual on held-out data [%].
-    pub error_reduction_pct: f64,
-    /// Reduction of the held-out output-error (simulation) cost [%], when computable.
-    pub oe_reduction_pct: Option<f64>,
-    /// BIC gain of its equation (search-corrected, effective sample size).
-    pub bic_gain: f64,
-    /// The equation it was judged in.
-    pub equation: Equation,
-    /// Its fitted parameters (catalogue keys and units).
-    pub params: Vec<ParamEstimate>,
-    /// The model with the effect added and the base refitted (on the fit blocks).
-    pub plant: Plant,
-    /// Plain-language evidence.
-    pub evidence: String,
-    /// For non-significant candidates: the experiment that would resolve it.
-    pub experiment: Option<String>,
-    /// RMS of what it explains in its equation over the balance's noise floor.
-    pub noise_ratio: f64,
-    /// Share of the balance's structured error (squared residual above the noise floor) it
-    /// explains.
-    pub structured_share: f64,
-    /// Practical-significance and physical-consistency checks, in the order applied.
-    pub checks: Vec<checks::Check>,
-    /// What the main parameter is conditional on (significant candidates whose effect reports
-    /// one: a gear play against the contact stiffness).
-    pub conditional: Option<checks::Conditional>,
-    /// The other member when this candidate passed only together with it ([`joint`]): judged
-    /// against the model holding that one alone, and added with it.
-    pub joint_with: Option<EffectKind>,
-}
-
-impl Candidate {
-    /// The first check that failed.
-    pub fn failed_check(&self) -> Option<&checks::Check> {
-        self.checks.iter().find(|c| !c.passed)
     }
 }
 
@@ -690,138 +647,6 @@ enum Done {
 /// ([`crate::effects::EffectModel::schedule_rank`]).
 fn cost_rank(kind: EffectKind) -> usize {
     usize::from(kind.model().schedule_rank())
-}
-
-/// `f` over `items`, on up to four threads (std builds, `parallel`) taking items from a shared
-/// queue in order, else in turn; results in the order of `items`.
-pub(crate) fn par_map<T: Sync, R: Send>(
-    items: &[T],
-    parallel: bool,
-    f: impl Fn(&T) -> R + Sync,
-) -> Vec<R> {
-    #[cfg(feature = "std")]
-    if parallel && items.len() > 1 {
-        let threads = std::thread::available_parallelism()
-            .map_or(2, |n| n.get())
-            .clamp(1, 4)
-            .min(items.len());
-        let next = core::sync::atomic::AtomicUsize::new(0);
-        let mut out: Vec<Option<R>> = items.iter().map(|_| None).collect();
-        let mut panicked = None;
-        std::thread::scope(|s| {
-            let handles: Vec<_> = (0..threads)
-                .map(|_| {
-                    let (f, next) = (&f, &next);
-                    s.spawn(move || {
-                        let mut done = Vec::new();
-                        loop {
-                            let i = next.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
-                            let Some(item) = items.get(i) else { break };
-                            let _busy = Busy::hold();
-                            done.push((i, f(item)));
-                        }
-                        done
-                    })
-                })
-                .collect();
-            for h in handles {
-                match h.join() {
-                    Ok(v) => {
-                        for (i, r) in v {
-                            out[i] = Some(r);
-                        }
-                    }
-                    Err(e) => panicked = Some(e),
-                }
-            }
-        });
-        if let Some(e) = panicked {
-            // A bug, not a data problem: surface it as the serial run would.
-            std::panic::resume_unwind(e);
-        }
-        return out.into_iter().flatten().collect();
-    }
-    let _ = parallel;
-    items.iter().map(f).collect()
-}
-
-/// Threads of the diagnosis working right now: the workers of [`par_map`] while they run an
-/// item, and the second half of a split cost evaluation ([`idle_core`]).
-#[cfg(feature = "std")]
-static BUSY: core::sync::atomic::AtomicUsize = core::sync::atomic::AtomicUsize::new(0);
-
-/// One working thread counted in [`BUSY`] while held.
-#[cfg(feature = "std")]
-pub(crate) struct Busy;
-
-#[cfg(feature = "std")]
-impl Busy {
-    fn hold() -> Busy {
-        BUSY.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
-        Busy
-    }
-}
-
-#[cfg(feature = "std")]
-impl Drop for Busy {
-    fn drop(&mut self) {
-        BUSY.fetch_sub(1, core::sync::atomic::Ordering::Relaxed);
-    }
-}
-
-/// A core no thread of a diagnosis works on, counted busy while the returned guard is held;
-/// `None` when every core is taken. Independent work inside one task (the segments of one
-/// simulation cost, [`crate::fit::oe::prediction_cost_stepped`]) runs on it: the serial parts
-/// of a diagnosis and its last task, which would leave the other cores idle, then use them.
-/// The caller, when it is a worker of [`par_map`], is already counted.
-#[cfg(feature = "std")]
-pub(crate) fn idle_core() -> Option<Busy> {
-    use core::sync::atomic::Ordering;
-    // Read once: the query reads the scheduler's affinity and the cgroup's quota.
-    static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
-    let cores = *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let mut now = BUSY.load(Ordering::Relaxed);
-    loop {
-        // The caller itself works on one core (counted or not).
-        if now.max(1) + 1 > cores {
-            return None;
-        }
-        match BUSY.compare_exchange_weak(now, now + 1, Ordering::Relaxed, Ordering::Relaxed) {
-            Ok(_) => return Some(Busy),
-            Err(v) => now = v,
-        }
-    }
-}
-
-/// `(fa(), fb())`: on two threads when a core is idle (std builds, see [`idle_core`]), else in
-/// turn; the results are the same either way. For independent parts of the serial work of a
-/// diagnosis (preparing the data set), which would otherwise leave a core idle.
-pub(crate) fn join<A: Send, B: Send>(
-    fa: impl FnOnce() -> A + Send,
-    fb: impl FnOnce() -> B + Send,
-) -> (A, B) {
-    #[cfg(feature = "std")]
-    if let Some(_held) = idle_core() {
-        return on_two_threads(fa, fb);
-    }
-    (fa(), fb())
-}
-
-/// `(fa(), fb())`, `fb` on a second thread: for a caller that already holds an [`idle_core`]
-/// for it. A panic in `fb` (a bug, not a data problem) is raised here as the serial run would.
-#[cfg(feature = "std")]
-pub(crate) fn on_two_threads<A: Send, B: Send>(
-    fa: impl FnOnce() -> A + Send,
-    fb: impl FnOnce() -> B + Send,
-) -> (A, B) {
-    std::thread::scope(|s| {
-        let h = s.spawn(fb);
-        let a = fa();
-        match h.join() {
-            Ok(b) => (a, b),
-            Err(e) => std::panic::resume_unwind(e),
-        }
-    })
 }
 
 /// Robust estimate of the white current-sensor noise [A]: MAD of first differences / sqrt(2).

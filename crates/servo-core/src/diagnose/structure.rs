@@ -12,6 +12,7 @@ use crate::fit::model::{EqSolution, Equation};
 use crate::math;
 use crate::plant::Plant;
 use crate::signal::derivative;
+pub use crate::verdict::BalanceKind;
 use alloc::string::String;
 use alloc::vec::Vec;
 use core::fmt::Write;
@@ -47,27 +48,6 @@ impl Default for Thresholds {
             min_signature_share: 0.15,
             consistency_tol: 0.35,
             electrical_block_ratio: 6.0,
-        }
-    }
-}
-
-/// Where a residual lives.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum BalanceKind {
-    /// The torque balance (or the u-driven torque balance without current): a missing torque.
-    Torque,
-    /// The electrical balance: the drive, the winding or the current sensor.
-    Electrical,
-    /// The measured angle itself (the error follows the angle sensor, not a torque or voltage).
-    Sensor,
-}
-
-impl BalanceKind {
-    pub const fn name(self) -> &'static str {
-        match self {
-            BalanceKind::Torque => "torque",
-            BalanceKind::Electrical => "electrical",
-            BalanceKind::Sensor => "sensor",
         }
     }
 }

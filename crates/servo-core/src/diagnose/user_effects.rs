@@ -4,9 +4,9 @@
 //! data); with discovery on, a new effect is searched among signal terms when neither the
 //! catalogue nor a user effect explains what is left.
 
-use crate::custom::discover::{self, Discovery, Gates, Judged};
 use crate::custom::CustomActive;
 use crate::diagnose::{DiagnoseOptions, Diagnosis, Status};
+use crate::fit::discover::{self, Discovery, Gates, Judged};
 use crate::fit::{Dataset, FitError};
 use crate::plant::Plant;
 use crate::record::Record;

@@ -100,8 +100,8 @@ impl super::FitHooks for Asymmetry {
         params: &[crate::fit::ParamEstimate],
         _cand: &crate::plant::Plant,
         _base: &crate::plant::Plant,
-    ) -> alloc::vec::Vec<crate::diagnose::checks::Check> {
-        use crate::diagnose::checks::{get, Check};
+    ) -> alloc::vec::Vec<crate::verdict::Check> {
+        use crate::verdict::{get, Check};
         let (p, n) = (
             get(params, "tau_sf_pos").unwrap_or(f64::NAN),
             get(params, "tau_sf_neg").unwrap_or(f64::NAN),

@@ -127,7 +127,7 @@ impl EffectModel for Backlash {
     }
     #[cfg(feature = "alloc")]
     fn search_grid(&self, _key: &str, _ctx: &super::GridContext) -> Option<alloc::vec::Vec<f64>> {
-        Some(crate::fit::search::linspace(0.0, GAP_MAX_RAD, 16))
+        Some(crate::math::linspace(0.0, GAP_MAX_RAD, 16))
     }
     fn schedule_rank(&self) -> u8 {
         0
@@ -150,9 +150,9 @@ impl EffectModel for Backlash {
 #[cfg(feature = "alloc")]
 mod fit {
     use super::{Backlash, GAP_MAX_RAD, LONG_HORIZON_S, PARAMS};
-    use crate::diagnose::checks::{get, Check, Conditional, Neighbour};
-    use crate::diagnose::structure::BalanceKind;
-    use crate::diagnose::Candidate;
+    use crate::verdict::{get, Check, Conditional, Neighbour};
+    use crate::verdict::BalanceKind;
+    use crate::verdict::Candidate;
     use crate::math;
     use crate::effects::{EffectKind, FitHooks};
     use crate::fit::{
@@ -175,7 +175,7 @@ mod fit {
             let q = ds
                 .recs
                 .iter()
-                .filter_map(|r| crate::compare::quantum::encoder_quantum(&r.theta_m_rad))
+                .filter_map(|r| crate::signal::quantum::encoder_quantum(&r.theta_m_rad))
                 .fold(0.0f64, f64::max)
                 / ds.gear_ratio;
             let mut out = alloc::vec![Check {
@@ -433,7 +433,7 @@ mod fit {
             .map_or((j0, f64::INFINITY), |(s, c)| (j0 * s, c))
         };
         let gaps = search::linspace(0.0, hi, 16);
-        let fits = crate::diagnose::par_map(&gaps, true, best_j);
+        let fits = crate::par::par_map(&gaps, true, best_j);
         gaps.into_iter().zip(fits).collect()
     }
 
@@ -744,7 +744,7 @@ mod fit {
             .filter(|f| **f != 1.0)
             .map(|f| k0 * f)
             .collect();
-        let refits = crate::diagnose::par_map(&others, true, |k| {
+        let refits = crate::par::par_map(&others, true, |k| {
             let spec = alloc::format!("backlash:stiffness={k}");
             let t = EffectToFit::parse(&spec).ok()?;
             let solved = ds.fit_config(model, &[t]).ok()?;

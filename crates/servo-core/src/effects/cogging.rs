@@ -173,8 +173,8 @@ impl super::FitHooks for Cogging {
         params: &[crate::fit::ParamEstimate],
         _cand: &crate::plant::Plant,
         _base: &crate::plant::Plant,
-    ) -> alloc::vec::Vec<crate::diagnose::checks::Check> {
-        use crate::diagnose::checks::{get, Check};
+    ) -> alloc::vec::Vec<crate::verdict::Check> {
+        use crate::verdict::{get, Check};
         let h = get(params, "harmonic").unwrap_or(f64::NAN);
         let max = f64::from(ds.opts.max_harmonic);
         alloc::vec![Check {

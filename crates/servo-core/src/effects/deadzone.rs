@@ -59,7 +59,7 @@ impl EffectModel for Deadzone {
     #[cfg(feature = "alloc")]
     fn search_grid(&self, _key: &str, ctx: &super::GridContext) -> Option<alloc::vec::Vec<f64>> {
         let umax = ctx.u_max_v;
-        Some(crate::fit::search::linspace(0.0, (0.4 * umax).min(3.0), 31))
+        Some(crate::math::linspace(0.0, (0.4 * umax).min(3.0), 31))
     }
     fn experiment(&self) -> &str {
         "apply slow voltage ramps through zero and log the current"
@@ -97,8 +97,8 @@ impl super::FitHooks for Deadzone {
         params: &[crate::fit::ParamEstimate],
         _cand: &crate::plant::Plant,
         _base: &crate::plant::Plant,
-    ) -> alloc::vec::Vec<crate::diagnose::checks::Check> {
-        use crate::diagnose::checks::{get, u_resolution, Check};
+    ) -> alloc::vec::Vec<crate::verdict::Check> {
+        use crate::verdict::{get, u_resolution, Check};
         let w = get(params, "width").unwrap_or(f64::NAN);
         let res = u_resolution(ds);
         let floor = (2.0 * res).max(0.005 * ds.u_max_v);

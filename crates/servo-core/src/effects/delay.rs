@@ -44,7 +44,7 @@ impl EffectModel for Delay {
     #[cfg(feature = "alloc")]
     fn search_grid(&self, _key: &str, ctx: &super::GridContext) -> Option<alloc::vec::Vec<f64>> {
         let n = (libm::ceil(ctx.max_delay_s / (0.5 * ctx.dt_s)) as usize).clamp(2, 200);
-        Some(crate::fit::search::linspace(0.0, ctx.max_delay_s, n + 1))
+        Some(crate::math::linspace(0.0, ctx.max_delay_s, n + 1))
     }
     fn schedule_rank(&self) -> u8 {
         5
@@ -85,8 +85,8 @@ impl super::FitHooks for Delay {
         params: &[crate::fit::ParamEstimate],
         _cand: &crate::plant::Plant,
         _base: &crate::plant::Plant,
-    ) -> alloc::vec::Vec<crate::diagnose::checks::Check> {
-        use crate::diagnose::checks::{get, Check};
+    ) -> alloc::vec::Vec<crate::verdict::Check> {
+        use crate::verdict::{get, Check};
         let d = get(params, "delay").unwrap_or(f64::NAN);
         let max = ds.opts.max_delay_s;
         alloc::vec![Check {

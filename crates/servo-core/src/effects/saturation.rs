@@ -58,7 +58,7 @@ impl EffectModel for Saturation {
     #[cfg(feature = "alloc")]
     fn search_grid(&self, _key: &str, ctx: &super::GridContext) -> Option<alloc::vec::Vec<f64>> {
         let umax = ctx.u_max_v;
-        Some(crate::fit::search::linspace(0.2 * umax, umax * 1.001, 33))
+        Some(crate::math::linspace(0.2 * umax, umax * 1.001, 33))
     }
     fn experiment(&self) -> &str {
         "apply steps large enough to drive the command to its limit"
@@ -96,8 +96,8 @@ impl super::FitHooks for Saturation {
         params: &[crate::fit::ParamEstimate],
         _cand: &crate::plant::Plant,
         _base: &crate::plant::Plant,
-    ) -> alloc::vec::Vec<crate::diagnose::checks::Check> {
-        use crate::diagnose::checks::{get, Check};
+    ) -> alloc::vec::Vec<crate::verdict::Check> {
+        use crate::verdict::{get, Check};
         let l = get(params, "limit").unwrap_or(f64::NAN);
         let umax = ds.u_max_v;
         let beyond = ds

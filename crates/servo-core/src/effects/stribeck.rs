@@ -102,7 +102,7 @@ impl EffectModel for Stribeck {
     #[cfg(feature = "alloc")]
     fn search_grid(&self, _key: &str, ctx: &super::GridContext) -> Option<alloc::vec::Vec<f64>> {
         let wl = ctx.omega_l_max_rad_s.max(1e-3);
-        Some(crate::fit::search::logspace(wl * 2e-3, wl * 0.5, 24))
+        Some(crate::math::logspace(wl * 2e-3, wl * 0.5, 24))
     }
     fn polish(&self) -> &[(&'static str, Span)] {
         &[("tau_s", Span::Scale(1.2)), ("omega_s", Span::Scale(1.5))]
@@ -170,8 +170,8 @@ impl super::FitHooks for Stribeck {
         params: &[crate::fit::ParamEstimate],
         cand: &crate::plant::Plant,
         base: &crate::plant::Plant,
-    ) -> alloc::vec::Vec<crate::diagnose::checks::Check> {
-        use crate::diagnose::checks::{get, Check};
+    ) -> alloc::vec::Vec<crate::verdict::Check> {
+        use crate::verdict::{get, Check};
         let mut out = alloc::vec::Vec::new();
         let (ts, tf) = (get(params, "tau_s").unwrap_or(f64::NAN), cand.tau_sf());
         out.push(Check {

@@ -516,7 +516,7 @@ fn prepare(
     let angle_logged = r.theta_m_rad.is_some() || r.theta_l_rad.is_some();
     let mut theta_m = theta_m;
     if angle_logged && centre_counts {
-        if let Some(q) = crate::compare::quantum::encoder_quantum(&theta_m) {
+        if let Some(q) = crate::signal::quantum::encoder_quantum(&theta_m) {
             for v in theta_m.iter_mut() {
                 *v += 0.5 * q;
             }
@@ -545,30 +545,29 @@ fn prepare(
     // Two independent halves (on two threads when a core is idle, the same values either way):
     // the motion and the torque current that needs its acceleration; the light speed, the
     // filtered current and the motor angle's phasor.
-    let ((omega_f, accel_f, i_torque_f), (omega_raw, i_filtered, motor_phasor)) =
-        crate::diagnose::join(
-            || {
-                let omega_f = filter.derivative(&theta_m);
-                let accel_f = derivative(&omega_f, dt);
-                let t = r.i_a_a.as_ref().map(|i| {
-                    torque_current_f(&filter, i, &accel_f, dt, tau_e, params.k_e / params.r_eq())
-                });
-                (omega_f, accel_f, t)
-            },
-            || {
-                let omega_raw = light.derivative(&theta_m);
-                let f = r.i_a_a.as_ref().map(|i| {
-                    let f = filter.apply(i);
-                    let d = derivative(&f, dt);
-                    (f, d)
-                });
-                let phasor: Vec<[f64; 2]> = theta_m
-                    .iter()
-                    .map(|&t| [math::cos(t), math::sin(t)])
-                    .collect();
-                (omega_raw, f, phasor)
-            },
-        );
+    let ((omega_f, accel_f, i_torque_f), (omega_raw, i_filtered, motor_phasor)) = crate::par::join(
+        || {
+            let omega_f = filter.derivative(&theta_m);
+            let accel_f = derivative(&omega_f, dt);
+            let t = r.i_a_a.as_ref().map(|i| {
+                torque_current_f(&filter, i, &accel_f, dt, tau_e, params.k_e / params.r_eq())
+            });
+            (omega_f, accel_f, t)
+        },
+        || {
+            let omega_raw = light.derivative(&theta_m);
+            let f = r.i_a_a.as_ref().map(|i| {
+                let f = filter.apply(i);
+                let d = derivative(&f, dt);
+                (f, d)
+            });
+            let phasor: Vec<[f64; 2]> = theta_m
+                .iter()
+                .map(|&t| [math::cos(t), math::sin(t)])
+                .collect();
+            (omega_raw, f, phasor)
+        },
+    );
     let i_raw = r.i_a_a.clone();
     let (i_f, di_f) = match i_filtered {
         Some((f, d)) => (Some(f), Some(d)),

@@ -14,9 +14,13 @@
 //! [`crate::effects::FitHooks::refine_on_simulation`].
 //!
 //! Entry point: [`fit_model`]. For repeated fits on the same data (diagnosis), prepare a
-//! [`Dataset`] once and call [`Dataset::fit`].
+//! [`Dataset`] once and call [`Dataset::fit`]. User-defined effects are fitted in [`custom`];
+//! [`discover`] proposes a new one from a residual no effect explains.
 
+pub mod custom;
+mod custom_columns;
 pub mod dataset;
+pub mod discover;
 pub mod lsq;
 pub mod model;
 pub mod oe;
@@ -188,7 +192,7 @@ pub struct FitResult {
     /// Equation residuals before and after.
     pub equations: Vec<EquationFit>,
     /// Parameters of the user-defined effects ([`crate::custom`]).
-    pub custom: Vec<crate::custom::fit::CustomEstimate>,
+    pub custom: Vec<crate::fit::custom::CustomEstimate>,
 }
 
 /// Fits `base` extended with `effects` to `records`.
@@ -352,7 +356,7 @@ impl Dataset {
     /// Fits `base` extended with `effects` (see [`fit_model`]).
     pub fn fit(&self, base: &Plant, effects: &[EffectToFit]) -> Result<FitResult, FitError> {
         let before = self.solve_config(&self.config(
-            &crate::custom::fit::without_unknown(base),
+            &crate::fit::custom::without_unknown(base),
             &[],
             false,
         ))?;
@@ -464,12 +468,12 @@ impl Dataset {
     /// linear ones by least squares.
     ///
     /// With a user sensor effect the configuration is fitted on the angle mapped back through
-    /// the sensor's inverse ([`crate::custom::fit::sensor_corrected`]).
+    /// the sensor's inverse ([`crate::fit::custom::sensor_corrected`]).
     pub fn fit_config(&self, base: &Plant, effects: &[EffectToFit]) -> Result<Solved, FitError> {
         let mut with_custom = *base;
-        crate::custom::fit::search_nonlinear(self, &mut with_custom)?;
+        crate::fit::custom::search_nonlinear(self, &mut with_custom)?;
         if with_custom.custom.has(crate::custom::ActsOn::Sensor) {
-            let corrected = crate::custom::fit::sensor_corrected(self, &with_custom)?;
+            let corrected = crate::fit::custom::sensor_corrected(self, &with_custom)?;
             return corrected.fit_config_searched(&with_custom, effects);
         }
         self.fit_config_searched(&with_custom, effects)
@@ -1001,13 +1005,13 @@ pub fn to_plant(
 
 /// The parameters of the user effects of a solved configuration: those unknown in `base` are
 /// marked fitted, with the least-squares standard error of the linear ones.
-fn custom_estimates(base: &Plant, solved: &Solved) -> Vec<crate::custom::fit::CustomEstimate> {
+fn custom_estimates(base: &Plant, solved: &Solved) -> Vec<crate::fit::custom::CustomEstimate> {
     let mut out = Vec::new();
     for (si, e) in solved.plant.custom.iter().enumerate() {
         let given = base.custom.get(e.name());
         for (j, spec) in e.def.params().iter().enumerate() {
             let fitted = given.is_none_or(|g| g.values[j].is_nan());
-            out.push(crate::custom::fit::CustomEstimate {
+            out.push(crate::fit::custom::CustomEstimate {
                 effect: e.name(),
                 key: spec.key,
                 unit: spec.unit,

@@ -180,7 +180,7 @@ impl Config {
             let u = maps
                 .iter()
                 .fold(u, |u, (m, s)| m.input_v(s.param_values(), u));
-            // Then the user's input effects (which see u only here; see crate::custom::fit).
+            // Then the user's input effects (which see u only here; see crate::fit::custom).
             if input {
                 custom.input(&[0.0, 0.0, 0.0, 0.0, 0.0, u, 0.0])
             } else {
@@ -315,7 +315,7 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
             _ => push_effect_terms(ds, rows, cfg, si, s, &mut terms),
         }
     }
-    for c in crate::custom::fit::torque_columns(ds, &cfg.base, rows) {
+    for c in crate::fit::custom_columns::torque_columns(ds, &cfg.base, rows) {
         terms.push(Term {
             col: c.col,
             coef: Coef::Custom(c.slot, c.param.unwrap_or(usize::MAX)),

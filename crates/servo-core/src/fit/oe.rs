@@ -132,7 +132,7 @@ pub const SEARCH_SUBSTEP_S: f64 = 250e-6;
 /// The segments are independent simulations: with at least [`SPLIT_MIN_SAMPLES`] samples they
 /// are summed in two halves, always (so the value never depends on the machine's load), and the
 /// two halves run on two threads when a core is idle (std builds, see
-/// [`crate::diagnose::idle_core`]): the long simulations that end a diagnosis (a gear play's
+/// [`crate::par::idle_core`]): the long simulations that end a diagnosis (a gear play's
 /// refinement, the checks of a significant candidate) then use both cores.
 pub fn prediction_cost_stepped(
     ds: &Dataset,
@@ -184,11 +184,11 @@ pub fn prediction_cost_stepped(
 pub const SPLIT_MIN_SAMPLES: usize = 4_000;
 
 /// A core for the second half of a split cost, held while the guard lives (std builds, see
-/// [`crate::diagnose::idle_core`]); `None` when every core is taken (or without std).
+/// [`crate::par::idle_core`]); `None` when every core is taken (or without std).
 fn idle_core_guard() -> Option<impl Sized> {
     #[cfg(feature = "std")]
     {
-        crate::diagnose::idle_core()
+        crate::par::idle_core()
     }
     #[cfg(not(feature = "std"))]
     {
@@ -200,7 +200,7 @@ fn idle_core_guard() -> Option<impl Sized> {
 fn both<A: Send, B: Send>(fa: impl FnOnce() -> A + Send, fb: impl FnOnce() -> B + Send) -> (A, B) {
     #[cfg(feature = "std")]
     {
-        crate::diagnose::on_two_threads(fa, fb)
+        crate::par::on_two_threads(fa, fb)
     }
     #[cfg(not(feature = "std"))]
     {

@@ -1,7 +1,5 @@
 //! One-dimensional minimisation: a grid scan followed by golden-section refinement.
 
-use alloc::vec::Vec;
-
 /// Minimises `f` over `grid` (sorted ascending), then refines between the neighbours of the best
 /// grid point by golden-section search. Returns (argmin, min). `None` when the grid is empty or `f`
 /// is never finite.
@@ -68,23 +66,8 @@ pub fn grid_then_golden_bounded(
     Some((best_x, best_f))
 }
 
-/// `n` points from `a` to `b` inclusive, spaced evenly.
-pub fn linspace(a: f64, b: f64, n: usize) -> Vec<f64> {
-    if n < 2 {
-        return alloc::vec![a];
-    }
-    (0..n)
-        .map(|i| a + (b - a) * i as f64 / (n - 1) as f64)
-        .collect()
-}
-
-/// `n` points from `a` to `b` inclusive, spaced evenly on a log scale (a, b > 0).
-pub fn logspace(a: f64, b: f64, n: usize) -> Vec<f64> {
-    linspace(crate::math::ln(a), crate::math::ln(b), n)
-        .into_iter()
-        .map(crate::math::exp)
-        .collect()
-}
+// The grids live beside the scalar maths (the effects' grids use them too): one path for both.
+pub use crate::math::{linspace, logspace};
 
 #[cfg(test)]
 mod tests {

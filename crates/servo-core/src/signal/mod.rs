@@ -2,6 +2,7 @@
 //! zero-phase low-pass ([`filtfilt`]), central-difference derivatives and a moving average.
 
 pub mod filtfilt;
+pub mod quantum;
 
 use alloc::vec::Vec;
 

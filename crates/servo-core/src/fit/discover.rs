@@ -27,8 +27,8 @@
 //! agrees within 35 %). The terms left form one user-defined load torque, which is fitted as any
 //! user effect and judged by [`judge`] (the held-out simulation must improve too).
 
-use super::fit::record_signals;
-use super::{ActsOn, CustomActive, CustomDef, ParamDecl};
+use super::custom::record_signals;
+use crate::custom::{ActsOn, CustomActive, CustomDef, ParamDecl};
 use crate::fit::dataset::{Dataset, RecData};
 use crate::fit::model::Equation;
 use crate::fit::oe::{self, Part};
@@ -416,7 +416,7 @@ impl Discovery {
 fn library_columns(ds: &Dataset, n: f64, terms: &[Term]) -> Result<Vec<Vec<f64>>, FitError> {
     let mut cols = Vec::new();
     for t in terms {
-        let prog = super::Program::compile(t.expr, &[])
+        let prog = crate::custom::Program::compile(t.expr, &[])
             .map_err(|e| FitError::BadModel(alloc::format!("library term {}: {e}", t.expr)))?;
         cols.push(ds.column(&ds.mech_rows, |r: &RecData| {
             (0..r.theta_m_rad.len())
