@@ -24,8 +24,10 @@ macro_rules! out {
 
 pub mod cmd;
 
+pub mod api;
 pub mod fuzz;
 pub mod io;
+pub mod json_out;
 pub mod live;
 pub mod plant_args;
 pub mod plot;

@@ -43,6 +43,13 @@ pub fn install_ctrlc_handler() {
     });
 }
 
+/// For a host that handles Ctrl-C itself (the Python binding: KeyboardInterrupt): no handler is
+/// ever installed in this process, so runs do not stop on Ctrl-C and the host's own handler
+/// stays. Call before the first run.
+pub fn leave_ctrlc_to_host() {
+    HANDLER.call_once(|| {});
+}
+
 /// True once Ctrl-C was pressed.
 pub fn interrupted() -> bool {
     INTERRUPTED.load(Ordering::SeqCst)

@@ -306,7 +306,7 @@ impl Compare {
         }
         if self.json {
             let v = to_json(&logs, &modes, &current, &ladder, &opts);
-            outln!("{}", serde_json::to_string_pretty(&v)?);
+            crate::json_out::emit(&v)?;
         } else {
             print_text(
                 &logs,

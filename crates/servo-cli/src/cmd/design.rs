@@ -317,10 +317,7 @@ impl Design {
                 .with_context(|| format!("--step-plot {}", path.display()))?;
         }
         if self.json {
-            emit(&format!(
-                "{}\n",
-                serde_json::to_string_pretty(&self.json_report(&out, &tr, &src))?
-            ))?;
+            crate::json_out::emit(&self.json_report(&out, &tr, &src))?;
         } else {
             let mut text = self.text_report(&out, &tr, &translation_lines, &src);
             if let Some(p) = &self.output {

@@ -82,6 +82,9 @@ pub struct Diagnose {
     /// Name of the discovered effect.
     #[arg(long, default_value = "found", value_name = "NAME")]
     pub effect_name: String,
+    /// Cancel hook of the diagnosis (the Python binding's Ctrl-C; no flag on the command line).
+    #[arg(skip)]
+    pub cancel: servo_core::diagnose::cancel::Cancel,
 }
 
 impl Diagnose {
@@ -118,6 +121,7 @@ impl Diagnose {
         let mut opts = DiagnoseOptions::default();
         opts.fit.filter_hz = self.filter_hz;
         opts.joint_candidates = self.joint;
+        opts.cancel = self.cancel.clone();
         for name in &self.only {
             let k = EffectKind::from_name(name.trim()).ok_or_else(|| {
                 anyhow!(
@@ -174,7 +178,7 @@ impl Diagnose {
                 v["first_ranking"] =
                     Value::Array(first.ranking.iter().map(candidate_json).collect());
             }
-            outln!("{}", serde_json::to_string_pretty(&v)?);
+            crate::json_out::emit(&v)?;
         } else {
             out!("{}", text_report(first, &ladder, &diags, self.auto));
             out!("{}", user.text());

@@ -212,10 +212,7 @@ impl Identify {
         }
         let report = identify(&exps, &params.params, &self.options())?;
         if self.json {
-            outln!(
-                "{}",
-                serde_json::to_string_pretty(&self.json_report(&report, &logs))?
-            );
+            crate::json_out::emit(&self.json_report(&report, &logs))?;
         } else {
             out!("{}", self.text_report(&report, &logs, &params.params));
         }

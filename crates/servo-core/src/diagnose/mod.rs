@@ -19,6 +19,7 @@
 //! with the experiment that would resolve it.
 
 mod backward;
+pub mod cancel;
 pub mod checks;
 pub mod evidence;
 pub mod joint;
@@ -79,6 +80,9 @@ pub struct DiagnoseOptions {
     /// seeds (on the other two the breakaway comes out 26 % and 38 % high); it adds 5-30 s to
     /// a diagnosis that ends "unexplained" on such logs, and 0.5-2 minutes when it finds a set.
     pub joint_candidates: usize,
+    /// Optional cancel hook ([`cancel::Cancel`]): read between stages and candidates; once set,
+    /// the diagnosis returns [`FitError::Cancelled`]. Default: none (never stops early).
+    pub cancel: cancel::Cancel,
 }
 
 impl Default for DiagnoseOptions {
@@ -97,6 +101,7 @@ impl Default for DiagnoseOptions {
             parallel: true,
             thresholds: Thresholds::default(),
             joint_candidates: 3,
+            cancel: cancel::Cancel::default(),
         }
     }
 }
@@ -237,6 +242,7 @@ pub fn diagnose_dataset(
     model: &Plant,
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, FitError> {
+    opts.cancel.check()?;
     let base = timing::timed(|| "base fit".into(), || base_fit(ds, model))?;
     let noise = current_noise(ds);
     let th = opts.thresholds;
@@ -282,6 +288,8 @@ pub fn diagnose_dataset(
     let mut balances: Vec<BalanceReport> = Vec::new();
     let mut analysed: Vec<(usize, BalanceReport)> = Vec::new();
     for done in par_map(&tasks, opts.parallel, |t| match *t {
+        // Cancelled: the tasks not started are skipped (the error is returned below).
+        Task::Fit(k) if opts.cancel.requested() => Done::Fit(k, Box::new(Err(FitError::Cancelled))),
         Task::Fit(k) => Done::Fit(
             k,
             Box::new(timing::timed(
@@ -312,6 +320,7 @@ pub fn diagnose_dataset(
             Done::Balance(i, b) => analysed.push((i, b)),
         }
     }
+    opts.cancel.check()?;
     analysed.sort_by_key(|(i, _)| *i);
     balances.extend(analysed.into_iter().map(|(_, b)| b));
     // Candidates in catalogue order (the ranking's ties keep it).
@@ -379,6 +388,7 @@ pub fn diagnose_dataset(
         }
         c
     });
+    opts.cancel.check()?;
     let mut ranking = judged;
     // A drive-side effect that explains most of the electrical residual (an input delay, a dead
     // zone) accounts for it: the measurements are then not suspect.
@@ -471,6 +481,7 @@ pub fn diagnose_dataset(
             labels: &labels,
             opts,
         };
+        opts.cancel.check()?;
         // Backward elimination from a joint simulation fit of the effects already named and
         // the best candidates ([`backward`]); failing that, the pairs ([`joint`]).
         let found = timing::timed(
@@ -483,6 +494,7 @@ pub fn diagnose_dataset(
             ranking.splice(0..0, set);
         }
     }
+    opts.cancel.check()?;
     let mut equations = Vec::new();
     for sol in core::iter::once(&base.mech).chain(base.elec.as_ref()) {
         let reg = labels.of(sol.equation);
@@ -1006,6 +1018,7 @@ pub fn diagnose_loop(
     let mut added_with: Option<EffectKind> = None;
     let mut added_also: Vec<EffectKind> = Vec::new();
     for step in 0..=max_steps {
+        opts.cancel.check()?;
         let d = diagnose_dataset(&ds, &plant, opts)?;
         ladder.push(Rung {
             added,

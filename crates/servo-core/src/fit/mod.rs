@@ -92,6 +92,9 @@ pub enum FitError {
     Singular(String),
     #[error("model: {0}")]
     BadModel(String),
+    /// The caller's cancel hook was set ([`crate::diagnose::cancel::Cancel`]).
+    #[error("cancelled")]
+    Cancelled,
 }
 
 /// An effect to add to the model, with the parameters to fit marked.
