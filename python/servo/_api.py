@@ -111,7 +111,7 @@ def _short(v: Any, n: int = 80) -> str:
 class DesignResult(Result):
     """``servo design --json``; ``.gains`` is the controller (as ``-o gains.toml`` writes it)."""
 
-    _summary = ("schema", "gains", "achieved", "spec", "verdict", "warnings")
+    _summary = ("schema", "kp", "ki", "kd", "wgc_rad_s", "pm_deg", "plant_source")
 
     def __init__(self, data: Dict[str, Any], gains: Optional[Gains]) -> None:
         super().__init__(data)
@@ -239,16 +239,21 @@ def identify(
     params: Any = None,
     *,
     method: Optional[str] = None,
-    columns: Optional[str] = None,
+    columns: Any = None,
     **options: Any,
 ) -> IdentifyResult:
     """Friction, inertia (and electrical constants) from logs (``servo identify``, handout
     section 4): ``method`` ``friction`` | ``inertia`` | ``combined`` | ``electrical``;
     ``params``: the known plant constants (Model or path; default Table 2). ``.model`` is the
-    identified model."""
+    identified model. ``columns``: one map for every log, or a list of maps, one per log."""
     lg = as_logs(logs)
     with tempdir() as tmp:
-        paths, cflags = log_args(lg, tmp, columns)
+        if isinstance(columns, (list, tuple)):
+            # identify takes one map per log, in order
+            paths, _ = log_args(lg, tmp, None)
+            cflags = [x for c in columns for x in ("--columns", c)]
+        else:
+            paths, cflags = log_args(lg, tmp, columns)
         args = paths + cflags + _flags(dict(method=method, **options))
         models = []
         if params is not None:

@@ -1,0 +1,97 @@
+"""Every result's .to_dict() is the CLI's --json for the same inputs (simulated logs)."""
+
+from __future__ import annotations
+
+import servo
+
+
+def test_version_is_the_cli_version(cli):
+    rc, out, _ = cli("--version")
+    assert rc == 0
+    assert out.split()[-1] == servo.__version__
+
+
+def test_design_equals_cli(cli_json):
+    cases = [
+        (dict(wc_rad_s=30, pm_deg=60), ["--wc", "30", "--pm", "60"]),
+        (dict(wc_rad_s=10, pm_deg=60, controller="pi", ts_s=0.002),
+         ["--wc", "10", "--pm", "60", "--controller", "pi", "--ts", "0.002"]),
+        (dict(overshoot=0.1, settling_time_s=0.15, alpha=6, exact=True),
+         ["--overshoot", "0.1", "--settling-time", "0.15", "--alpha", "6", "--exact"]),
+    ]
+    for kw, flags in cases:
+        r = servo.design(**kw)
+        assert r.to_dict() == cli_json("design", *flags), kw
+        assert r.gains is not None and r.gains.pid["kp"] == r.kp
+
+
+def test_design_on_a_model_file(story, cli_json):
+    r = servo.design(30, 60, params=servo.Model.load(story / "model.toml"))
+    assert r.to_dict() == cli_json("design", "--wc", "30", "--pm", "60", "--params", story / "model.toml")
+    assert r.to_dict() != servo.design(30, 60).to_dict()
+
+
+def test_identify_equals_cli(story, cli_json):
+    log = str(story / "ol.mcap")
+    r = servo.identify(log, method="combined")
+    assert r.to_dict() == cli_json("identify", log, "--method", "combined")
+    assert r.model is not None
+    assert r.model.params["j_eq"] == r.to_dict()["j_eq_kg_m2"]["value"]
+    # the same through read_log's DataFrame and a Log
+    assert servo.identify(servo.read_log(log), method="combined").to_dict() == r.to_dict()
+    assert servo.identify([servo.Log.read(log)], method="combined").to_dict() == r.to_dict()
+
+
+def test_compare_equals_cli_open_and_closed_loop(story, cli_json):
+    model = servo.Model.load(story / "model.toml")
+    for log, extra in [(story / "ol.mcap", []), (story / "cl.mcap", ["--gains", story / "gains.toml"])]:
+        gains = servo.Gains.load(story / "gains.toml") if extra else None
+        r = servo.compare(str(log), model, gains)
+        assert r.to_dict() == cli_json("compare", log, "--model", story / "model.toml", *extra)
+    # both logs in one call, and an option
+    r = servo.compare([story / "ol.mcap", story / "cl.mcap"], model, mode="k-step", k_steps=20)
+    assert r.to_dict() == cli_json("compare", story / "ol.mcap", story / "cl.mcap", "--model",
+                                   story / "model.toml", "--mode", "k-step", "--k-steps", "20")
+
+
+def test_add_equals_cli_and_the_error_falls(story, cli_json, tmp_path):
+    model = servo.Model.load(story / "model.toml")
+    r = model.add("imbalance", story / "ol.mcap")
+    want = cli_json("compare", story / "ol.mcap", "--model", story / "model.toml", "--add",
+                    "imbalance", "--save", tmp_path / "m2.toml")
+    assert r.to_dict() == want
+    assert r.model is not None and "imbalance" in r.model.effects
+    assert r.model.text == (tmp_path / "m2.toml").read_text()
+    before = servo.compare(story / "ol.mcap", model).fit_pct
+    after = servo.compare(story / "ol.mcap", r.model).fit_pct
+    assert before is not None and after is not None and after > before + 1.0, (before, after)
+
+
+def test_diagnose_equals_cli(story, cli_json, tmp_path):
+    r = servo.diagnose(story / "ol.mcap", servo.Model.load(story / "model.toml"), auto=True)
+    want = cli_json("diagnose", story / "ol.mcap", "--model", story / "model.toml", "--auto",
+                    "--save", tmp_path / "d.toml")
+    assert r.to_dict() == want
+    assert r.winner == "imbalance"
+    assert r.model is not None and r.model.text == (tmp_path / "d.toml").read_text()
+    costs = [rung["oe_cost_rad"] for rung in r.ladder]
+    assert costs[-1] < 0.5 * costs[0], costs
+
+
+def test_in_memory_logs_equal_their_csv(story, cli_json, tmp_path):
+    """A Log built from arrays is what the CLI reads from the same samples as servo's CSV."""
+    src = servo.Log.read(story / "ol.mcap")
+    log = servo.Log.from_arrays(**{k: v for k, v in src.signals.items()})
+    assert log.path is None
+    r = servo.compare(log, story / "model.toml")
+    rc_csv = tmp_path / "ol.csv"
+    import subprocess
+    from conftest import servo_bin
+    subprocess.run([str(servo_bin()), "export", str(story / "ol.mcap"), "-o", str(rc_csv)], check=True,
+                   capture_output=True)
+    want = cli_json("compare", rc_csv, "--model", story / "model.toml")
+    import json
+    import re
+    # the log's name differs (a temporary file); everything else is the same
+    got = re.sub(r'"[^"]*servo-[^"/]+/log0\.csv"', '"LOG"', json.dumps(r.to_dict()))
+    assert got == json.dumps(want).replace(json.dumps(str(rc_csv)), '"LOG"')
