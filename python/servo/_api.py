@@ -182,11 +182,17 @@ class DiagnoseResult(Result):
 
     @property
     def winner(self) -> Optional[str]:
-        """The missing effect named (first significant candidate), or None."""
-        for c in self._data.get("ranking") or []:
+        """The missing effect named: the first significant candidate of the first diagnosis
+        (with ``auto=True`` the first effect the ladder added), or None."""
+        for c in self._data.get("first_ranking") or self._data.get("ranking") or []:
             if c.get("significant"):
                 return c.get("effect")
         return None
+
+    @property
+    def added(self) -> List[str]:
+        """With ``auto=True``: the effects the ladder added, in order."""
+        return [r["added"] for r in self._data.get("ladder") or [] if r.get("added")]
 
     def _fields(self):
         out = super()._fields()

@@ -72,7 +72,7 @@ def test_diagnose_equals_cli(story, cli_json, tmp_path):
     want = cli_json("diagnose", story / "ol.mcap", "--model", story / "model.toml", "--auto",
                     "--save", tmp_path / "d.toml")
     assert r.to_dict() == want
-    assert r.winner == "imbalance"
+    assert r.winner == "imbalance" and r.added == ["imbalance"] and r.status == "complete"
     assert r.model is not None and r.model.text == (tmp_path / "d.toml").read_text()
     costs = [rung["oe_cost_rad"] for rung in r.ladder]
     assert costs[-1] < 0.5 * costs[0], costs
