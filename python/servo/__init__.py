@@ -42,6 +42,7 @@ from ._errors import (
     UsageError,
 )
 from ._files import SIGNALS, Gains, Log, Model, Plant, read_log
+from . import plot  # matplotlib is imported when a plot is drawn
 
 __version__: str = version()
 
@@ -71,6 +72,7 @@ __all__ = [
     "diagnose",
     "diagnose_many",
     "identify",
+    "plot",
     "read_log",
     "simulate",
     "version",
