@@ -189,6 +189,9 @@ fn columns_of(r: Record) -> Vec<(&'static str, Vec<f64>)> {
     out
 }
 
+/// What [`read_log`] returns: kind, signals (or the message), notes, metadata.
+type ReadOutcome<'py> = (String, Bound<'py, PyAny>, Vec<String>, Bound<'py, PyDict>);
+
 /// Reads a log (MCAP, CSV or MAT) as `servo` does: `("ok", {signal: array}, notes, metadata)`
 /// or `(kind, message, [], {})`. Signal names carry their SI unit (`time_s`, `u_v`,
 /// `theta_l_rad`, `i_a_a`, ...).
@@ -198,7 +201,7 @@ fn read_log<'py>(
     py: Python<'py>,
     path: PathBuf,
     columns: Option<String>,
-) -> PyResult<(String, Bound<'py, PyAny>, Vec<String>, Bound<'py, PyDict>)> {
+) -> PyResult<ReadOutcome<'py>> {
     let got = py.detach(|| {
         guard(|| {
             servo_io::read_log_with_meta(&path, columns.as_deref())
