@@ -15,6 +15,7 @@ mod guide;
 mod identify;
 mod layout;
 mod mat;
+mod promises;
 mod registry;
 mod run_log;
 mod schemas;

@@ -14,7 +14,7 @@
 //! [provenance]        # optional, free-form: where identified values came from
 //! ```
 
-use crate::error::{self as anyhow, anyhow, Context};
+use crate::error::{self as anyhow, anyhow, bail, Context};
 use servo_core::custom::CustomSlots;
 use servo_core::effects::{Effect, EffectKind, Effects};
 use servo_core::sim::SensorConfig;
@@ -96,6 +96,23 @@ impl ModelFile {
         raw.params
             .validate()
             .map_err(|e| anyhow!("[params]: {e}"))?;
+        // One value per quantity: the friction of [params] and the friction effects are the same
+        // quantities (the effect would silently override the params).
+        for (key, given, section) in [
+            ("b_eq", raw.params.b_eq, EffectKind::Viscous),
+            ("tau_sf", raw.params.tau_sf, EffectKind::Coulomb),
+        ] {
+            let other = raw
+                .effects
+                .get(section.name())
+                .and_then(|kv| kv.get(key).map(|v| (section.name(), *v)));
+            if let (Some(a), Some((name, b))) = (given, other) {
+                bail!(
+                    "{key} is given twice: [params] {key} = {a:e} and [effects.{name}] {key} = {b:e}; \
+                     a model file holds each quantity once: keep one of the two"
+                );
+            }
+        }
         let mut effects = Effects::NONE;
         for (name, kv) in &raw.effects {
             let kind = EffectKind::from_name(name).ok_or_else(|| {
@@ -155,10 +172,31 @@ impl ModelFile {
         Ok(toml::to_string(&self.to_raw())?)
     }
 
+    /// The params as written: B_eq and tau_sf of the friction effects go to `[params]` (one
+    /// place per quantity), and those effects are not written again as sections.
+    fn written_params(&self) -> PlantParams {
+        let mut p = self.params;
+        if let Some(b) = self.effects.value(EffectKind::Viscous, "b_eq") {
+            // A B_eq equal to the one implied by B_m and B_l stays implied.
+            if p.b_eq.is_some() || b != p.b_eq() {
+                p.b_eq = Some(b);
+            }
+        }
+        if let Some(t) = self.effects.value(EffectKind::Coulomb, "tau_sf") {
+            p.tau_sf = Some(t);
+        }
+        p
+    }
+
+    /// Is effect `kind` written as params (the friction effects)?
+    fn in_params(kind: EffectKind) -> bool {
+        matches!(kind, EffectKind::Viscous | EffectKind::Coulomb)
+    }
+
     /// The serialisable form: effects as tables of catalogue keys.
     fn to_raw(&self) -> Raw {
         let mut effects = BTreeMap::new();
-        for e in self.effects.iter() {
+        for e in self.effects.iter().filter(|e| !Self::in_params(e.kind)) {
             let kv: BTreeMap<String, f64> = e.iter().map(|(p, v)| (p.key.to_string(), v)).collect();
             effects.insert(e.kind.name().to_string(), kv);
         }
@@ -168,7 +206,7 @@ impl ModelFile {
             .map(|c| (c.name().to_string(), crate::effects_file::to_raw(c, None)))
             .collect();
         Raw {
-            params: self.params,
+            params: self.written_params(),
             effects,
             custom,
             sensors: self.sensors,
@@ -184,7 +222,8 @@ impl ModelFile {
 
     /// TOML with units and meanings in comments (what `servo params` prints).
     pub fn to_toml_commented(&self) -> String {
-        let p = &self.params;
+        let written = self.written_params();
+        let p = &written;
         let mut s = String::from(
             "# servo model file: DC gearmotor parameters (handout Table 2), SI units.\n\
              # Motor side / load side as in the handout: omega_l = omega_m / N.\n\n[params]\n",
@@ -226,7 +265,7 @@ impl ModelFile {
                 None => s.push_str(&format!("# {k} = ...  # {doc}\n")),
             }
         }
-        for e in self.effects.iter() {
+        for e in self.effects.iter().filter(|e| !Self::in_params(e.kind)) {
             s.push_str(&format!(
                 "\n[effects.{}]  # {}\n",
                 e.kind.name(),
@@ -299,6 +338,41 @@ mod tests {
         // both spellings of one key are refused, not silently resolved
         let both = good.replace("r_s =", "r_a_ohm = 2.6\nr_s =");
         assert!(ModelFile::parse(&both).is_err());
+    }
+
+    #[test]
+    fn each_quantity_is_written_once_and_a_file_with_one_twice_is_refused() {
+        let plant = Plant::from_params(PlantParams {
+            b_eq: Some(1.1e-6),
+            tau_sf: Some(8.0e-3),
+            ..PlantParams::TABLE2
+        })
+        .unwrap();
+        let mut m = ModelFile::from_plant(&plant);
+        m.effects
+            .insert(Effect::new(EffectKind::Coulomb, &[7.0e-3]).unwrap());
+        for text in [m.to_toml_commented(), m.to_toml().unwrap()] {
+            assert!(!text.contains("[effects.coulomb]") && !text.contains("[effects.viscous]"));
+            let back = ModelFile::parse(&text).unwrap().plant().unwrap();
+            // The effect's value is the one the plant used: it is the one written.
+            assert_eq!(back.tau_sf(), 7.0e-3, "{text}");
+            assert_eq!(back.b_eq(), 1.1e-6);
+        }
+        let good = m.to_toml_commented();
+        for (section, key) in [("coulomb", "tau_sf"), ("viscous", "b_eq")] {
+            let bad = format!("{good}\n[effects.{section}]\n{key} = 1e-3\n");
+            let e = ModelFile::parse(&bad).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("[params] {key}"))
+                    && e.contains(&format!("[effects.{section}] {key}")),
+                "{e}"
+            );
+        }
+        // One place only (an older file's effects without the params' key) is read.
+        let only_effect =
+            good.replace("tau_sf = 7e-3", "") + "\n[effects.coulomb]\ntau_sf = 5e-3\n";
+        let back = ModelFile::parse(&only_effect).unwrap().plant().unwrap();
+        assert_eq!(back.tau_sf(), 5e-3);
     }
 
     #[test]

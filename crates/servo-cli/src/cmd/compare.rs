@@ -18,6 +18,7 @@ mod plots;
 mod prepare;
 mod report_json;
 mod report_text;
+mod save;
 
 pub use added::{Added, ParseAdded};
 pub use plots::{compare_figures_svg, stack_svg};
@@ -108,9 +109,15 @@ pub struct Compare {
     /// that --add can name. Repeat for several files.
     #[arg(long = "effects", value_name = "effects.toml")]
     pub effects: Vec<PathBuf>,
-    /// Write the (extended) model to this file.
+    /// Write the (extended) model to this file. With --add, only when the model with the
+    /// effects predicts the logs at least as well as the model it started from (on the replay
+    /// and on held-out blocks refitted without them); otherwise it says so and writes nothing.
     #[arg(long, value_name = "model.toml")]
     pub save: Option<PathBuf>,
+    /// With --save: write the model even when the added effects made it predict worse (it says
+    /// so, and records it in the file's [provenance]).
+    #[arg(long, requires = "save")]
+    pub force: bool,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
@@ -165,6 +172,7 @@ impl Compare {
     pub fn run_report(self) -> anyhow::Result<(Vec<LadderStep>, ModelComparison)> {
         let model_file = ModelFile::load(&self.model)?;
         let plant = model_file.plant()?;
+        let start = plant;
         let gains = match &self.gains {
             Some(p) => Some(GainsFile::load(p)?),
             None => None,
@@ -258,37 +266,20 @@ impl Compare {
             },
         )?;
 
-        if let Some(path) = &self.save {
-            let mut mf = ModelFile::from_plant(&plant);
-            mf.sensors = model_file.sensors;
-            let mut prov = model_file.provenance.clone().unwrap_or_default();
-            prov.insert(
-                "compare_model".into(),
-                toml::Value::String(self.model.display().to_string()),
-            );
-            prov.insert(
-                "compare_logs".into(),
-                toml::Value::Array(
-                    self.logs
-                        .iter()
-                        .map(|p| toml::Value::String(p.display().to_string()))
-                        .collect(),
-                ),
-            );
-            if !self.add.is_empty() {
-                prov.insert(
-                    "compare_added".into(),
-                    toml::Value::Array(
-                        self.add
-                            .iter()
-                            .map(|s| toml::Value::String(s.clone()))
-                            .collect(),
-                    ),
-                );
-            }
-            mf.provenance = Some(prov);
-            mf.save(path)?;
-        }
+        let saved = match &self.save {
+            Some(path) => Some(save::gate_and_save(
+                &self,
+                path,
+                &model_file,
+                &start,
+                &plant,
+                &records,
+                &effects,
+                &ladder,
+            )?),
+            None => None,
+        };
+        let refitted = save::refitted_line(&start, &plant, &ladder);
         if let Some(path) = &self.plot {
             let mut panels = Vec::new();
             for (log, r) in logs.iter().zip(&current.reports) {
@@ -305,7 +296,13 @@ impl Compare {
                 .with_context(|| format!("writing plot {}", path.display()))?;
         }
         if self.json {
-            let v = to_json(&logs, &modes, &current, &ladder, &opts);
+            let mut v = to_json(&logs, &modes, &current, &ladder, &opts);
+            if !effects.is_empty() {
+                v["refitted_base"] = save::refitted_json(&start, &plant);
+            }
+            if let Some(s) = &saved {
+                v["save"] = s.json();
+            }
             crate::json_out::emit(&v)?;
         } else {
             print_text(
@@ -314,7 +311,11 @@ impl Compare {
                 &current,
                 &ladder,
                 &opts,
-                self.save.as_deref(),
+                refitted.as_deref(),
+                &saved
+                    .as_ref()
+                    .map(save::SaveOutcome::lines)
+                    .unwrap_or_default(),
                 self.plot.as_deref(),
             );
         }

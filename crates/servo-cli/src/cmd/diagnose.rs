@@ -51,9 +51,15 @@ pub struct Diagnose {
     /// Most effects added by `--auto`.
     #[arg(long, default_value_t = 3)]
     pub max_steps: usize,
-    /// Save the model with the accepted effects (with `--auto`) to this TOML file.
+    /// Save the model with the accepted effects (with `--auto`) to this TOML file: only when it
+    /// predicts the held-out blocks (and the logs) at least as well as the model given with
+    /// --model; otherwise it says so and writes nothing.
     #[arg(long)]
     pub save: Option<PathBuf>,
+    /// With --save: write the model even when it predicts worse than the model given (it says
+    /// so, and records it in the file's [provenance]).
+    #[arg(long, requires = "save")]
+    pub force: bool,
     /// Only try these effects (comma-separated catalogue names).
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
@@ -160,6 +166,27 @@ impl Diagnose {
         if let Some(path) = &self.save_effect {
             user.save_effect(path)?;
         }
+        let gate = self.save.as_ref().map(|_| {
+            let added: Vec<&str> = ladder
+                .iter()
+                .flat_map(|r| r.added.iter().chain(&r.added_with).chain(&r.added_also))
+                .map(|k| k.name())
+                .collect();
+            let change = if added.is_empty() {
+                String::from("refitting the base parameters")
+            } else {
+                format!("adding {}", added.join(" + "))
+            };
+            servo_core::compare::gate::held_out_gate(
+                &records,
+                &model,
+                &final_plant,
+                change,
+                &opts.fit,
+            )
+        });
+        let worse = gate.as_ref().is_some_and(|g| g.worse().is_some());
+        let save_ok = !worse || self.force;
         if self.json {
             let mut v = json!({
                 "schema": "servo.diagnose/1",
@@ -168,19 +195,28 @@ impl Diagnose {
                 "balances": last.balances.iter().map(balance_json).collect::<Vec<_>>(),
                 "neighbours": last.neighbours.iter().map(|n| neighbour_json(n, last.base.oe_cost_rad)).collect::<Vec<_>>(),
                 "thresholds": thresholds_json(&opts.thresholds),
-                "ranking": last.ranking.iter().map(candidate_json).collect::<Vec<_>>(),
+                "bars": bars_json(&opts),
+                "ranking": last.ranking.iter().map(|c| candidate_json(c, &opts)).collect::<Vec<_>>(),
                 "verdict": last.verdict,
                 "base": base_json(first),
             });
             user.add_json(&mut v);
+            if let (Some(g), Some(p)) = (&gate, &self.save) {
+                v["save"] = save_json(g, p, save_ok, self.force);
+            }
             if self.auto {
                 v["ladder"] = Value::Array(ladder.iter().map(rung_json).collect());
-                v["first_ranking"] =
-                    Value::Array(first.ranking.iter().map(candidate_json).collect());
+                v["first_ranking"] = Value::Array(
+                    first
+                        .ranking
+                        .iter()
+                        .map(|c| candidate_json(c, &opts))
+                        .collect(),
+                );
             }
             crate::json_out::emit(&v)?;
         } else {
-            out!("{}", text_report(first, &ladder, &diags, self.auto));
+            out!("{}", text_report(first, &ladder, &diags, self.auto, &opts));
             out!("{}", user.text());
             if let Some(p) = &self.save_effect {
                 outln!("discovered effect written to {}", p.display());
@@ -195,13 +231,38 @@ impl Diagnose {
             }
         }
         if let Some(path) = &self.save {
-            let final_plant = ladder.last().map(|r| r.plant).unwrap_or(model);
-            let mut mf = ModelFile::from_plant(&final_plant);
-            mf.sensors = model_file.sensors;
-            mf.provenance = model_file.provenance.clone();
-            mf.save(path)?;
+            if let (Some(g), false) = (&gate, self.json) {
+                if let Some(why) = &g.held_out_missing {
+                    outln!("held-out check: not made ({why})");
+                }
+                outln!("{}", g.sentence());
+            }
+            if save_ok {
+                let mut mf = ModelFile::from_plant(&final_plant);
+                mf.sensors = model_file.sensors;
+                mf.provenance = model_file.provenance.clone();
+                if let Some(g) = gate.as_ref().filter(|_| worse) {
+                    mf.provenance
+                        .get_or_insert_with(Default::default)
+                        .insert("diagnose_forced".into(), toml::Value::String(g.sentence()));
+                }
+                mf.save(path)?;
+            }
             if !self.json {
-                outln!("model saved to {}", path.display());
+                outln!(
+                    "{}",
+                    match (save_ok, worse) {
+                        (true, true) => format!(
+                            "model saved to {} although it predicts worse (--force)",
+                            path.display()
+                        ),
+                        (true, false) => format!("model saved to {}", path.display()),
+                        (false, _) => format!(
+                            "model not saved to {} (--force saves it anyway)",
+                            path.display()
+                        ),
+                    }
+                );
             }
         }
         Ok((ladder, diags))

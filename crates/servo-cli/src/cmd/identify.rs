@@ -119,6 +119,12 @@ pub struct Identify {
     #[arg(short = 'o', long = "output", value_name = "MODEL_TOML")]
     pub output: Option<PathBuf>,
 
+    /// Electrical constants fitted by the electrical balance to write into the model (-o)
+    /// instead of the datasheet values: `k_drv` (driver gain), `r_eq` (R_a + R_s; R_a is set
+    /// to R_eq - R_s). Comma-separated or repeated; each is recorded in [provenance].
+    #[arg(long = "keep-fitted", value_name = "KEY", value_delimiter = ',', value_parser = ["k_drv", "r_eq"])]
+    pub keep_fitted: Vec<String>,
+
     /// Draw torque vs speed with the fitted friction line and the inertia phases (SVG).
     #[arg(long = "plot", value_name = "SVG")]
     pub plot: Option<PathBuf>,
@@ -226,22 +232,35 @@ impl Identify {
             if b.is_none() && j.is_none() {
                 bail!("-o {}: nothing was identified to write", out.display());
             }
+            // Where the next command reads them: the friction effects of the template (which
+            // override [params]) take the identified values too.
             if let Some((e, _)) = b {
                 file.params.b_eq = Some(e.value.max(0.0));
+                file.effects
+                    .remove(servo_core::effects::EffectKind::Viscous);
             }
             if let Some((e, _)) = t {
                 file.params.tau_sf = Some(e.value.max(0.0));
+                file.effects
+                    .remove(servo_core::effects::EffectKind::Coulomb);
             }
             if let Some((e, _)) = j {
                 file.params.j_eq = Some(e.value);
             }
+            let mut prov = provenance(&report, &logs);
+            report::keep_fitted(&self.keep_fitted, &report, &mut file.params, &mut prov)?;
             file.params
                 .validate()
                 .map_err(|e| anyhow!("identified parameters are not physical: {e}"))?;
-            file.provenance = Some(provenance(&report, &logs));
+            file.provenance = Some(prov);
             file.save(out)?;
             if !self.json {
-                outln!("wrote {}", out.display());
+                let kept = if self.keep_fitted.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({} kept as fitted)", self.keep_fitted.join(", "))
+                };
+                outln!("wrote {}{kept}", out.display());
             }
         }
         Ok(())

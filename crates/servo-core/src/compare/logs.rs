@@ -264,6 +264,11 @@ pub struct LadderStep {
     pub params: Vec<ParamEstimate>,
     /// Parameters of the user-defined effects fitted at this rung.
     pub custom: Vec<CustomEstimate>,
+    /// Were the base parameters (J_eq, B_eq, tau_sf, R_eq, k_drv) refitted with the effect?
+    /// Each rung is fitted twice, with the base refitted and with the base kept as given, and
+    /// the fit whose replay predicts the logs better is kept: the base is refitted only when
+    /// the data ask for it together with the effect.
+    pub base_refitted: bool,
 }
 
 /// The error ladder: the rungs, the final model and its comparison with every log.
@@ -328,6 +333,7 @@ pub fn error_ladder(
         cmp_fit: pooled(&first),
         params: Vec::new(),
         custom: Vec::new(),
+        base_refitted: false,
     }];
     let mut current = first;
     for (rung, eff) in adds.iter().enumerate() {
@@ -346,22 +352,37 @@ pub fn error_ladder(
                 Vec::new()
             }
         };
-        let fit =
-            fit_model(records, &start, &catalogue, &FitOptions::default()).map_err(|source| {
-                LadderError::Fit {
-                    rung,
-                    effect: eff.name().to_string(),
-                    source,
-                }
-            })?;
+        let fitted = |refit_base: bool| {
+            let fo = FitOptions {
+                refit_base,
+                ..FitOptions::default()
+            };
+            fit_model(records, &start, &catalogue, &fo).map_err(|source| LadderError::Fit {
+                rung,
+                effect: eff.name().to_string(),
+                source,
+            })
+        };
+        let fit = fitted(true)?;
+        let cmp = compare_logs(&fit.plant, logs, modes, opts)?;
+        // The same effect with the base kept as given: kept when its replay predicts better.
+        let kept = fitted(false).ok().and_then(|f| {
+            let c = compare_logs(&f.plant, logs, modes, opts).ok()?;
+            Some((f, c))
+        });
+        let rmse = |c: &ModelComparison| pooled(c).first().map_or(f64::INFINITY, |p| p.1.rmse);
+        let (fit, cmp, base_refitted) = match kept {
+            Some((f, c)) if rmse(&c) < rmse(&cmp) => (f, c, false),
+            _ => (fit, cmp, true),
+        };
         plant = fit.plant;
-        let cmp = compare_logs(&plant, logs, modes, opts)?;
         steps.push(LadderStep {
             label: format!("+ {}", eff.name()),
             effect: Some(eff.name()),
             cmp_fit: pooled(&cmp),
             params: fit.params,
             custom: fit.custom,
+            base_refitted,
         });
         current = cmp;
     }

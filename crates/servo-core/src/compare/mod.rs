@@ -18,6 +18,7 @@
 pub mod chi2;
 pub mod controller_check;
 pub mod figures;
+pub mod gate;
 pub mod ladder;
 pub mod logs;
 pub mod measured;

@@ -19,6 +19,7 @@
 //! with the experiment that would resolve it.
 
 mod backward;
+pub mod bars;
 pub mod cancel;
 pub mod checks;
 pub mod evidence;

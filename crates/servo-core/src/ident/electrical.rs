@@ -85,14 +85,14 @@ pub fn identify_electrical(
     let k_drv = mk(k_drv, se_k);
     let r_eq = mk(r_eq, se_r);
     let mut warnings = Vec::new();
-    for (name, est, nom, unit) in [
-        ("k_drv", &k_drv, params.k_drv, "V/V"),
-        ("R_eq", &r_eq, params.r_eq(), "ohm"),
+    for (name, key, est, nom, unit) in [
+        ("k_drv", "k_drv", &k_drv, params.k_drv, "V/V"),
+        ("R_eq", "r_eq", &r_eq, params.r_eq(), "ohm"),
     ] {
         let rel = (est.value - nom) / nom;
         if rel.abs() > FLAG_REL && !est.contains(nom) {
             warnings.push(format!(
-                "{name} = {:.4} {unit} (95 % CI {:.4}..{:.4}) disagrees with the datasheet value {nom:.4} {unit} by {:+.1} %",
+                "{name} = {:.4} {unit} (95 % CI {:.4}..{:.4}) disagrees with the datasheet value {nom:.4} {unit} by {:+.1} %; the model keeps {nom:.4} {unit} unless told: `--keep-fitted {key}` writes the fitted value (with -o)",
                 est.value,
                 est.ci95.0,
                 est.ci95.1,

@@ -101,6 +101,7 @@ pub(super) fn to_json(
                 "fit_pct": finite(f.fit_percent), "rmse": finite(f.rmse), "max_error": finite(f.max_abs_error),
                 "signals": s.cmp_fit.iter().map(|(k, f)| figures_json(*k, f)).collect::<Vec<_>>(),
                 "fitted_params": fitted_json(s),
+                "base_refitted": s.base_refitted,
             })
         })
         .collect();

@@ -8,7 +8,8 @@ pub(super) fn print_text(
     c: &ModelComparison,
     ladder: &[LadderStep],
     opts: &CompareOptions,
-    save: Option<&Path>,
+    refitted: Option<&str>,
+    save: &[String],
     plot: Option<&Path>,
 ) {
     for ((log, r), mc) in logs.iter().zip(&c.reports).zip(modes) {
@@ -137,8 +138,11 @@ pub(super) fn print_text(
             c.plant.params.k_drv
         );
     }
-    if let Some(p) = save {
-        outln!("model written to {}", p.display());
+    if let Some(r) = refitted {
+        outln!("{r}");
+    }
+    for line in save {
+        outln!("{line}");
     }
     if let Some(p) = plot {
         outln!("figures written to {}", p.display());

@@ -12,7 +12,7 @@ pub(super) fn f(v: f64) -> Value {
     }
 }
 
-pub(super) fn candidate_json(c: &Candidate) -> Value {
+pub(super) fn candidate_json(c: &Candidate, opts: &DiagnoseOptions) -> Value {
     let mut params = serde_json::Map::new();
     for p in &c.params {
         params.insert(
@@ -33,6 +33,10 @@ pub(super) fn candidate_json(c: &Candidate) -> Value {
         "experiment": c.experiment,
         "noise_ratio": f(c.noise_ratio),
         "structured_share": f(c.structured_share),
+        "gates": servo_core::diagnose::bars::statistical_gates(c, opts).iter().map(|g| json!({
+            "bar": g.bar.name, "value": g.bar.value, "unit": g.bar.unit, "rule": g.bar.rule,
+            "measured": g.measured.map(f), "passed": g.passed,
+        })).collect::<Vec<_>>(),
         "checks": c.checks.iter().map(|k| json!({ "check": k.name, "passed": k.passed, "detail": k.detail })).collect::<Vec<_>>(),
         "joint_with": c.joint_with.map(|k| k.name()),
         "conditional": c.conditional.as_ref().map(|k| {
@@ -114,5 +118,43 @@ pub(super) fn rung_json(r: &Rung) -> Value {
         "equations": r.equations.iter().map(|(e, rms)| json!({ "equation": e.name(), "unit": e.unit(), "rms": f(*rms) })).collect::<Vec<_>>(),
         "oe_cost_rad": r.oe_cost_rad.map(f),
         "effects": r.plant.effects.iter().map(|e| e.to_string()).collect::<Vec<_>>(),
+    })
+}
+
+/// Every bar (named threshold) of `opts`, with unit, rule and why.
+pub(super) fn bars_json(opts: &DiagnoseOptions) -> Value {
+    Value::Array(
+        servo_core::diagnose::bars::bars(opts)
+            .iter()
+            .map(|b| json!({ "name": b.name, "value": b.value, "unit": b.unit, "rule": b.rule, "why": b.why }))
+            .collect(),
+    )
+}
+
+/// The `"save"` object: the gate's verdict and whether the model was written.
+pub(super) fn save_json(
+    g: &servo_core::compare::gate::Gate,
+    path: &std::path::Path,
+    saved: bool,
+    forced: bool,
+) -> Value {
+    json!({
+        "path": path.display().to_string(),
+        "saved": saved,
+        "forced": forced,
+        "worse": g.worse().is_some(),
+        "reason": g.sentence(),
+        "held_out_missing": g.held_out_missing,
+        "measures": g.measures.iter().map(|m| json!({
+            "measure": m.name, "words": m.words, "before": f(m.before), "after": f(m.after),
+            "unit": m.unit, "change_pct": f(m.change_pct),
+        })).collect::<Vec<_>>(),
+        "bar": {
+            "name": servo_core::compare::gate::MAX_WORSENING.name,
+            "value": servo_core::compare::gate::MAX_WORSENING.value,
+            "unit": servo_core::compare::gate::MAX_WORSENING.unit,
+            "rule": servo_core::compare::gate::MAX_WORSENING.rule,
+            "why": servo_core::compare::gate::MAX_WORSENING.why,
+        },
     })
 }

@@ -55,6 +55,7 @@ pub(super) fn text_report(
     ladder: &[Rung],
     diags: &[Diagnosis],
     auto: bool,
+    opts: &DiagnoseOptions,
 ) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "Model residual (base parameters refitted):");
@@ -82,13 +83,23 @@ pub(super) fn text_report(
         let _ = writeln!(s, "\nCandidates, best first:");
         let _ = writeln!(
             s,
-            "  {:<11} {:>11} {:>10} {:>10} {:>9}",
-            "effect", "significant", "eq. drop", "sim. drop", "BIC gain"
+            "  {:<11} {:>11} {:>10} {:>10} {:>9}  {}",
+            "effect", "significant", "eq. drop", "sim. drop", "BIC gain", "refused by"
         );
         for c in &d.ranking {
+            let refused = if c.significant {
+                String::new()
+            } else {
+                servo_core::diagnose::bars::refused_by(c, opts)
+                    .or_else(|| {
+                        c.failed_check()
+                            .map(|k| format!("{}: {}", k.name, k.detail))
+                    })
+                    .unwrap_or_default()
+            };
             let _ = writeln!(
                 s,
-                "  {:<11} {:>11} {:>9.1}% {:>10} {:>9.1}",
+                "  {:<11} {:>11} {:>9.1}% {:>10} {:>9.1}  {refused}",
                 c.effect.name(),
                 if c.significant {
                     "YES"
@@ -107,6 +118,17 @@ pub(super) fn text_report(
             let _ = writeln!(s, "\nBest candidate: {}", w.evidence);
         }
         let _ = writeln!(s, "\nVerdict: {}", d.verdict);
+    }
+    let _ = writeln!(
+        s,
+        "\nBars (thresholds that can refuse an effect or a verdict):"
+    );
+    for b in servo_core::diagnose::bars::bars(opts) {
+        let _ = writeln!(
+            s,
+            "  {:<27} {} {} {:<14} {}",
+            b.name, b.rule, b.value, b.unit, b.why
+        );
     }
     if auto {
         let _ = writeln!(s, "\nError ladder:");

@@ -200,3 +200,56 @@ pub(super) fn utc_now() -> String {
         rem % 60
     )
 }
+
+/// Writes the electrical constants named in `keys` (`k_drv`, `r_eq`) as fitted by the
+/// electrical balance into `params`, each with its provenance (`<key>_kept`: fitted value,
+/// datasheet value, 95 % interval). An error when the electrical balance was not fitted.
+pub(super) fn keep_fitted(
+    keys: &[String],
+    r: &Report,
+    params: &mut servo_core::PlantParams,
+    prov: &mut toml::Table,
+) -> anyhow::Result<()> {
+    if keys.is_empty() {
+        return Ok(());
+    }
+    let Some(el) = &r.electrical else {
+        anyhow::bail!(
+            "--keep-fitted {}: the electrical balance was not fitted (it needs logs of u, i_a and speed at constant speeds)",
+            keys.join(",")
+        );
+    };
+    for key in keys {
+        let (est, datasheet) = match key.as_str() {
+            "k_drv" => (&el.k_drv, params.k_drv),
+            "r_eq" => (&el.r_eq, params.r_eq()),
+            other => anyhow::bail!("--keep-fitted: unknown key `{other}` (k_drv or r_eq)"),
+        };
+        match key.as_str() {
+            "k_drv" => params.k_drv = est.value,
+            _ => {
+                if est.value.is_nan() || est.value <= params.r_s {
+                    anyhow::bail!(
+                        "--keep-fitted r_eq: the fitted R_eq = {:.4} ohm is not above R_s = {:.4} ohm",
+                        est.value,
+                        params.r_s
+                    );
+                }
+                params.r_a = est.value - params.r_s;
+            }
+        }
+        let mut t = toml::Table::new();
+        t.insert("value".into(), toml::Value::Float(est.value));
+        t.insert("datasheet".into(), toml::Value::Float(datasheet));
+        t.insert(
+            "ci95".into(),
+            toml::Value::Array(vec![est.ci95.0.into(), est.ci95.1.into()]),
+        );
+        t.insert(
+            "method".into(),
+            toml::Value::String("electrical balance (servo identify --keep-fitted)".into()),
+        );
+        prov.insert(format!("{key}_kept"), toml::Value::Table(t));
+    }
+    Ok(())
+}

@@ -68,8 +68,18 @@ impl super::Identify {
             for e in &est {
                 match e.key {
                     "j_eq" => params.params.j_eq = Some(e.value),
-                    "b_eq" => params.params.b_eq = Some(e.value.max(0.0)),
-                    "tau_sf" => params.params.tau_sf = Some(e.value.max(0.0)),
+                    "b_eq" => {
+                        params.params.b_eq = Some(e.value.max(0.0));
+                        params
+                            .effects
+                            .remove(servo_core::effects::EffectKind::Viscous);
+                    }
+                    "tau_sf" => {
+                        params.params.tau_sf = Some(e.value.max(0.0));
+                        params
+                            .effects
+                            .remove(servo_core::effects::EffectKind::Coulomb);
+                    }
                     _ => {}
                 }
             }
