@@ -434,19 +434,21 @@ fn keep_fitted_k_drv_writes_the_fitted_gain_and_compare_uses_it() {
     ModelFile::from_plant(&lab(1.0e-6, 9.0e-3, 0.70))
         .save(&d("truth.toml"))
         .unwrap();
+    let truth = d("truth.toml");
     let ident = |out: &str, extra: &[&str]| {
+        let o = d(out);
         let mut args = vec![
             "identify",
             "--ramp",
             "--plant",
-            p(&d("truth.toml")),
+            p(&truth),
             "--log-dir",
             p(dir.path()),
             "--progress",
             "never",
+            "-o",
+            p(&o),
         ];
-        let o = d(out);
-        args.extend_from_slice(&["-o", p(&o)]);
         args.extend_from_slice(extra);
         ok(&args)
     };

@@ -150,6 +150,16 @@ pub(super) fn stage_add(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<Pa
             format!(" ({k} {v:.4} {}{truth})", main_unit(winner))
         })
         .unwrap_or_default();
+    // compare writes the model only when it does not predict worse than the identified one.
+    if !saved.exists() {
+        return Ok((
+            format!(
+                "adding {} made the prediction worse: model not saved (compare's gate)",
+                winner.name()
+            ),
+            vec![plot],
+        ));
+    }
     ctx.extended_model = Some(saved.clone());
     Ok((
         format!(
