@@ -203,7 +203,7 @@ pub(super) fn utc_now() -> String {
 
 /// Writes the electrical constants named in `keys` (`k_drv`, `r_eq`) as fitted by the
 /// electrical balance into `params`, each with its provenance (`<key>_kept`: fitted value,
-/// datasheet value, 95 % interval). An error when the electrical balance was not fitted.
+/// `<key>_datasheet`, `<key>_kept_ci95`, `<key>_kept_method`). An error when the electrical balance was not fitted.
 pub(super) fn keep_fitted(
     keys: &[String],
     r: &Report,
@@ -238,18 +238,17 @@ pub(super) fn keep_fitted(
                 params.r_a = est.value - params.r_s;
             }
         }
-        let mut t = toml::Table::new();
-        t.insert("value".into(), toml::Value::Float(est.value));
-        t.insert("datasheet".into(), toml::Value::Float(datasheet));
-        t.insert(
-            "ci95".into(),
+        // Flat keys, as the rest of [provenance].
+        prov.insert(format!("{key}_kept"), toml::Value::Float(est.value));
+        prov.insert(format!("{key}_datasheet"), toml::Value::Float(datasheet));
+        prov.insert(
+            format!("{key}_kept_ci95"),
             toml::Value::Array(vec![est.ci95.0.into(), est.ci95.1.into()]),
         );
-        t.insert(
-            "method".into(),
+        prov.insert(
+            format!("{key}_kept_method"),
             toml::Value::String("electrical balance (servo identify --keep-fitted)".into()),
         );
-        prov.insert(format!("{key}_kept"), toml::Value::Table(t));
     }
     Ok(())
 }
