@@ -2,6 +2,7 @@
 
 use super::*;
 
+#[allow(clippy::too_many_arguments)]
 pub(super) fn print_text(
     logs: &[LogData],
     modes: &[ModeChoice],

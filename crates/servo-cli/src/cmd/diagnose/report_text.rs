@@ -83,8 +83,8 @@ pub(super) fn text_report(
         let _ = writeln!(s, "\nCandidates, best first:");
         let _ = writeln!(
             s,
-            "  {:<11} {:>11} {:>10} {:>10} {:>9}  {}",
-            "effect", "significant", "eq. drop", "sim. drop", "BIC gain", "refused by"
+            "  {:<11} {:>11} {:>10} {:>10} {:>9}  refused by",
+            "effect", "significant", "eq. drop", "sim. drop", "BIC gain"
         );
         for c in &d.ranking {
             let refused = if c.significant {
