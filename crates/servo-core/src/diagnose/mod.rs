@@ -455,6 +455,21 @@ pub fn diagnose_dataset(
             .then(score(b).total_cmp(&score(a)))
             .then(b.error_reduction_pct.total_cmp(&a.error_reduction_pct))
     });
+    // The two best significant candidates explain the data alike (within 0.1 point of the
+    // ranking's score: at N = 1 a torque periodic once per motor revolution is one periodic in
+    // the load angle): the one with fewer searched parameters is named.
+    if let [a, b, ..] = ranking.as_slice() {
+        let score = |c: &Candidate| {
+            c.oe_reduction_pct.unwrap_or(f64::NEG_INFINITY) + 0.1 * c.error_reduction_pct
+        };
+        if a.significant
+            && b.significant
+            && (score(a) - score(b)).abs() < 0.1
+            && nonlinear_searched(b.effect) < nonlinear_searched(a.effect)
+        {
+            ranking.swap(0, 1);
+        }
+    }
     // No single effect passes but a balance is still above its noise floor: two missing effects
     // may hide each other; judge the best candidates in pairs ([`joint`]).
     if opts.joint_candidates >= 2

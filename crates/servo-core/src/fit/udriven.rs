@@ -100,6 +100,17 @@ pub fn identify_without_current_model(
             ..r.clone()
         })
         .collect();
+    identify_with_model(&strip, base, opts)
+}
+
+/// [`identify_without_current_model`] on the records as they are: with the current logged in
+/// every record the fit uses the torque and electrical balances (a params file that declares
+/// effects on a rig with a current sensor), else the u-driven balance.
+pub fn identify_with_model(
+    strip: &[Record],
+    base: &Plant,
+    opts: &FitOptions,
+) -> Result<UDrivenIdentification, FitError> {
     let params = base.params;
     let declared: Vec<EffectKind> = base
         .effects
@@ -107,7 +118,7 @@ pub fn identify_without_current_model(
         .map(|e| e.kind)
         .filter(|k| !matches!(*k, EffectKind::Viscous | EffectKind::Coulomb))
         .collect();
-    let ds = Dataset::new(&strip, &params, opts)?;
+    let ds = Dataset::new(strip, &params, opts)?;
     let start = with_params(base, params)?;
     let (bare, bare_j) = ds.fit_base_tolerant(&start)?;
     let mut model = start;
@@ -149,7 +160,7 @@ pub fn identify_without_current_model(
         }
     }
     let fit_with = |p: PlantParams| -> Result<(Vec<ParamEstimate>, Solved), FitError> {
-        let ds = Dataset::new(&strip, &p, opts)?;
+        let ds = Dataset::new(strip, &p, opts)?;
         let s = ds.fit_config(&with_params(&model, p)?, &[])?;
         Ok((ds.estimates(&s), s))
     };

@@ -13,20 +13,32 @@ impl super::Identify {
         logs: &[PathBuf],
         mut params: ModelFile,
     ) -> anyhow::Result<()> {
-        use servo_core::fit::udriven::{describe_effects, identify_without_current_model};
+        use servo_core::fit::udriven::{
+            describe_effects, identify_with_model, identify_without_current_model,
+        };
         use servo_core::fit::{FitOptions, DRIVE_CONSTANT_TOLERANCE};
         let base = params.plant().context("--params")?;
-        let id = identify_without_current_model(records, &base, &FitOptions::default())
-            .map_err(|e| anyhow!("identification from u and angle failed: {e}"))?;
+        let with_current = !needs_u_driven_balance(records);
+        let id = if with_current {
+            identify_with_model(records, &base, &FitOptions::default())
+                .map_err(|e| anyhow!("identification with the declared effects failed: {e}"))?
+        } else {
+            identify_without_current_model(records, &base, &FitOptions::default())
+                .map_err(|e| anyhow!("identification from u and angle failed: {e}"))?
+        };
         let est: Vec<_> = id.estimates.iter().filter(|e| e.effect.is_none()).collect();
         let tol_pct = 100.0 * DRIVE_CONSTANT_TOLERANCE;
-        let mut notes = vec![format!(
+        let mut notes = vec![if with_current {
+            format!("the params file declares effects: J_eq, B_eq and tau_sf were fitted with them on the torque balance k_t i_a = J_eq dw/dt + B_eq w + tau_sf/N sign(w) + tau_effects/N (and the electrical balance), one least squares over every log (handout 4.3), instead of the dedicated friction and inertia tests; a {tol_pct:.0} % tolerance on each drive constant is added to the intervals")
+        } else {
+            format!(
             "no log records the armature current: J_eq, B_eq and tau_sf were estimated from u and the angle alone, with the u-driven balance k_drv k_t u / R_eq = J_eq dw/dt + (B_eq + k_t k_e / R_eq) w + tau_sf/N sign(w), taking k_drv = {}, R_eq = {} ohm, k_e = {}, k_t = {} from the params file; their {tol_pct:.0} % tolerance each is added to the intervals",
             params.params.k_drv,
             params.params.r_eq(),
             params.params.k_e,
             params.params.k_t
-        )];
+        )
+        }];
         if !id.declared.is_empty() {
             let names: Vec<&str> = id.declared.iter().map(|k| k.name()).collect();
             notes.push(format!(
@@ -53,7 +65,7 @@ impl super::Identify {
         if self.json {
             let mut v = serde_json::json!({
                 "schema": "servo.identify/1",
-                "method": "u-driven balance (no current logged)",
+                "method": if with_current { "model fit with the declared effects" } else { "u-driven balance (no current logged)" },
                 "b_eq_n_m_s_rad": null, "tau_sf_n_m": null, "j_eq_kg_m2": null,
                 "notes": notes,
                 "effects_fitted": id.estimates.iter().filter(|e| e.effect.is_some()).map(|e| serde_json::json!({
