@@ -11,6 +11,7 @@ mod design;
 mod diagnose;
 mod frf;
 mod fuzz;
+mod gravity;
 mod guide;
 mod identify;
 mod layout;

@@ -325,6 +325,13 @@ pub trait EffectModel: Sync + Send {
     fn depends_on_angle_only(&self) -> bool {
         false
     }
+    /// A load torque set by the load's position alone that can dwarf the friction (an arm's or
+    /// a pendulum's gravity, m g L sin(theta_l + phi)): identification fits it with the base
+    /// when it dominates the balance instead of returning an unphysical inertia
+    /// ([`crate::fit::udriven`]). Default false.
+    fn dominant_load_candidate(&self) -> bool {
+        false
+    }
     /// [`SimRole::DryFriction`]: adds this effect's part to the dry friction `f` (effects are
     /// applied in registry order; a later one may replace an earlier one's levels).
     fn dry_friction(&self, v: &[f64], f: &mut torque::Friction) {

@@ -207,7 +207,16 @@ impl Identify {
                 logs.push(path);
             }
         }
-        if needs_u_driven_balance(&records) {
+        // Effects declared in the params file are fitted with the base (never ignored): the
+        // model fit of fit::udriven, on the balances the logs allow.
+        let declares = params.effects.iter().any(|e| {
+            !matches!(
+                e.kind,
+                servo_core::effects::EffectKind::Viscous | servo_core::effects::EffectKind::Coulomb
+            )
+        });
+        if needs_u_driven_balance(&records) || (declares && records.iter().all(|r| r.u_v.is_some()))
+        {
             return self.run_without_current(&records, &logs, params);
         }
         let mut exps = Vec::new();

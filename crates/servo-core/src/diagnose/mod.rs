@@ -244,7 +244,7 @@ pub fn diagnose_dataset(
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, FitError> {
     opts.cancel.check()?;
-    let base = timing::timed(|| "base fit".into(), || base_fit(ds, model))?;
+    let (base, base_j_unphysical) = timing::timed(|| "base fit".into(), || base_fit(ds, model))?;
     let noise = current_noise(ds);
     let th = opts.thresholds;
     let sols: Vec<&EqSolution> = core::iter::once(&base.mech)
@@ -466,6 +466,21 @@ pub fn diagnose_dataset(
             .then(score(b).total_cmp(&score(a)))
             .then(b.error_reduction_pct.total_cmp(&a.error_reduction_pct))
     });
+    // The two best significant candidates explain the data alike (within 0.1 point of the
+    // ranking's score: at N = 1 a torque periodic once per motor revolution is one periodic in
+    // the load angle): the one with fewer searched parameters is named.
+    if let [a, b, ..] = ranking.as_slice() {
+        let score = |c: &Candidate| {
+            c.oe_reduction_pct.unwrap_or(f64::NEG_INFINITY) + 0.1 * c.error_reduction_pct
+        };
+        if a.significant
+            && b.significant
+            && (score(a) - score(b)).abs() < 0.1
+            && nonlinear_searched(b.effect) < nonlinear_searched(a.effect)
+        {
+            ranking.swap(0, 1);
+        }
+    }
     // No single effect passes but a balance is still above its noise floor: two missing effects
     // may hide each other; judge the best candidates in pairs ([`joint`]).
     if opts.joint_candidates >= 2
@@ -541,6 +556,12 @@ pub fn diagnose_dataset(
         }
     }
     let mut verdict = evidence::verdict(status, &ranking, &unexplained, &th);
+    if let Some(j) = base_j_unphysical {
+        verdict.push_str(&alloc::format!(
+            " The bare base model was unphysical on these logs (the fitted inertia J_eq = {} kg m^2 is not positive: a large torque it lacks, such as an arm's gravity, was absorbed into it); each candidate was fitted with the base refitted beside it.",
+            math::Num(j)
+        ));
+    }
     if !ds.has_input {
         verdict.push_str(" No log records the input voltage u: judged on the torque balance alone (information criterion and held-out residual), without a simulation check; input effects and effects judged on the simulation were not tried.");
     }
@@ -724,8 +745,15 @@ fn nonlinear_searched(kind: EffectKind) -> usize {
 /// beside a play at tau_s 0.017 N m (0.020 true) came back from the torque balance at 0.012,
 /// and one at 0.020 at 0.026 (the breakaway lives at the reversals the balance leaves out).
 /// The balances' residuals are those of the re-solved model either way.
-fn base_fit(ds: &Dataset, model: &Plant) -> Result<Solved, FitError> {
-    let mut s = ds.fit_config(model, &[])?;
+///
+/// When the re-solved inertia is not positive (a large torque the model lacks: an arm's
+/// gravity), the base keeps `model`'s inertia and the fitted value is returned beside it: the
+/// candidates, each refitting the base, are still tried ([`Dataset::fit_base_tolerant`]).
+fn base_fit(ds: &Dataset, model: &Plant) -> Result<(Solved, Option<f64>), FitError> {
+    let (mut s, unphysical) = ds.fit_base_tolerant(model)?;
+    if unphysical.is_some() {
+        return Ok((s, unphysical));
+    }
     if ds.has_input && model.effects.iter().any(|e| on_simulation(e.kind)) {
         if let [Some(a), Some(b)] = backward::motion_costs(ds, [&s.plant, model]) {
             if b < a {
@@ -733,7 +761,7 @@ fn base_fit(ds: &Dataset, model: &Plant) -> Result<Solved, FitError> {
             }
         }
     }
-    Ok(s)
+    Ok((s, None))
 }
 
 /// Is `kind` judged on the simulation alone (no regressors; a gear play)?
@@ -793,8 +821,17 @@ fn judge(
             )
         }
     };
-    // Information criterion on the fit rows.
-    let rho = lag1(&b.resid);
+    // Information criterion on the fit rows, over the effective number of independent rows of
+    // the noise. When the candidate explains most of the base's residual (a dominant torque such
+    // as an arm's gravity), that residual is the effect's own smooth shape, whose lag-1
+    // correlation near 1 would count a whole log as a handful of rows (a gravity torque 70 times
+    // the Coulomb level refused at a gain of 9.9): the candidate's residual then measures the
+    // noise's correlation.
+    let rho = if c.rss_fit < 0.5 * b.rss_fit {
+        lag1(&c.resid)
+    } else {
+        lag1(&b.resid)
+    };
     let n_eff = (b.n_fit as f64 * (1.0 - rho) / (1.0 + rho)).max(1.0);
     let q_lin = c.p.saturating_sub(b.p) as f64;
     let q_nl = nonlinear_searched(kind) as f64;

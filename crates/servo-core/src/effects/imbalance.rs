@@ -60,6 +60,9 @@ impl EffectModel for Imbalance {
     fn depends_on_angle_only(&self) -> bool {
         true
     }
+    fn dominant_load_candidate(&self) -> bool {
+        true
+    }
     fn polish(&self) -> &[(&'static str, Span)] {
         &[("phase", Span::Add(0.5))]
     }

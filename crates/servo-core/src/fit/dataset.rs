@@ -215,20 +215,23 @@ impl Dataset {
         params: &PlantParams,
         opts: &FitOptions,
     ) -> Result<Dataset, FitError> {
-        let mut ds = Self::prepared(records, params, opts, true)?;
+        let mut ds = Self::prepared(records, params, opts, true, None)?;
+        let stuck = Some(ds.opts.min_speed_rad_s);
         ds.search = search_windows(records, ds.recs.iter().map(|r| r.dt_s))
-            .and_then(|w| Self::prepared(&w, params, opts, true).ok())
+            .and_then(|w| Self::prepared(&w, params, opts, true, stuck).ok())
             .map(alloc::boxed::Box::new);
         Ok(ds)
     }
 
     /// [`Dataset::new`] without search windows; `centre_counts`: move an encoder's readings to
-    /// the centre of their count cells (see [`prepare`]).
+    /// the centre of their count cells (see [`prepare`]); `stuck`: the stuck-speed threshold
+    /// [rad/s] (`None`: the rig's, [`rig_stuck_speed_rad_s`] of these records).
     fn prepared(
         records: &[Record],
         params: &PlantParams,
         opts: &FitOptions,
         centre_counts: bool,
+        stuck: Option<f64>,
     ) -> Result<Dataset, FitError> {
         if records.is_empty() {
             return Err(FitError::NoData(String::from("no records given")));
@@ -256,6 +259,11 @@ impl Dataset {
             .filter(|r| r.has_u)
             .flat_map(|r| r.u_v.iter())
             .fold(0.0f64, |m, u| m.max(u.abs()));
+        // The stuck-speed threshold of this rig (its encoder and its speeds, at the motor).
+        let opts = &FitOptions {
+            min_speed_rad_s: stuck.unwrap_or_else(|| rig_stuck_speed_rad_s(&recs, opts)),
+            ..opts.clone()
+        };
         let mut mech_rows = Rows::default();
         let mut elec_rows = Rows::default();
         for (ri, r) in recs.iter().enumerate() {
@@ -264,9 +272,9 @@ impl Dataset {
         let need = 20;
         if mech_rows.len() < need {
             return Err(FitError::NoData(alloc::format!(
-                "only {} usable moving samples (speed above {} rad/s at the motor, away from stuck phases); the logs need the motor to move",
+                "only {} usable moving samples (speed above {} rad/s at the motor, this rig's stuck threshold from its encoder and speeds, away from stuck phases); the logs need the motor to move",
                 mech_rows.len(),
-                opts.min_speed_rad_s
+                crate::math::Num(opts.min_speed_rad_s)
             )));
         }
         let mut ds = Dataset {
@@ -329,7 +337,13 @@ impl Dataset {
                 ref_rad: None,
             });
         }
-        Self::prepared(&records, params, &self.opts, false)
+        Self::prepared(
+            &records,
+            params,
+            &self.opts,
+            false,
+            Some(self.opts.min_speed_rad_s),
+        )
     }
 
     /// The data the searches over nonlinear parameters run on: the search windows on long logs,
@@ -643,6 +657,34 @@ pub fn centred_current(i: &[f64], dt_s: f64, tau_s: f64) -> Vec<f64> {
             i[k] + w * (next - i[k])
         })
         .collect()
+}
+
+/// The speed [rad/s, motor side] below which a sample of these records counts as stuck: what the
+/// rig's encoder can resolve through the fit's filter, 2 q f_c for a motor-side count q [rad]
+/// and cut-off f_c [Hz] (a count per half period of the filter), and at least 1 % of the rig's
+/// running speed (the 95th percentile of |omega_m|), both taken from the logs; never above
+/// [`FitOptions::min_speed_rad_s`] (the bound; 1 rad/s by default, what 2 q f_c gives on the
+/// handout's SRV-02: 4096 counts per load revolution, N = 14, 25 Hz). A smart servo seen at its
+/// output (N = 1, 4096 counts, a few rad/s) gets 0.08 rad/s; a rig whose speed the bound
+/// already resolves (the SRV-02) keeps it, and selects the rows it always did.
+pub fn rig_stuck_speed_rad_s(recs: &[RecData], opts: &FitOptions) -> f64 {
+    let bound = opts.min_speed_rad_s;
+    let mut floor = 0.0f64;
+    let mut speeds: Vec<f64> = Vec::new();
+    for r in recs {
+        if let Some(q) = crate::compare::quantum::encoder_quantum(&r.theta_m_rad) {
+            floor = floor.max(2.0 * q * opts.filter_hz);
+        }
+        speeds.extend(r.omega_f.iter().map(|w| w.abs()));
+    }
+    let at = (0.95 * speeds.len() as f64) as usize;
+    let w95 = math::order_statistic(&mut speeds, at).unwrap_or(0.0);
+    let t = floor.max(0.01 * w95);
+    if t > 0.0 && t.is_finite() {
+        t.min(bound)
+    } else {
+        bound
+    }
 }
 
 fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec: &mut Rows) {

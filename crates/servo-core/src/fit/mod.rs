@@ -25,6 +25,7 @@ pub mod lsq;
 pub mod model;
 pub mod oe;
 pub mod search;
+pub mod udriven;
 
 pub use dataset::Dataset;
 pub use model::Equation;
@@ -44,7 +45,10 @@ use model::{Coef, Config, EqSolution, Slot};
 pub struct FitOptions {
     /// Cut-off of the zero-phase low-pass filter applied to every signal [Hz].
     pub filter_hz: f64,
-    /// Motor speed below which a sample counts as stuck [rad/s].
+    /// Upper bound of the motor speed below which a sample counts as stuck [rad/s]. A dataset
+    /// uses its rig's own threshold ([`dataset::rig_stuck_speed_rad_s`]: the encoder's
+    /// resolution through the filter and 1 % of the running speed), at most this; a prepared
+    /// [`Dataset`]'s `opts` hold the threshold it used.
     pub min_speed_rad_s: f64,
     /// Margin excluded around stuck phases in the torque balance [s].
     pub margin_s: f64,
@@ -248,10 +252,12 @@ pub const DRIVE_CONSTANT_TOLERANCE: f64 = 0.05;
 /// One mechanical parameter identified from the u-driven balance.
 #[derive(Debug, Clone, PartialEq)]
 pub struct UDrivenEstimate {
+    /// The effect the parameter belongs to; `None` for the base (`j_eq`, `b_eq`, `tau_sf`).
+    pub effect: Option<EffectKind>,
     pub key: &'static str,
     pub unit: &'static str,
     pub value: f64,
-    /// Statistical standard error (least squares).
+    /// Statistical standard error (least squares; NaN when the fit gives none, e.g. a phase).
     pub std_err: f64,
     /// Standard error including the tolerance of the drive constants
     /// ([`DRIVE_CONSTANT_TOLERANCE`] on each of k_drv, R_a, k_e, k_t, root-sum-square).
@@ -325,6 +331,7 @@ pub fn identify_without_current(
         };
         let se = e.std_err.unwrap_or(0.0);
         out.push(UDrivenEstimate {
+            effect: None,
             key,
             unit: e.unit,
             value: e.value,
@@ -454,6 +461,45 @@ impl Dataset {
             elec,
             plant,
         })
+    }
+
+    /// Fits `base` alone like [`Dataset::fit_config`]; when the fitted inertia comes out not
+    /// positive (the classic symptom of a large torque the base lacks, e.g. an arm's gravity),
+    /// the solution is kept (its residuals and coefficients, for judging candidates against)
+    /// with a plant that holds `base`'s inertia instead, and the fitted J_eq [kg m^2] is returned
+    /// beside it. Any other failure is returned as the error.
+    pub fn fit_base_tolerant(&self, base: &Plant) -> Result<(Solved, Option<f64>), FitError> {
+        let err = match self.fit_config(base, &[]) {
+            Ok(s) => return Ok((s, None)),
+            Err(e) => e,
+        };
+        let cfg = self.config(base, &[], true);
+        let Some(mech) = model::solve_mech(self, &cfg) else {
+            return Err(err);
+        };
+        let j = match mech.coef(Coef::JEq) {
+            Some((j, _)) if j <= 0.0 => j,
+            _ => return Err(err),
+        };
+        let elec = if self.has_current && !self.elec_rows.is_empty() {
+            model::solve_elec(self, &cfg)
+        } else {
+            None
+        };
+        let mut held = mech.clone();
+        if let Some(i) = held.coefs.iter().position(|&q| q == Coef::JEq) {
+            held.theta[i] = base.params.j_eq();
+        }
+        let plant = to_plant(&cfg, &held, elec.as_ref())?;
+        Ok((
+            Solved {
+                cfg,
+                mech,
+                elec,
+                plant,
+            },
+            Some(j),
+        ))
     }
 
     /// Residual sum of squares (fit rows) of the equation where `kind` lives, per row.

@@ -4,30 +4,82 @@ use super::*;
 
 impl super::Identify {
     /// Logs of u and angle only: J_eq, B_eq and tau_sf from the u-driven balance with the drive
-    /// constants of the params file (see `servo_core::fit::identify_without_current`).
+    /// constants of the params file, the file's effects fitted with them, and a dominant
+    /// position-dependent load torque found and fitted (see
+    /// `servo_core::fit::udriven::identify_without_current_model`).
     pub(super) fn run_without_current(
         &self,
         records: &[servo_core::record::Record],
         logs: &[PathBuf],
         mut params: ModelFile,
     ) -> anyhow::Result<()> {
-        use servo_core::fit::{identify_without_current, FitOptions, DRIVE_CONSTANT_TOLERANCE};
-        let est = identify_without_current(records, &params.params, &FitOptions::default())
-            .map_err(|e| anyhow!("identification from u and angle failed: {e}"))?;
+        use servo_core::fit::udriven::{
+            describe_effects, identify_with_model, identify_without_current_model,
+        };
+        use servo_core::fit::{FitOptions, DRIVE_CONSTANT_TOLERANCE};
+        let base = params.plant().context("--params")?;
+        let with_current = !needs_u_driven_balance(records);
+        let id = if with_current {
+            identify_with_model(records, &base, &FitOptions::default())
+                .map_err(|e| anyhow!("identification with the declared effects failed: {e}"))?
+        } else {
+            identify_without_current_model(records, &base, &FitOptions::default())
+                .map_err(|e| anyhow!("identification from u and angle failed: {e}"))?
+        };
+        let est: Vec<_> = id.estimates.iter().filter(|e| e.effect.is_none()).collect();
         let tol_pct = 100.0 * DRIVE_CONSTANT_TOLERANCE;
-        let note = format!(
+        let mut notes = vec![if with_current {
+            format!("the params file declares effects: J_eq, B_eq and tau_sf were fitted with them on the torque balance k_t i_a = J_eq dw/dt + B_eq w + tau_sf/N sign(w) + tau_effects/N (and the electrical balance), one least squares over every log (handout 4.3), instead of the dedicated friction and inertia tests; a {tol_pct:.0} % tolerance on each drive constant is added to the intervals")
+        } else {
+            format!(
             "no log records the armature current: J_eq, B_eq and tau_sf were estimated from u and the angle alone, with the u-driven balance k_drv k_t u / R_eq = J_eq dw/dt + (B_eq + k_t k_e / R_eq) w + tau_sf/N sign(w), taking k_drv = {}, R_eq = {} ohm, k_e = {}, k_t = {} from the params file; their {tol_pct:.0} % tolerance each is added to the intervals",
             params.params.k_drv,
             params.params.r_eq(),
             params.params.k_e,
             params.params.k_t
-        );
+        )
+        }];
+        if !id.declared.is_empty() {
+            let names: Vec<&str> = id.declared.iter().map(|k| k.name()).collect();
+            notes.push(format!(
+                "the effects declared in the params file were fitted with the base: {}",
+                names.join(", ")
+            ));
+        }
+        if let Some(d) = &id.dominant {
+            notes.push(format!(
+                "a position-dependent load torque dominates the balance: {} explains {:.1} % of the base fit's residual (without it J_eq = {:.4e} kg m^2, B_eq = {:.4e} N m s/rad, absorbing it); it was fitted with the base; declare it in the params file ([effects.{}]) to fit it from the start",
+                d.effect.name(),
+                100.0 * d.share,
+                d.bare_j_eq_kg_m2,
+                d.bare_b_eq_n_m_s_rad,
+                d.effect.name()
+            ));
+        }
+        for (key, v) in &id.clamped {
+            notes.push(format!(
+                "WARNING: {key} came out negative ({v:.4e}): unphysical, written as 0 with -o; the model lacks a torque the logs hold, or the drive constants are off"
+            ));
+        }
+        let effect_lines = describe_effects(&id);
         if self.json {
             let mut v = serde_json::json!({
                 "schema": "servo.identify/1",
-                "method": "u-driven balance (no current logged)",
+                "method": if with_current { "model fit with the declared effects" } else { "u-driven balance (no current logged)" },
                 "b_eq_n_m_s_rad": null, "tau_sf_n_m": null, "j_eq_kg_m2": null,
-                "notes": [note],
+                "notes": notes,
+                "effects_fitted": id.estimates.iter().filter(|e| e.effect.is_some()).map(|e| serde_json::json!({
+                    "effect": e.effect.map(|k| k.name()),
+                    "key": e.key, "unit": e.unit, "value": e.value,
+                    "std_err": e.std_err.is_finite().then_some(e.std_err),
+                    "std_err_with_drive_tolerance": e.std_err_total,
+                    "how": if id.declared.iter().any(|k| Some(*k) == e.effect) { "declared" } else { "found dominant" },
+                })).collect::<Vec<_>>(),
+                "dominant_torque": id.dominant.as_ref().map(|d| serde_json::json!({
+                    "effect": d.effect.name(), "share_of_residual": d.share,
+                    "bare_j_eq_kg_m2": d.bare_j_eq_kg_m2,
+                    "bare_b_eq_n_m_s_rad": d.bare_b_eq_n_m_s_rad,
+                })),
                 "drive_constant_tolerance": DRIVE_CONSTANT_TOLERANCE,
                 "logs": logs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
                 "not_identified": [],
@@ -51,7 +103,9 @@ impl super::Identify {
             }
             outln!("{}", serde_json::to_string_pretty(&v)?);
         } else {
-            outln!("{note}.");
+            for note in &notes {
+                outln!("{note}.");
+            }
             for e in &est {
                 outln!(
                     "  {:<7} = {:.4e} {:<10} +/- {:.2e} (statistical) -> +/- {:.2e} with the drive-constant tolerance ({:.1}x wider)",
@@ -62,6 +116,9 @@ impl super::Identify {
                     e.std_err_total,
                     if e.std_err > 0.0 { e.std_err_total / e.std_err } else { f64::NAN }
                 );
+            }
+            for line in &effect_lines {
+                outln!("  {line}");
             }
         }
         if let Some(out) = &self.output {
@@ -81,6 +138,15 @@ impl super::Identify {
                             .remove(servo_core::effects::EffectKind::Coulomb);
                     }
                     _ => {}
+                }
+            }
+            for k in id
+                .declared
+                .iter()
+                .chain(id.dominant.as_ref().map(|d| &d.effect))
+            {
+                if let Some(e) = id.plant.effects.get(*k) {
+                    params.effects.insert(*e);
                 }
             }
             params
