@@ -14,6 +14,7 @@ mod fuzz;
 mod guide;
 mod identify;
 mod layout;
+mod log_reader;
 mod mat;
 mod promises;
 mod registry;
