@@ -15,6 +15,7 @@ mod gravity;
 mod guide;
 mod identify;
 mod layout;
+mod log_reader;
 mod mat;
 mod promises;
 mod registry;

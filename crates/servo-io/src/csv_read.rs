@@ -50,6 +50,49 @@ pub fn read_csv_signals(
     parse_csv_signals(&text, &path.display().to_string(), columns, want)
 }
 
+/// servo's reader of CSV logs (`.csv`, `.txt`, `.tsv`; `,`, `;` or tab separated).
+pub struct CsvReader;
+
+impl crate::log_reader::LogReader for CsvReader {
+    fn name(&self) -> &'static str {
+        "CSV"
+    }
+    fn extensions(&self) -> &'static [&'static str] {
+        &["csv", "txt", "tsv"]
+    }
+    fn read(
+        &self,
+        path: &Path,
+        columns: Option<&str>,
+        want: Option<&[Signal]>,
+    ) -> anyhow::Result<(Record, crate::LogMeta)> {
+        let imp = read_csv_signals(path, columns, want)?;
+        Ok((
+            imp.record,
+            crate::LogMeta {
+                columns: Some(imp.map.to_string()),
+                notes: imp.notes,
+                ..crate::LogMeta::default()
+            },
+        ))
+    }
+    /// The header columns, the number of data rows and the map servo would guess.
+    fn inspect(&self, path: &Path) -> anyhow::Result<Vec<String>> {
+        let source = path.display().to_string();
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {source}"))?;
+        let mut lines = text
+            .lines()
+            .filter(|l| !l.trim_start().starts_with('#') && !l.trim().is_empty());
+        let header = lines.next().unwrap_or("");
+        let rows = lines.count();
+        Ok(vec![
+            format!("{source}: CSV, {rows} data rows"),
+            format!("  columns: {header}"),
+            crate::log_reader::guessed(parse_csv(&text, &source, None).map(|i| i.map.to_string())),
+        ])
+    }
+}
+
 /// Parses CSV `text`; `source` names the file in messages.
 pub fn parse_csv(text: &str, source: &str, columns: Option<&str>) -> anyhow::Result<CsvImport> {
     parse_csv_signals(text, source, columns, None)

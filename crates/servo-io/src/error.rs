@@ -15,6 +15,21 @@ pub enum Error {
     /// what was expected.
     #[error("{0}")]
     Invalid(String),
+    /// A file no log reader takes (by its extension): `expected` lists the registry's formats
+    /// (".mat, .mcap or .csv").
+    #[error("{}: unknown log format `.{extension}`; expected a {expected} file", path.display())]
+    UnknownFormat {
+        path: std::path::PathBuf,
+        extension: String,
+        expected: String,
+    },
+    /// A log reader handed a file that is not its format ([`crate::LogReader::read`]): the
+    /// registry asks the next reader.
+    #[error("{}: not a {format} file", path.display())]
+    Incompatible {
+        path: std::path::PathBuf,
+        format: &'static str,
+    },
     /// A lower-level error with what servo-io was doing when it happened. `{}` shows the
     /// context, `{:#}` the context and every cause after it.
     #[error(fmt = fmt_context)]

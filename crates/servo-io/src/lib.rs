@@ -8,7 +8,8 @@
 //! * [`error`]: the typed [`Error`] every function here returns.
 //!
 //! Every command that reads a log calls [`read_log`] (or [`read_log_with_meta`] for the run's
-//! metadata: gains, plant, reference).
+//! metadata: gains, plant, reference), which asks the [`log_reader`] registry: one reader per
+//! format behind the [`LogReader`] trait.
 //!
 //! * [`units`]: signal names (`time`, `u`, `theta_l`, ...) and the units columns may use.
 //! * [`columns`]: the `--columns` map, servo's own header, guessing from header suffixes.
@@ -27,6 +28,7 @@ pub mod disk;
 pub mod effects_file;
 pub mod error;
 pub mod gains_file;
+pub mod log_reader;
 pub mod loop_msg;
 pub mod mat_log;
 pub mod mat_path;
@@ -46,40 +48,22 @@ pub use columns::ColumnMap;
 pub use controller::logged_controller;
 pub use csv_write::write_csv;
 pub use error::{Context, Error, Result};
+pub use log_reader::{LogReader, Registry};
 pub use units::{Signal, Unit};
 
-use crate::error::{self as anyhow, bail};
+use crate::error::{self as anyhow};
 use servo_core::record::Record;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-/// Log file formats, by extension.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LogFormat {
-    Mcap,
-    Csv,
-    Mat,
-}
-
-impl LogFormat {
-    /// The format of `path` from its extension (`.mcap`, `.csv`, `.txt`, `.tsv`, `.mat`).
-    pub fn of(path: &Path) -> anyhow::Result<LogFormat> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase)
-            .unwrap_or_default();
-        match ext.as_str() {
-            "mcap" => Ok(LogFormat::Mcap),
-            "csv" | "txt" | "tsv" => Ok(LogFormat::Csv),
-            "mat" => Ok(LogFormat::Mat),
-            _ => bail!(
-                "{}: unknown log format `.{ext}`; expected a .mat, .mcap or .csv file",
-                path.display()
-            ),
-        }
-    }
-}
+/// The log formats servo reads ([`log_reader`]), in the order of the "expected ..." message: one
+/// line per format. (Here, at the crate's root, so that the readers' files and the registry's
+/// do not import each other.)
+pub static BUILT_IN: [&dyn LogReader; 3] = [
+    &crate::mat_log::MatReader,
+    &crate::mcap_read::McapReader,
+    &crate::csv_read::CsvReader,
+];
 
 /// What a log says about the run besides its samples.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -163,7 +147,8 @@ impl LogMeta {
     }
 }
 
-/// Reads a log (MCAP, CSV or MAT, by extension) into a [`Record`] in SI units, printing notes (a
+/// Reads a log (MCAP, CSV or MAT, by extension: the readers of [`BUILT_IN`]) into a [`Record`]
+/// in SI units, printing notes (a
 /// guessed column map, data lost from a truncated MCAP) to stderr.
 ///
 /// `columns` is the `--columns` map for foreign CSVs, e.g.
@@ -193,45 +178,5 @@ pub fn read_log_signals(
     columns: Option<&str>,
     want: Option<&[Signal]>,
 ) -> anyhow::Result<(Record, LogMeta)> {
-    match LogFormat::of(path)? {
-        LogFormat::Csv => {
-            let imp = csv_read::read_csv_signals(path, columns, want)?;
-            Ok((
-                imp.record,
-                LogMeta {
-                    columns: Some(imp.map.to_string()),
-                    notes: imp.notes,
-                    ..LogMeta::default()
-                },
-            ))
-        }
-        LogFormat::Mat => {
-            let imp = mat_log::read_mat_log(path, columns)?;
-            Ok((
-                imp.record,
-                LogMeta {
-                    columns: Some(imp.map.to_string()),
-                    notes: imp.notes,
-                    ..LogMeta::default()
-                },
-            ))
-        }
-        LogFormat::Mcap => {
-            if columns.is_some() {
-                bail!(
-                    "{}: --columns applies to CSV logs only; an MCAP log names its own signals",
-                    path.display()
-                );
-            }
-            let run = mcap_read::read_mcap_signals(path, want)?;
-            let meta = LogMeta {
-                columns: None,
-                entries: run.metadata,
-                summary: run.summary,
-                notes: run.notes,
-                feedforward_v: run.feedforward_v,
-            };
-            Ok((run.record, meta))
-        }
-    }
+    log_reader::Registry::built_in().read(path, columns, want)
 }

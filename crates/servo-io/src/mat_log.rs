@@ -29,6 +29,50 @@ pub fn read_mat_log(path: &Path, columns: Option<&str>) -> anyhow::Result<MatImp
     import(&file, &source, columns)
 }
 
+/// servo's reader of MATLAB MAT-files (`.mat`, Level 5, -v6/-v7) as logs.
+pub struct MatReader;
+
+impl crate::log_reader::LogReader for MatReader {
+    fn name(&self) -> &'static str {
+        "MAT-file"
+    }
+    fn extensions(&self) -> &'static [&'static str] {
+        &["mat"]
+    }
+    /// Every mapped signal (the MAT-file is read whole; `want` is not used).
+    fn read(
+        &self,
+        path: &Path,
+        columns: Option<&str>,
+        _want: Option<&[Signal]>,
+    ) -> anyhow::Result<(Record, crate::LogMeta)> {
+        let imp = read_mat_log(path, columns)?;
+        Ok((
+            imp.record,
+            crate::LogMeta {
+                columns: Some(imp.map.to_string()),
+                notes: imp.notes,
+                ..crate::LogMeta::default()
+            },
+        ))
+    }
+    /// The variables, struct fields, sizes and Scope labels ([`describe`]) and the map servo
+    /// would guess.
+    fn inspect(&self, path: &Path) -> anyhow::Result<Vec<String>> {
+        let source = path.display().to_string();
+        let file = read_mat_file(path).with_context(|| source.clone())?;
+        let mut out = vec![format!(
+            "{source}: MAT-file, {} variables",
+            file.variables.len()
+        )];
+        out.extend(describe(&file).into_iter().map(|l| format!("  {l}")));
+        out.push(crate::log_reader::guessed(
+            guess(&file).map(|m| m.to_string()),
+        ));
+        Ok(out)
+    }
+}
+
 /// Builds a record from `file`; `source` names the file in messages.
 pub fn import(file: &MatFile, source: &str, columns: Option<&str>) -> anyhow::Result<MatImport> {
     let mut notes = Vec::new();

@@ -179,6 +179,88 @@ pub fn parse_record_checked(opcode: u8, body: &[u8]) -> mcap::McapResult<McapRec
     mcap::parse_record(opcode, body)
 }
 
+/// servo's reader of its MCAP logs (`.mcap`, the `/servo/loop` channel and the run metadata).
+pub struct McapReader;
+
+impl crate::log_reader::LogReader for McapReader {
+    fn name(&self) -> &'static str {
+        "MCAP"
+    }
+    fn extensions(&self) -> &'static [&'static str] {
+        &["mcap"]
+    }
+    /// Refuses a `--columns` map: an MCAP log names its own signals.
+    fn read(
+        &self,
+        path: &Path,
+        columns: Option<&str>,
+        want: Option<&[Signal]>,
+    ) -> anyhow::Result<(Record, crate::LogMeta)> {
+        if columns.is_some() {
+            bail!(
+                "{}: --columns applies to CSV logs only; an MCAP log names its own signals",
+                path.display()
+            );
+        }
+        let run = read_mcap_signals(path, want)?;
+        let meta = crate::LogMeta {
+            columns: None,
+            entries: run.metadata,
+            summary: run.summary,
+            notes: run.notes,
+            feedforward_v: run.feedforward_v,
+        };
+        Ok((run.record, meta))
+    }
+    /// The channels (encoding, schema, message count), then the log as servo reads it
+    /// (samples, duration, signals, metadata keys, notes) or why it cannot.
+    fn inspect(&self, path: &Path) -> anyhow::Result<Vec<String>> {
+        let source = path.display().to_string();
+        let bytes = std::fs::read(path).with_context(|| format!("reading {source}"))?;
+        let mut out = vec![format!("{source}: MCAP")];
+        match mcap::read::Summary::read(&bytes) {
+            Ok(Some(s)) => {
+                let counts = s.stats.as_ref().map(|st| st.channel_message_counts.clone());
+                for (id, c) in &s.channels {
+                    let n = counts
+                        .as_ref()
+                        .and_then(|m| m.get(id))
+                        .map(|n| format!(", {n} messages"))
+                        .unwrap_or_default();
+                    out.push(format!(
+                        "  channel {}: encoding {}, schema {}{n}",
+                        c.topic,
+                        c.message_encoding,
+                        c.schema.as_ref().map(|s| s.name.as_str()).unwrap_or("-")
+                    ));
+                }
+            }
+            Ok(None) => out.push("  (no summary section: an unfinished log?)".to_string()),
+            Err(e) => out.push(format!("  (summary unreadable: {e})")),
+        }
+        match crate::log_reader::LogReader::read(self, path, None, None) {
+            Ok((rec, meta)) => {
+                out.push(format!(
+                    "  {} samples, {:.3} s, signals {}",
+                    rec.len(),
+                    rec.time_s.last().copied().unwrap_or(0.0)
+                        - rec.time_s.first().copied().unwrap_or(0.0),
+                    rec.signals().join(", ")
+                ));
+                if !meta.entries.is_empty() {
+                    let keys: Vec<&str> = meta.entries.keys().map(String::as_str).collect();
+                    out.push(format!("  metadata: {}", keys.join(", ")));
+                }
+                for n in &meta.notes {
+                    out.push(format!("  note: {n}"));
+                }
+            }
+            Err(e) => out.push(format!("  not readable as a servo log: {e:#}")),
+        }
+        Ok(out)
+    }
+}
+
 /// Reads the MCAP file `path`.
 pub fn read_mcap(path: &Path) -> anyhow::Result<McapRun> {
     let bytes =

@@ -8,7 +8,7 @@
 //! A truncated MCAP (killed run) exports what is readable and says what was lost.
 
 use crate::io::mcap_read::loop_msgs_of;
-use crate::io::{meta_keys, read_log_with_meta, write_csv, LogFormat, McapLog, McapLogOptions};
+use crate::io::{meta_keys, read_log_with_meta, write_csv, McapLog, McapLogOptions, Registry};
 use anyhow::bail;
 use std::path::PathBuf;
 
@@ -29,13 +29,17 @@ pub struct Export {
 
 impl Export {
     pub fn run(self) -> anyhow::Result<()> {
-        let in_fmt = LogFormat::of(&self.input)?;
+        let registry = Registry::built_in();
+        let format = |path: &std::path::Path| -> anyhow::Result<&'static str> {
+            let reader = registry.reader_for(path)?;
+            Ok(reader.extensions().first().copied().unwrap_or(""))
+        };
+        let in_fmt = format(&self.input)?;
         let output = match &self.output {
             Some(o) => o.clone(),
-            None => self.input.with_extension(match in_fmt {
-                LogFormat::Mcap | LogFormat::Mat => "csv",
-                LogFormat::Csv => "mcap",
-            }),
+            None => self
+                .input
+                .with_extension(if in_fmt == "csv" { "mcap" } else { "csv" }),
         };
         if output == self.input {
             bail!(
@@ -43,18 +47,14 @@ impl Export {
                 output.display()
             );
         }
-        let out_fmt = LogFormat::of(&output)?;
+        let out_fmt = format(&output)?;
         let (rec, meta) = read_log_with_meta(&self.input, self.columns.as_deref())?;
         for n in &meta.notes {
             eprintln!("note: {n}");
         }
         match out_fmt {
-            LogFormat::Csv => write_csv(&output, &rec)?,
-            LogFormat::Mat => bail!(
-                "{}: servo does not write MAT-files; export to .csv or .mcap",
-                output.display()
-            ),
-            LogFormat::Mcap => {
+            "csv" => write_csv(&output, &rec)?,
+            "mcap" => {
                 let mut entries = meta.entries.clone();
                 entries
                     .entry(meta_keys::SERVO_VERSION.into())
@@ -78,6 +78,14 @@ impl Export {
                 }
                 log.finish()?;
             }
+            "mat" => bail!(
+                "{}: servo does not write MAT-files; export to .csv or .mcap",
+                output.display()
+            ),
+            other => bail!(
+                "{}: servo does not write .{other} files; export to .csv or .mcap",
+                output.display()
+            ),
         }
         outln!(
             "{} -> {}: {} samples, {:.3} s, signals {}",
