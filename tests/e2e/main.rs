@@ -21,3 +21,4 @@ mod schemas;
 mod serial;
 mod sim;
 mod util;
+mod window;

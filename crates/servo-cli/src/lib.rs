@@ -27,6 +27,7 @@ pub mod cmd;
 pub mod fuzz;
 pub mod io;
 pub mod live;
+pub mod log_part;
 pub mod plant_args;
 pub mod plot;
 

@@ -9,6 +9,7 @@ impl super::Identify {
         &self,
         records: &[servo_core::record::Record],
         logs: &[PathBuf],
+        parts: &[servo_core::record::part::UsedPart],
         mut params: ModelFile,
     ) -> anyhow::Result<()> {
         use servo_core::fit::{identify_without_current, FitOptions, DRIVE_CONSTANT_TOLERANCE};
@@ -31,6 +32,7 @@ impl super::Identify {
                 "drive_constant_tolerance": DRIVE_CONSTANT_TOLERANCE,
                 "logs": logs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
                 "not_identified": [],
+                "log_parts": crate::log_part::json(parts),
             });
             for e in &est {
                 // keys of the JSON convention (docs/schemas/README.md): quantity and SI unit
@@ -51,6 +53,7 @@ impl super::Identify {
             }
             outln!("{}", serde_json::to_string_pretty(&v)?);
         } else {
+            out!("{}", crate::log_part::text(parts));
             outln!("{note}.");
             for e in &est {
                 outln!(
