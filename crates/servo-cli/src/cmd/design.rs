@@ -278,23 +278,7 @@ impl Design {
                         "--meet-specs needs time-domain specs: --overshoot and one of --settling-time,                          --settling-time-1pct, --rise-time (e.g. --overshoot 0.1 --settling-time 0.15)"
                     )
                 })?;
-            let t0 = std::time::Instant::now();
-            let m = meet_specs(&MeetRequest {
-                base: req,
-                specs,
-                u_limit_v: self.u_limit,
-                derivative_on: structure.derivative_on,
-            })
-            .map_err(|e| anyhow!("{e}"))
-            .context("--meet-specs failed")?;
-            let elapsed_ms = t0.elapsed().as_secs_f64() * 1e3;
-            Outcome {
-                report: m.report.clone(),
-                structure: m.structure,
-                check: Some(m.check.clone()),
-                meet: Some((m, elapsed_ms)),
-                run_check: None,
-            }
+            self.meet_through_run(&req, specs, structure.derivative_on, &tr)?
         } else {
             let report = design(&req)
                 .map_err(|e| anyhow!("{e}"))
@@ -316,7 +300,11 @@ impl Design {
             }
         };
         let mut out = out;
-        if let (Some(sp), false) = (&out.check.as_ref().map(|c| c.specs), src.bare_reduced) {
+        if let (Some(sp), false, None) = (
+            &out.check.as_ref().map(|c| c.specs),
+            src.bare_reduced,
+            &out.run_check,
+        ) {
             let gains = self.gains_file(&out, &tr);
             out.run_check = Some(self.run_check(&gains, sp)?);
         }

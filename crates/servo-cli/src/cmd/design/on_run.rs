@@ -174,3 +174,93 @@ impl Design {
         }
     }
 }
+
+/// Spec margins of the successive searches of [`Design::meet_through_run`]: the search aims at
+/// the specs times this factor, until `servo run`'s loop meets the specs themselves (the search's
+/// linear loop model has no Coulomb friction, quantisation or noise).
+const MARGINS: [f64; 4] = [1.0, 0.8, 0.65, 0.5];
+
+impl Design {
+    /// `--meet-specs` closed through `servo run`: searches (servo_core::design::meet), checks the
+    /// result through the run loop on the design's plant, and when some case misses, searches
+    /// again with tighter targets; returns the first design that `servo run` meets, else the
+    /// one with the fewest missed cases (which the report then names).
+    pub(super) fn meet_through_run(
+        &self,
+        req: &DesignRequest,
+        specs: TimeSpecs,
+        derivative_on: DerivativeOn,
+        tr: &Translation,
+    ) -> anyhow::Result<Outcome> {
+        let t0 = std::time::Instant::now();
+        let mut best: Option<Outcome> = None;
+        for factor in MARGINS {
+            let aimed = TimeSpecs {
+                overshoot_max: specs.overshoot_max.map(|m| m * factor),
+                speed: specs.speed.map(|s| match s {
+                    SpeedTarget::Settling { band, time_s } => SpeedTarget::Settling {
+                        band,
+                        time_s: time_s * factor,
+                    },
+                    SpeedTarget::Rise { time_s } => SpeedTarget::Rise {
+                        time_s: time_s * factor,
+                    },
+                }),
+                ..specs
+            };
+            let mut m = match meet_specs(&MeetRequest {
+                base: *req,
+                specs: aimed,
+                u_limit_v: self.u_limit,
+                derivative_on,
+            }) {
+                Ok(m) => m,
+                Err(_) if best.is_some() => break,
+                Err(e) => return Err(anyhow!("{e}")).context("--meet-specs failed"),
+            };
+            if factor < 1.0 && !m.feasible {
+                break; // tighter than the loop can do: keep the last one
+            }
+            // The claim is about the user's specs: re-check the found design against them.
+            m.check = check_report(&m.report, &m.structure, &specs)
+                .map_err(|e| anyhow!("{e}"))
+                .context("checking the time-domain specs")?;
+            m.feasible = m.check.met();
+            let mut out = Outcome {
+                report: m.report.clone(),
+                structure: m.structure,
+                check: Some(m.check.clone()),
+                meet: Some((m, 0.0)),
+                run_check: None,
+            };
+            // (--km/--tm name no plant that `servo run` could simulate)
+            if self.km.is_some() {
+                return Ok(out);
+            }
+            let rc = self.run_check(&self.gains_file(&out, tr), &specs)?;
+            let missed = rc.failing().len();
+            out.run_check = Some(rc);
+            let better = best.as_ref().is_none_or(|b| {
+                missed
+                    < b.run_check
+                        .as_ref()
+                        .map_or(usize::MAX, |r| r.failing().len())
+            });
+            if better {
+                best = Some(out);
+            }
+            if missed == 0
+                && best
+                    .as_ref()
+                    .is_some_and(|b| b.check.as_ref().is_some_and(RangeCheck::met))
+            {
+                break;
+            }
+        }
+        let mut out = best.ok_or_else(|| anyhow!("--meet-specs found no design"))?;
+        if let Some((_, ms)) = out.meet.as_mut() {
+            *ms = t0.elapsed().as_secs_f64() * 1e3;
+        }
+        Ok(out)
+    }
+}
