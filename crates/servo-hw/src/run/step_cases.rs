@@ -37,6 +37,8 @@ impl StepStart {
 
     /// The case in words, with the `servo run --ref` that gives it.
     pub fn words(self, step_rad: f64) -> String {
+        // the step size to the micro-radian, without float noise (0.3, not 0.30000000000000004)
+        let step_rad = (step_rad * 1e6).round() / 1e6;
         match self {
             StepStart::AtStart => format!("step:{step_rad} (at t = 0)"),
             StepStart::Later => format!("step:{step_rad}@{LATER_STEP_S} (from rest, later)"),
