@@ -24,3 +24,4 @@ mod schemas;
 mod serial;
 mod sim;
 mod util;
+mod window;

@@ -29,6 +29,7 @@ pub mod fuzz;
 pub mod io;
 pub mod json_out;
 pub mod live;
+pub mod log_part;
 pub mod plant_args;
 pub mod plot;
 

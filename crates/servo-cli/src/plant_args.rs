@@ -108,6 +108,42 @@ fn parse_plant_effect(s: &str) -> Result<Effect, String> {
 }
 
 impl PlantArgs {
+    /// The plant in one word, as a gains file's `[design] plant` records it: the preset's name
+    /// (`lab`, `table2`) or the `--plant` file as given; `+effects` when `--plant-effect` adds
+    /// some.
+    pub fn key(&self) -> String {
+        let base = match &self.plant {
+            Some(p) => p.display().to_string(),
+            None => match self.plant_preset.unwrap_or(DEFAULT_PLANT) {
+                PlantPreset::Lab => "lab".to_string(),
+                PlantPreset::Table2 => "table2".to_string(),
+            },
+        };
+        if self.plant_effect.is_empty() {
+            base
+        } else {
+            format!("{base}+effects")
+        }
+    }
+
+    /// The plant in words, for the one line a simulating command prints.
+    pub fn words(&self) -> String {
+        let base = match &self.plant {
+            Some(p) => format!("the plant of {}", p.display()),
+            None => self
+                .plant_preset
+                .unwrap_or(DEFAULT_PLANT)
+                .describe()
+                .to_string(),
+        };
+        if self.plant_effect.is_empty() {
+            base
+        } else {
+            let e: Vec<String> = self.plant_effect.iter().map(|e| e.to_string()).collect();
+            format!("{base} with {}", e.join(", "))
+        }
+    }
+
     /// The plant and sensor configuration these options describe.
     pub fn load(&self) -> anyhow::Result<(Plant, SensorConfig)> {
         let preset = self.plant_preset.unwrap_or(DEFAULT_PLANT);

@@ -4,6 +4,8 @@
 //! `time_s[k]` and the voltage `u_v[k]` applied from then until row k+1. Measurements therefore lag
 //! the input by one sample.
 
+pub mod part;
+
 use alloc::string::String;
 use alloc::vec::Vec;
 
@@ -28,6 +30,9 @@ pub struct Record {
     pub i_a_a: Option<Vec<f64>>,
     /// Position reference [rad] at the load.
     pub ref_rad: Option<Vec<f64>>,
+    /// Drive enable / torque-on flag per sample (nonzero = on, 0 = off), when the log has one:
+    /// [`part::cut`] ends the usable part of the log at the first off sample.
+    pub enable: Option<Vec<f64>>,
 }
 
 impl Record {
@@ -48,6 +53,27 @@ impl Record {
         let mid = d.len() / 2;
         *d.select_nth_unstable_by(mid, f64::total_cmp).1
     }
+    /// Rows `a..b` of every signal (indices clamped to the length), same source.
+    pub fn slice(&self, a: usize, b: usize) -> Record {
+        let b = b.min(self.len());
+        let a = a.min(b);
+        let cut = |v: &Option<Vec<f64>>| {
+            v.as_ref()
+                .map(|v| v[a.min(v.len())..b.min(v.len())].to_vec())
+        };
+        Record {
+            source: self.source.clone(),
+            time_s: self.time_s[a..b].to_vec(),
+            u_v: cut(&self.u_v),
+            theta_l_rad: cut(&self.theta_l_rad),
+            theta_m_rad: cut(&self.theta_m_rad),
+            omega_l_rad_s: cut(&self.omega_l_rad_s),
+            omega_m_rad_s: cut(&self.omega_m_rad_s),
+            i_a_a: cut(&self.i_a_a),
+            ref_rad: cut(&self.ref_rad),
+            enable: cut(&self.enable),
+        }
+    }
     /// Names of the signals present, in the names users type (`u`, `theta_l`, ...).
     pub fn signals(&self) -> Vec<&'static str> {
         let mut v = Vec::new();
@@ -59,6 +85,7 @@ impl Record {
             ("omega_m", self.omega_m_rad_s.is_some()),
             ("i_a", self.i_a_a.is_some()),
             ("ref", self.ref_rad.is_some()),
+            ("enable", self.enable.is_some()),
         ] {
             if present {
                 v.push(name);

@@ -49,6 +49,7 @@ use servo_io::{LoopMsg, McapLog};
 
 pub mod experiments;
 pub mod logged;
+pub mod step_cases;
 
 /// The error a [`LogSink`] returns (any error type).
 pub type SinkError = Box<dyn std::error::Error + Send + Sync + 'static>;

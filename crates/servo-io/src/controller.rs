@@ -518,6 +518,8 @@ pub struct RunController {
     pub u_limit_v: f64,
     /// The PID (None without a gains file: open loop).
     pub pid: Option<PidConfig>,
+    /// The PID in one line, each part with where it came from ([`ResolvedPid::describe`]).
+    pub description: Option<String>,
 }
 
 /// The controller of a run: T_s from `ts_s` (`--ts`), else the gains file's `ts_s`, else 1 ms;
@@ -548,13 +550,14 @@ pub fn run_controller(
                 logged: None,
                 gains_file: Some(g),
             };
-            pid_config(&src, ts_s, Some((u_limit_v, String::new()))).map(|r| r.config)
+            pid_config(&src, ts_s, Some((u_limit_v, String::new())))
         })
         .transpose()?;
     Ok(RunController {
         ts_s,
         u_limit_v,
-        pid,
+        description: pid.as_ref().map(ResolvedPid::describe),
+        pid: pid.map(|r| r.config),
     })
 }
 

@@ -269,6 +269,7 @@ pub fn plausible_limit(signal: Signal) -> f64 {
         Signal::IA => 1e5,
         Signal::ThetaL | Signal::ThetaM | Signal::Ref => 1e9,
         Signal::OmegaL | Signal::OmegaM => 1e7,
+        Signal::Enable => 1e9,
     }
 }
 

@@ -31,6 +31,7 @@ pub fn signal_of(rec: &Record, signal: Signal) -> Option<&[f64]> {
         Signal::OmegaM => rec.omega_m_rad_s.as_deref(),
         Signal::IA => rec.i_a_a.as_deref(),
         Signal::Ref => rec.ref_rad.as_deref(),
+        Signal::Enable => rec.enable.as_deref(),
     }
 }
 

@@ -120,6 +120,39 @@ impl GainsFile {
         Ok(())
     }
 
+    /// What `[design]` says the gains were designed and checked for, against what a run uses:
+    /// one warning per difference. `plant_key`: the simulated plant as `[design] plant` writes it
+    /// (`lab`, `table2`, a file), `None` on a board; `discretization`: the rule the PID runs.
+    pub fn design_mismatches(
+        &self,
+        plant_key: Option<&str>,
+        discretization: servo_core::control::Discretization,
+    ) -> Vec<String> {
+        let Some(d) = &self.design else {
+            return Vec::new();
+        };
+        let mut out = Vec::new();
+        if let (Some(run), Some(designed)) = (plant_key, d.get("plant").and_then(|v| v.as_str())) {
+            if run != designed {
+                out.push(format!(
+                    "the gains were designed and checked for the plant `{designed}` ([design] plant) but this run simulates `{run}`: the design's figures (overshoot, settling, MET) do not apply; run with the design's plant (--plant-preset/--plant) or redesign for this one"
+                ));
+            }
+        }
+        if let Some(designed) = d.get("discretization").and_then(|v| v.as_str()) {
+            let run = match discretization {
+                servo_core::control::Discretization::BackwardEuler => "backward-euler",
+                servo_core::control::Discretization::Tustin => "tustin",
+            };
+            if run != designed {
+                out.push(format!(
+                    "the gains were designed for the {designed} discretisation ([design] discretization) but this run uses {run}"
+                ));
+            }
+        }
+        out
+    }
+
     /// Writes the file with units in comments.
     pub fn save(&self, path: &Path) -> anyhow::Result<()> {
         std::fs::write(path, self.to_toml_commented())

@@ -3,7 +3,8 @@
 //! Signal names are the ones users type in `--columns`: `time`, `u`, `theta_l`, `theta_m`,
 //! `omega_l`, `omega_m`, `i_a`, `ref`. Units (after a colon in `--columns`; SI when omitted):
 //! time `s`, `ms`, `us`; angle `rad`, `deg`, `rev`, `counts:N` (N counts per revolution); angular
-//! speed `rad/s`, `deg/s`, `rpm`, `rev/s`; voltage `V`, `mV`; current `A`, `mA`.
+//! speed `rad/s`, `deg/s`, `rpm`, `rev/s`; voltage `V`, `mV`; current `A`, `mA`. The `enable`
+//! signal (drive on / torque on: nonzero = on, 0 = off) has no unit (`flag`).
 
 use std::f64::consts::PI;
 use std::fmt;
@@ -19,6 +20,8 @@ pub enum Signal {
     OmegaM,
     IA,
     Ref,
+    /// Drive enable / torque-on flag: nonzero = the drive is on, 0 = off (the motor coasts).
+    Enable,
 }
 
 impl Signal {
@@ -34,6 +37,7 @@ impl Signal {
             Signal::OmegaM => rec.omega_m_rad_s = Some(col),
             Signal::IA => rec.i_a_a = Some(col),
             Signal::Ref => rec.ref_rad = Some(col),
+            Signal::Enable => rec.enable = Some(col),
         }
     }
 }
@@ -46,6 +50,8 @@ pub enum Dimension {
     AngularSpeed,
     Voltage,
     Current,
+    /// A flag without unit (nonzero = on).
+    Flag,
 }
 
 impl Dimension {
@@ -57,6 +63,7 @@ impl Dimension {
             Dimension::AngularSpeed => "rad/s, deg/s, rpm, rev/s",
             Dimension::Voltage => "V, mV",
             Dimension::Current => "A, mA",
+            Dimension::Flag => "flag (no unit: nonzero = on, 0 = off)",
         }
     }
     fn name(self) -> &'static str {
@@ -66,13 +73,14 @@ impl Dimension {
             Dimension::AngularSpeed => "an angular speed",
             Dimension::Voltage => "a voltage",
             Dimension::Current => "a current",
+            Dimension::Flag => "an on/off flag",
         }
     }
 }
 
 impl Signal {
     /// Every signal, in the order of servo's CSV columns.
-    pub const ALL: [Signal; 8] = [
+    pub const ALL: [Signal; 9] = [
         Signal::Time,
         Signal::U,
         Signal::ThetaL,
@@ -81,6 +89,7 @@ impl Signal {
         Signal::OmegaM,
         Signal::IA,
         Signal::Ref,
+        Signal::Enable,
     ];
 
     /// The name users type.
@@ -94,6 +103,7 @@ impl Signal {
             Signal::OmegaM => "omega_m",
             Signal::IA => "i_a",
             Signal::Ref => "ref",
+            Signal::Enable => "enable",
         }
     }
 
@@ -113,6 +123,7 @@ impl Signal {
             Signal::OmegaM => "omega_m_rad_s",
             Signal::IA => "i_a_A",
             Signal::Ref => "ref_rad",
+            Signal::Enable => "enable",
         }
     }
 
@@ -124,6 +135,7 @@ impl Signal {
             Signal::ThetaL | Signal::ThetaM | Signal::Ref => Dimension::Angle,
             Signal::OmegaL | Signal::OmegaM => Dimension::AngularSpeed,
             Signal::IA => Dimension::Current,
+            Signal::Enable => Dimension::Flag,
         }
     }
 
@@ -135,6 +147,7 @@ impl Signal {
             Dimension::AngularSpeed => Unit::RadPerS,
             Dimension::Voltage => Unit::Volt,
             Dimension::Current => Unit::Ampere,
+            Dimension::Flag => Unit::Flag,
         }
     }
 
@@ -170,12 +183,14 @@ pub enum Unit {
     Millivolt,
     Ampere,
     Milliampere,
+    /// No unit: an on/off flag (nonzero = on).
+    Flag,
 }
 
 /// Why a unit string could not be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum UnitError {
-    #[error("unknown unit `{0}`; known units: s, ms, us, rad, deg, rev, counts:N, rad/s, deg/s, rpm, rev/s, V, mV, A, mA")]
+    #[error("unknown unit `{0}`; known units: s, ms, us, rad, deg, rev, counts:N, rad/s, deg/s, rpm, rev/s, V, mV, A, mA, flag")]
     Unknown(String),
     #[error("`counts:N` needs N, the counts per revolution (> 0), got `{0}`")]
     BadCounts(String),
@@ -214,6 +229,7 @@ impl Unit {
             "mv" => Unit::Millivolt,
             "a" => Unit::Ampere,
             "ma" => Unit::Milliampere,
+            "flag" | "1" => Unit::Flag,
             "counts" => return Err(UnitError::BadCounts(String::new())),
             _ => return Err(UnitError::Unknown(t.to_string())),
         })
@@ -229,6 +245,7 @@ impl Unit {
             Unit::RadPerS | Unit::DegPerS | Unit::Rpm | Unit::RevPerS => Dimension::AngularSpeed,
             Unit::Volt | Unit::Millivolt => Dimension::Voltage,
             Unit::Ampere | Unit::Milliampere => Dimension::Current,
+            Unit::Flag => Dimension::Flag,
         }
     }
 
@@ -247,7 +264,9 @@ impl Unit {
     /// Factor from this unit to SI (value_si = value * factor).
     pub fn factor_to_si(self) -> f64 {
         match self {
-            Unit::Second | Unit::Rad | Unit::RadPerS | Unit::Volt | Unit::Ampere => 1.0,
+            Unit::Second | Unit::Rad | Unit::RadPerS | Unit::Volt | Unit::Ampere | Unit::Flag => {
+                1.0
+            }
             Unit::Millisecond | Unit::Millivolt | Unit::Milliampere => 1e-3,
             Unit::Microsecond => 1e-6,
             Unit::Nanosecond => 1e-9,
@@ -289,6 +308,7 @@ impl fmt::Display for Unit {
             Unit::Millivolt => f.write_str("mV"),
             Unit::Ampere => f.write_str("A"),
             Unit::Milliampere => f.write_str("mA"),
+            Unit::Flag => f.write_str("flag"),
         }
     }
 }

@@ -72,6 +72,8 @@ pub struct Compare {
     /// or MATLAB paths for .mat files (`theta_l=scope.signals(1).values(:,1):deg`).
     #[arg(long, value_name = "MAP")]
     pub columns: Option<String>,
+    #[command(flatten)]
+    pub part: crate::log_part::LogPartArgs,
     /// Gains of the controller that ran during the log (gains file of `servo design`): enables
     /// closed-loop replay; overrides the gains recorded in a `servo run` log.
     #[arg(long, value_name = "gains.toml")]
@@ -193,9 +195,15 @@ impl Compare {
             .collect::<anyhow::Result<_>>()?;
         let opts = CompareOptions::default();
         let mut logs = Vec::new();
-        for path in &self.logs {
-            let (mut record, meta) = crate::io::read_log_with_meta(path, self.columns.as_deref())
-                .with_context(|| format!("reading log {}", path.display()))?;
+        self.part.check(self.logs.len())?;
+        let mut parts = Vec::new();
+        for (k, path) in self.logs.iter().enumerate() {
+            let (mut record, mut meta) =
+                crate::io::read_log_with_meta(path, self.columns.as_deref())
+                    .with_context(|| format!("reading log {}", path.display()))?;
+            let used = self.part.apply(&mut record, path, k, self.logs.len())?;
+            meta.feedforward_v = meta.feedforward_v.map(|f| used.slice_of(&f).to_vec());
+            parts.push(used);
             // A lab log without u (angle, reference, current): the closed loop is replayed from
             // the controller and the reference; u is what that controller commanded.
             let no_u = record.u_v.is_none()
@@ -303,8 +311,10 @@ impl Compare {
             if let Some(s) = &saved {
                 v["save"] = s.json();
             }
+            v["log_parts"] = crate::log_part::json(&parts);
             crate::json_out::emit(&v)?;
         } else {
+            out!("{}", crate::log_part::text(&parts));
             print_text(
                 &logs,
                 &modes,

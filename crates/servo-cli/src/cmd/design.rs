@@ -2,6 +2,7 @@
 //! verified on the reduced model, the full model and the discrete loop at T_s.
 
 mod bode_plot;
+mod on_run;
 mod report_json;
 mod report_specs;
 mod report_text;
@@ -10,6 +11,7 @@ mod spec_plot;
 mod step_plot;
 mod words;
 
+use on_run::*;
 use report_specs::*;
 use report_text::*;
 use step_plot::*;
@@ -145,9 +147,15 @@ pub struct Design {
     /// Driver input limit [V] of the loop that runs (written to the gains file).
     #[arg(long = "u-limit", value_name = "VOLTS", default_value_t = 10.0)]
     pub u_limit: f64,
-    /// Plant parameter file (TOML, see `servo params`); default Table 2.
-    #[arg(long, value_name = "FILE")]
+    /// Plant parameter file (TOML, see `servo params`; the same file as `servo run --plant`);
+    /// default: `--plant-preset`.
+    #[arg(long, value_name = "FILE", conflicts_with = "plant_preset")]
     pub params: Option<PathBuf>,
+    /// A built-in plant: `lab` (the default, as `servo run`'s: Table 2 with measured friction;
+    /// the design uses its linear part, the check through `servo run`'s loop all of it) or
+    /// `table2` (the handout's Table 2 without friction).
+    #[arg(long = "plant-preset", value_enum, value_name = "PRESET")]
+    pub plant_preset: Option<crate::plant_args::PlantPreset>,
     /// Reduced model given directly: k_m [rad/(V s)] (needs --tm; N from --params or 14).
     #[arg(long, value_name = "RAD_PER_V_S", requires = "tm")]
     pub km: Option<f64>,
@@ -184,7 +192,13 @@ impl Design {
                 let plant = file.plant()?;
                 (plant.linear_params(), format!("{}", p.display()))
             }
-            None => (PlantParams::TABLE2, "Table 2 (nominal)".to_string()),
+            None => {
+                let preset = self
+                    .plant_preset
+                    .unwrap_or(crate::plant_args::DEFAULT_PLANT);
+                let plant = preset.model_file().plant()?;
+                (plant.linear_params(), preset.describe().to_string())
+            }
         };
         Ok(PlantSource {
             params,
@@ -264,22 +278,7 @@ impl Design {
                         "--meet-specs needs time-domain specs: --overshoot and one of --settling-time,                          --settling-time-1pct, --rise-time (e.g. --overshoot 0.1 --settling-time 0.15)"
                     )
                 })?;
-            let t0 = std::time::Instant::now();
-            let m = meet_specs(&MeetRequest {
-                base: req,
-                specs,
-                u_limit_v: self.u_limit,
-                derivative_on: structure.derivative_on,
-            })
-            .map_err(|e| anyhow!("{e}"))
-            .context("--meet-specs failed")?;
-            let elapsed_ms = t0.elapsed().as_secs_f64() * 1e3;
-            Outcome {
-                report: m.report.clone(),
-                structure: m.structure,
-                check: Some(m.check.clone()),
-                meet: Some((m, elapsed_ms)),
-            }
+            self.meet_through_run(&req, specs, structure.derivative_on, &tr)?
         } else {
             let report = design(&req)
                 .map_err(|e| anyhow!("{e}"))
@@ -297,8 +296,18 @@ impl Design {
                 structure,
                 check,
                 meet: None,
+                run_check: None,
             }
         };
+        let mut out = out;
+        if let (Some(sp), false, None) = (
+            &out.check.as_ref().map(|c| c.specs),
+            src.bare_reduced,
+            &out.run_check,
+        ) {
+            let gains = self.gains_file(&out, &tr);
+            out.run_check = Some(self.run_check(&gains, sp)?);
+        }
         let report = &out.report;
 
         if let Some(path) = &self.output {
@@ -341,6 +350,16 @@ struct Outcome {
     check: Option<RangeCheck>,
     /// The --meet-specs search and its run time [ms].
     meet: Option<(MeetResult, f64)>,
+    /// The time-domain specs checked through `servo run`'s loop on the design's plant.
+    run_check: Option<RunCheck>,
+}
+
+impl Outcome {
+    /// Whether the time-domain specs are met: on the design's loop model and through `servo run`.
+    fn time_specs_met(&self) -> Option<bool> {
+        let c = self.check.as_ref()?;
+        Some(c.met() && self.run_check.as_ref().is_none_or(RunCheck::met))
+    }
 }
 
 /// Writes to stdout; a closed pipe (`servo design | head`) is not an error.

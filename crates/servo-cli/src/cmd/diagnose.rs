@@ -39,6 +39,8 @@ pub struct Diagnose {
     /// paths for .mat files (`theta_l=scope.signals(1).values(:,1):deg`).
     #[arg(long)]
     pub columns: Option<String>,
+    #[command(flatten)]
+    pub part: crate::log_part::LogPartArgs,
     /// Print one JSON object `{ "ranking": [...], "verdict": ... }` instead of text.
     #[arg(long)]
     pub json: bool,
@@ -110,12 +112,15 @@ impl Diagnose {
         let model_file = ModelFile::load(&self.model)?;
         let model = model_file.plant()?;
         let mut records = Vec::new();
-        for p in &self.logs {
-            let r = servo_core::diagnose::timing::timed(
+        self.part.check(self.logs.len())?;
+        let mut parts = Vec::new();
+        for (k, p) in self.logs.iter().enumerate() {
+            let mut r = servo_core::diagnose::timing::timed(
                 || format!("read {}", p.display()),
                 || read_log(p, self.columns.as_deref()),
             )
             .with_context(|| format!("reading log {}", p.display()))?;
+            parts.push(self.part.apply(&mut r, p, k, self.logs.len())?);
             records.push(r);
         }
         if !(self.filter_hz > 0.0 && self.filter_hz.is_finite()) {
@@ -199,6 +204,7 @@ impl Diagnose {
                 "ranking": last.ranking.iter().map(|c| candidate_json(c, &opts)).collect::<Vec<_>>(),
                 "verdict": last.verdict,
                 "base": base_json(first),
+                "log_parts": crate::log_part::json(&parts),
             });
             user.add_json(&mut v);
             if let (Some(g), Some(p)) = (&gate, &self.save) {
@@ -216,6 +222,7 @@ impl Diagnose {
             }
             crate::json_out::emit(&v)?;
         } else {
+            out!("{}", crate::log_part::text(&parts));
             out!("{}", text_report(first, &ladder, &diags, self.auto, &opts));
             out!("{}", user.text());
             if let Some(p) = &self.save_effect {

@@ -25,6 +25,9 @@ pub struct Export {
     /// or MATLAB paths for a .mat input (`time=scope.time,theta_l=scope.signals(1).values:deg`).
     #[arg(long, value_name = "MAP")]
     pub columns: Option<String>,
+    /// Export only this part (and, with an `enable` column, only where the drive was on).
+    #[command(flatten)]
+    pub part: crate::log_part::LogPartArgs,
 }
 
 impl Export {
@@ -48,10 +51,13 @@ impl Export {
             );
         }
         let out_fmt = format(&output)?;
-        let (rec, meta) = read_log_with_meta(&self.input, self.columns.as_deref())?;
+        let (mut rec, mut meta) = read_log_with_meta(&self.input, self.columns.as_deref())?;
         for n in &meta.notes {
             eprintln!("note: {n}");
         }
+        let used = self.part.apply(&mut rec, &self.input, 0, 1)?;
+        meta.feedforward_v = meta.feedforward_v.map(|f| used.slice_of(&f).to_vec());
+        out!("{}", crate::log_part::text(std::slice::from_ref(&used)));
         match out_fmt {
             "csv" => write_csv(&output, &rec)?,
             "mcap" => {

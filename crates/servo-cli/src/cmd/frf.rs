@@ -48,6 +48,8 @@ pub struct Frf {
     /// Column map for foreign CSVs, e.g. `time=t_s,theta_l=thl_meas_deg:deg,u=u_V,ref=thl_ref_deg:deg`.
     #[arg(long, value_name = "MAP")]
     pub columns: Option<String>,
+    #[command(flatten)]
+    pub part: crate::log_part::LogPartArgs,
     /// Averaging segment [s] (default: the largest power-of-two length giving ~16 averages).
     #[arg(long, value_name = "S")]
     pub segment_s: Option<f64>,
@@ -77,14 +79,23 @@ impl Frf {
             .map(|p| GainsFile::load(p))
             .transpose()?;
         let mut logs = Vec::new();
-        for p in &self.logs {
+        self.part.check(self.logs.len())?;
+        let mut parts = Vec::new();
+        for (k, p) in self.logs.iter().enumerate() {
             // Only the signals the estimate uses are read.
-            let (rec, meta) = read_log_signals(
+            let (mut rec, meta) = read_log_signals(
                 p,
                 self.columns.as_deref(),
-                Some(&[Signal::Time, Signal::U, Signal::ThetaL, Signal::Ref]),
+                Some(&[
+                    Signal::Time,
+                    Signal::U,
+                    Signal::ThetaL,
+                    Signal::Ref,
+                    Signal::Enable,
+                ]),
             )
             .with_context(|| format!("reading {}", p.display()))?;
+            parts.push(self.part.apply(&mut rec, p, k, self.logs.len())?);
             if !self.json {
                 for n in &meta.notes {
                     eprintln!("note: {n}");
@@ -162,8 +173,12 @@ impl Frf {
         })?;
         let names: Vec<String> = logs.iter().map(|l| l.name.clone()).collect();
         if self.json {
-            outln!("{}", json_document(&a, &names)?);
+            outln!(
+                "{}",
+                json_document(&a, &names, crate::log_part::json(&parts))?
+            );
         } else {
+            out!("{}", crate::log_part::text(&parts));
             print_text(&a, logs.len());
         }
         if let Some(path) = &self.plot {

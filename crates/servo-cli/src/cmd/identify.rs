@@ -68,6 +68,9 @@ pub struct Identify {
     #[arg(long = "columns", value_name = "MAP")]
     pub columns: Vec<String>,
 
+    #[command(flatten)]
+    pub part: crate::log_part::LogPartArgs,
+
     /// Method; default: every method the data supports.
     #[arg(long = "method", value_enum)]
     pub method: Option<Method>,
@@ -182,16 +185,19 @@ impl Identify {
                 self.logs.len()
             );
         }
+        self.part.check(self.logs.len())?;
         let mut records = Vec::new();
         let mut logs: Vec<PathBuf> = Vec::new();
+        let mut parts = Vec::new();
         for (k, path) in self.logs.iter().enumerate() {
             let cols = match self.columns.len() {
                 0 => None,
                 1 => Some(self.columns[0].as_str()),
                 _ => Some(self.columns[k].as_str()),
             };
-            let rec = crate::io::read_log(path, cols)
+            let mut rec = crate::io::read_log(path, cols)
                 .with_context(|| format!("reading log {}", path.display()))?;
+            parts.push(self.part.apply(&mut rec, path, k, self.logs.len())?);
             records.push(rec);
             logs.push(path.clone());
         }
@@ -217,7 +223,7 @@ impl Identify {
         });
         if needs_u_driven_balance(&records) || (declares && records.iter().all(|r| r.u_v.is_some()))
         {
-            return self.run_without_current(&records, &logs, params);
+            return self.run_without_current(&records, &logs, &parts, params);
         }
         let mut exps = Vec::new();
         for (rec, path) in records.iter().zip(&logs) {
@@ -227,8 +233,11 @@ impl Identify {
         }
         let report = identify(&exps, &params.params, &self.options())?;
         if self.json {
-            crate::json_out::emit(&self.json_report(&report, &logs))?;
+            let mut v = self.json_report(&report, &logs);
+            v["log_parts"] = crate::log_part::json(&parts);
+            crate::json_out::emit(&v)?;
         } else {
+            out!("{}", crate::log_part::text(&parts));
             out!("{}", self.text_report(&report, &logs, &params.params));
         }
         if let Some(path) = &self.plot {

@@ -8,6 +8,8 @@
 //! servo run --experiment experiments/steps.toml --gains gains.toml --log steps.mcap
 //! ```
 
+mod said;
+
 use crate::gains_file::GainsFile;
 use crate::io::{meta_keys, write_csv, McapLog, McapLogOptions};
 use crate::live;
@@ -221,6 +223,7 @@ impl Run {
         let gains_src = gains.as_ref().zip(gains_name.as_deref());
         let ctl = run_controller(gains_src, &self.pid, self.ts, self.u_limit)?;
         let (ts_s, u_limit_v, pid) = (ctl.ts_s, ctl.u_limit_v, ctl.pid);
+        self.say_plant_and_controller(gains.as_ref(), pid.as_ref(), ctl.description.as_deref());
         let model = match &self.model {
             Some(p) => Some(ModelFile::load(p).context("--model")?),
             None => None,

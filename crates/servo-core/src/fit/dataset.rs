@@ -335,6 +335,7 @@ impl Dataset {
                 omega_m_rad_s: None,
                 i_a_a: r.i_raw.clone(),
                 ref_rad: None,
+                enable: None,
             });
         }
         Self::prepared(
@@ -472,6 +473,7 @@ fn slice(r: &Record, a: usize, b: usize) -> Record {
         omega_m_rad_s: cut(&r.omega_m_rad_s),
         i_a_a: cut(&r.i_a_a),
         ref_rad: cut(&r.ref_rad),
+        enable: cut(&r.enable),
     }
 }
 

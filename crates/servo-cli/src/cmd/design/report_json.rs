@@ -42,6 +42,7 @@ impl super::Design {
                 "discrete": achieved_json(&r.discrete),
             },
             "time_specs": out.check.as_ref().map(check_json),
+            "run_check": out.run_check.as_ref().map(run_json),
             "transfer_functions": tf_json(r, st),
         })
     }

@@ -50,7 +50,7 @@ impl super::Design {
             deg(dphi)
         );
         if let Some((m, ms)) = &out.meet {
-            meet_section(&mut s, m, *ms, tr, self);
+            meet_section(&mut s, m, *ms, tr, self, out.run_check.as_ref());
         }
         let _ = writeln!(
             s,
@@ -224,6 +224,9 @@ impl super::Design {
         }
         if let Some(c) = &out.check {
             check_section(&mut s, c, r, out.meet.is_some());
+        }
+        if let Some(rc) = &out.run_check {
+            run_section(&mut s, rc);
         }
         s
     }

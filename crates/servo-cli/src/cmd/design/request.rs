@@ -104,6 +104,8 @@ impl super::Design {
             r.request.discretization.name().into(),
         );
         d.insert("exact".into(), self.exact.into());
+        // What the design assumed, for `servo run` to compare with what it runs.
+        d.insert("plant".into(), self.plant_key().into());
         d.insert("meet_specs".into(), self.meet_specs.into());
         if self.meet_specs {
             d.insert("translated_wgc_rad_s".into(), tr.spec.omega_gc.into());
@@ -127,7 +129,10 @@ impl super::Design {
             if let Some(t) = c.worst_speed_s {
                 d.insert(format!("achieved_worst_{}", speed_key(&c.specs)), t.into());
             }
-            d.insert("time_specs_met".into(), c.met().into());
+            d.insert(
+                "time_specs_met".into(),
+                out.time_specs_met().unwrap_or(false).into(),
+            );
         }
         GainsFile {
             pid: PidSection {

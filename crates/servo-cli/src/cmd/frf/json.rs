@@ -8,7 +8,11 @@ use serde_json::{json, Value};
 use servo_core::frf::analysis::FrfAnalysis;
 
 /// The `servo.frf/1` document of an analysis of the logs `names`.
-pub(super) fn json_document(a: &FrfAnalysis, names: &[String]) -> anyhow::Result<String> {
+pub(super) fn json_document(
+    a: &FrfAnalysis,
+    names: &[String],
+    log_parts: Value,
+) -> anyhow::Result<String> {
     let mut frf = vec![("plant", points(&a.plant, -90.0))];
     if let Some(l) = &a.loop_frf {
         frf.push(("loop", points(l, -180.0)));
@@ -47,6 +51,7 @@ pub(super) fn json_document(a: &FrfAnalysis, names: &[String]) -> anyhow::Result
         })),
         "amplitude": a.amplitude.as_ref().map(|x| json!({"gain_change_db": x.gain_change_db, "bound_db": x.bound_db, "significant": x.significant, "sentence": x.sentence, "u_rms_v": a.u_rms_v})),
         "notes": a.notes,
+        "log_parts": log_parts,
     });
     let Value::Object(rest) = &out else {
         anyhow::bail!("internal error: the JSON document is not an object");

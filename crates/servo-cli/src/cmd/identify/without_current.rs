@@ -11,6 +11,7 @@ impl super::Identify {
         &self,
         records: &[servo_core::record::Record],
         logs: &[PathBuf],
+        parts: &[servo_core::record::part::UsedPart],
         mut params: ModelFile,
     ) -> anyhow::Result<()> {
         use servo_core::fit::udriven::{
@@ -83,6 +84,7 @@ impl super::Identify {
                 "drive_constant_tolerance": DRIVE_CONSTANT_TOLERANCE,
                 "logs": logs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
                 "not_identified": [],
+                "log_parts": crate::log_part::json(parts),
             });
             for e in &est {
                 // keys of the JSON convention (docs/schemas/README.md): quantity and SI unit
@@ -101,8 +103,9 @@ impl super::Identify {
                     "widening": (e.std_err > 0.0).then(|| e.std_err_total / e.std_err),
                 });
             }
-            outln!("{}", serde_json::to_string_pretty(&v)?);
+            crate::json_out::emit(&v)?;
         } else {
+            out!("{}", crate::log_part::text(parts));
             for note in &notes {
                 outln!("{note}.");
             }
