@@ -193,9 +193,35 @@ pub fn read_log_signals(
     columns: Option<&str>,
     want: Option<&[Signal]>,
 ) -> anyhow::Result<(Record, LogMeta)> {
+    read_log_on(path, columns, want, &servo_core::Transmission::GEAR)
+}
+
+/// [`read_log`] on the axis of a model file: printing the notes as [`read_log`] does.
+pub fn read_log_axis(
+    path: &Path,
+    columns: Option<&str>,
+    axis: &servo_core::Transmission,
+) -> anyhow::Result<Record> {
+    let (rec, meta) = read_log_on(path, columns, None, axis)?;
+    for n in &meta.notes {
+        eprintln!("note: {n}");
+    }
+    Ok(rec)
+}
+
+/// [`read_log_signals`] on the axis `axis` (from the model file's `[transmission]`): a CSV or
+/// MAT column in a length or linear speed unit (`x=q:mm`, `v_x=v:m/s`) becomes the load shaft's
+/// equivalent rotation [rad] (x / s, s the axis' travel per radian); on a rotary gear such a
+/// column is refused with a message naming it. An MCAP log holds the equivalent rotation itself.
+pub fn read_log_on(
+    path: &Path,
+    columns: Option<&str>,
+    want: Option<&[Signal]>,
+    axis: &servo_core::Transmission,
+) -> anyhow::Result<(Record, LogMeta)> {
     match LogFormat::of(path)? {
         LogFormat::Csv => {
-            let imp = csv_read::read_csv_signals(path, columns, want)?;
+            let imp = csv_read::read_csv_on(path, columns, want, axis)?;
             Ok((
                 imp.record,
                 LogMeta {
@@ -206,7 +232,7 @@ pub fn read_log_signals(
             ))
         }
         LogFormat::Mat => {
-            let imp = mat_log::read_mat_log(path, columns)?;
+            let imp = mat_log::read_mat_log_on(path, columns, axis)?;
             Ok((
                 imp.record,
                 LogMeta {
