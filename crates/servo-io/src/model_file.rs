@@ -519,7 +519,7 @@ mod tests {
         for (bad, needle) in [
             ("[transmission]\nkind = \"screw\"\n", "lead_m"),
             ("[transmission]\nkind = \"belt\"\nlead_m = 0.01\n", "radius_m"),
-            ("[transmission]\nkind = \"screw\"\nlead_m = 10.0\n", "lead_m"),
+            ("[transmission]\nkind = \"screw\"\nlead_m = 20.0\n", "lead_m"),
             ("[transmission]\nkind = \"worm\"\n", "worm"),
             ("[transmission]\nencoder = \"hub\"\n", "hub"),
             ("[transmission]\nm_eq_kg = 5.0\n", "a gear takes [params] j_eq"),
