@@ -20,4 +20,5 @@ mod run_log;
 mod schemas;
 mod serial;
 mod sim;
+mod transmission;
 mod util;

@@ -308,7 +308,10 @@ mod tests {
             Transmission::linear_key("tau_sf_pos", "N").as_str(),
             "tau_sf_pos_n"
         );
-        assert_eq!(Transmission::linear_key("omega_s", "m/s").as_str(), "omega_s_m_s");
+        assert_eq!(
+            Transmission::linear_key("omega_s", "m/s").as_str(),
+            "omega_s_m_s"
+        );
     }
 
     #[test]

@@ -398,7 +398,10 @@ mod tests {
         let m = ColumnMap::parse("time=t:s,x=q:mm,u=u_V:V,i_a=ia:A,v_x=v:m/s,ref=r:um").unwrap();
         assert_eq!(m.get(Signal::ThetaL).unwrap().unit, Unit::Millimetre);
         assert_eq!(m.get(Signal::OmegaL).unwrap().unit, Unit::MetrePerS);
-        assert_eq!(m.to_string(), "time=t,x=q:mm,u=u_V,i_a=ia,v_x=v:m/s,ref=r:um");
+        assert_eq!(
+            m.to_string(),
+            "time=t,x=q:mm,u=u_V,i_a=ia,v_x=v:m/s,ref=r:um"
+        );
         assert_eq!(ColumnMap::parse(&m.to_string()).unwrap(), m);
         assert!(ColumnMap::parse("time=t,theta_l=q:m").is_ok());
         let e = format!("{:#}", ColumnMap::parse("time=t,theta_m=q:m").unwrap_err());
@@ -409,7 +412,10 @@ mod tests {
         );
         assert!(e.contains("`q`") && e.contains("[transmission]"), "{e}");
         let own = ColumnMap::servo_own(&["time_s", "u_V", "x_m", "i_a_A", "ref_m"]).unwrap();
-        assert_eq!(own.to_string(), "time=time_s,u=u_V,x=x_m:m,i_a=i_a_A,ref=ref_m:m");
+        assert_eq!(
+            own.to_string(),
+            "time=time_s,u=u_V,x=x_m:m,i_a=i_a_A,ref=ref_m:m"
+        );
         let (g, ign) =
             ColumnMap::guess(&["t_s", "x_mm", "theta_m", "pos_ref_mm", "u_V", "v_x_mm_s"]).unwrap();
         assert_eq!(

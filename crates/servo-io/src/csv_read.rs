@@ -138,9 +138,7 @@ pub fn parse_csv_on(
         })?;
         idx.push(i);
     }
-    let factors = map
-        .factors_on(axis)
-        .with_context(|| source.to_string())?;
+    let factors = map.factors_on(axis).with_context(|| source.to_string())?;
     // The mapped columns read: (entry, column index, values, non-finite count, factor to the
     // record's unit).
     #[allow(clippy::type_complexity)]

@@ -64,9 +64,7 @@ pub fn import_on(
         let p = MatPath::parse(&e.column).map_err(|m| anyhow!("--columns `{}`: {m}", e.signal))?;
         resolve(file, &p).map_err(|m| anyhow!("{source}: signal `{}`: {m}", e.signal))
     };
-    let factors = map
-        .factors_on(axis)
-        .with_context(|| source.to_string())?;
+    let factors = map.factors_on(axis).with_context(|| source.to_string())?;
     let time_spec = map
         .get(Signal::Time)
         .ok_or_else(|| anyhow!("--columns: `time=<path>` is required"))?;

@@ -397,9 +397,9 @@ impl ModelFile {
         let linear = self.transmission.is_linear();
         for (k, v, doc) in opt {
             match v {
-                _ if linear => {
-                    s.push_str(&format!("# {k}: a linear axis gives it in [transmission]\n"))
-                }
+                _ if linear => s.push_str(&format!(
+                    "# {k}: a linear axis gives it in [transmission]\n"
+                )),
                 Some(v) => s.push_str(&format!("{k} = {v:e}  # {doc}\n")),
                 None => s.push_str(&format!("# {k} = ...  # {doc}\n")),
             }
@@ -447,20 +447,25 @@ impl ModelFile {
 
 /// The commented `[transmission]` table.
 fn transmission_toml(t: &RawTransmission) -> String {
-    let mut s = String::from(
-        "\n[transmission]  # between the motor (after its gearbox n) and the load\n",
-    );
+    let mut s =
+        String::from("\n[transmission]  # between the motor (after its gearbox n) and the load\n");
     let kind = match t.kind {
         RawKind::Gear => "gear",
         RawKind::Screw => "screw",
         RawKind::Belt => "belt",
     };
-    s.push_str(&format!("kind = \"{kind}\"  # gear | screw | belt (or rack)\n"));
+    s.push_str(&format!(
+        "kind = \"{kind}\"  # gear | screw | belt (or rack)\n"
+    ));
     if let Some(v) = t.lead_m {
-        s.push_str(&format!("lead_m = {v:e}  # travel per screw revolution [m]\n"));
+        s.push_str(&format!(
+            "lead_m = {v:e}  # travel per screw revolution [m]\n"
+        ));
     }
     if let Some(v) = t.radius_m {
-        s.push_str(&format!("radius_m = {v:e}  # pulley or pinion radius [m]\n"));
+        s.push_str(&format!(
+            "radius_m = {v:e}  # pulley or pinion radius [m]\n"
+        ));
     }
     let enc = match t.encoder {
         RawEncoder::Load => "load",
@@ -471,8 +476,16 @@ fn transmission_toml(t: &RawTransmission) -> String {
         "encoder = \"{enc}\"  # load | motor | both: where the position encoder sits\n"
     ));
     let rows = [
-        ("m_eq_kg", t.m_eq_kg, "total mass at the load, motor and screw included [kg]"),
-        ("b_eq_n_s_m", t.b_eq_n_s_m, "viscous friction at the load [N s/m]"),
+        (
+            "m_eq_kg",
+            t.m_eq_kg,
+            "total mass at the load, motor and screw included [kg]",
+        ),
+        (
+            "b_eq_n_s_m",
+            t.b_eq_n_s_m,
+            "viscous friction at the load [N s/m]",
+        ),
         ("f_c_n", t.f_c_n, "Coulomb friction at the load [N]"),
     ];
     for (k, v, doc) in rows {
@@ -501,7 +514,10 @@ mod tests {
         assert!((m.params.j_eq.unwrap() - 5.0 * s * s / (n * n)).abs() < 1e-18);
         assert!((m.params.tau_sf.unwrap() - 12.0 * s).abs() < 1e-15);
         let text = m.to_toml_commented();
-        assert!(text.contains("m_eq_kg = 5") && !text.contains("\nj_eq ="), "{text}");
+        assert!(
+            text.contains("m_eq_kg = 5") && !text.contains("\nj_eq ="),
+            "{text}"
+        );
         let back = ModelFile::parse(&text).unwrap();
         assert!((back.params.j_eq.unwrap() / m.params.j_eq.unwrap() - 1.0).abs() < 1e-12);
         assert!((back.params.b_eq.unwrap() / m.params.b_eq.unwrap() - 1.0).abs() < 1e-12);
@@ -510,7 +526,10 @@ mod tests {
         let back: ModelFile = serde_json::from_str(&json).unwrap();
         assert!((back.params.tau_sf.unwrap() / m.params.tau_sf.unwrap() - 1.0).abs() < 1e-12);
         // A file without [transmission] is a gear with a load-side encoder.
-        assert_eq!(ModelFile::parse(&good).unwrap().transmission, Transmission::GEAR);
+        assert_eq!(
+            ModelFile::parse(&good).unwrap().transmission,
+            Transmission::GEAR
+        );
     }
 
     #[test]
@@ -518,19 +537,37 @@ mod tests {
         let good = ModelFile::default().to_toml_commented();
         for (bad, needle) in [
             ("[transmission]\nkind = \"screw\"\n", "lead_m"),
-            ("[transmission]\nkind = \"belt\"\nlead_m = 0.01\n", "radius_m"),
-            ("[transmission]\nkind = \"screw\"\nlead_m = 20.0\n", "lead_m"),
+            (
+                "[transmission]\nkind = \"belt\"\nlead_m = 0.01\n",
+                "radius_m",
+            ),
+            (
+                "[transmission]\nkind = \"screw\"\nlead_m = 20.0\n",
+                "lead_m",
+            ),
             ("[transmission]\nkind = \"worm\"\n", "worm"),
             ("[transmission]\nencoder = \"hub\"\n", "hub"),
-            ("[transmission]\nm_eq_kg = 5.0\n", "a gear takes [params] j_eq"),
-            ("[transmission]\nkind = \"belt\"\nradius_m = 0.02\nefficiency = 0.9\n", "efficiency"),
+            (
+                "[transmission]\nm_eq_kg = 5.0\n",
+                "a gear takes [params] j_eq",
+            ),
+            (
+                "[transmission]\nkind = \"belt\"\nradius_m = 0.02\nefficiency = 0.9\n",
+                "efficiency",
+            ),
         ] {
-            let e = format!("{:#}", ModelFile::parse(&format!("{good}\n{bad}")).unwrap_err());
+            let e = format!(
+                "{:#}",
+                ModelFile::parse(&format!("{good}\n{bad}")).unwrap_err()
+            );
             assert!(e.contains(needle), "{bad}: {e}");
         }
         // One quantity twice: the mass in [transmission] and J_eq in [params].
         let twice = good.replace("# j_eq = ...", "j_eq = 1e-5");
-        let e = format!("{:#}", ModelFile::parse(&format!("{twice}{SCREW}")).unwrap_err());
+        let e = format!(
+            "{:#}",
+            ModelFile::parse(&format!("{twice}{SCREW}")).unwrap_err()
+        );
         assert!(e.contains("twice") && e.contains("m_eq_kg"), "{e}");
     }
 

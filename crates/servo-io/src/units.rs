@@ -444,7 +444,10 @@ mod tests {
             .unwrap()
             .check_for(Signal::ThetaM, "m")
             .is_err());
-        assert!(Unit::parse("N").unwrap().check_for(Signal::IA, "N").is_err());
+        assert!(Unit::parse("N")
+            .unwrap()
+            .check_for(Signal::IA, "N")
+            .is_err());
     }
 
     #[test]
@@ -459,8 +462,14 @@ mod tests {
         assert!((10.0 * f - 2.0 * PI).abs() < 1e-12);
         let f = Unit::parse("m/s").unwrap().factor_on(&screw).unwrap();
         assert!((0.01 * f - 2.0 * PI).abs() < 1e-12);
-        assert_eq!(Unit::parse("um").unwrap().factor_on(&Transmission::GEAR), None);
-        assert_eq!(Unit::parse("deg").unwrap().factor_on(&screw), Some(PI / 180.0));
+        assert_eq!(
+            Unit::parse("um").unwrap().factor_on(&Transmission::GEAR),
+            None
+        );
+        assert_eq!(
+            Unit::parse("deg").unwrap().factor_on(&screw),
+            Some(PI / 180.0)
+        );
         assert_eq!(Signal::from_name("x"), Some(Signal::ThetaL));
         assert_eq!(Signal::from_name("v_x"), Some(Signal::OmegaL));
     }

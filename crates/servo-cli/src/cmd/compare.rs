@@ -186,8 +186,13 @@ impl Compare {
         let opts = CompareOptions::default();
         let mut logs = Vec::new();
         for path in &self.logs {
-            let (mut record, meta) = crate::io::read_log_with_meta(path, self.columns.as_deref())
-                .with_context(|| format!("reading log {}", path.display()))?;
+            let (mut record, meta) = crate::io::read_log_on(
+                path,
+                self.columns.as_deref(),
+                None,
+                &model_file.transmission,
+            )
+            .with_context(|| format!("reading log {}", path.display()))?;
             // A lab log without u (angle, reference, current): the closed loop is replayed from
             // the controller and the reference; u is what that controller commanded.
             let no_u = record.u_v.is_none()
@@ -261,6 +266,7 @@ impl Compare {
         if let Some(path) = &self.save {
             let mut mf = ModelFile::from_plant(&plant);
             mf.sensors = model_file.sensors;
+            mf.transmission = model_file.transmission;
             let mut prov = model_file.provenance.clone().unwrap_or_default();
             prov.insert(
                 "compare_model".into(),

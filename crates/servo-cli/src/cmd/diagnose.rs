@@ -12,7 +12,6 @@ use report_html::*;
 use report_json::*;
 use report_text::*;
 
-use crate::io::read_log;
 use crate::model_file::ModelFile;
 use crate::plot::{line_chart_svg, Chart, Series};
 use anyhow::{anyhow, Context};
@@ -104,7 +103,7 @@ impl Diagnose {
         for p in &self.logs {
             let r = servo_core::diagnose::timing::timed(
                 || format!("read {}", p.display()),
-                || read_log(p, self.columns.as_deref()),
+                || crate::io::read_log_axis(p, self.columns.as_deref(), &model_file.transmission),
             )
             .with_context(|| format!("reading log {}", p.display()))?;
             records.push(r);
@@ -169,6 +168,9 @@ impl Diagnose {
                 "base": base_json(first),
             });
             user.add_json(&mut v);
+            if let Some(axis) = crate::axis::Axis::of(&model_file) {
+                linear_json(&mut v, &axis, first, last, &ladder);
+            }
             if self.auto {
                 v["ladder"] = Value::Array(ladder.iter().map(rung_json).collect());
                 v["first_ranking"] =
@@ -177,6 +179,9 @@ impl Diagnose {
             outln!("{}", serde_json::to_string_pretty(&v)?);
         } else {
             out!("{}", text_report(first, &ladder, &diags, self.auto));
+            if let Some(axis) = crate::axis::Axis::of(&model_file) {
+                out!("{}", linear_text(&axis, last, &ladder));
+            }
             out!("{}", user.text());
             if let Some(p) = &self.save_effect {
                 outln!("discovered effect written to {}", p.display());
@@ -194,6 +199,7 @@ impl Diagnose {
             let final_plant = ladder.last().map(|r| r.plant).unwrap_or(model);
             let mut mf = ModelFile::from_plant(&final_plant);
             mf.sensors = model_file.sensors;
+            mf.transmission = model_file.transmission;
             mf.provenance = model_file.provenance.clone();
             mf.save(path)?;
             if !self.json {

@@ -27,7 +27,6 @@ use servo_core::ident::combined::CombinedConfig;
 use servo_core::ident::friction::FrictionConfig;
 use servo_core::ident::phases::PhaseConfig;
 use servo_core::ident::{Estimate, Experiment};
-use servo_core::PlantParams;
 use std::path::PathBuf;
 
 use crate::model_file::ModelFile;
@@ -184,7 +183,7 @@ impl Identify {
                 1 => Some(self.columns[0].as_str()),
                 _ => Some(self.columns[k].as_str()),
             };
-            let rec = crate::io::read_log(path, cols)
+            let rec = crate::io::read_log_axis(path, cols, &params.transmission)
                 .with_context(|| format!("reading log {}", path.display()))?;
             records.push(rec);
             logs.push(path.clone());
@@ -214,10 +213,10 @@ impl Identify {
         if self.json {
             outln!(
                 "{}",
-                serde_json::to_string_pretty(&self.json_report(&report, &logs))?
+                serde_json::to_string_pretty(&self.json_report(&report, &logs, &params))?
             );
         } else {
-            out!("{}", self.text_report(&report, &logs, &params.params));
+            out!("{}", self.text_report(&report, &logs, &params));
         }
         if let Some(path) = &self.plot {
             std::fs::write(path, plot_svg(&report, &exps)?)
