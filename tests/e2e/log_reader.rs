@@ -21,6 +21,7 @@ impl LogReader for Whitespace {
         path: &Path,
         _columns: Option<&str>,
         _want: Option<&[Signal]>,
+        _axis: &servo_core::Transmission,
     ) -> Result<(Record, LogMeta)> {
         let text = std::fs::read_to_string(path)?;
         let mut lines = text.lines();

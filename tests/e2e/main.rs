@@ -23,5 +23,6 @@ mod run_log;
 mod schemas;
 mod serial;
 mod sim;
+mod transmission;
 mod util;
 mod window;

@@ -22,6 +22,7 @@ macro_rules! out {
     }};
 }
 
+pub mod axis;
 pub mod cmd;
 
 pub mod api;

@@ -15,6 +15,8 @@
 //!   reference step, saturation time), computed while it runs.
 //! * [`sim`]: integration of the plant with its effects (truth for the simulator, model for
 //!   `compare`).
+//! * [`transmission`]: gear, screw or belt between motor and load, the encoder's place, and the
+//!   conversions of a linear axis (m, N, kg) to the equivalent rotation the core computes in.
 //!
 //! The crate is `no_std` without the default `std` feature; modules that need a heap are behind
 //! the `alloc` feature. Units are SI unless a name says otherwise; "motor side" and "load side"
@@ -54,6 +56,7 @@ pub mod safety;
 #[cfg(feature = "alloc")]
 pub mod signal;
 pub mod sim;
+pub mod transmission;
 #[cfg(feature = "alloc")]
 pub mod verdict;
 
@@ -61,3 +64,4 @@ pub use design::DesignError;
 pub use effects::{Effect, EffectKind, Effects};
 pub use params::{ParamError, PlantParams};
 pub use plant::Plant;
+pub use transmission::Transmission;

@@ -29,7 +29,12 @@ impl fmt::Display for ColumnMap {
             if i > 0 {
                 f.write_str(",")?;
             }
-            write!(f, "{}={}", e.signal, e.column)?;
+            let name = match (e.signal, e.unit.is_linear()) {
+                (Signal::ThetaL, true) => "x",
+                (Signal::OmegaL, true) => "v_x",
+                (s, _) => s.name(),
+            };
+            write!(f, "{name}={}", e.column)?;
             if e.unit != e.signal.si_unit() {
                 write!(f, ":{}", e.unit)?;
             }
@@ -100,16 +105,22 @@ impl ColumnMap {
     pub fn servo_own(header: &[&str]) -> Option<ColumnMap> {
         let mut entries = Vec::new();
         for h in header {
-            let signal = Signal::ALL
-                .into_iter()
-                .find(|s| s.csv_column().eq_ignore_ascii_case(h.trim()))?;
+            let (signal, unit) = Signal::ALL.into_iter().find_map(|s| {
+                if s.csv_column().eq_ignore_ascii_case(h.trim()) {
+                    Some((s, s.si_unit()))
+                } else {
+                    s.csv_column_linear()
+                        .filter(|c| c.eq_ignore_ascii_case(h.trim()))
+                        .and_then(|_| s.linear_unit().map(|u| (s, u)))
+                }
+            })?;
             if entries.iter().any(|e: &ColumnSpec| e.signal == signal) {
                 return None;
             }
             entries.push(ColumnSpec {
                 signal,
                 column: h.to_string(),
-                unit: signal.si_unit(),
+                unit,
             });
         }
         entries
@@ -148,6 +159,27 @@ impl ColumnMap {
         Ok((ColumnMap { entries }, ignored))
     }
 
+    /// The factor of every entry (in order) from its column's unit to the record's SI unit on
+    /// `axis` ([`Unit::factor_on`]); an error naming the column when a column is in a length or
+    /// linear speed and the axis is not linear.
+    pub fn factors_on(&self, axis: &servo_core::Transmission) -> anyhow::Result<Vec<f64>> {
+        self.entries
+            .iter()
+            .map(|e| {
+                e.unit.factor_on(axis).ok_or_else(|| {
+                    anyhow!(
+                        "column `{}` holds {} in {}, a linear unit, but the model is a rotary gear: \
+                         give the model file of the linear axis (a [transmission] section with kind = \"screw\" \
+                         and lead_m, or kind = \"belt\" and radius_m) with --params, --model or --plant",
+                        e.column,
+                        e.signal,
+                        e.unit
+                    )
+                })
+            })
+            .collect()
+    }
+
     /// The entry for `signal`, if mapped.
     pub fn get(&self, signal: Signal) -> Option<&ColumnSpec> {
         self.entries.iter().find(|e| e.signal == signal)
@@ -174,7 +206,11 @@ fn split_top(text: &str, sep: char) -> Vec<&str> {
 
 /// Unit suffixes recognised at the end of a header name (case-sensitive for V/A to avoid
 /// matching words; longest first). `None`: a derivative we do not import (acceleration).
-const SUFFIXES: [(&str, Option<&str>); 26] = [
+const SUFFIXES: [(&str, Option<&str>); 34] = [
+    ("_mm_per_s", Some("mm/s")),
+    ("_m_per_s", Some("m/s")),
+    ("_mm_s", Some("mm/s")),
+    ("_m_s", Some("m/s")),
     ("_deg_per_s2", None),
     ("_rad_per_s2", None),
     ("_rpm_per_s", None),
@@ -197,10 +233,14 @@ const SUFFIXES: [(&str, Option<&str>); 26] = [
     ("_V", Some("V")),
     ("_v", Some("V")),
     ("_mA", Some("mA")),
+    ("_mm", Some("mm")),
+    ("_um", Some("um")),
+    ("_m", Some("m")),
     ("_A", Some("A")),
     ("_a", Some("A")),
     ("_Nm", None),
     ("_N_m", None),
+    ("_N", None),
 ];
 
 /// Base-name words that identify a signal (after splitting on `_`).
@@ -208,7 +248,8 @@ fn signal_from_word(word: &str) -> Option<Signal> {
     Some(match word {
         "t" | "time" => Signal::Time,
         "u" | "v" | "volt" | "voltage" | "vin" | "uin" => Signal::U,
-        "thl" | "thetal" | "theta" | "pos" | "position" | "angle" | "ql" => Signal::ThetaL,
+        "thl" | "thetal" | "theta" | "pos" | "position" | "angle" | "ql" | "x" => Signal::ThetaL,
+        "vx" | "xdot" | "vel" | "velocity" => Signal::OmegaL,
         "thm" | "thetam" => Signal::ThetaM,
         "wl" | "omegal" => Signal::OmegaL,
         "wm" | "omegam" => Signal::OmegaM,
@@ -239,14 +280,28 @@ pub(crate) fn guess_column(name: &str) -> Option<(Signal, Unit)> {
     });
     let mut signal =
         signal_from_word(&joined).or_else(|| words.iter().find_map(|w| signal_from_word(w)))?;
+    // A length suffix (`_m`) is read as one only on a position or speed named as linear (`x_m`,
+    // `pos_mm`, `v_x_m_s`): `theta_m` is the motor angle, not a load position in metres.
+    if unit.is_linear()
+        && !words.iter().any(|w| {
+            matches!(
+                *w,
+                "x" | "pos" | "position" | "vx" | "xdot" | "vel" | "velocity" | "carriage"
+            )
+        })
+        && !matches!(joined.as_str(), "vx" | "xdot")
+    {
+        return None;
+    }
     if is_ref {
-        if signal.dimension() != super::units::Dimension::Angle {
+        if signal != Signal::ThetaL {
             return None;
         }
         signal = Signal::Ref;
     }
     // The unit decides between look-alikes: `v` with an angle unit is not a voltage.
-    (unit.dimension() == signal.dimension()).then_some((signal, unit))
+    (unit.dimension() == signal.dimension() || signal.accepts_linear(unit.dimension()))
+        .then_some((signal, unit))
 }
 
 #[cfg(test)]
@@ -336,6 +391,38 @@ mod tests {
             m.to_string(),
             "time=time_ms:ms,theta_l=theta_l_rad,i_a=i_a_mA:mA"
         );
+    }
+
+    #[test]
+    fn linear_columns() {
+        let m = ColumnMap::parse("time=t:s,x=q:mm,u=u_V:V,i_a=ia:A,v_x=v:m/s,ref=r:um").unwrap();
+        assert_eq!(m.get(Signal::ThetaL).unwrap().unit, Unit::Millimetre);
+        assert_eq!(m.get(Signal::OmegaL).unwrap().unit, Unit::MetrePerS);
+        assert_eq!(
+            m.to_string(),
+            "time=t,x=q:mm,u=u_V,i_a=ia,v_x=v:m/s,ref=r:um"
+        );
+        assert_eq!(ColumnMap::parse(&m.to_string()).unwrap(), m);
+        assert!(ColumnMap::parse("time=t,theta_l=q:m").is_ok());
+        let e = format!("{:#}", ColumnMap::parse("time=t,theta_m=q:m").unwrap_err());
+        assert!(e.contains("not an angle unit"), "{e}");
+        let e = format!(
+            "{:#}",
+            m.factors_on(&servo_core::Transmission::GEAR).unwrap_err()
+        );
+        assert!(e.contains("`q`") && e.contains("[transmission]"), "{e}");
+        let own = ColumnMap::servo_own(&["time_s", "u_V", "x_m", "i_a_A", "ref_m"]).unwrap();
+        assert_eq!(
+            own.to_string(),
+            "time=time_s,u=u_V,x=x_m:m,i_a=i_a_A,ref=ref_m:m"
+        );
+        let (g, ign) =
+            ColumnMap::guess(&["t_s", "x_mm", "theta_m", "pos_ref_mm", "u_V", "v_x_mm_s"]).unwrap();
+        assert_eq!(
+            g.to_string(),
+            "time=t_s,x=x_mm:mm,ref=pos_ref_mm:mm,u=u_V,v_x=v_x_mm_s:mm/s"
+        );
+        assert_eq!(ign, ["theta_m"]);
     }
 
     #[test]

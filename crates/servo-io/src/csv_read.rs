@@ -4,6 +4,7 @@ use super::columns::ColumnMap;
 use super::units::Signal;
 use crate::error::{self as anyhow, anyhow, bail, Context};
 use servo_core::record::Record;
+use servo_core::Transmission;
 use std::path::Path;
 
 /// A CSV read into a record, with the column map used and notes for the user (guessed map,
@@ -45,9 +46,21 @@ pub fn read_csv_signals(
     columns: Option<&str>,
     want: Option<&[Signal]>,
 ) -> anyhow::Result<CsvImport> {
+    read_csv_on(path, columns, want, &Transmission::GEAR)
+}
+
+/// [`read_csv_signals`] on the axis `axis`: a column in a length or linear speed unit (`x=q:mm`)
+/// becomes the load shaft's equivalent rotation [rad] ([`servo_core::transmission`]); on a
+/// rotary gear such a column is refused.
+pub fn read_csv_on(
+    path: &Path,
+    columns: Option<&str>,
+    want: Option<&[Signal]>,
+    axis: &Transmission,
+) -> anyhow::Result<CsvImport> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("reading CSV log {}", path.display()))?;
-    parse_csv_signals(&text, &path.display().to_string(), columns, want)
+    parse_csv_on(&text, &path.display().to_string(), columns, want, axis)
 }
 
 /// servo's reader of CSV logs (`.csv`, `.txt`, `.tsv`; `,`, `;` or tab separated).
@@ -65,8 +78,9 @@ impl crate::log_reader::LogReader for CsvReader {
         path: &Path,
         columns: Option<&str>,
         want: Option<&[Signal]>,
+        axis: &Transmission,
     ) -> anyhow::Result<(Record, crate::LogMeta)> {
-        let imp = read_csv_signals(path, columns, want)?;
+        let imp = read_csv_on(path, columns, want, axis)?;
         Ok((
             imp.record,
             crate::LogMeta {
@@ -110,6 +124,17 @@ pub fn parse_csv_signals(
     source: &str,
     columns: Option<&str>,
     want: Option<&[Signal]>,
+) -> anyhow::Result<CsvImport> {
+    parse_csv_on(text, source, columns, want, &Transmission::GEAR)
+}
+
+/// [`parse_csv_signals`] on the axis `axis` (see [`read_csv_on`]).
+pub fn parse_csv_on(
+    text: &str,
+    source: &str,
+    columns: Option<&str>,
+    want: Option<&[Signal]>,
+    axis: &Transmission,
 ) -> anyhow::Result<CsvImport> {
     let mut rdr = csv::ReaderBuilder::new()
         .delimiter(sniff_delimiter(text))
@@ -157,13 +182,19 @@ pub fn parse_csv_signals(
         })?;
         idx.push(i);
     }
-    // The mapped columns read: (entry, column index, values, non-finite count).
-    let mut cols: Vec<(&super::columns::ColumnSpec, usize, Vec<f64>, usize)> = map
+    let factors = map.factors_on(axis).with_context(|| source.to_string())?;
+    // The mapped columns read: (entry, column index, values, non-finite count, factor to the
+    // record's unit).
+    #[allow(clippy::type_complexity)]
+    let mut cols: Vec<(&super::columns::ColumnSpec, usize, Vec<f64>, usize, f64)> = map
         .entries
         .iter()
         .zip(&idx)
-        .filter(|(e, _)| e.signal == Signal::Time || want.is_none_or(|w| w.contains(&e.signal)))
-        .map(|(e, &i)| (e, i, Vec::new(), 0usize))
+        .zip(&factors)
+        .filter(|((e, _), _)| {
+            e.signal == Signal::Time || want.is_none_or(|w| w.contains(&e.signal))
+        })
+        .map(|((e, &i), &f)| (e, i, Vec::new(), 0usize, f))
         .collect();
     let mut last_t = f64::NEG_INFINITY;
     let mut row = csv::ByteRecord::new();
@@ -176,7 +207,7 @@ pub fn parse_csv_signals(
                 bail!("{source}: line {line}: {}", csv_error_text(&e));
             }
         }
-        for (e, i, col, nans) in cols.iter_mut() {
+        for (e, i, col, nans, factor) in cols.iter_mut() {
             let i = *i;
             let cell = trim_field(row.get(i).unwrap_or(b""));
             let v = if cell.is_empty() || cell.eq_ignore_ascii_case(b"nan") {
@@ -211,7 +242,7 @@ pub fn parse_csv_signals(
                 last_t = t;
                 col.push(t);
             } else {
-                let si = e.unit.to_si(v);
+                let si = if *factor == 1.0 { v } else { v * *factor };
                 if !v.is_finite() {
                     *nans += 1;
                 } else if !si.is_finite() || si.abs() > plausible_limit(e.signal) {
@@ -236,7 +267,7 @@ pub fn parse_csv_signals(
         source: source.to_string(),
         ..Record::default()
     };
-    for (e, _, col, nans) in cols {
+    for (e, _, col, nans, _) in cols {
         if nans > 0 {
             notes.push(format!(
                 "{source}: column `{}` has {nans} empty or non-finite values (kept as NaN)",

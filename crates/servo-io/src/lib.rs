@@ -178,5 +178,31 @@ pub fn read_log_signals(
     columns: Option<&str>,
     want: Option<&[Signal]>,
 ) -> anyhow::Result<(Record, LogMeta)> {
-    log_reader::Registry::built_in().read(path, columns, want)
+    read_log_on(path, columns, want, &servo_core::Transmission::GEAR)
+}
+
+/// [`read_log`] on the axis of a model file: printing the notes as [`read_log`] does.
+pub fn read_log_axis(
+    path: &Path,
+    columns: Option<&str>,
+    axis: &servo_core::Transmission,
+) -> anyhow::Result<Record> {
+    let (rec, meta) = read_log_on(path, columns, None, axis)?;
+    for n in &meta.notes {
+        eprintln!("note: {n}");
+    }
+    Ok(rec)
+}
+
+/// [`read_log_signals`] on the axis `axis` (from the model file's `[transmission]`): a CSV or
+/// MAT column in a length or linear speed unit (`x=q:mm`, `v_x=v:m/s`) becomes the load shaft's
+/// equivalent rotation [rad] (x / s, s the axis' travel per radian); on a rotary gear such a
+/// column is refused with a message naming it. An MCAP log holds the equivalent rotation itself.
+pub fn read_log_on(
+    path: &Path,
+    columns: Option<&str>,
+    want: Option<&[Signal]>,
+    axis: &servo_core::Transmission,
+) -> anyhow::Result<(Record, LogMeta)> {
+    log_reader::Registry::built_in().read(path, columns, want, axis)
 }

@@ -30,12 +30,15 @@ pub trait LogReader: Send + Sync {
     }
     /// Reads the log at `path`: `columns` is the user's `--columns` map (a reader whose files
     /// name their own signals refuses one), `want` the signals to build (time always; `None`:
-    /// every signal). [`Error::Incompatible`] when the file is not this format.
+    /// every signal), `axis` the model's transmission (a column in a length unit becomes the
+    /// load shaft's equivalent rotation on a linear axis, and is refused on a rotary gear).
+    /// [`Error::Incompatible`] when the file is not this format.
     fn read(
         &self,
         path: &Path,
         columns: Option<&str>,
         want: Option<&[Signal]>,
+        axis: &servo_core::Transmission,
     ) -> Result<(Record, LogMeta)>;
     /// What the file holds, one line each (`servo inspect`): the first line names the file and
     /// the format, the next ones are indented by the caller's choice.
@@ -104,9 +107,10 @@ impl Registry {
         path: &Path,
         columns: Option<&str>,
         want: Option<&[Signal]>,
+        axis: &servo_core::Transmission,
     ) -> Result<(Record, LogMeta)> {
         for r in self.readers.iter().filter(|r| r.can_read(path)) {
-            match r.read(path, columns, want) {
+            match r.read(path, columns, want, axis) {
                 Err(Error::Incompatible { .. }) => continue,
                 other => return other,
             }

@@ -24,9 +24,18 @@ pub struct MatImport {
 /// Reads the MAT-file at `path` as a log. `columns` maps signals to MATLAB paths; `None` guesses
 /// the map from the Scope labels (stated in the notes).
 pub fn read_mat_log(path: &Path, columns: Option<&str>) -> anyhow::Result<MatImport> {
+    read_mat_log_on(path, columns, &servo_core::Transmission::GEAR)
+}
+
+/// [`read_mat_log`] on the axis `axis` (see [`import_on`]).
+pub fn read_mat_log_on(
+    path: &Path,
+    columns: Option<&str>,
+    axis: &servo_core::Transmission,
+) -> anyhow::Result<MatImport> {
     let source = path.display().to_string();
     let file = read_mat_file(path).with_context(|| source.clone())?;
-    import(&file, &source, columns)
+    import_on(&file, &source, columns, axis)
 }
 
 /// servo's reader of MATLAB MAT-files (`.mat`, Level 5, -v6/-v7) as logs.
@@ -45,8 +54,9 @@ impl crate::log_reader::LogReader for MatReader {
         path: &Path,
         columns: Option<&str>,
         _want: Option<&[Signal]>,
+        axis: &servo_core::Transmission,
     ) -> anyhow::Result<(Record, crate::LogMeta)> {
-        let imp = read_mat_log(path, columns)?;
+        let imp = read_mat_log_on(path, columns, axis)?;
         Ok((
             imp.record,
             crate::LogMeta {
@@ -75,6 +85,17 @@ impl crate::log_reader::LogReader for MatReader {
 
 /// Builds a record from `file`; `source` names the file in messages.
 pub fn import(file: &MatFile, source: &str, columns: Option<&str>) -> anyhow::Result<MatImport> {
+    import_on(file, source, columns, &servo_core::Transmission::GEAR)
+}
+
+/// [`import`] on the axis `axis`: a signal in a length or linear speed unit becomes the load
+/// shaft's equivalent rotation [rad] ([`crate::csv_read::read_csv_on`]).
+pub fn import_on(
+    file: &MatFile,
+    source: &str,
+    columns: Option<&str>,
+    axis: &servo_core::Transmission,
+) -> anyhow::Result<MatImport> {
     let mut notes = Vec::new();
     let map = match columns {
         Some(c) => ColumnMap::parse(c)?,
@@ -88,6 +109,7 @@ pub fn import(file: &MatFile, source: &str, columns: Option<&str>) -> anyhow::Re
         let p = MatPath::parse(&e.column).map_err(|m| anyhow!("--columns `{}`: {m}", e.signal))?;
         resolve(file, &p).map_err(|m| anyhow!("{source}: signal `{}`: {m}", e.signal))
     };
+    let factors = map.factors_on(axis).with_context(|| source.to_string())?;
     let time_spec = map
         .get(Signal::Time)
         .ok_or_else(|| anyhow!("--columns: `time=<path>` is required"))?;
@@ -119,7 +141,12 @@ pub fn import(file: &MatFile, source: &str, columns: Option<&str>) -> anyhow::Re
         time_s: time.clone(),
         ..Record::default()
     };
-    for e in map.entries.iter().filter(|e| e.signal != Signal::Time) {
+    for (e, &factor) in map
+        .entries
+        .iter()
+        .zip(&factors)
+        .filter(|(e, _)| e.signal != Signal::Time)
+    {
         let s = get(e)?;
         let raw = match &s.own_time {
             Some((tpath, t)) if t.len() == s.values.len() && !same_time(t, &time) => {
@@ -170,7 +197,7 @@ pub fn import(file: &MatFile, source: &str, columns: Option<&str>) -> anyhow::Re
                 e.column
             ));
         }
-        let col: Vec<f64> = raw.iter().map(|&v| e.unit.to_si(v)).collect();
+        let col: Vec<f64> = raw.iter().map(|&v| v * factor).collect();
         if e.signal != Signal::Time {
             e.signal.store(&mut rec, col);
         }

@@ -189,12 +189,14 @@ impl crate::log_reader::LogReader for McapReader {
     fn extensions(&self) -> &'static [&'static str] {
         &["mcap"]
     }
-    /// Refuses a `--columns` map: an MCAP log names its own signals.
+    /// Refuses a `--columns` map: an MCAP log names its own signals (and holds the equivalent
+    /// rotation itself on a linear axis: `axis` is not used).
     fn read(
         &self,
         path: &Path,
         columns: Option<&str>,
         want: Option<&[Signal]>,
+        _axis: &servo_core::Transmission,
     ) -> anyhow::Result<(Record, crate::LogMeta)> {
         if columns.is_some() {
             bail!(

@@ -9,6 +9,13 @@
 //! ...
 //! [effects.<name>]    # registered effects, keys as in the registry (SI units)
 //! gap = 0.04
+//! [transmission]      # optional: gear (default), screw or belt, and the encoder's place
+//! kind = "screw"      # "gear" | "screw" | "belt" ("rack" is a belt)
+//! lead_m = 0.01       # screw: travel per screw revolution [m]; belt: radius_m [m]
+//! encoder = "motor"   # "load" (default) | "motor" | "both"
+//! m_eq_kg = 5.3       # linear axis: total mass at the load [kg] (in place of [params] j_eq)
+//! b_eq_n_s_m = 40     # viscous friction [N s/m] (in place of b_eq)
+//! f_c_n = 12          # Coulomb friction [N] (in place of tau_sf)
 //! [sensors]           # optional, simulator only
 //! counts_per_rev = 4096
 //! [provenance]        # optional, free-form: where identified values came from
@@ -18,6 +25,7 @@ use crate::error::{self as anyhow, anyhow, bail, Context};
 use servo_core::custom::CustomSlots;
 use servo_core::effects::{Effect, EffectKind, Effects};
 use servo_core::sim::SensorConfig;
+use servo_core::transmission::{EncoderSide, Transmission, TransmissionKind};
 use servo_core::{Plant, PlantParams};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -31,9 +39,158 @@ struct Raw {
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     custom: BTreeMap<String, crate::effects_file::RawCustom>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    transmission: Option<RawTransmission>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     sensors: Option<SensorConfig>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     provenance: Option<toml::Table>,
+}
+
+/// `kind` of a `[transmission]`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+enum RawKind {
+    #[default]
+    Gear,
+    Screw,
+    #[serde(alias = "rack")]
+    Belt,
+}
+
+/// `encoder` of a `[transmission]`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+enum RawEncoder {
+    #[default]
+    Load,
+    Motor,
+    Both,
+}
+
+/// The `[transmission]` table as written. A linear axis' mass, viscous and Coulomb friction
+/// live here, in linear units, in place of `[params]` j_eq, b_eq, tau_sf: each quantity once.
+#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+struct RawTransmission {
+    #[serde(default)]
+    kind: RawKind,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    lead_m: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    radius_m: Option<f64>,
+    #[serde(default)]
+    encoder: RawEncoder,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    m_eq_kg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    b_eq_n_s_m: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    f_c_n: Option<f64>,
+}
+
+impl RawTransmission {
+    /// The transmission, its lead or radius checked.
+    fn transmission(&self) -> anyhow::Result<Transmission> {
+        let kind = match (self.kind, self.lead_m, self.radius_m) {
+            (RawKind::Gear, None, None) => TransmissionKind::Gear,
+            (RawKind::Screw, Some(lead_m), None) => TransmissionKind::Screw { lead_m },
+            (RawKind::Belt, None, Some(radius_m)) => TransmissionKind::Belt { radius_m },
+            (RawKind::Screw, _, _) => {
+                return Err(anyhow!(
+                    "[transmission]: kind = \"screw\" needs lead_m (travel per screw revolution [m]) and no radius_m"
+                ))
+            }
+            (RawKind::Belt, _, _) => {
+                return Err(anyhow!(
+                    "[transmission]: kind = \"belt\" needs radius_m (pulley or pinion radius [m]) and no lead_m"
+                ))
+            }
+            (RawKind::Gear, _, _) => {
+                return Err(anyhow!(
+                    "[transmission]: a gear (the default kind) has no lead_m or radius_m; give kind = \"screw\" or \"belt\""
+                ))
+            }
+        };
+        let t = Transmission {
+            kind,
+            encoder: match self.encoder {
+                RawEncoder::Load => EncoderSide::Load,
+                RawEncoder::Motor => EncoderSide::Motor,
+                RawEncoder::Both => EncoderSide::Both,
+            },
+        };
+        t.validate().map_err(|e| anyhow!("[transmission]: {e}"))?;
+        Ok(t)
+    }
+
+    /// Moves the linear mass, viscous and Coulomb values into `params` (motor-side J_eq, B_eq,
+    /// load-side tau_sf); a quantity given in both tables is refused.
+    fn into_params(&self, t: &Transmission, params: &mut PlantParams) -> anyhow::Result<()> {
+        let given = [
+            ("m_eq_kg", self.m_eq_kg, "j_eq", params.j_eq.is_some()),
+            ("b_eq_n_s_m", self.b_eq_n_s_m, "b_eq", params.b_eq.is_some()),
+            ("f_c_n", self.f_c_n, "tau_sf", params.tau_sf.is_some()),
+        ];
+        for (key, v, rotary, twice) in given {
+            let Some(v) = v else { continue };
+            if !t.is_linear() {
+                return Err(anyhow!(
+                    "[transmission]: `{key}` is a linear axis' value; a gear takes [params] {rotary}"
+                ));
+            }
+            if twice {
+                return Err(anyhow!(
+                    "`{key}` in [transmission] and `{rotary}` in [params] give one quantity twice: keep one"
+                ));
+            }
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(anyhow!(
+                    "[transmission]: `{key}` must be a finite number >= 0, got {v}"
+                ));
+            }
+        }
+        let n = params.n;
+        if let Some(m) = self.m_eq_kg {
+            params.j_eq = t.j_eq_of_mass(m, n);
+        }
+        if let Some(b) = self.b_eq_n_s_m {
+            params.b_eq = t.b_eq_of_viscous(b, n);
+        }
+        if let Some(f) = self.f_c_n {
+            params.tau_sf = t.torque_of_force(f);
+        }
+        Ok(())
+    }
+
+    /// The table of `t`, with the linear values of `params` (which are taken out of it).
+    fn of(t: &Transmission, params: &mut PlantParams) -> Option<RawTransmission> {
+        if *t == Transmission::GEAR {
+            return None;
+        }
+        let (kind, lead_m, radius_m) = match t.kind {
+            TransmissionKind::Gear => (RawKind::Gear, None, None),
+            TransmissionKind::Screw { lead_m } => (RawKind::Screw, Some(lead_m), None),
+            TransmissionKind::Belt { radius_m } => (RawKind::Belt, None, Some(radius_m)),
+        };
+        let n = params.n;
+        let mut raw = RawTransmission {
+            kind,
+            lead_m,
+            radius_m,
+            encoder: match t.encoder {
+                EncoderSide::Load => RawEncoder::Load,
+                EncoderSide::Motor => RawEncoder::Motor,
+                EncoderSide::Both => RawEncoder::Both,
+            },
+            ..RawTransmission::default()
+        };
+        if t.is_linear() {
+            raw.m_eq_kg = params.j_eq.take().and_then(|j| t.mass_kg(j, n));
+            raw.b_eq_n_s_m = params.b_eq.take().and_then(|b| t.viscous_n_s_m(b, n));
+            raw.f_c_n = params.tau_sf.take().and_then(|f| t.force_n(f));
+        }
+        Some(raw)
+    }
 }
 
 /// A parsed and validated model file. With serde it (de)serialises as the file's tables
@@ -46,6 +203,10 @@ pub struct ModelFile {
     pub effects: Effects,
     /// User-defined effects (`[custom.NAME]`, see [`crate::effects_file`]), active in the model.
     pub custom: CustomSlots,
+    /// The transmission (`[transmission]`; a gear with a load-side encoder when absent). On a
+    /// linear axis `params` holds the equivalent rotation's J_eq, B_eq, tau_sf, converted from
+    /// the file's m_eq_kg, b_eq_n_s_m, f_c_n (and back when written).
+    pub transmission: Transmission,
     pub sensors: Option<SensorConfig>,
     /// Free-form provenance (log, method, date, ...).
     pub provenance: Option<toml::Table>,
@@ -71,6 +232,7 @@ impl Default for ModelFile {
             params: PlantParams::TABLE2,
             effects: Effects::NONE,
             custom: CustomSlots::NONE,
+            transmission: Transmission::GEAR,
             sensors: None,
             provenance: None,
         }
@@ -93,14 +255,21 @@ impl ModelFile {
 
     /// Validates the deserialised file: parameters, effect names and keys, complete effects.
     fn from_raw(raw: Raw) -> anyhow::Result<ModelFile> {
-        raw.params
-            .validate()
-            .map_err(|e| anyhow!("[params]: {e}"))?;
-        // One value per quantity: the friction of [params] and the friction effects are the same
-        // quantities (the effect would silently override the params).
+        let mut params = raw.params;
+        let transmission = match &raw.transmission {
+            Some(t) => {
+                let tr = t.transmission()?;
+                t.into_params(&tr, &mut params)?;
+                tr
+            }
+            None => Transmission::GEAR,
+        };
+        params.validate().map_err(|e| anyhow!("[params]: {e}"))?;
+        // One value per quantity: the friction of [params] (or of a linear axis' [transmission])
+        // and the friction effects are the same quantities (the effect would silently override).
         for (key, given, section) in [
-            ("b_eq", raw.params.b_eq, EffectKind::Viscous),
-            ("tau_sf", raw.params.tau_sf, EffectKind::Coulomb),
+            ("b_eq", params.b_eq, EffectKind::Viscous),
+            ("tau_sf", params.tau_sf, EffectKind::Coulomb),
         ] {
             let other = raw
                 .effects
@@ -137,9 +306,10 @@ impl ModelFile {
                 .map_err(|e| anyhow!("[custom.{}]: {e}", def.name()))?;
         }
         Ok(ModelFile {
-            params: raw.params,
+            params,
             effects,
             custom,
+            transmission,
             sensors: raw.sensors,
             provenance: raw.provenance,
         })
@@ -162,6 +332,7 @@ impl ModelFile {
             params: plant.params,
             effects: plant.effects,
             custom: plant.custom,
+            transmission: Transmission::GEAR,
             sensors: None,
             provenance: None,
         }
@@ -205,10 +376,13 @@ impl ModelFile {
             .iter()
             .map(|c| (c.name().to_string(), crate::effects_file::to_raw(c, None)))
             .collect();
+        let mut params = self.written_params();
+        let transmission = RawTransmission::of(&self.transmission, &mut params);
         Raw {
-            params: self.written_params(),
+            params,
             effects,
             custom,
+            transmission,
             sensors: self.sensors,
             provenance: self.provenance.clone(),
         }
@@ -259,11 +433,19 @@ impl ModelFile {
             ("b_eq", p.b_eq, "identified viscous friction at motor side B_eq [N m s/rad] (overrides B_m + B_l/N^2)"),
             ("tau_sf", p.tau_sf, "identified Coulomb friction at load side tau_sf [N m]"),
         ];
+        let linear = self.transmission.is_linear();
         for (k, v, doc) in opt {
             match v {
+                _ if linear => s.push_str(&format!(
+                    "# {k}: a linear axis gives it in [transmission]\n"
+                )),
                 Some(v) => s.push_str(&format!("{k} = {v:e}  # {doc}\n")),
                 None => s.push_str(&format!("# {k} = ...  # {doc}\n")),
             }
+        }
+        let mut rest = written;
+        if let Some(t) = RawTransmission::of(&self.transmission, &mut rest) {
+            s.push_str(&transmission_toml(&t));
         }
         for e in self.effects.iter().filter(|e| !Self::in_params(e.kind)) {
             s.push_str(&format!(
@@ -302,9 +484,131 @@ impl ModelFile {
     }
 }
 
+/// The commented `[transmission]` table.
+fn transmission_toml(t: &RawTransmission) -> String {
+    let mut s =
+        String::from("\n[transmission]  # between the motor (after its gearbox n) and the load\n");
+    let kind = match t.kind {
+        RawKind::Gear => "gear",
+        RawKind::Screw => "screw",
+        RawKind::Belt => "belt",
+    };
+    s.push_str(&format!(
+        "kind = \"{kind}\"  # gear | screw | belt (or rack)\n"
+    ));
+    if let Some(v) = t.lead_m {
+        s.push_str(&format!(
+            "lead_m = {v:e}  # travel per screw revolution [m]\n"
+        ));
+    }
+    if let Some(v) = t.radius_m {
+        s.push_str(&format!(
+            "radius_m = {v:e}  # pulley or pinion radius [m]\n"
+        ));
+    }
+    let enc = match t.encoder {
+        RawEncoder::Load => "load",
+        RawEncoder::Motor => "motor",
+        RawEncoder::Both => "both",
+    };
+    s.push_str(&format!(
+        "encoder = \"{enc}\"  # load | motor | both: where the position encoder sits\n"
+    ));
+    let rows = [
+        (
+            "m_eq_kg",
+            t.m_eq_kg,
+            "total mass at the load, motor and screw included [kg]",
+        ),
+        (
+            "b_eq_n_s_m",
+            t.b_eq_n_s_m,
+            "viscous friction at the load [N s/m]",
+        ),
+        ("f_c_n", t.f_c_n, "Coulomb friction at the load [N]"),
+    ];
+    for (k, v, doc) in rows {
+        match v {
+            Some(v) => s.push_str(&format!("{k} = {v:e}  # {doc}\n")),
+            None => s.push_str(&format!("# {k} = ...  # {doc}\n")),
+        }
+    }
+    s
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    const SCREW: &str = "\n[transmission]\nkind = \"screw\"\nlead_m = 0.01\nencoder = \"motor\"\nm_eq_kg = 5.0\nb_eq_n_s_m = 40.0\nf_c_n = 12.0\n";
+
+    #[test]
+    fn a_screw_axis_reads_in_linear_units_and_round_trips() {
+        let good = ModelFile::default().to_toml_commented();
+        let m = ModelFile::parse(&format!("{good}{SCREW}")).unwrap();
+        let t = m.transmission;
+        assert_eq!(t.encoder, EncoderSide::Motor);
+        let s = 0.01 / std::f64::consts::TAU;
+        let n = m.params.n;
+        assert!((m.params.j_eq.unwrap() - 5.0 * s * s / (n * n)).abs() < 1e-18);
+        assert!((m.params.tau_sf.unwrap() - 12.0 * s).abs() < 1e-15);
+        let text = m.to_toml_commented();
+        assert!(
+            text.contains("m_eq_kg = 5") && !text.contains("\nj_eq ="),
+            "{text}"
+        );
+        let back = ModelFile::parse(&text).unwrap();
+        assert!((back.params.j_eq.unwrap() / m.params.j_eq.unwrap() - 1.0).abs() < 1e-12);
+        assert!((back.params.b_eq.unwrap() / m.params.b_eq.unwrap() - 1.0).abs() < 1e-12);
+        assert_eq!(back.transmission, t);
+        let json = serde_json::to_string(&m).unwrap();
+        let back: ModelFile = serde_json::from_str(&json).unwrap();
+        assert!((back.params.tau_sf.unwrap() / m.params.tau_sf.unwrap() - 1.0).abs() < 1e-12);
+        // A file without [transmission] is a gear with a load-side encoder.
+        assert_eq!(
+            ModelFile::parse(&good).unwrap().transmission,
+            Transmission::GEAR
+        );
+    }
+
+    #[test]
+    fn a_transmission_is_refused_clearly() {
+        let good = ModelFile::default().to_toml_commented();
+        for (bad, needle) in [
+            ("[transmission]\nkind = \"screw\"\n", "lead_m"),
+            (
+                "[transmission]\nkind = \"belt\"\nlead_m = 0.01\n",
+                "radius_m",
+            ),
+            (
+                "[transmission]\nkind = \"screw\"\nlead_m = 20.0\n",
+                "lead_m",
+            ),
+            ("[transmission]\nkind = \"worm\"\n", "worm"),
+            ("[transmission]\nencoder = \"hub\"\n", "hub"),
+            (
+                "[transmission]\nm_eq_kg = 5.0\n",
+                "a gear takes [params] j_eq",
+            ),
+            (
+                "[transmission]\nkind = \"belt\"\nradius_m = 0.02\nefficiency = 0.9\n",
+                "efficiency",
+            ),
+        ] {
+            let e = format!(
+                "{:#}",
+                ModelFile::parse(&format!("{good}\n{bad}")).unwrap_err()
+            );
+            assert!(e.contains(needle), "{bad}: {e}");
+        }
+        // One quantity twice: the mass in [transmission] and J_eq in [params].
+        let twice = good.replace("# j_eq = ...", "j_eq = 1e-5");
+        let e = format!(
+            "{:#}",
+            ModelFile::parse(&format!("{twice}{SCREW}")).unwrap_err()
+        );
+        assert!(e.contains("twice") && e.contains("m_eq_kg"), "{e}");
+    }
 
     #[test]
     fn default_file_round_trips() {

@@ -5,6 +5,12 @@
 //! time `s`, `ms`, `us`; angle `rad`, `deg`, `rev`, `counts:N` (N counts per revolution); angular
 //! speed `rad/s`, `deg/s`, `rpm`, `rev/s`; voltage `V`, `mV`; current `A`, `mA`. The `enable`
 //! signal (drive on / torque on: nonzero = on, 0 = off) has no unit (`flag`).
+//!
+//! On a linear axis (a screw or a belt, [`servo_core::transmission`]) the load position may be
+//! written in `m`, `mm`, `um` (signal `theta_l`, also named `x`) and the load speed in `m/s`,
+//! `mm/s` (signal `omega_l`, also named `v_x`); the reference in `m`, `mm`, `um`. Such a column is
+//! converted to the load shaft's equivalent rotation with the axis' travel per radian when the log
+//! is read ([`Unit::factor_on`]); without a linear axis it is refused.
 
 use std::f64::consts::PI;
 use std::fmt;
@@ -52,6 +58,12 @@ pub enum Dimension {
     Current,
     /// A flag without unit (nonzero = on).
     Flag,
+    /// A length on a linear axis [m].
+    Length,
+    /// A speed on a linear axis [m/s].
+    LinearSpeed,
+    /// A force [N] (no log signal is a force yet).
+    Force,
 }
 
 impl Dimension {
@@ -64,6 +76,9 @@ impl Dimension {
             Dimension::Voltage => "V, mV",
             Dimension::Current => "A, mA",
             Dimension::Flag => "flag (no unit: nonzero = on, 0 = off)",
+            Dimension::Length => "m, mm, um",
+            Dimension::LinearSpeed => "m/s, mm/s",
+            Dimension::Force => "N",
         }
     }
     fn name(self) -> &'static str {
@@ -74,6 +89,9 @@ impl Dimension {
             Dimension::Voltage => "a voltage",
             Dimension::Current => "a current",
             Dimension::Flag => "an on/off flag",
+            Dimension::Length => "a length",
+            Dimension::LinearSpeed => "a linear speed",
+            Dimension::Force => "a force",
         }
     }
 }
@@ -107,9 +125,46 @@ impl Signal {
         }
     }
 
-    /// Looks a signal up by the name users type.
+    /// Looks a signal up by the name users type; `x` is the load position and `v_x` the load
+    /// speed of a linear axis (the signals `theta_l` and `omega_l` in a length or linear speed
+    /// unit).
     pub fn from_name(name: &str) -> Option<Signal> {
-        Signal::ALL.into_iter().find(|s| s.name() == name)
+        match name {
+            "x" => Some(Signal::ThetaL),
+            "v_x" => Some(Signal::OmegaL),
+            _ => Signal::ALL.into_iter().find(|s| s.name() == name),
+        }
+    }
+
+    /// The column name in servo's own CSV of a linear axis (`x_m`, `v_x_m_s`, `ref_m`), for the
+    /// signals a linear axis writes in metres.
+    pub const fn csv_column_linear(self) -> Option<&'static str> {
+        match self {
+            Signal::ThetaL => Some("x_m"),
+            Signal::OmegaL => Some("v_x_m_s"),
+            Signal::Ref => Some("ref_m"),
+            _ => None,
+        }
+    }
+
+    /// The signal's SI unit on a linear axis (`m`, `m/s`) where it differs from
+    /// [`Signal::si_unit`].
+    pub const fn linear_unit(self) -> Option<Unit> {
+        match self {
+            Signal::ThetaL | Signal::Ref => Some(Unit::Metre),
+            Signal::OmegaL => Some(Unit::MetrePerS),
+            _ => None,
+        }
+    }
+
+    /// True when `dim` is the linear form of this signal's dimension (a load position or
+    /// reference in a length, the load speed in a linear speed).
+    pub fn accepts_linear(self, dim: Dimension) -> bool {
+        matches!(
+            (self, dim),
+            (Signal::ThetaL | Signal::Ref, Dimension::Length)
+                | (Signal::OmegaL, Dimension::LinearSpeed)
+        )
     }
 
     /// The column name in servo's own CSV (SI unit in the name).
@@ -148,6 +203,9 @@ impl Signal {
             Dimension::Voltage => Unit::Volt,
             Dimension::Current => Unit::Ampere,
             Dimension::Flag => Unit::Flag,
+            Dimension::Length => Unit::Metre,
+            Dimension::LinearSpeed => Unit::MetrePerS,
+            Dimension::Force => Unit::Newton,
         }
     }
 
@@ -185,12 +243,18 @@ pub enum Unit {
     Milliampere,
     /// No unit: an on/off flag (nonzero = on).
     Flag,
+    Metre,
+    Millimetre,
+    Micrometre,
+    MetrePerS,
+    MillimetrePerS,
+    Newton,
 }
 
 /// Why a unit string could not be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum UnitError {
-    #[error("unknown unit `{0}`; known units: s, ms, us, rad, deg, rev, counts:N, rad/s, deg/s, rpm, rev/s, V, mV, A, mA, flag")]
+    #[error("unknown unit `{0}`; known units: s, ms, us, rad, deg, rev, counts:N, rad/s, deg/s, rpm, rev/s, V, mV, A, mA, m, mm, um, m/s, mm/s, N, flag")]
     Unknown(String),
     #[error("`counts:N` needs N, the counts per revolution (> 0), got `{0}`")]
     BadCounts(String),
@@ -230,6 +294,12 @@ impl Unit {
             "a" => Unit::Ampere,
             "ma" => Unit::Milliampere,
             "flag" | "1" => Unit::Flag,
+            "m" => Unit::Metre,
+            "mm" => Unit::Millimetre,
+            "um" | "µm" => Unit::Micrometre,
+            "m/s" | "m_per_s" | "m_s" => Unit::MetrePerS,
+            "mm/s" | "mm_per_s" | "mm_s" => Unit::MillimetrePerS,
+            "n" => Unit::Newton,
             "counts" => return Err(UnitError::BadCounts(String::new())),
             _ => return Err(UnitError::Unknown(t.to_string())),
         })
@@ -246,12 +316,36 @@ impl Unit {
             Unit::Volt | Unit::Millivolt => Dimension::Voltage,
             Unit::Ampere | Unit::Milliampere => Dimension::Current,
             Unit::Flag => Dimension::Flag,
+            Unit::Metre | Unit::Millimetre | Unit::Micrometre => Dimension::Length,
+            Unit::MetrePerS | Unit::MillimetrePerS => Dimension::LinearSpeed,
+            Unit::Newton => Dimension::Force,
         }
     }
 
-    /// Checks that the unit fits `signal`.
+    /// True for a length or a linear speed: a column in this unit needs a linear axis.
+    pub fn is_linear(self) -> bool {
+        matches!(
+            self.dimension(),
+            Dimension::Length | Dimension::LinearSpeed | Dimension::Force
+        )
+    }
+
+    /// Factor from this unit to the record's SI unit on `axis` (value_record = value * factor):
+    /// [`Unit::factor_to_si`] for a rotary unit; for a length or a linear speed the metres (per
+    /// second) divided by the axis' travel per radian, i.e. the load shaft's equivalent rotation
+    /// [rad] ([`servo_core::transmission`]). `None` when the unit is linear and the axis is not.
+    pub fn factor_on(self, axis: &servo_core::Transmission) -> Option<f64> {
+        if self.is_linear() {
+            axis.metres_per_rad().map(|s| self.factor_to_si() / s)
+        } else {
+            Some(self.factor_to_si())
+        }
+    }
+
+    /// Checks that the unit fits `signal` (a load position, reference or speed also in its
+    /// linear form: [`Signal::accepts_linear`]).
     pub fn check_for(self, signal: Signal, text: &str) -> Result<Unit, UnitError> {
-        if self.dimension() == signal.dimension() {
+        if self.dimension() == signal.dimension() || signal.accepts_linear(self.dimension()) {
             Ok(self)
         } else {
             Err(UnitError::Mismatch {
@@ -267,8 +361,10 @@ impl Unit {
             Unit::Second | Unit::Rad | Unit::RadPerS | Unit::Volt | Unit::Ampere | Unit::Flag => {
                 1.0
             }
+            Unit::Metre | Unit::MetrePerS | Unit::Newton => 1.0,
             Unit::Millisecond | Unit::Millivolt | Unit::Milliampere => 1e-3,
-            Unit::Microsecond => 1e-6,
+            Unit::Millimetre | Unit::MillimetrePerS => 1e-3,
+            Unit::Microsecond | Unit::Micrometre => 1e-6,
             Unit::Nanosecond => 1e-9,
             Unit::Deg => PI / 180.0,
             Unit::Rev => 2.0 * PI,
@@ -309,6 +405,12 @@ impl fmt::Display for Unit {
             Unit::Ampere => f.write_str("A"),
             Unit::Milliampere => f.write_str("mA"),
             Unit::Flag => f.write_str("flag"),
+            Unit::Metre => f.write_str("m"),
+            Unit::Millimetre => f.write_str("mm"),
+            Unit::Micrometre => f.write_str("um"),
+            Unit::MetrePerS => f.write_str("m/s"),
+            Unit::MillimetrePerS => f.write_str("mm/s"),
+            Unit::Newton => f.write_str("N"),
         }
     }
 }
@@ -353,5 +455,42 @@ mod tests {
             .unwrap()
             .check_for(Signal::Ref, "deg")
             .is_ok());
+        // A length is a load position or reference, never a motor angle or a current.
+        assert!(Unit::parse("mm")
+            .unwrap()
+            .check_for(Signal::ThetaL, "mm")
+            .is_ok());
+        assert!(Unit::parse("m")
+            .unwrap()
+            .check_for(Signal::ThetaM, "m")
+            .is_err());
+        assert!(Unit::parse("N")
+            .unwrap()
+            .check_for(Signal::IA, "N")
+            .is_err());
+    }
+
+    #[test]
+    fn linear_units_need_a_linear_axis() {
+        use servo_core::transmission::{Transmission, TransmissionKind};
+        let screw = Transmission {
+            kind: TransmissionKind::Screw { lead_m: 0.01 },
+            ..Transmission::GEAR
+        };
+        // 10 mm of travel is one screw revolution.
+        let f = Unit::parse("mm").unwrap().factor_on(&screw).unwrap();
+        assert!((10.0 * f - 2.0 * PI).abs() < 1e-12);
+        let f = Unit::parse("m/s").unwrap().factor_on(&screw).unwrap();
+        assert!((0.01 * f - 2.0 * PI).abs() < 1e-12);
+        assert_eq!(
+            Unit::parse("um").unwrap().factor_on(&Transmission::GEAR),
+            None
+        );
+        assert_eq!(
+            Unit::parse("deg").unwrap().factor_on(&screw),
+            Some(PI / 180.0)
+        );
+        assert_eq!(Signal::from_name("x"), Some(Signal::ThetaL));
+        assert_eq!(Signal::from_name("v_x"), Some(Signal::OmegaL));
     }
 }

@@ -199,7 +199,7 @@ impl Compare {
         let mut parts = Vec::new();
         for (k, path) in self.logs.iter().enumerate() {
             let (mut record, mut meta) =
-                crate::io::read_log_with_meta(path, self.columns.as_deref())
+                crate::io::read_log_on(path, self.columns.as_deref(), None, &model_file.transmission)
                     .with_context(|| format!("reading log {}", path.display()))?;
             let used = self.part.apply(&mut record, path, k, self.logs.len())?;
             meta.feedforward_v = meta.feedforward_v.map(|f| used.slice_of(&f).to_vec());

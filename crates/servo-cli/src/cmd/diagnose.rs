@@ -12,7 +12,6 @@ use report_html::*;
 use report_json::*;
 use report_text::*;
 
-use crate::io::read_log;
 use crate::model_file::ModelFile;
 use crate::plot::{line_chart_svg, Chart, Series};
 use anyhow::{anyhow, Context};
@@ -117,7 +116,7 @@ impl Diagnose {
         for (k, p) in self.logs.iter().enumerate() {
             let mut r = servo_core::diagnose::timing::timed(
                 || format!("read {}", p.display()),
-                || read_log(p, self.columns.as_deref()),
+                || crate::io::read_log_axis(p, self.columns.as_deref(), &model_file.transmission),
             )
             .with_context(|| format!("reading log {}", p.display()))?;
             parts.push(self.part.apply(&mut r, p, k, self.logs.len())?);
@@ -210,6 +209,9 @@ impl Diagnose {
             if let (Some(g), Some(p)) = (&gate, &self.save) {
                 v["save"] = save_json(g, p, save_ok, self.force);
             }
+            if let Some(axis) = crate::axis::Axis::of(&model_file) {
+                linear_json(&mut v, &axis, first, last, &ladder);
+            }
             if self.auto {
                 v["ladder"] = Value::Array(ladder.iter().map(rung_json).collect());
                 v["first_ranking"] = Value::Array(
@@ -224,6 +226,9 @@ impl Diagnose {
         } else {
             out!("{}", crate::log_part::text(&parts));
             out!("{}", text_report(first, &ladder, &diags, self.auto, &opts));
+            if let Some(axis) = crate::axis::Axis::of(&model_file) {
+                out!("{}", linear_text(&axis, last, &ladder));
+            }
             out!("{}", user.text());
             if let Some(p) = &self.save_effect {
                 outln!("discovered effect written to {}", p.display());
@@ -247,6 +252,7 @@ impl Diagnose {
             if save_ok {
                 let mut mf = ModelFile::from_plant(&final_plant);
                 mf.sensors = model_file.sensors;
+                mf.transmission = model_file.transmission;
                 mf.provenance = model_file.provenance.clone();
                 if let Some(g) = gate.as_ref().filter(|_| worse) {
                     mf.provenance

@@ -27,7 +27,6 @@ use servo_core::ident::combined::CombinedConfig;
 use servo_core::ident::friction::FrictionConfig;
 use servo_core::ident::phases::PhaseConfig;
 use servo_core::ident::{Estimate, Experiment};
-use servo_core::PlantParams;
 use std::path::PathBuf;
 
 use crate::model_file::ModelFile;
@@ -195,7 +194,7 @@ impl Identify {
                 1 => Some(self.columns[0].as_str()),
                 _ => Some(self.columns[k].as_str()),
             };
-            let mut rec = crate::io::read_log(path, cols)
+            let mut rec = crate::io::read_log_axis(path, cols, &params.transmission)
                 .with_context(|| format!("reading log {}", path.display()))?;
             parts.push(self.part.apply(&mut rec, path, k, self.logs.len())?);
             records.push(rec);
@@ -233,12 +232,12 @@ impl Identify {
         }
         let report = identify(&exps, &params.params, &self.options())?;
         if self.json {
-            let mut v = self.json_report(&report, &logs);
+            let mut v = self.json_report(&report, &logs, &params);
             v["log_parts"] = crate::log_part::json(&parts);
             crate::json_out::emit(&v)?;
         } else {
             out!("{}", crate::log_part::text(&parts));
-            out!("{}", self.text_report(&report, &logs, &params.params));
+            out!("{}", self.text_report(&report, &logs, &params));
         }
         if let Some(path) = &self.plot {
             std::fs::write(path, plot_svg(&report, &exps)?)

@@ -98,6 +98,7 @@ pub(super) fn gate_and_save(
     if saved {
         let mut mf = ModelFile::from_plant(plant);
         mf.sensors = model_file.sensors;
+        mf.transmission = model_file.transmission;
         let mut prov = model_file.provenance.clone().unwrap_or_default();
         prov.insert(
             "compare_model".into(),

@@ -158,3 +158,38 @@ pub(super) fn save_json(
         },
     })
 }
+
+/// The linear axis' figures of a diagnosis, added beside the rotary ones: the `transmission`;
+/// each candidate's fitted effect and base in linear units (`linear`: keys with unit suffixes,
+/// e.g. `tau_sf_pos_n`, `m_eq_kg`); the prediction errors in metres (`oe_cost_m`).
+pub(super) fn linear_json(
+    v: &mut Value,
+    axis: &crate::axis::Axis,
+    first: &Diagnosis,
+    last: &Diagnosis,
+    ladder: &[Rung],
+) {
+    let s = axis.transmission.metres_per_rad().unwrap_or(f64::NAN);
+    v["transmission"] = axis.json();
+    let linear = |c: &Candidate| {
+        let p = &c.plant.params;
+        let mut l = axis.base_json(p.j_eq(), p.b_eq(), p.tau_sf());
+        if let Some(e) = c.plant.effects.get(c.effect) {
+            if let (Value::Object(m), Value::Object(e)) = (&mut l, axis.effect_json(e)) {
+                m.extend(e);
+            }
+        }
+        l
+    };
+    if let Some(Value::Array(rank)) = v.get_mut("ranking") {
+        for (j, c) in rank.iter_mut().zip(&last.ranking) {
+            j["linear"] = linear(c);
+        }
+    }
+    v["base"]["oe_cost_m"] = first.base.oe_cost_rad.map_or(Value::Null, |c| f(c * s));
+    if let Some(Value::Array(rungs)) = v.get_mut("ladder") {
+        for (j, r) in rungs.iter_mut().zip(ladder) {
+            j["oe_cost_m"] = r.oe_cost_rad.map_or(Value::Null, |c| f(c * s));
+        }
+    }
+}

@@ -162,3 +162,31 @@ pub(super) fn ladder_text(ladder: &[Rung]) -> String {
     }
     s
 }
+
+/// The linear axis' lines of the text report: the best candidate's effect and base in linear
+/// units, the ladder's prediction errors in millimetres.
+pub(super) fn linear_text(axis: &crate::axis::Axis, last: &Diagnosis, ladder: &[Rung]) -> String {
+    let mut s = format!("\n{}\n", axis.describe());
+    if let Some(c) = last.ranking.first() {
+        let p = &c.plant.params;
+        if let Some(e) = c.plant.effects.get(c.effect) {
+            let _ = writeln!(
+                s,
+                "  best candidate {}: {}",
+                c.effect.name(),
+                axis.effect_text(e)
+            );
+        }
+        s.push_str(&axis.base_text(p.j_eq(), p.b_eq(), p.tau_sf()));
+    }
+    let m = axis.transmission.metres_per_rad().unwrap_or(f64::NAN);
+    for r in ladder {
+        if let Some(c) = r.oe_cost_rad {
+            let name = r
+                .added
+                .map_or("starting model".to_string(), |k| format!("+ {k}"));
+            let _ = writeln!(s, "  {name:<16} prediction error {:.4} mm", c * m * 1e3);
+        }
+    }
+    s
+}

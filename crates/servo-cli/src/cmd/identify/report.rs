@@ -4,7 +4,8 @@
 use super::*;
 
 impl super::Identify {
-    pub(super) fn text_report(&self, r: &Report, logs: &[PathBuf], p: &PlantParams) -> String {
+    pub(super) fn text_report(&self, r: &Report, logs: &[PathBuf], model: &ModelFile) -> String {
+        let p = &model.params;
         let mut s = String::new();
         s.push_str(&format!(
             "servo identify: {} log(s); k_t = {:e} N m/A, k_e = {:e} V s/rad, N = {}\n",
@@ -62,6 +63,19 @@ impl super::Identify {
         if let Some((e, how)) = r.j_eq() {
             s.push_str(&line("J_eq", "kg m^2", &e, how));
         }
+        if let Some(axis) = crate::axis::Axis::of(model) {
+            s.push_str(&format!("{} (load side):\n", axis.describe()));
+            let (m, f) = (axis.mass_per_j(), axis.force_per_tau());
+            if let Some((e, how)) = r.j_eq() {
+                s.push_str(&line("m_eq", "kg", &scaled(&e, m), how));
+            }
+            if let Some((e, how)) = r.b_eq() {
+                s.push_str(&line("b_eq", "N s/m", &scaled(&e, m), how));
+            }
+            if let Some((e, how)) = r.tau_sf() {
+                s.push_str(&line("F_c", "N", &scaled(&e, f), how));
+            }
+        }
         if let Some(el) = &r.electrical {
             s.push_str(&line("k_drv", "V/V", &el.k_drv, "electrical"));
             s.push_str(&line("R_eq", "ohm", &el.r_eq, "electrical"));
@@ -82,7 +96,12 @@ impl super::Identify {
         s
     }
 
-    pub(super) fn json_report(&self, r: &Report, logs: &[PathBuf]) -> serde_json::Value {
+    pub(super) fn json_report(
+        &self,
+        r: &Report,
+        logs: &[PathBuf],
+        model: &ModelFile,
+    ) -> serde_json::Value {
         let est = |e: Option<(Estimate, &'static str)>, unit: &str, side: &str| match e {
             None => serde_json::Value::Null,
             Some((e, how)) => serde_json::json!({
@@ -115,7 +134,26 @@ impl super::Identify {
         if let Some(i) = &r.inertia {
             v["inertia_pairs"] = i.pairs.iter().map(|p| serde_json::json!(p.2)).collect();
         }
+        if let Some(axis) = crate::axis::Axis::of(model) {
+            let (m, f) = (axis.mass_per_j(), axis.force_per_tau());
+            let sc =
+                |e: Option<(Estimate, &'static str)>, k: f64| e.map(|(e, h)| (scaled(&e, k), h));
+            v["transmission"] = axis.json();
+            v["m_eq_kg"] = est(sc(r.j_eq(), m), "kg", "load");
+            v["b_eq_n_s_m"] = est(sc(r.b_eq(), m), "N s/m", "load");
+            v["f_c_n"] = est(sc(r.tau_sf(), f), "N", "load");
+        }
         v
+    }
+}
+
+/// An estimate times a positive factor (a unit conversion: value, error and interval scale).
+fn scaled(e: &Estimate, k: f64) -> Estimate {
+    Estimate {
+        value: e.value * k,
+        std_err: e.std_err * k,
+        ci95: (e.ci95.0 * k, e.ci95.1 * k),
+        ..*e
     }
 }
 
