@@ -51,7 +51,7 @@ impl LogReader for Whitespace {
         Ok((rec, LogMeta::default()))
     }
     fn inspect(&self, path: &Path) -> Result<Vec<String>> {
-        let (rec, _) = self.read(path, None, None)?;
+        let (rec, _) = self.read(path, None, None, &servo_core::Transmission::GEAR)?;
         Ok(vec![format!(
             "{}: whitespace text, {} samples",
             path.display(),
@@ -83,7 +83,7 @@ fn log_reader_registry_takes_a_format_from_outside_in_one_line() {
 
     // Without it, the built-in registry names the formats it knows, word for word as before.
     let err = Registry::built_in()
-        .read(&log, None, None)
+        .read(&log, None, None, &servo_core::Transmission::GEAR)
         .expect_err("no built-in reader takes .ws");
     assert_eq!(
         err.to_string(),
@@ -95,7 +95,7 @@ fn log_reader_registry_takes_a_format_from_outside_in_one_line() {
 
     // One line: the registry with the reader.
     let registry = Registry::built_in().with(&WHITESPACE);
-    let (rec, meta) = registry.read(&log, None, None).expect("the .ws log reads");
+    let (rec, meta) = registry.read(&log, None, None, &servo_core::Transmission::GEAR).expect("the .ws log reads");
     assert_eq!(rec.len(), 50);
     let (u, th) = (rec.u_v.expect("u"), rec.theta_l_rad.expect("theta_l"));
     assert!((u[49] - 4.9).abs() < 1e-12, "{}", u[49]);
@@ -109,19 +109,19 @@ fn log_reader_registry_takes_a_format_from_outside_in_one_line() {
     let other = write(dir.path(), "run.xyz", "1 2 3\n");
     assert!(
         registry
-            .read(&other, None, None)
+            .read(&other, None, None, &servo_core::Transmission::GEAR)
             .expect_err(".xyz is nobody's")
             .to_string()
             .ends_with("expected a .mat, .mcap, .csv or .ws file"),
         "{:?}",
-        registry.read(&other, None, None).err()
+        registry.read(&other, None, None, &servo_core::Transmission::GEAR).err()
     );
 
     // "Not mine" is typed: a .ws file without the format's first line is passed on, and with no
     // other reader for .ws, the file is of no known format.
     let foreign = write(dir.path(), "foreign.ws", "t u theta\n0 0 0\n");
     assert!(matches!(
-        WHITESPACE.read(&foreign, None, None),
+        WHITESPACE.read(&foreign, None, None, &servo_core::Transmission::GEAR),
         Err(Error::Incompatible { .. })
     ));
     assert!(matches!(
