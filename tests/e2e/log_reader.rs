@@ -95,7 +95,9 @@ fn log_reader_registry_takes_a_format_from_outside_in_one_line() {
 
     // One line: the registry with the reader.
     let registry = Registry::built_in().with(&WHITESPACE);
-    let (rec, meta) = registry.read(&log, None, None, &servo_core::Transmission::GEAR).expect("the .ws log reads");
+    let (rec, meta) = registry
+        .read(&log, None, None, &servo_core::Transmission::GEAR)
+        .expect("the .ws log reads");
     assert_eq!(rec.len(), 50);
     let (u, th) = (rec.u_v.expect("u"), rec.theta_l_rad.expect("theta_l"));
     assert!((u[49] - 4.9).abs() < 1e-12, "{}", u[49]);
@@ -114,7 +116,9 @@ fn log_reader_registry_takes_a_format_from_outside_in_one_line() {
             .to_string()
             .ends_with("expected a .mat, .mcap, .csv or .ws file"),
         "{:?}",
-        registry.read(&other, None, None, &servo_core::Transmission::GEAR).err()
+        registry
+            .read(&other, None, None, &servo_core::Transmission::GEAR)
+            .err()
     );
 
     // "Not mine" is typed: a .ws file without the format's first line is passed on, and with no
@@ -125,7 +129,7 @@ fn log_reader_registry_takes_a_format_from_outside_in_one_line() {
         Err(Error::Incompatible { .. })
     ));
     assert!(matches!(
-        registry.read(&foreign, None, None),
+        registry.read(&foreign, None, None, &servo_core::Transmission::GEAR),
         Err(Error::UnknownFormat { .. })
     ));
 
@@ -135,7 +139,9 @@ fn log_reader_registry_takes_a_format_from_outside_in_one_line() {
         "run.csv",
         "time_s,u_V,theta_l_rad\n0,0,0\n0.002,1,0.001\n0.004,2,0.003\n",
     );
-    let (rec, _) = registry.read(&csv, None, None).expect("the CSV reads");
+    let (rec, _) = registry
+        .read(&csv, None, None, &servo_core::Transmission::GEAR)
+        .expect("the CSV reads");
     assert_eq!(rec.len(), 3);
     assert_eq!(
         registry.reader_for(&csv).expect("a reader").name(),

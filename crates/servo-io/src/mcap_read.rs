@@ -240,7 +240,13 @@ impl crate::log_reader::LogReader for McapReader {
             Ok(None) => out.push("  (no summary section: an unfinished log?)".to_string()),
             Err(e) => out.push(format!("  (summary unreadable: {e})")),
         }
-        match crate::log_reader::LogReader::read(self, path, None, None, &servo_core::Transmission::GEAR) {
+        match crate::log_reader::LogReader::read(
+            self,
+            path,
+            None,
+            None,
+            &servo_core::Transmission::GEAR,
+        ) {
             Ok((rec, meta)) => {
                 out.push(format!(
                     "  {} samples, {:.3} s, signals {}",

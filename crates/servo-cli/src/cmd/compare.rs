@@ -198,9 +198,13 @@ impl Compare {
         self.part.check(self.logs.len())?;
         let mut parts = Vec::new();
         for (k, path) in self.logs.iter().enumerate() {
-            let (mut record, mut meta) =
-                crate::io::read_log_on(path, self.columns.as_deref(), None, &model_file.transmission)
-                    .with_context(|| format!("reading log {}", path.display()))?;
+            let (mut record, mut meta) = crate::io::read_log_on(
+                path,
+                self.columns.as_deref(),
+                None,
+                &model_file.transmission,
+            )
+            .with_context(|| format!("reading log {}", path.display()))?;
             let used = self.part.apply(&mut record, path, k, self.logs.len())?;
             meta.feedforward_v = meta.feedforward_v.map(|f| used.slice_of(&f).to_vec());
             parts.push(used);
