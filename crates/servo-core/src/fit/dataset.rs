@@ -674,7 +674,7 @@ pub fn rig_stuck_speed_rad_s(recs: &[RecData], opts: &FitOptions) -> f64 {
     let mut floor = 0.0f64;
     let mut speeds: Vec<f64> = Vec::new();
     for r in recs {
-        if let Some(q) = crate::compare::quantum::encoder_quantum(&r.theta_m_rad) {
+        if let Some(q) = crate::signal::quantum::encoder_quantum(&r.theta_m_rad) {
             floor = floor.max(2.0 * q * opts.filter_hz);
         }
         speeds.extend(r.omega_f.iter().map(|w| w.abs()));
