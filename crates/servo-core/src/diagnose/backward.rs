@@ -39,223 +39,18 @@
 //! bending together to soak up a mechanism outside the catalogue) must pass every guard, each
 //! given the others.
 
-use super::{joint, on_simulation, par_map, Candidate, Reference};
-use crate::effects::{EffectKind, SearchScale, Span};
+use super::judge::simulation_bic;
+use super::survey::Reference;
+use super::thresholds::frac;
+use super::tuner::{get, targets, with, Target, Tuner, GRID_POINTS, STARTS};
+use super::{joint, on_simulation, par_map, Candidate};
+use crate::effects::EffectKind;
 use crate::fit::model::Config;
 use crate::fit::oe::{self, Part};
 use crate::fit::{search, set_effect, to_plant, Dataset, EffectToFit, FitError, Solved};
 use crate::math;
 use crate::plant::Plant;
 use alloc::vec::Vec;
-
-/// Horizon of the segments the joint model is tuned on [s]: long enough to hold several
-/// reversals (a gap shows as an offset after each one, blurred on short segments started from
-/// an uncertain contact state).
-const LONG_HORIZON_S: f64 = 0.75;
-/// Grid points per parameter of the coarse two-parameter grid.
-const GRID_POINTS: usize = 6;
-/// Share of the segments the tuning cost leaves out, the worst ones ([`trimmed`]).
-const TRIM: f64 = 0.2;
-/// Starts of the joint refinement (the best grid points).
-const STARTS: usize = 3;
-/// At most this many long segments (spread over the logs) for the joint fit (a play's own
-/// refinement uses 90; each evaluation here is one of several hundred).
-const MAX_SEGMENTS: usize = 45;
-
-/// A parameter tuned on the simulation.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Target {
-    Effect(EffectKind, &'static str),
-    JEq,
-    TauSf,
-    /// The armature resistance: sized in the electrical balance before the delay (or a play)
-    /// was in the model, it sets the torque a voltage produces in the simulation.
-    RA,
-    BEq,
-}
-
-fn get(p: &Plant, t: Target) -> Option<f64> {
-    match t {
-        Target::Effect(k, key) => p.effects.value(k, key),
-        Target::JEq => Some(p.params.j_eq()),
-        Target::TauSf => Some(p.tau_sf()),
-        Target::RA => Some(p.params.r_a),
-        Target::BEq => Some(p.params.b_eq()),
-    }
-}
-
-fn with(p: &Plant, t: Target, x: f64) -> Option<Plant> {
-    let mut q = *p;
-    match t {
-        Target::Effect(k, key) => q.effects.get_mut(k)?.set(key, x).ok()?,
-        Target::JEq => q.params.j_eq = Some(x),
-        Target::RA => q.params.r_a = x,
-        Target::BEq => q.params.b_eq = Some(x),
-        Target::TauSf => {
-            q.params.tau_sf = Some(x);
-            if q.effects.contains(EffectKind::Coulomb) {
-                set_effect(&mut q, EffectKind::Coulomb, &[x]).ok()?;
-            }
-        }
-    }
-    Some(q)
-}
-
-/// The parameters of `p` tuned on the simulation, with how far they may move in the first
-/// pass: those of the members judged on the simulation (no balance sees them: a gear play's
-/// gap), those the other members declare sensitive in the motion
-/// ([`crate::effects::EffectModel::polish`]: a breakaway's level and speed scale), J_eq and the
-/// Coulomb level. The rest keep their equation-error values (a delay, which the electrical
-/// balance resolves far more sharply than the motion does, is refitted there with the others in
-/// the model, see [`search`]).
-fn targets(p: &Plant, members: &[EffectKind]) -> Vec<(Target, Span)> {
-    let mut out = Vec::new();
-    for &k in members {
-        if !p.effects.contains(k) {
-            continue;
-        }
-        if on_simulation(k) {
-            for spec in k.params() {
-                if k.model().fittable(spec.key) {
-                    out.push((Target::Effect(k, spec.key), Span::Scale(1.5)));
-                }
-            }
-        } else {
-            for &(key, span) in k.model().polish() {
-                out.push((Target::Effect(k, key), span));
-            }
-            // Its other searched parameters (a delay sized in the electrical balance to a
-            // fraction of a sample only by the motion), within 40 %.
-            for spec in k.params() {
-                let searched = spec.nonlinear
-                    && k.model().fittable(spec.key)
-                    && k.model().search(spec.key).scale != SearchScale::Integer;
-                if searched && !out.iter().any(|(t, _)| *t == Target::Effect(k, spec.key)) {
-                    out.push((Target::Effect(k, spec.key), Span::Scale(1.4)));
-                }
-            }
-        }
-    }
-    out.push((Target::JEq, Span::Scale(1.15)));
-    // The armature resistance and the viscous coefficient, sized in their balances before the
-    // members were in the model (a missing delay biases the electrical balance, a play the
-    // torque balance): each sets the torque a voltage produces and the speed it holds.
-    out.push((Target::RA, Span::Scale(1.05)));
-    out.push((Target::BEq, Span::Scale(1.3)));
-    if p.effects.contains(EffectKind::Coulomb) {
-        out.push((Target::TauSf, Span::Scale(1.1)));
-    }
-    // The base first: a member tuned before it bends to absorb the base's bias (a play wider
-    // and a breakaway broader for an inertia 3 % light and a resistance 1.5 % high).
-    out.reverse();
-    out
-}
-
-/// The simulation cost of the fit blocks over long segments.
-struct Tuner<'a> {
-    ds: &'a Dataset,
-    segs: Vec<(usize, usize)>,
-    horizon_s: f64,
-}
-
-impl<'a> Tuner<'a> {
-    /// The tuner over the long fit segments of `ds` ([`LONG_HORIZON_S`], at most
-    /// [`MAX_SEGMENTS`]).
-    fn new(ds: &'a Dataset) -> Self {
-        let horizon_s = LONG_HORIZON_S.max(ds.opts.oe_horizon_s);
-        Tuner {
-            ds,
-            segs: oe::segments_with(ds, Part::Fit, horizon_s, 3, MAX_SEGMENTS),
-            horizon_s,
-        }
-    }
-
-    /// The trimmed simulation cost of `p` ([`trimmed`], [`TRIM`]); `bound` is not used (a
-    /// trimmed sum cannot stop early), kept for the searches' signature.
-    fn cost(&self, p: &Plant, _bound: f64) -> f64 {
-        trimmed(self.ds, p, &self.segs, self.horizon_s, TRIM).unwrap_or(f64::INFINITY)
-    }
-
-    /// How many segments the trimmed cost keeps.
-    fn kept(&self) -> usize {
-        kept(self.segs.len(), TRIM)
-    }
-
-    /// Coordinate refinement of `ts` from `p`, `passes` times: per parameter a grid over its
-    /// span (narrowed by `shrink` at each pass; a scale on a log axis) then a golden-section
-    /// search, a change kept only when it lowers the cost.
-    fn refine(&self, p: &Plant, ts: &[(Target, Span)], passes: &[f64]) -> (Plant, f64) {
-        let mut best = *p;
-        let mut c_best = self.cost(&best, f64::INFINITY);
-        for &shrink in passes {
-            for &(t, span) in ts {
-                let Some(x0) = get(&best, t) else { continue };
-                if !x0.is_finite() {
-                    continue;
-                }
-                // Search coordinates: ln x for a scale, x for an additive span.
-                let (grid, to_x): (Vec<f64>, fn(f64) -> f64) = match span {
-                    Span::Scale(f) if x0 > 0.0 => {
-                        let d = shrink * math::ln(f);
-                        let l0 = math::ln(x0);
-                        (search::linspace(l0 - d, l0 + d, 5), math::exp)
-                    }
-                    Span::Add(d) => {
-                        let d = shrink * d;
-                        (search::linspace(x0 - d, x0 + d, 5), |x| x)
-                    }
-                    Span::Scale(_) => continue,
-                };
-                let from = best;
-                let r = search::grid_then_golden_bounded(
-                    &grid,
-                    |l, bound| {
-                        with(&from, t, to_x(l)).map_or(f64::INFINITY, |q| self.cost(&q, bound))
-                    },
-                    8,
-                );
-                if let Some((l, c)) = r {
-                    if c < c_best {
-                        if let Some(q) = with(&from, t, to_x(l)) {
-                            best = q;
-                            c_best = c;
-                        }
-                    }
-                }
-            }
-        }
-        (best, c_best)
-    }
-}
-
-/// The trimmed simulation cost [rad]: the RMS error over the segments but the worst `trim`
-/// share of them (a least-trimmed-squares cost).
-///
-/// With a gear play and a breakaway friction, a few segments cannot be predicted whatever the
-/// parameters: their start state is fixed by no measurement (the motor somewhere inside the gap,
-/// the load stuck or slipping near a set point, where the loop hunts). On seed 24 of the
-/// three-effect test the true model's plain cost over the long fit segments is 0.33 rad (its
-/// held-out cost on short segments 0.06 rad): those few segments carry most of it, and a wrong
-/// model (gap 0.049 rad, breakaway speed 1.3 rad/s for 0.03 and 0.5) scores lower (0.32-0.38).
-/// Without the worst fifth, the true model scores 0.086 rad against 0.148 for the wrong one.
-fn trimmed(
-    ds: &Dataset,
-    p: &Plant,
-    segs: &[(usize, usize)],
-    horizon_s: f64,
-    trim: f64,
-) -> Option<f64> {
-    let mut c = oe::segment_costs(ds, p, segs, horizon_s)?;
-    c.sort_by(|a, b| a.total_cmp(b));
-    let keep = kept(c.len(), trim);
-    let s: f64 = c.iter().take(keep).map(|x| x * x).sum();
-    Some(math::sqrt(s / keep.max(1) as f64))
-}
-
-/// How many of `n` segments a cost trimmed by `trim` keeps (at least one).
-fn kept(n: usize, trim: f64) -> usize {
-    (libm::ceil(n as f64 * (1.0 - trim)) as usize).clamp(1, n.max(1))
-}
 
 /// The result of the backward elimination: the survivors (best first), judged each given the
 /// others, every one carrying the joint model in its `plant`.
@@ -273,7 +68,7 @@ pub(super) fn search(
     // simulation (an input delay whose motion another missing effect spoils): the information
     // criterion, the held-out residual drop and the noise floor of their balance pass.
     let th = &cx.opts.thresholds;
-    let min_red = 100.0 * (1.0 - math::sqrt(1.0 - cx.opts.min_eq_drop));
+    let min_red = 100.0 * (1.0 - math::sqrt(1.0 - frac(th.min_eq_drop_pct)));
     join_from(
         ranking,
         fits,
@@ -281,7 +76,7 @@ pub(super) fn search(
         cx.opts.joint_candidates + 2,
         |c| {
             !on_simulation(c.effect)
-                && c.bic_gain > cx.opts.min_bic_gain
+                && c.bic_gain > th.min_bic_gain
                 && c.error_reduction_pct >= min_red
                 && c.noise_ratio >= th.min_noise_ratio
         },
@@ -422,11 +217,11 @@ pub(super) fn search(
                 let total = 1.0
                     - oe::prediction_cost(ds, &full, Part::Holdout)?
                         / cx.reference.oe_holdout?.max(1e-300);
-                let need = if survivors.iter().any(|k| on_simulation(*k)) {
-                    cx.opts.min_simulation_oe_drop
+                let need = frac(if survivors.iter().any(|k| on_simulation(*k)) {
+                    cx.opts.thresholds.min_simulation_oe_drop_pct
                 } else {
-                    cx.opts.min_oe_drop
-                };
+                    cx.opts.thresholds.min_oe_drop_pct
+                });
                 trace(|| {
                     alloc::format!(
                         "survivors {survivors:?} total held-out drop {:.1} % (needs {:.1} %)",
@@ -493,13 +288,6 @@ fn narrower(
     .chain(core::iter::once((full, c_full)))
     .min_by(|a, b| a.1.total_cmp(&b.1))
     .unwrap_or((full, c_full))
-}
-
-/// The cost a joint model is tuned on ([`Tuner`]) of each of `plants`: the trimmed simulation
-/// error [rad] over the long fit segments of `ds`. `None` when nothing could be simulated.
-pub(super) fn motion_costs<const N: usize>(ds: &Dataset, plants: [&Plant; N]) -> [Option<f64>; N] {
-    let tuner = Tuner::new(ds);
-    plants.map(|p| Some(tuner.cost(p, f64::INFINITY)).filter(|c| c.is_finite()))
 }
 
 /// Adds to `fresh`, in ranking order and while it holds fewer than `cap`, every candidate not
@@ -714,7 +502,14 @@ fn drop_one(
     let (mut c, before) = joint::judge_given(cx, m, &o_solved, &reference, &j_solved)?;
     if on_simulation(m) && !c.significant && c.checks.is_empty() {
         on_tuned_cost(cx, tuner, &mut c, full, &reduced);
-        joint::resonance_given(ds, &mut c, &before, &o_solved, &j_solved);
+        joint::resonance_given(
+            ds,
+            &mut c,
+            &before,
+            &o_solved,
+            &j_solved,
+            &cx.opts.thresholds,
+        );
     }
     let contribution = c.oe_reduction_pct.unwrap_or(f64::NEG_INFINITY);
     // Agreement across both halves, refitted with the others in the model.
@@ -742,9 +537,12 @@ fn on_tuned_cost(
     reduced: &Plant,
 ) {
     let opts = cx.opts;
-    let held_out = c
-        .oe_reduction_pct
-        .is_some_and(|d| d >= 100.0 * opts.min_simulation_oe_drop.max(opts.min_oe_drop));
+    let held_out = c.oe_reduction_pct.is_some_and(|d| {
+        d >= opts
+            .thresholds
+            .min_simulation_oe_drop_pct
+            .max(opts.thresholds.min_oe_drop_pct)
+    });
     let (x, y) = (
         tuner.cost(reduced, f64::INFINITY),
         tuner.cost(full, f64::INFINITY),
@@ -753,14 +551,14 @@ fn on_tuned_cost(
         return;
     }
     let n = tuner.kept() as f64;
-    let bic = super::simulation_bic(x, y, n, c.effect);
+    let bic = simulation_bic(x, y, n, c.effect, &opts.thresholds);
     trace(|| {
         alloc::format!(
             "{} on the tuned cost: {x:.4e} -> {y:.4e} rad over {n} segments, criterion {bic:.1}",
             c.effect
         )
     });
-    if bic <= opts.min_bic_gain {
+    if bic <= opts.thresholds.min_bic_gain {
         return;
     }
     c.bic_gain = bic;

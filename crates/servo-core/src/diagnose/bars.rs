@@ -7,33 +7,12 @@ use super::{on_simulation, Candidate, DiagnoseOptions};
 use crate::compare::gate::{Bar, MAX_WORSENING};
 use alloc::vec::Vec;
 
-/// The bars of `opts`, in the order they are applied (the statistical guards, the practical
-/// checks, the verdict's thresholds, the save gate). Fractions are given in %.
+/// The bars of `opts`: every threshold of the diagnosis ([`super::Thresholds::table`]), then the
+/// save gate's. Fractions are given in %.
 pub fn bars(opts: &DiagnoseOptions) -> Vec<Bar> {
-    let t = &opts.thresholds;
-    alloc::vec![
-        Bar { name: "min_bic_gain", value: opts.min_bic_gain, unit: "-", rule: ">",
-            why: "information criterion: the fit gain must outweigh the cost of the effect's parameters (search-corrected, effective sample size)" },
-        Bar { name: "min_eq_drop_pct", value: 100.0 * opts.min_eq_drop, unit: "%", rule: ">=",
-            why: "the effect must lower its balance's squared residual on held-out blocks" },
-        Bar { name: "min_simulation_oe_drop_pct", value: 100.0 * opts.min_simulation_oe_drop, unit: "%", rule: ">=",
-            why: "an effect judged on the simulation alone (a gear play) needs a clear held-out simulation drop" },
-        Bar { name: "min_oe_drop_pct", value: 100.0 * opts.min_oe_drop, unit: "%", rule: ">=",
-            why: "the effect must lower the held-out simulation (output) error" },
-        Bar { name: "min_noise_ratio", value: t.min_noise_ratio, unit: "x noise floor", rule: ">=",
-            why: "what the effect explains must stand above the sensor noise of its balance (RMS)" },
-        Bar { name: "min_structured_share_pct", value: 100.0 * t.min_structured_share, unit: "%", rule: ">=",
-            why: "the effect must explain a material share of the structured (above-noise) error" },
-        Bar { name: "consistency_tol_pct", value: 100.0 * t.consistency_tol, unit: "%", rule: "<=",
-            why: "parameters fitted on the two halves of the data must agree (or within 3 standard errors)" },
-        Bar { name: "electrical_block_ratio", value: t.electrical_block_ratio, unit: "x noise floor", rule: "<",
-            why: "no torque is named while the electrical balance is this far above its floor (inconsistent current or speed)" },
-        Bar { name: "unexplained_ratio", value: t.unexplained_ratio, unit: "x noise floor", rule: "<=",
-            why: "a balance whose residual is above this is incomplete" },
-        Bar { name: "min_signature_share_pct", value: 100.0 * t.min_signature_share, unit: "%", rule: ">=",
-            why: "a residual shape is named when it explains this share of the held-out residual" },
-        MAX_WORSENING,
-    ]
+    let mut out = opts.thresholds.table();
+    out.push(MAX_WORSENING);
+    out
 }
 
 /// The bar named `name` of `opts`.

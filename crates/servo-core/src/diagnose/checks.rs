@@ -7,7 +7,7 @@
 //! and second half, or between slow and fast motion, are the marks of a mimic: a catalogue effect
 //! bent to soak up a mechanism outside the catalogue.
 
-use super::structure::Thresholds;
+use super::thresholds::{frac, Thresholds};
 use super::Candidate;
 use crate::effects::EffectKind;
 use crate::fit::{Dataset, EffectToFit, ParamEstimate};
@@ -69,8 +69,9 @@ fn agree(
     kind: EffectKind,
     a: &[ParamEstimate],
     b: &[ParamEstimate],
-    tol: f64,
+    th: &Thresholds,
 ) -> Check {
+    let tol = frac(th.consistency_tol_pct);
     let mut passed = true;
     let mut detail = String::new();
     for key in compared(kind) {
@@ -84,18 +85,19 @@ fn agree(
         let scale = pa.value.abs().max(pb.value.abs());
         let (sa, sb) = (pa.std_err.unwrap_or(0.0), pb.std_err.unwrap_or(0.0));
         let se = math::sqrt(sa * sa + sb * sb);
-        let ok = diff <= (tol * scale).max(3.0 * se);
+        let ok = diff <= (tol * scale).max(th.consistency_std_errors * se);
         passed &= ok;
         if !detail.is_empty() {
             detail.push_str("; ");
         }
         detail.push_str(&alloc::format!(
-            "{key} = {:.4e} vs {:.4e} {} on {what} ({:.0} % apart; allowed {:.0} % or 3 standard errors)",
+            "{key} = {:.4e} vs {:.4e} {} on {what} ({:.0} % apart; allowed {:.0} % or {} standard errors)",
             pa.value,
             pb.value,
             pa.unit,
             100.0 * diff / scale.max(1e-300),
-            100.0 * tol
+            th.consistency_tol_pct,
+            th.consistency_std_errors
         ));
     }
     Check {
@@ -140,7 +142,7 @@ pub fn consistency_with(
             kind,
             &a,
             &b,
-            th.consistency_tol,
+            th,
         ));
     }
     // Only for effects that say they do not depend on speed (e.g. a motor-angle periodic torque
@@ -164,7 +166,7 @@ pub fn consistency_with(
                 kind,
                 &a,
                 &b,
-                th.consistency_tol,
+                th,
             ));
         }
     }

@@ -227,11 +227,11 @@ pub fn thresholds_text(th: &Thresholds) -> String {
     alloc::format!(
         "Thresholds: an effect must pass the information criterion, the held-out residual and simulation drops, explain at least {:.1} times its balance's noise floor (RMS) and {:.0} % of its structured error, have physically meaningful parameters and agree within {:.0} % across halves of the data; no torque is named while the electrical balance is {:.0} times its noise floor; a balance is incomplete when its residual exceeds {:.1} times its noise floor; a shape is named when it explains {:.0} % of the held-out residual.",
         th.min_noise_ratio,
-        100.0 * th.min_structured_share,
-        100.0 * th.consistency_tol,
+        th.min_structured_share_pct,
+        th.consistency_tol_pct,
         th.electrical_block_ratio,
         th.unexplained_ratio,
-        100.0 * th.min_signature_share
+        th.min_signature_share_pct
     )
 }
 

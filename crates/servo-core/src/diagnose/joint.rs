@@ -23,10 +23,10 @@
 //! member in the model). A mimic pair (two effects bending together to soak up a mechanism
 //! outside the catalogue) must therefore pass every guard twice over.
 
-use super::{
-    checks, judge, on_simulation, par_map, resonance_check, structure, structure_check, Candidate,
-    DiagnoseOptions, Reference,
-};
+use super::judge::{judge, resonance_check, structure_check};
+use super::survey::Reference;
+use super::thresholds::frac;
+use super::{checks, on_simulation, par_map, structure, Candidate, DiagnoseOptions};
 use crate::effects::EffectKind;
 use crate::fit::model::{Config, Equation};
 use crate::fit::oe::{self, Part};
@@ -77,7 +77,7 @@ pub(super) fn seeds<'a>(
             // spoils most. It is always a seed.
             let drop = if on_simulation(c.effect) {
                 f64::INFINITY
-            } else if drop < 100.0 * cx.opts.min_oe_drop {
+            } else if drop < cx.opts.thresholds.min_oe_drop_pct {
                 return None;
             } else {
                 drop
@@ -173,7 +173,7 @@ fn judge_pair(
     let joint_oe = oe::prediction_cost(cx.ds, &joint.plant, Part::Holdout)?;
     let base_oe = cx.reference.oe_holdout?;
     let total = 1.0 - joint_oe / base_oe.max(1e-300);
-    if total < cx.opts.min_oe_drop {
+    if total < frac(cx.opts.thresholds.min_oe_drop_pct) {
         return None;
     }
     if !(confirm_member(cx, &mut ca, &joint) && confirm_member(cx, &mut cb, &joint)) {
@@ -239,12 +239,12 @@ pub(super) fn judge_given(
             c.checks.push(k);
         }
     }
-    resonance_given(ds, &mut c, &before, o_alone, joint);
+    resonance_given(ds, &mut c, &before, o_alone, joint, &cx.opts.thresholds);
     Some((c, before))
 }
 
 /// The check of a single candidate that it explains the resonance its balance rings with
-/// ([`super::resonance_check`]), for member `c` of `joint` judged against `o_alone` (the joint
+/// ([`super::judge::resonance_check`]), for member `c` of `joint` judged against `o_alone` (the joint
 /// model without it; `before`, that model's balance): a play bends to a compliant shaft's ringing
 /// through its contact stiffness beside other members as it does alone (with the joint search
 /// on, seed 50 of the compliant-shaft test named one without this check). Applied once, to a
@@ -255,12 +255,13 @@ pub(super) fn resonance_given(
     before: &structure::BalanceReport,
     o_alone: &Solved,
     joint: &Solved,
+    th: &super::Thresholds,
 ) {
     const NAME: &str = "explains the resonance";
     if !c.significant || c.checks.iter().any(|k| k.name == NAME) {
         return;
     }
-    if let Some(k) = resonance_check(ds, before, o_alone.equation(before.equation), joint) {
+    if let Some(k) = resonance_check(ds, before, o_alone.equation(before.equation), joint, th) {
         c.significant = k.passed;
         c.checks.push(k);
     }

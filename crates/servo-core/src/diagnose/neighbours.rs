@@ -6,7 +6,7 @@
 //! its noise floor). A neighbour is reported among the signatures of its balance when it predicts
 //! the held-out motion better than the simulation reference by at least the drop asked of an
 //! effect judged on the simulation
-//! ([`super::DiagnoseOptions::min_simulation_oe_drop`]). It is a lead on the missing term, with
+//! ([`super::Thresholds::min_simulation_oe_drop_pct`]). It is a lead on the missing term, with
 //! its fitted parameters and the experiment that would confirm it, never a named effect: the
 //! status stays "unexplained".
 
@@ -61,7 +61,7 @@ pub(super) fn find(
         .filter_map(|n| {
             let c = n.heldout_oe_rad;
             let drop = 1.0 - c / c0;
-            (drop >= opts.min_simulation_oe_drop).then(|| {
+            (drop >= super::thresholds::frac(opts.thresholds.min_simulation_oe_drop_pct)).then(|| {
                 let sig = Signature {
                     kind: n.kind,
                     description: alloc::format!(

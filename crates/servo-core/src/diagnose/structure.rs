@@ -17,40 +17,8 @@ use alloc::string::String;
 use alloc::vec::Vec;
 use core::fmt::Write;
 
-/// Thresholds of the practical-significance gates and of "unexplained" (stated in the output and
-/// the guide, docs/guide/src/verdict.md).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Thresholds {
-    /// An effect must explain at least this multiple of its balance's noise floor (RMS).
-    pub min_noise_ratio: f64,
-    /// An effect must explain at least this share of the structured error (squared residual
-    /// above the noise floor) of its balance.
-    pub min_structured_share: f64,
-    /// A balance whose residual RMS exceeds this multiple of its noise floor is incomplete.
-    pub unexplained_ratio: f64,
-    /// A shape is named when it explains at least this share of the held-out residual's variance.
-    pub min_signature_share: f64,
-    /// Parameters fitted on independent halves of the data agree within this relative difference
-    /// (or 3 combined standard errors).
-    pub consistency_tol: f64,
-    /// No torque (mechanical effect other than a gear play, which breaks the angle-speed relation
-    /// itself) is named while the electrical balance, which holds no torque, is this many times
-    /// its noise floor: the current or speed measurement is then inconsistent.
-    pub electrical_block_ratio: f64,
-}
-
-impl Default for Thresholds {
-    fn default() -> Self {
-        Thresholds {
-            min_noise_ratio: 1.0,
-            min_structured_share: 0.25,
-            unexplained_ratio: 2.0,
-            min_signature_share: 0.15,
-            consistency_tol: 0.35,
-            electrical_block_ratio: 6.0,
-        }
-    }
-}
+use super::thresholds::frac;
+pub use super::thresholds::Thresholds;
 
 /// One interpretable shape of a residual.
 #[derive(Debug, Clone, PartialEq)]
@@ -746,9 +714,10 @@ pub fn analyse(
             resonance = Some(res);
         }
     }
-    sigs.retain(|s| s.share >= th.min_signature_share && s.explained_rms > 0.0);
+    sigs.retain(|s| s.share >= frac(th.min_signature_share_pct) && s.explained_rms > 0.0);
     sigs.sort_by(|a, b| b.share.total_cmp(&a.share));
-    let structured = !sigs.is_empty() || ratio >= 2.0 * th.unexplained_ratio;
+    let structured =
+        !sigs.is_empty() || ratio >= th.structured_without_shape * th.unexplained_ratio;
     let above_noise = ratio >= th.unexplained_ratio && structured;
     // Where it lives: an error whose angle-periodic part grows with speed in the electrical
     // balance (k_e times an angle error's derivative), or with speed^2 in the torque balance

@@ -59,9 +59,9 @@ pub fn judge_user_effects(
         return Ok(out);
     }
     let gates = Gates {
-        min_bic_gain: opts.min_bic_gain,
-        min_eq_drop: opts.min_eq_drop,
-        min_oe_drop: opts.min_oe_drop,
+        min_bic_gain: opts.thresholds.min_bic_gain,
+        min_eq_drop: super::thresholds::frac(opts.thresholds.min_eq_drop_pct),
+        min_oe_drop: super::thresholds::frac(opts.thresholds.min_oe_drop_pct),
         ..Gates::default()
     };
     let ds = Dataset::new(records, &model.params, &opts.fit).map_err(UserEffectsError::Prepare)?;

@@ -89,10 +89,10 @@ pub(super) fn neighbour_json(n: &Neighbour, reference_rad: Option<f64>) -> Value
 pub(super) fn thresholds_json(t: &Thresholds) -> Value {
     json!({
         "min_noise_ratio": f(t.min_noise_ratio),
-        "min_structured_share": f(t.min_structured_share),
+        "min_structured_share": f(t.min_structured_share_pct / 100.0),
         "unexplained_ratio": f(t.unexplained_ratio),
-        "min_signature_share": f(t.min_signature_share),
-        "consistency_tol": f(t.consistency_tol),
+        "min_signature_share": f(t.min_signature_share_pct / 100.0),
+        "consistency_tol": f(t.consistency_tol_pct / 100.0),
         "electrical_block_ratio": f(t.electrical_block_ratio),
     })
 }

@@ -1,0 +1,97 @@
+//! Stage 9 of a diagnosis: the conclusion. The base model's residual summary per balance and
+//! regime, the status (missing when a candidate passes, unexplained when a balance is left above
+//! its floor, complete otherwise), the leads beyond the catalogue for an unexplained status
+//! ([`super::neighbours`]), and the verdict in words ([`super::evidence::verdict`]).
+
+use super::base::Base;
+use super::structure::BalanceReport;
+use super::survey::Survey;
+use super::{evidence, neighbours, regimes, timing, BaseSummary, Candidate, DiagnoseOptions};
+use super::{Diagnosis, Status};
+use crate::effects::EffectKind;
+use crate::fit::Dataset;
+use crate::math;
+use crate::plant::Plant;
+use alloc::vec::Vec;
+
+/// Concludes the diagnosis of `model` on `ds` from the stages before.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn run(
+    ds: &Dataset,
+    model: &Plant,
+    base: Base,
+    survey: Survey,
+    labels: &regimes::Labels,
+    kinds: &[EffectKind],
+    ranking: Vec<Candidate>,
+    opts: &DiagnoseOptions,
+) -> Diagnosis {
+    let mut equations = Vec::new();
+    for sol in base.solutions() {
+        let reg = labels.of(sol.equation);
+        let sq: Vec<f64> = sol.resid.iter().map(|r| r * r).collect();
+        equations.push((
+            sol.equation,
+            sol.rms(),
+            regimes::shares(reg, &sq),
+            regimes::occupancy(reg),
+        ));
+    }
+    let Survey {
+        reference,
+        mut balances,
+        ..
+    } = survey;
+    let summary = BaseSummary {
+        plant: base.solved.plant,
+        equations,
+        oe_cost_rad: reference.oe_holdout,
+        current_noise_a: base.noise_a,
+    };
+    let winner = ranking.first().filter(|c| c.significant).is_some();
+    let mut unexplained: Vec<BalanceReport> = if winner {
+        Vec::new()
+    } else {
+        balances.iter().filter(|b| b.above_noise).cloned().collect()
+    };
+    let status = if winner {
+        Status::Missing
+    } else if unexplained.is_empty() {
+        Status::Complete
+    } else {
+        Status::Unexplained
+    };
+    let mut leads = Vec::new();
+    if status == Status::Unexplained {
+        // Leads beyond the catalogue: a mechanism the candidates' own machinery sizes (a gear
+        // play's contact without play: a shaft) that predicts the motion materially better.
+        if let (Some(c0), true) = (reference.oe_holdout, ds.has_input) {
+            let found = timing::timed(
+                || "neighbours outside the catalogue".into(),
+                || neighbours::find(ds, kinds, &[model, &reference.plant], c0, opts),
+            );
+            neighbours::attach(&mut unexplained, &found);
+            neighbours::attach(&mut balances, &found);
+            leads = found.into_iter().map(|(n, _)| n).collect();
+        }
+    }
+    let mut verdict = evidence::verdict(status, &ranking, &unexplained, &opts.thresholds);
+    if let Some(j) = base.unphysical_j_eq {
+        verdict.push_str(&alloc::format!(
+            " The bare base model was unphysical on these logs (the fitted inertia J_eq = {} kg m^2 is not positive: a large torque it lacks, such as an arm's gravity, was absorbed into it); each candidate was fitted with the base refitted beside it.",
+            math::Num(j)
+        ));
+    }
+    if !ds.has_input {
+        verdict.push_str(" No log records the input voltage u: judged on the torque balance alone (information criterion and held-out residual), without a simulation check; input effects and effects judged on the simulation were not tried.");
+    }
+    Diagnosis {
+        ranking,
+        verdict,
+        base: summary,
+        status,
+        balances,
+        unexplained,
+        neighbours: leads,
+    }
+}

@@ -1,0 +1,71 @@
+//! What a diagnosis returns: its status, the base model's residual summary and the ranking.
+
+use super::checks;
+use super::structure::BalanceReport;
+use crate::fit::model::Equation;
+use crate::plant::Plant;
+use crate::verdict::Candidate;
+use alloc::string::String;
+use alloc::vec::Vec;
+
+/// What the diagnosis concludes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Status {
+    /// Nothing material is left in any balance.
+    Complete,
+    /// A catalogue effect passes every check: it is `ranking[0]`.
+    Missing,
+    /// Structured error above the noise floor that no catalogue effect explains.
+    Unexplained,
+}
+
+impl Status {
+    pub const fn name(self) -> &'static str {
+        match self {
+            Status::Complete => "complete",
+            Status::Missing => "missing",
+            Status::Unexplained => "unexplained",
+        }
+    }
+}
+
+/// Residual summary of the model being diagnosed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BaseSummary {
+    /// The model with its base parameters refitted (fit blocks).
+    pub plant: Plant,
+    /// Per equation: (equation, rms of the residual [unit], share of squared residual per regime).
+    pub equations: Vec<(Equation, f64, [f64; 5], [f64; 5])>,
+    /// Held-out output-error cost (RMS motor-angle prediction error [rad]) of the simulation
+    /// reference: this model with J_eq and tau_sf tuned on the simulation (fit blocks).
+    pub oe_cost_rad: Option<f64>,
+    /// Current-noise floor [A] estimated from the logs (current logged).
+    pub current_noise_a: Option<f64>,
+}
+
+/// The outcome of a diagnosis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Diagnosis {
+    /// Candidates, best first.
+    pub ranking: Vec<Candidate>,
+    /// One paragraph for the user.
+    pub verdict: String,
+    pub base: BaseSummary,
+    /// complete / missing / unexplained.
+    pub status: Status,
+    /// Every balance's residual of the base model: noise floor, ratio and signatures.
+    pub balances: Vec<BalanceReport>,
+    /// The balances left unexplained (status `Unexplained`; empty otherwise).
+    pub unexplained: Vec<BalanceReport>,
+    /// Leads beyond the catalogue (status `Unexplained`): mechanisms outside it, fitted on the
+    /// simulation, that predict the held-out motion materially better ([`neighbours`]); each is
+    /// also a signature of its balance.
+    pub neighbours: Vec<checks::Neighbour>,
+}
+
+impl Diagnosis {
+    /// The best significant candidate.
+    pub fn winner(&self) -> Option<&Candidate> {
+        self.ranking.first().filter(|c| c.significant)
+    }
+}

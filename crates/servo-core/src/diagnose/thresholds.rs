@@ -1,0 +1,186 @@
+//! The one table of a diagnosis's thresholds: every figure that can refuse a candidate, demote it
+//! or decide the verdict, named, with its unit and why it is there. The pipeline's stages read
+//! them from here and nowhere else; [`Thresholds::table`] lists them for the text report and the
+//! `--json` output (`bars`), so a user who sees "BIC gain 9.9" sees the bar of 10 beside it.
+//!
+//! Drops and shares are in percent, as the results they are compared with
+//! ([`super::Candidate::error_reduction_pct`], [`super::Candidate::oe_reduction_pct`]); ratios to
+//! a noise floor are plain multiples.
+
+use crate::compare::gate::Bar;
+use alloc::vec::Vec;
+
+/// Every threshold of a diagnosis (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Thresholds {
+    /// Minimum BIC gain of the effect's own equation [-] (search-corrected, over the effective
+    /// number of independent rows).
+    pub min_bic_gain: f64,
+    /// Minimum drop of the effect's own equation's squared residual on held-out blocks [%].
+    pub min_eq_drop_pct: f64,
+    /// Minimum drop of the held-out output-error (simulation) cost [%].
+    pub min_oe_drop_pct: f64,
+    /// Minimum held-out simulation drop of an effect judged on the simulation alone (a gear play,
+    /// [`crate::effects::FitHooks::judged_on_simulation`]) [%].
+    pub min_simulation_oe_drop_pct: f64,
+    /// Charge of the information criterion per nonlinear parameter found by a search, in units of
+    /// ln(n) (a searched parameter costs this many fitted ones) [-].
+    pub bic_search_charge: f64,
+    /// When a candidate's fit-row squared residual is below this share of the base's, its own
+    /// residual (not the base's, which is the effect's smooth shape) measures the noise's lag-1
+    /// correlation for the effective sample size [%].
+    pub dominant_residual_pct: f64,
+    /// An effect must explain at least this multiple of its balance's noise floor (RMS) [x].
+    pub min_noise_ratio: f64,
+    /// An effect must explain at least this share of the structured (above-noise) squared error
+    /// of its balance [%].
+    pub min_structured_share_pct: f64,
+    /// A candidate is a mimic when the shape that carried its balance's residual is still there
+    /// after it, at least this share of that shape's RMS [%].
+    pub structure_left_pct: f64,
+    /// A candidate is a mimic of a resonance when this share of the resonance band's power is
+    /// left in its residual [%].
+    pub max_resonance_kept_pct: f64,
+    /// A resonance refuses candidates only at this prominence over the spectrum's median [x].
+    pub resonance_refuse_prominence: f64,
+    /// Parameters fitted on the two halves of the data agree within this relative difference [%]
+    /// (or within `consistency_std_errors` combined standard errors).
+    pub consistency_tol_pct: f64,
+    /// The standard-error alternative of `consistency_tol_pct` [standard errors].
+    pub consistency_std_errors: f64,
+    /// No torque is named while the electrical balance (which holds none) is this many times its
+    /// noise floor: the current or the speed measurement is then inconsistent [x].
+    pub electrical_block_ratio: f64,
+    /// A drive-side effect that explains this share of the electrical residual (RMS) accounts for
+    /// it, and lifts the electrical veto [%].
+    pub drive_explains_pct: f64,
+    /// Ranking: the weight of the equation residual reduction beside the held-out simulation
+    /// reduction in a candidate's score [-].
+    pub rank_equation_weight: f64,
+    /// Ranking: two significant candidates within this many score points explain the data alike;
+    /// the one with fewer searched parameters is named [percentage points].
+    pub rank_tie_points: f64,
+    /// A balance whose residual RMS exceeds this multiple of its noise floor is incomplete [x].
+    pub unexplained_ratio: f64,
+    /// A balance this many times `unexplained_ratio` above its floor is structured even when no
+    /// shape is named [x].
+    pub structured_without_shape: f64,
+    /// A residual shape is named when it explains this share of the held-out residual [%].
+    pub min_signature_share_pct: f64,
+}
+
+impl Default for Thresholds {
+    fn default() -> Self {
+        Thresholds {
+            min_bic_gain: 10.0,
+            min_eq_drop_pct: 2.0,
+            min_oe_drop_pct: 1.0,
+            min_simulation_oe_drop_pct: 8.0,
+            bic_search_charge: 3.0,
+            dominant_residual_pct: 50.0,
+            min_noise_ratio: 1.0,
+            min_structured_share_pct: 25.0,
+            structure_left_pct: 50.0,
+            max_resonance_kept_pct: 50.0,
+            resonance_refuse_prominence: super::resonance::REFUSE_PROMINENCE,
+            consistency_tol_pct: 35.0,
+            consistency_std_errors: 3.0,
+            electrical_block_ratio: 6.0,
+            drive_explains_pct: 50.0,
+            rank_equation_weight: 0.1,
+            rank_tie_points: 0.1,
+            unexplained_ratio: 2.0,
+            structured_without_shape: 2.0,
+            min_signature_share_pct: 15.0,
+        }
+    }
+}
+
+/// `pct` [%] as a fraction.
+pub(crate) fn frac(pct: f64) -> f64 {
+    pct / 100.0
+}
+
+impl Thresholds {
+    /// Every threshold, in the order the pipeline applies them (the statistical guards, the
+    /// practical checks, the mimic checks, the ranking, the verdict), each with its unit, the rule
+    /// a figure must meet and why.
+    pub fn table(&self) -> Vec<Bar> {
+        let t = self;
+        alloc::vec![
+            Bar { name: "min_bic_gain", value: t.min_bic_gain, unit: "-", rule: ">",
+                why: "information criterion: the fit gain must outweigh the cost of the effect's parameters (search-corrected, effective sample size)" },
+            Bar { name: "min_eq_drop_pct", value: t.min_eq_drop_pct, unit: "%", rule: ">=",
+                why: "the effect must lower its balance's squared residual on held-out blocks" },
+            Bar { name: "min_simulation_oe_drop_pct", value: t.min_simulation_oe_drop_pct, unit: "%", rule: ">=",
+                why: "an effect judged on the simulation alone (a gear play) needs a clear held-out simulation drop" },
+            Bar { name: "min_oe_drop_pct", value: t.min_oe_drop_pct, unit: "%", rule: ">=",
+                why: "the effect must lower the held-out simulation (output) error" },
+            Bar { name: "bic_search_charge", value: t.bic_search_charge, unit: "x ln(n) per searched parameter", rule: "charged",
+                why: "a parameter found by a search over a grid overfits more than a linear one" },
+            Bar { name: "dominant_residual_pct", value: t.dominant_residual_pct, unit: "%", rule: "<",
+                why: "when a candidate explains most of the residual, its own residual measures the noise's correlation (the base's is the effect's smooth shape)" },
+            Bar { name: "min_noise_ratio", value: t.min_noise_ratio, unit: "x noise floor", rule: ">=",
+                why: "what the effect explains must stand above the sensor noise of its balance (RMS)" },
+            Bar { name: "min_structured_share_pct", value: t.min_structured_share_pct, unit: "%", rule: ">=",
+                why: "the effect must explain a material share of the structured (above-noise) error" },
+            Bar { name: "structure_left_pct", value: t.structure_left_pct, unit: "% of the shape's RMS", rule: "<",
+                why: "a mimic leaves the shape it was meant to explain: still above the noise floor and at this share of its size" },
+            Bar { name: "max_resonance_kept_pct", value: t.max_resonance_kept_pct, unit: "% of the band's power", rule: "<",
+                why: "a candidate that leaves a resonance ringing is a mimic (no effect of the rigid model rings)" },
+            Bar { name: "resonance_refuse_prominence", value: t.resonance_refuse_prominence, unit: "x spectrum median", rule: ">=",
+                why: "only a clear resonance refuses candidates" },
+            Bar { name: "consistency_tol_pct", value: t.consistency_tol_pct, unit: "%", rule: "<=",
+                why: "parameters fitted on the two halves of the data must agree (or within consistency_std_errors standard errors)" },
+            Bar { name: "consistency_std_errors", value: t.consistency_std_errors, unit: "standard errors", rule: "<=",
+                why: "the halves may differ by their combined standard error this many times over" },
+            Bar { name: "electrical_block_ratio", value: t.electrical_block_ratio, unit: "x noise floor", rule: "<",
+                why: "no torque is named while the electrical balance is this far above its floor (inconsistent current or speed)" },
+            Bar { name: "drive_explains_pct", value: t.drive_explains_pct, unit: "%", rule: ">=",
+                why: "a drive-side effect explaining this much of the electrical residual accounts for it (the measurements are not suspect)" },
+            Bar { name: "rank_equation_weight", value: t.rank_equation_weight, unit: "-", rule: "weight",
+                why: "the ranking's score is the held-out simulation drop plus this weight times the equation drop (near ties go to the effect that also explains its balance)" },
+            Bar { name: "rank_tie_points", value: t.rank_tie_points, unit: "points", rule: "<",
+                why: "two candidates this close in score explain the data alike: the one with fewer searched parameters is named" },
+            Bar { name: "unexplained_ratio", value: t.unexplained_ratio, unit: "x noise floor", rule: "<=",
+                why: "a balance whose residual is above this is incomplete" },
+            Bar { name: "structured_without_shape", value: t.structured_without_shape, unit: "x unexplained_ratio", rule: ">=",
+                why: "a residual this far above its floor is structured even when no shape is named" },
+            Bar { name: "min_signature_share_pct", value: t.min_signature_share_pct, unit: "%", rule: ">=",
+                why: "a residual shape is named when it explains this share of the held-out residual" },
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_field_is_in_the_table_once() {
+        let t = Thresholds::default();
+        let table = t.table();
+        // One row per field: a field added without a row (or a row twice) fails here.
+        assert_eq!(table.len(), 20);
+        for (i, a) in table.iter().enumerate() {
+            assert!(
+                table[i + 1..].iter().all(|b| b.name != a.name),
+                "{}",
+                a.name
+            );
+            assert!(!a.unit.is_empty() && !a.why.is_empty(), "{}", a.name);
+        }
+    }
+
+    #[test]
+    fn percents_convert_to_the_fractions_they_replaced() {
+        let t = Thresholds::default();
+        assert_eq!(frac(t.min_eq_drop_pct), 0.02);
+        assert_eq!(frac(t.min_oe_drop_pct), 0.01);
+        assert_eq!(frac(t.min_simulation_oe_drop_pct), 0.08);
+        assert_eq!(frac(t.min_structured_share_pct), 0.25);
+        assert_eq!(frac(t.consistency_tol_pct), 0.35);
+        assert_eq!(frac(t.min_signature_share_pct), 0.15);
+        assert_eq!(frac(t.structure_left_pct), 0.5);
+    }
+}
