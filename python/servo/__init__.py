@@ -22,12 +22,14 @@ from ._api import (
     DiagnoseResult,
     IdentifyResult,
     Result,
+    TrendResult,
     compare,
     design,
     diagnose,
     diagnose_many,
     identify,
     simulate,
+    trend,
     version,
 )
 from ._errors import (
@@ -66,6 +68,7 @@ __all__ = [
     "Result",
     "SIGNALS",
     "SimulateError",
+    "TrendResult",
     "UsageError",
     "compare",
     "design",
@@ -75,5 +78,6 @@ __all__ = [
     "plot",
     "read_log",
     "simulate",
+    "trend",
     "version",
 ]

@@ -389,6 +389,41 @@ def diagnose_many(
         return out
 
 
+class TrendResult(Result):
+    """``servo trend --json`` (schema ``servo.trend/1``): per actuator its logs and estimates,
+    each parameter's trend, and ``changes`` (only the significant ones)."""
+
+    _summary = ("schema", "logs_found", "cache", "changes")
+
+
+def trend(
+    logs: Any,
+    model: Any,
+    *,
+    cache: Optional[str] = None,
+    jobs: Optional[int] = None,
+    limits: Optional[Dict[str, float]] = None,
+    **options: Any,
+) -> TrendResult:
+    """Each actuator's parameters over many logs (``servo trend``): ``logs`` are paths of logs
+    or of directories of logs; ``model`` the model fitted to each (Model or path); ``cache`` the
+    cache directory shared by the runs (a re-run fits only new logs); ``limits``
+    ``{"tau_sf": 0.02}``. Options as the flags (``group_by``, ``time_from="name:%Y%m%d"``,
+    ``min_change_pct``, ``report``). Releases the GIL."""
+    paths = [str(p) for p in (logs if isinstance(logs, (list, tuple)) else [logs])]
+    with tempdir() as tmp:
+        margs, mpaths = _model_args(model, tmp)
+        args = paths + margs + ["--quiet"]
+        if cache is not None:
+            args += ["--cache", str(cache)]
+        if jobs is not None:
+            args += ["--jobs", str(int(jobs))]
+        for k, v in (limits or {}).items():
+            args += ["--limit", f"{k}={v}"]
+        args += _flags(options)
+        return TrendResult(_run_json("trend", args, paths, mpaths))
+
+
 def simulate(
     plant: Any = None,
     gains: Any = None,

@@ -24,5 +24,6 @@ mod schemas;
 mod serial;
 mod sim;
 mod transmission;
+mod trend;
 mod util;
 mod window;

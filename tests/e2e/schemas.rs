@@ -8,7 +8,7 @@
 use servo_e2e::{schema_path, servo, validate_output};
 use std::path::Path;
 
-const COMMANDS: [&str; 5] = ["design", "identify", "compare", "diagnose", "frf"];
+const COMMANDS: [&str; 6] = ["design", "identify", "compare", "diagnose", "frf", "trend"];
 
 /// Runs `args` (ending in `--json`), which validates the output, and returns it.
 fn json(args: &[&str]) -> serde_json::Value {

@@ -33,6 +33,7 @@ pub mod live;
 pub mod log_part;
 pub mod plant_args;
 pub mod plot;
+pub mod trend;
 
 pub use servo_io::{effects_file, gains_file, model_file, reference_file};
 

@@ -17,6 +17,8 @@
 //!   `compare`).
 //! * [`transmission`]: gear, screw or belt between motor and load, the encoder's place, and the
 //!   conversions of a linear axis (m, N, kg) to the equivalent rotation the core computes in.
+//! * `trend` (alloc): a parameter's estimates over many logs: its linear trend with a 95 %
+//!   interval, a step test, the verdict and the forecast of a limit crossing (`servo trend`).
 //!
 //! The crate is `no_std` without the default `std` feature; modules that need a heap are behind
 //! the `alloc` feature. Units are SI unless a name says otherwise; "motor side" and "load side"
@@ -57,6 +59,8 @@ pub mod safety;
 pub mod signal;
 pub mod sim;
 pub mod transmission;
+#[cfg(feature = "alloc")]
+pub mod trend;
 #[cfg(feature = "alloc")]
 pub mod verdict;
 

@@ -19,6 +19,8 @@
 //! [sensors]           # optional, simulator only
 //! counts_per_rev = 4096
 //! [provenance]        # optional, free-form: where identified values came from
+//! [limits]            # optional: maintenance limits `servo trend` forecasts the crossing of
+//! tau_sf = 0.02       # a base parameter [its SI unit], or an effect's: "<effect>.<key>" = v
 //! ```
 
 use crate::error::{self as anyhow, anyhow, bail, Context};
@@ -44,6 +46,8 @@ struct Raw {
     sensors: Option<SensorConfig>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     provenance: Option<toml::Table>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    limits: Option<toml::Table>,
 }
 
 /// `kind` of a `[transmission]`.
@@ -210,6 +214,10 @@ pub struct ModelFile {
     pub sensors: Option<SensorConfig>,
     /// Free-form provenance (log, method, date, ...).
     pub provenance: Option<toml::Table>,
+    /// `[limits]`: the value each named parameter must not cross (a maintenance limit, in the
+    /// parameter's SI unit), keyed as `servo trend` names parameters: `j_eq`, `b_eq`, `tau_sf`,
+    /// or `<effect>.<key>` (written `"<effect>.<key>" = v` or as a `[limits.<effect>]` table).
+    pub limits: BTreeMap<String, f64>,
 }
 
 impl TryFrom<Raw> for ModelFile {
@@ -235,6 +243,7 @@ impl Default for ModelFile {
             transmission: Transmission::GEAR,
             sensors: None,
             provenance: None,
+            limits: BTreeMap::new(),
         }
     }
 }
@@ -312,6 +321,7 @@ impl ModelFile {
             transmission,
             sensors: raw.sensors,
             provenance: raw.provenance,
+            limits: parse_limits(raw.limits.as_ref())?,
         })
     }
 
@@ -335,6 +345,7 @@ impl ModelFile {
             transmission: Transmission::GEAR,
             sensors: None,
             provenance: None,
+            limits: BTreeMap::new(),
         }
     }
 
@@ -385,6 +396,12 @@ impl ModelFile {
             transmission,
             sensors: self.sensors,
             provenance: self.provenance.clone(),
+            limits: (!self.limits.is_empty()).then(|| {
+                self.limits
+                    .iter()
+                    .map(|(k, v)| (k.clone(), toml::Value::Float(*v)))
+                    .collect()
+            }),
         }
     }
 
@@ -480,8 +497,73 @@ impl ModelFile {
             s.push_str("\n[provenance]\n");
             s.push_str(&toml::to_string(pv).unwrap_or_default());
         }
+        if !self.limits.is_empty() {
+            s.push_str("\n[limits]  # maintenance limits servo trend forecasts (SI units)\n");
+            for (k, v) in &self.limits {
+                s.push_str(&format!("\"{k}\" = {v:e}\n"));
+            }
+        }
         s
     }
+}
+
+/// The `[limits]` table: `key = value` for a base parameter (`j_eq`, `b_eq`, `tau_sf`), and
+/// `"<effect>.<key>" = value` or `[limits.<effect>] key = value` for an effect's parameter, each
+/// key checked against the registry.
+fn parse_limits(raw: Option<&toml::Table>) -> anyhow::Result<BTreeMap<String, f64>> {
+    let mut out = BTreeMap::new();
+    let Some(t) = raw else { return Ok(out) };
+    let number = |k: &str, v: &toml::Value| -> anyhow::Result<f64> {
+        let x = match v {
+            toml::Value::Float(f) => *f,
+            toml::Value::Integer(i) => *i as f64,
+            _ => bail!("[limits] {k}: expected a number (the limit in the parameter's SI unit)"),
+        };
+        if !x.is_finite() {
+            bail!("[limits] {k}: expected a finite number, got {x}");
+        }
+        Ok(x)
+    };
+    for (k, v) in t {
+        match v {
+            toml::Value::Table(inner) => {
+                for (kk, vv) in inner {
+                    let key = format!("{k}.{kk}");
+                    check_limit_key(&key)?;
+                    out.insert(key.clone(), number(&key, vv)?);
+                }
+            }
+            _ => {
+                check_limit_key(k)?;
+                out.insert(k.clone(), number(k, v)?);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// A `[limits]` key names a base parameter or a registered effect's parameter.
+fn check_limit_key(key: &str) -> anyhow::Result<()> {
+    if ["j_eq", "b_eq", "tau_sf"].contains(&key) {
+        return Ok(());
+    }
+    let Some((effect, param)) = key.split_once('.') else {
+        bail!("[limits] {key}: expected j_eq, b_eq, tau_sf or <effect>.<key> (e.g. an effect's gap)");
+    };
+    let kind = EffectKind::from_name(effect).ok_or_else(|| {
+        anyhow!(
+            "[limits] {key}: unknown effect `{effect}`; the registry has {}",
+            servo_core::effects::RegisteredNames
+        )
+    })?;
+    if !kind.params().iter().any(|p| p.key == param) {
+        let keys: Vec<&str> = kind.params().iter().map(|p| p.key).collect();
+        bail!(
+            "[limits] {key}: {effect} has no parameter `{param}` (it has {})",
+            keys.join(", ")
+        );
+    }
+    Ok(())
 }
 
 /// The commented `[transmission]` table.

@@ -15,6 +15,7 @@ pub mod log;
 pub mod params;
 pub mod ports;
 pub mod run;
+pub mod trend;
 
 /// The subcommands of `servo`.
 #[derive(Debug, clap::Subcommand)]
@@ -45,6 +46,8 @@ pub enum Command {
     Ports(ports::Ports),
     /// Log utilities (recover an unfinished MCAP).
     Log(log::Log),
+    /// Follow each actuator's parameters over many logs and say what is changing.
+    Trend(trend::Trend),
 }
 
 impl Command {
@@ -63,6 +66,7 @@ impl Command {
             Command::Board(c) => c.run(),
             Command::Ports(c) => c.run(),
             Command::Log(c) => c.run(),
+            Command::Trend(c) => c.run(),
         }
     }
 }

@@ -1,0 +1,59 @@
+#!/usr/bin/env bash
+# Benchmark of `servo trend` (issue #31, item 2): N one-minute open-loop logs of 4 simulated
+# actuators (one with a growing gear play), then `servo trend` on them with 1 and with 2 workers
+# (cold cache each), and once more on the warm cache. Prints the per-log cost, the parallel
+# speed-up and the peak memory (GNU time's "Maximum resident set size").
+#
+#   crates/servo-cli/benches/trend_fleet.sh N DIR [SERVO]
+#
+#   N      logs (1000 for the issue's figure; run it on an idle machine)
+#   DIR    work directory (logs in DIR/fleet, caches in DIR/cache-*); reused when the logs exist
+#   SERVO  the servo binary (default target/release/servo)
+set -euo pipefail
+N=${1:?usage: trend_fleet.sh N DIR [SERVO]}
+DIR=${2:?usage: trend_fleet.sh N DIR [SERVO]}
+SERVO=${3:-target/release/servo}
+TIME=/usr/bin/time
+[ -x "$TIME" ] || { echo "needs GNU time at $TIME (apt-get install time)"; exit 1; }
+mkdir -p "$DIR/fleet"
+# The fleet's model: Table 2 (`servo params`) with a Coulomb level to fit and a gear play to
+# size.
+"$SERVO" params | sed "s/^\[params\]\$/[params]\ntau_sf = 0.01/" > "$DIR/model.toml"
+printf '\n[effects.backlash]\ngap = 0.01\n' >> "$DIR/model.toml"
+have=$(find "$DIR/fleet" -name '*.mcap' | wc -l)
+if [ "$have" -lt "$N" ]; then
+  echo "simulating $N one-minute logs in $DIR/fleet ..."
+  start=$(date +%s)
+  for ((k = 0; k < N; k++)); do
+    a=$((k % 4)); week=$((k / 4))
+    mkdir -p "$DIR/fleet/act-$a"
+    f="$DIR/fleet/act-$a/run_$(printf %05d "$week").mcap"
+    [ -f "$f" ] && continue
+    effect=()
+    if [ "$a" = 0 ]; then
+      effect=(--plant-effect "backlash:gap=$(awk -v w="$week" 'BEGIN{printf "%.5f", 0.01 + 0.0002 * w}')")
+    fi
+    "$SERVO" run --voltage prbs:amp=4,bit=0.2 --duration 60 --seed "$((k + 1))" "${effect[@]}" \
+      --log "$f" > /dev/null
+  done
+  echo "simulated in $(( $(date +%s) - start )) s"
+fi
+run() { # workers cache label
+  rm -rf "$DIR/$2"
+  "$TIME" -v "$SERVO" trend "$DIR/fleet" --model "$DIR/model.toml" --jobs "$1" --cache "$DIR/$2" \
+    --time-from mtime --quiet > "$DIR/$3.txt" 2> "$DIR/$3.time"
+  local wall rss
+  wall=$(grep 'Elapsed (wall clock)' "$DIR/$3.time" | awk '{print $NF}')
+  rss=$(grep 'Maximum resident set size' "$DIR/$3.time" | awk '{print $NF}')
+  echo "$3: wall $wall, peak RSS $((rss / 1024)) MiB; $(grep -o '[0-9]* from the cache, [0-9]* fitted, [0-9]* failed' "$DIR/$3.txt")"
+}
+secs() { awk -F: '{ if (NF == 3) print $1 * 3600 + $2 * 60 + $3; else print $1 * 60 + $2 }' <<< "$1"; }
+run 1 cache-1 one_worker
+run 2 cache-2 two_workers
+# warm: the cache of the 2-worker run, kept
+"$TIME" -v "$SERVO" trend "$DIR/fleet" --model "$DIR/model.toml" --jobs 2 --cache "$DIR/cache-2" \
+  --time-from mtime --quiet > "$DIR/warm.txt" 2> "$DIR/warm.time"
+echo "warm cache: wall $(grep 'Elapsed (wall clock)' "$DIR/warm.time" | awk '{print $NF}'); $(grep -o '[0-9]* from the cache, [0-9]* fitted, [0-9]* failed' "$DIR/warm.txt")"
+w1=$(secs "$(grep 'Elapsed (wall clock)' "$DIR/one_worker.time" | awk '{print $NF}')")
+w2=$(secs "$(grep 'Elapsed (wall clock)' "$DIR/two_workers.time" | awk '{print $NF}')")
+awk -v n="$N" -v a="$w1" -v b="$w2" 'BEGIN { printf "per log: %.3f s (1 worker), %.3f s wall (2 workers); speed-up 1 -> 2 workers: %.2fx\n", a / n, b / n, a / b }'
