@@ -500,7 +500,8 @@ fn the_cycle_finder_finds_a_cycle_and_only_a_cycle() {
 
 /// servo-core's modules form layers (#32): signal, params, math (and the thread helpers `par`)
 /// at the bottom, then plant and effects, then sim and fit, the verdict types of a candidate,
-/// compare and diagnose, then design and frf. What the effects need of a diagnosis lives in
+/// compare and diagnose, then design and frf, and at the top `trend` (the statistics of a
+/// parameter over many logs, on the identification's Student t). What the effects need of a diagnosis lives in
 /// `verdict`, the thread helpers in `par`, the encoder quantum in `signal`.
 ///
 /// One seam is allowed through the layers, and only one: an effect's fit hooks (the

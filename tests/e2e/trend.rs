@@ -99,7 +99,11 @@ fn write_model(path: &Path) {
     m.save(path).unwrap();
 }
 
-fn change<'a>(v: &'a serde_json::Value, actuator: &str, parameter: &str) -> Option<&'a serde_json::Value> {
+fn change<'a>(
+    v: &'a serde_json::Value,
+    actuator: &str,
+    parameter: &str,
+) -> Option<&'a serde_json::Value> {
     v["changes"]
         .as_array()
         .unwrap()
@@ -129,7 +133,11 @@ fn a_fleet_s_wear_is_found_forecast_and_cached() {
         }
     }
     // A corrupt log among them.
-    std::fs::write(fleet.join("arm-3").join("20260301.csv"), b"\x00\x01garbage,\nnot a log").unwrap();
+    std::fs::write(
+        fleet.join("arm-3").join("20260301.csv"),
+        b"\x00\x01garbage,\nnot a log",
+    )
+    .unwrap();
     let model = tmp.path().join("fleet.toml");
     write_model(&model);
     let cache = tmp.path().join("cache");
@@ -162,7 +170,10 @@ fn a_fleet_s_wear_is_found_forecast_and_cached() {
     let refs: Vec<&str> = a.iter().map(String::as_str).collect();
     let (ok, out, err) = servo_e2e::servo(&refs);
     assert!(ok, "servo trend failed: {err}");
-    eprintln!("first run {:.1} s; stderr: {err}", started.elapsed().as_secs_f64());
+    eprintln!(
+        "first run {:.1} s; stderr: {err}",
+        started.elapsed().as_secs_f64()
+    );
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["schema"], "servo.trend/1");
     for c in v["changes"].as_array().unwrap() {
@@ -186,28 +197,48 @@ fn a_fleet_s_wear_is_found_forecast_and_cached() {
         "{failed:?}"
     );
     // The gear play of arm-1: +0.001 rad a week.
-    let gap = change(&v, "arm-1", "backlash.gap").unwrap_or_else(|| panic!("no gap change: {}", v["changes"]));
+    let gap = change(&v, "arm-1", "backlash.gap")
+        .unwrap_or_else(|| panic!("no gap change: {}", v["changes"]));
     let slope = gap["slope_per_day"].as_f64().unwrap() * 7.0;
-    assert!((slope / 0.001 - 1.0).abs() < 0.25, "gap slope {slope} rad/week, true 0.001");
+    assert!(
+        (slope / 0.001 - 1.0).abs() < 0.25,
+        "gap slope {slope} rad/week, true 0.001"
+    );
     // The limit 0.04 rad is reached in week 30 (true line), 11 weeks after the last log (week
     // 19): the forecast within 20 % of that lead time.
     let when = days_after_start(gap["forecast_limit_date"].as_str().unwrap());
     let lead = (when - 7.0 * 19.0) / 7.0;
-    assert!((lead / 11.0 - 1.0).abs() < 0.20, "gap limit forecast {lead} weeks after the last log, true 11");
+    assert!(
+        (lead / 11.0 - 1.0).abs() < 0.20,
+        "gap limit forecast {lead} weeks after the last log, true 11"
+    );
     // The Coulomb friction of arm-2: +0.0004 N m a week; its limit 0.02 N m (model file) in
     // week 25, 6 weeks after the last log.
-    let tau = change(&v, "arm-2", "tau_sf").unwrap_or_else(|| panic!("no tau_sf change: {}", v["changes"]));
+    let tau = change(&v, "arm-2", "tau_sf")
+        .unwrap_or_else(|| panic!("no tau_sf change: {}", v["changes"]));
     let slope = tau["slope_per_day"].as_f64().unwrap() * 7.0;
-    assert!((slope / 0.0004 - 1.0).abs() < 0.25, "tau_sf slope {slope} N m/week, true 0.0004");
+    assert!(
+        (slope / 0.0004 - 1.0).abs() < 0.25,
+        "tau_sf slope {slope} N m/week, true 0.0004"
+    );
     let when = days_after_start(tau["forecast_limit_date"].as_str().unwrap());
     let lead = (when - 7.0 * 19.0) / 7.0;
-    assert!((lead / 6.0 - 1.0).abs() < 0.20, "tau_sf limit forecast {lead} weeks after the last log, true 6");
+    assert!(
+        (lead / 6.0 - 1.0).abs() < 0.20,
+        "tau_sf limit forecast {lead} weeks after the last log, true 6"
+    );
     // Only those two change; arm-3 is steady in every parameter, and says so.
     let names: Vec<String> = v["changes"]
         .as_array()
         .unwrap()
         .iter()
-        .map(|c| format!("{}:{}", c["actuator"].as_str().unwrap(), c["parameter"].as_str().unwrap()))
+        .map(|c| {
+            format!(
+                "{}:{}",
+                c["actuator"].as_str().unwrap(),
+                c["parameter"].as_str().unwrap()
+            )
+        })
         .collect();
     assert_eq!(names.len(), 2, "changes: {names:?}");
     let arm3 = v["actuators"]
@@ -221,7 +252,10 @@ fn a_fleet_s_wear_is_found_forecast_and_cached() {
         assert_eq!(p["verdict"], "steady", "arm-3 {}", p);
     }
     let html = std::fs::read_to_string(&report).unwrap();
-    assert!(html.contains("<svg") && html.contains("arm-1"), "the report has its charts");
+    assert!(
+        html.contains("<svg") && html.contains("arm-1"),
+        "the report has its charts"
+    );
 
     // Five new logs: the second run fits only those five (and the corrupt log fails again).
     for k in WEEKS..WEEKS + 5 {
@@ -236,7 +270,16 @@ fn a_fleet_s_wear_is_found_forecast_and_cached() {
         text.contains("60 from the cache, 5 fitted, 1 failed"),
         "second run counts: {text}"
     );
-    assert!(text.contains("skipped ") && text.contains("20260301.csv"), "{text}");
-    assert!(text.contains("CHANGE: the total play") && text.contains("arm-1 grew from"), "{text}");
-    assert!(text.contains("steady: ") && text.contains(" of arm-3"), "{text}");
+    assert!(
+        text.contains("skipped ") && text.contains("20260301.csv"),
+        "{text}"
+    );
+    assert!(
+        text.contains("CHANGE: the total play") && text.contains("arm-1 grew from"),
+        "{text}"
+    );
+    assert!(
+        text.contains("steady: ") && text.contains(" of arm-3"),
+        "{text}"
+    );
 }

@@ -548,7 +548,9 @@ fn check_limit_key(key: &str) -> anyhow::Result<()> {
         return Ok(());
     }
     let Some((effect, param)) = key.split_once('.') else {
-        bail!("[limits] {key}: expected j_eq, b_eq, tau_sf or <effect>.<key> (e.g. an effect's gap)");
+        bail!(
+            "[limits] {key}: expected j_eq, b_eq, tau_sf or <effect>.<key> (e.g. an effect's gap)"
+        );
     };
     let kind = EffectKind::from_name(effect).ok_or_else(|| {
         anyhow!(

@@ -1,7 +1,7 @@
 //! `servo trend`: follow each actuator's parameters over many logs and say what is changing.
 //!
 //! ```text
-//! servo trend fleet/ --model m.toml --time-from name:%Y%m%d --limit backlash.gap=0.03 --json
+//! servo trend fleet/ --model m.toml --time-from name:%Y%m%d --limit tau_sf=0.02 --json
 //! ```
 //!
 //! The work is the library's ([`crate::trend`]): this file parses the flags, calls it and prints.
@@ -23,7 +23,11 @@ pub struct Trend {
     pub model: PathBuf,
     /// How logs are grouped into actuators: `dir` (the log's folder, the default), `file` (the
     /// file name up to its first `_`), or a metadata field of the log (an MCAP run's key).
-    #[arg(long = "group-by", value_name = "dir|file|FIELD", default_value = "dir")]
+    #[arg(
+        long = "group-by",
+        value_name = "dir|file|FIELD",
+        default_value = "dir"
+    )]
     pub group_by: GroupBy,
     /// Where each log's time comes from: `auto` (the MCAP run's start, the MAT-file's save date,
     /// a CSV date column such as `unix_time_s` or `date`, else the file's modification time),
@@ -44,7 +48,7 @@ pub struct Trend {
     #[arg(long, value_name = "N")]
     pub jobs: Option<usize>,
     /// Smallest change over the logs' span that counts, in percent of the parameter's mean
-    /// magnitude.
+    /// magnitude (or of its limit, when it has one and that is larger).
     #[arg(long = "min-change-pct", value_name = "PCT", default_value_t = 10.0)]
     pub min_change_pct: f64,
     /// Print one JSON object (schema servo.trend/1) instead of text.
@@ -77,11 +81,12 @@ impl Trend {
             time_from: self.time_from,
             limits: self.limit.into_iter().collect(),
             cache_dir: self.cache,
-            workers: self.jobs.unwrap_or_else(|| {
-                std::thread::available_parallelism().map_or(1, |n| n.get())
-            }),
+            workers: self
+                .jobs
+                .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
             options: TrendOptions {
                 min_relative_change: self.min_change_pct / 100.0,
+                ..TrendOptions::default()
             },
             progress: !self.quiet,
         };

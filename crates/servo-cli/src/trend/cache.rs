@@ -39,7 +39,10 @@ impl Cache {
     /// The cache in `dir` (created) for the model key `model_key`.
     pub fn open(dir: &Path, model_key: String) -> anyhow::Result<Cache> {
         std::fs::create_dir_all(dir).map_err(|e| {
-            anyhow::anyhow!("--cache {}: cannot create the cache directory: {e}", dir.display())
+            anyhow::anyhow!(
+                "--cache {}: cannot create the cache directory: {e}",
+                dir.display()
+            )
         })?;
         Ok(Cache {
             dir: dir.to_path_buf(),

@@ -329,16 +329,21 @@ pub fn run(cfg: &TrendConfig) -> anyhow::Result<TrendReport> {
                 let Some((t, from)) = log_time(&path, &fit, &cfg.time_from) else {
                     failed.push(Failed {
                         error: match &cfg.time_from {
-                            TimeFrom::Name(p) => format!("its name does not match --time-from name:{p}"),
+                            TimeFrom::Name(p) => {
+                                format!("its name does not match --time-from name:{p}")
+                            }
                             TimeFrom::Column(c) => format!("it has no date in column {c}"),
-                            _ => "it has no time (no date in its content, no modification time)".into(),
+                            _ => "it has no time (no date in its content, no modification time)"
+                                .into(),
                         },
                         path,
                     });
                     continue;
                 };
                 let (group, how) = log_group(&path, &fit, &cfg.group_by);
-                let g = groups.entry(group).or_insert_with(|| (how.clone(), Vec::new()));
+                let g = groups
+                    .entry(group)
+                    .or_insert_with(|| (how.clone(), Vec::new()));
                 if g.0 != how && !g.0.contains(&how) {
                     g.0 = format!("{}, {how}", g.0);
                 }
@@ -430,10 +435,14 @@ fn param_trends(
                     std_err: e.std_err,
                 })
                 .collect();
-            let trend = analyse(&series, opts);
             let limit = limits
                 .get(&parameter)
                 .map(|v| (*v, source.get(&parameter).copied().unwrap_or("model file")));
+            let opts = TrendOptions {
+                scale_floor: limit.map_or(opts.scale_floor, |l| l.0.abs()),
+                ..*opts
+            };
+            let trend = analyse(&series, &opts);
             let crossing = match (&trend.linear, limit) {
                 (Some(lin), Some((v, _)))
                     if matches!(trend.verdict, Verdict::Rising | Verdict::Falling) =>
@@ -456,9 +465,9 @@ fn param_trends(
 
 /// Parses `--limit KEY=VALUE`.
 pub fn parse_limit(s: &str) -> Result<(String, f64), String> {
-    let (k, v) = s
-        .split_once('=')
-        .ok_or_else(|| format!("--limit: expected PARAMETER=VALUE (e.g. tau_sf=0.02), got `{s}`"))?;
+    let (k, v) = s.split_once('=').ok_or_else(|| {
+        format!("--limit: expected PARAMETER=VALUE (e.g. tau_sf=0.02), got `{s}`")
+    })?;
     let v: f64 = v
         .trim()
         .parse()

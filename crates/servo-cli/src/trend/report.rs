@@ -107,7 +107,11 @@ pub fn change_words(a: &Actuator, p: &ParamTrend) -> String {
     }
     let span = lin.span_days();
     let (unit, per) = time_unit(span);
-    let verb = if lin.slope_per_day > 0.0 { "grew" } else { "fell" };
+    let verb = if lin.slope_per_day > 0.0 {
+        "grew"
+    } else {
+        "fell"
+    };
     let mut s = format!(
         "{what} of {} {verb} from {} to {} {u} over {}, {}{} {u} per {unit} (95 %: {} to {})",
         a.name,
@@ -200,7 +204,11 @@ pub fn text(r: &TrendReport) -> String {
                 plural(span / 86_400.0 / per, unit)
             ));
         }
-        for p in a.params.iter().filter(|p| p.trend.verdict == Verdict::Unknown) {
+        for p in a
+            .params
+            .iter()
+            .filter(|p| p.trend.verdict == Verdict::Unknown)
+        {
             s.push_str(&format!(
                 "{}: too few logs to judge ({})\n",
                 p.parameter,
@@ -400,13 +408,33 @@ pub fn param_svg(a: &Actuator, p: &ParamTrend) -> anyhow::Result<String> {
     let x_label = format!("time since the first log [{unit}s]");
     let y_label = format!("{} [{}]", p.parameter, p.unit);
     let mut series = vec![
-        Series { label: "estimate", x: &x, y: &y },
-        Series { label: "95 % low", x: &x, y: &lo },
-        Series { label: "95 % high", x: &x, y: &hi },
-        Series { label: "trend", x: &lx, y: &ly },
+        Series {
+            label: "estimate",
+            x: &x,
+            y: &y,
+        },
+        Series {
+            label: "95 % low",
+            x: &x,
+            y: &lo,
+        },
+        Series {
+            label: "95 % high",
+            x: &x,
+            y: &hi,
+        },
+        Series {
+            label: "trend",
+            x: &lx,
+            y: &ly,
+        },
     ];
     if !limit_y.is_empty() {
-        series.push(Series { label: "limit", x: &limit_x, y: &limit_y });
+        series.push(Series {
+            label: "limit",
+            x: &limit_x,
+            y: &limit_y,
+        });
     }
     line_chart_svg(
         &Chart {
@@ -422,7 +450,9 @@ pub fn param_svg(a: &Actuator, p: &ParamTrend) -> anyhow::Result<String> {
 }
 
 fn esc(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }
 
 /// The HTML report: the counts, what changes, and per actuator its table and a chart per
@@ -451,7 +481,10 @@ pub fn html(r: &TrendReport) -> anyhow::Result<String> {
     s.push_str("<h2>What changes</h2><ul>\n");
     for a in &r.actuators {
         for p in a.params.iter().filter(|p| p.trend.significant()) {
-            s.push_str(&format!("<li class=\"change\">{}.</li>\n", esc(&change_words(a, p))));
+            s.push_str(&format!(
+                "<li class=\"change\">{}.</li>\n",
+                esc(&change_words(a, p))
+            ));
         }
         let steady: Vec<&str> = a
             .params
@@ -477,14 +510,22 @@ pub fn html(r: &TrendReport) -> anyhow::Result<String> {
             esc(&time_sources(a))
         ));
         for p in &a.params {
-            s.push_str(&format!("<th>{} [{}]</th>", esc(&p.parameter), esc(&p.unit)));
+            s.push_str(&format!(
+                "<th>{} [{}]</th>",
+                esc(&p.parameter),
+                esc(&p.unit)
+            ));
         }
         s.push_str("</tr>\n");
         for (i, l) in a.logs.iter().enumerate() {
             s.push_str(&format!(
                 "<tr><td>{}</td><td>{}</td>",
                 date_text(l.time_unix_s),
-                esc(&l.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default())
+                esc(&l
+                    .path
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default())
             ));
             for p in &a.params {
                 let cell = match p.points.iter().find(|(k, _)| *k == i) {

@@ -30,7 +30,9 @@ impl std::str::FromStr for TimeFrom {
             _ => {
                 if let Some(p) = s.strip_prefix("name:") {
                     if !p.contains('%') {
-                        return Err(format!("--time-from name:PATTERN needs fields such as %Y%m%d, got `{p}`"));
+                        return Err(format!(
+                            "--time-from name:PATTERN needs fields such as %Y%m%d, got `{p}`"
+                        ));
                     }
                     check_pattern(p).map_err(|e| format!("--time-from {s}: {e}"))?;
                     Ok(TimeFrom::Name(p.to_string()))
@@ -83,7 +85,15 @@ pub fn civil_from_days(z: i64) -> (i64, u32, u32) {
     let mp = (5 * doy + 2) / 153;
     let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
     let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    (if m <= 2 { yoe + era * 400 + 1 } else { yoe + era * 400 }, m, d)
+    (
+        if m <= 2 {
+            yoe + era * 400 + 1
+        } else {
+            yoe + era * 400
+        },
+        m,
+        d,
+    )
 }
 
 /// `YYYY-MM-DD` of a Unix time [s] (UTC).
@@ -146,10 +156,16 @@ fn parse_with_pattern(text: &str, pattern: &str) -> Result<f64, String> {
     let digits = |n: usize, i: &mut usize| -> Result<u32, String> {
         let part = t.get(*i..*i + n).ok_or("the name is too short")?;
         if !part.iter().all(u8::is_ascii_digit) {
-            return Err(format!("expected {n} digits at `{}`", String::from_utf8_lossy(part)));
+            return Err(format!(
+                "expected {n} digits at `{}`",
+                String::from_utf8_lossy(part)
+            ));
         }
         *i += n;
-        Ok(std::str::from_utf8(part).map_err(|e| e.to_string())?.parse::<u32>().map_err(|e| e.to_string())?)
+        Ok(std::str::from_utf8(part)
+            .map_err(|e| e.to_string())?
+            .parse::<u32>()
+            .map_err(|e| e.to_string())?)
     };
     let mut fields = 0;
     while let Some(c) = p.next() {
@@ -204,7 +220,9 @@ pub fn parse_date_value(v: &str) -> Option<f64> {
 pub fn mat_header_time(bytes: &[u8]) -> Option<f64> {
     let head = String::from_utf8_lossy(bytes.get(..116)?);
     let at = head.find("Created on:")?;
-    let words: Vec<&str> = head[at + "Created on:".len()..].split_whitespace().collect();
+    let words: Vec<&str> = head[at + "Created on:".len()..]
+        .split_whitespace()
+        .collect();
     // Weekday Month Day HH:MM:SS Year
     let months = [
         "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
@@ -216,7 +234,13 @@ pub fn mat_header_time(bytes: &[u8]) -> Option<f64> {
         .split(':')
         .map(|x| x.parse().ok())
         .collect::<Option<_>>()?;
-    let y: i64 = words.get(4)?.chars().take(4).collect::<String>().parse().ok()?;
+    let y: i64 = words
+        .get(4)?
+        .chars()
+        .take(4)
+        .collect::<String>()
+        .parse()
+        .ok()?;
     unix(y, mo, d, *hms.first()?, *hms.get(1)?, *hms.get(2)?).ok()
 }
 
@@ -224,7 +248,9 @@ pub fn mat_header_time(bytes: &[u8]) -> Option<f64> {
 /// as a date; Unix seconds and the column's name.
 pub fn csv_column_time(bytes: &[u8], name: Option<&str>) -> Option<(f64, String)> {
     let text = std::str::from_utf8(bytes.get(..bytes.len().min(64 * 1024))?).ok()?;
-    let mut lines = text.lines().filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
+    let mut lines = text
+        .lines()
+        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
     let header: Vec<&str> = lines.next()?.split(',').map(str::trim).collect();
     let row: Vec<&str> = lines.next()?.split(',').collect();
     let col = match name {
@@ -258,9 +284,14 @@ mod tests {
             datetime_text(parse_date_value("2026-03-04T05:06:07Z").unwrap()),
             "2026-03-04T05:06:07Z"
         );
-        let mut head = b"MATLAB 5.0 MAT-file, Platform: GLNXA64, Created on: Thu Dec  3 06:03:34 2026".to_vec();
+        let mut head =
+            b"MATLAB 5.0 MAT-file, Platform: GLNXA64, Created on: Thu Dec  3 06:03:34 2026"
+                .to_vec();
         head.resize(128, b' ');
-        assert_eq!(datetime_text(mat_header_time(&head).unwrap()), "2026-12-03T06:03:34Z");
+        assert_eq!(
+            datetime_text(mat_header_time(&head).unwrap()),
+            "2026-12-03T06:03:34Z"
+        );
         assert!("name:nope".parse::<TimeFrom>().is_err());
         assert!("name:%Q".parse::<TimeFrom>().is_err());
         assert_eq!(

@@ -65,12 +65,17 @@ pub struct TrendOptions {
     /// Smallest change over the span of the logs, as a fraction of the series' mean magnitude,
     /// that counts as a change (a statistically significant drift of 1 % is not wear).
     pub min_relative_change: f64,
+    /// The magnitude a change is measured against is at least this (the parameter's limit,
+    /// when it has one): a drift of 1e-4 rad of a gap that stays near 0 is no wear when its
+    /// limit is 0.04 rad, however large it is relative to its own near-zero mean.
+    pub scale_floor: f64,
 }
 
 impl Default for TrendOptions {
     fn default() -> Self {
         TrendOptions {
             min_relative_change: 0.10,
+            scale_floor: 0.0,
         }
     }
 }
@@ -100,7 +105,8 @@ impl Trend {
 
 /// The trend of `points` (in any order; sorted by time here): the line, the step test and the
 /// verdict. A line is a change when its slope's 95 % interval excludes 0 and the change over
-/// the span reaches `opts.min_relative_change`; a step when [`step_change`] finds one that the
+/// the span reaches `opts.min_relative_change` of the series' mean magnitude (or of
+/// `opts.scale_floor` when larger); a step when [`step_change`] finds one that the
 /// line does not explain as well.
 pub fn analyse(points: &[Point], opts: &TrendOptions) -> Trend {
     let mut pts: Vec<Point> = points
@@ -122,7 +128,12 @@ pub fn analyse(points: &[Point], opts: &TrendOptions) -> Trend {
         return unknown;
     };
     let scale = pts.iter().map(|p| p.value.abs()).sum::<f64>() / pts.len() as f64;
-    let scale = if scale > 0.0 { scale } else { f64::MIN_POSITIVE };
+    let scale = scale.max(opts.scale_floor.abs());
+    let scale = if scale > 0.0 {
+        scale
+    } else {
+        f64::MIN_POSITIVE
+    };
     let rel_line = (lin.slope_per_day * lin.span_days()).abs() / scale;
     let line_sig = lin.excludes_zero() && rel_line >= opts.min_relative_change;
     let step = step_change(&pts, &lin);
@@ -178,7 +189,10 @@ mod tests {
         assert_eq!(tr.verdict, Verdict::Rising);
         let lin = tr.linear.unwrap();
         assert!((lin.slope_per_day / 2e-4 - 1.0).abs() < 0.05, "{lin:?}");
-        assert!(lin.slope_ci95.0 < 2e-4 && 2e-4 < lin.slope_ci95.1, "{lin:?}");
+        assert!(
+            lin.slope_ci95.0 < 2e-4 && 2e-4 < lin.slope_ci95.1,
+            "{lin:?}"
+        );
     }
 
     #[test]
@@ -194,6 +208,17 @@ mod tests {
         let s = tr.step.unwrap();
         assert!((s.t_day - 70.0).abs() <= 7.0, "{s:?}");
         assert!((s.after - s.before - 0.01).abs() < 1e-3, "{s:?}");
+        // A significant drift near 0 is a change on its own scale, not against a far limit.
+        let near_zero = series(|t| 1e-5 + 1e-6 * t, 20, 1e-6);
+        assert_eq!(
+            analyse(&near_zero, &TrendOptions::default()).verdict,
+            Verdict::Rising
+        );
+        let against_limit = TrendOptions {
+            scale_floor: 0.04,
+            ..TrendOptions::default()
+        };
+        assert_eq!(analyse(&near_zero, &against_limit).verdict, Verdict::Steady);
         let few = series(|t| t, 3, 0.0);
         assert_eq!(
             analyse(&few, &TrendOptions::default()).verdict,
