@@ -16,9 +16,8 @@ SERVO=${3:-target/release/servo}
 TIME=/usr/bin/time
 [ -x "$TIME" ] || { echo "needs GNU time at $TIME (apt-get install time)"; exit 1; }
 mkdir -p "$DIR/fleet"
-# The fleet's model: Table 2 (`servo params`) with a Coulomb level to fit and a gear play to
-# size.
-"$SERVO" params | sed "s/^\[params\]\$/[params]\ntau_sf = 0.01/" > "$DIR/model.toml"
+# The fleet's model: the default plant file (`servo params`) and a gear play to size.
+"$SERVO" params > "$DIR/model.toml"
 printf '\n[effects.backlash]\ngap = 0.01\n' >> "$DIR/model.toml"
 have=$(find "$DIR/fleet" -name '*.mcap' | wc -l)
 if [ "$have" -lt "$N" ]; then
