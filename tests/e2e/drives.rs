@@ -186,7 +186,12 @@ impl Rig {
                 .unwrap();
             }
             DriveKind::Duty => {
-                write!(s, "r_a = {}\nl_a = {}\nk_e = {}\n{mech}", p.r_a, p.l_a, p.k_e).unwrap();
+                write!(
+                    s,
+                    "r_a = {}\nl_a = {}\nk_e = {}\n{mech}",
+                    p.r_a, p.l_a, p.k_e
+                )
+                .unwrap();
                 let d = &self.drive;
                 write!(
                     s,
@@ -312,8 +317,7 @@ fn files(rig: &Rig, hidden: &[Effect], dir: &Path, seed: u64) -> (Vec<PathBuf>, 
 fn run_json(args: &[&str]) -> serde_json::Value {
     let (ok, out, err) = servo(args);
     assert!(ok, "servo {args:?} failed: {err}\n{out}");
-    let v: serde_json::Value =
-        serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"));
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"));
     servo_e2e::validate_output(&v).unwrap();
     v
 }
@@ -411,12 +415,23 @@ fn each_drive_diagnoses_and_adds_a_hidden_imbalance() {
         let v = run_json(&args_with(
             "diagnose",
             &logs,
-            &["--columns", &cols, "--model", base.to_str().unwrap(), "--json"],
+            &[
+                "--columns",
+                &cols,
+                "--model",
+                base.to_str().unwrap(),
+                "--json",
+            ],
         ));
         let w = &v["ranking"][0];
         assert_eq!(w["effect"], "imbalance", "[{}] {}", rig.name, v["verdict"]);
         let a = w["params"]["amplitude"]["value"].as_f64().unwrap();
-        within(&format!("{} diagnose amplitude", rig.name), a, amplitude, 0.15);
+        within(
+            &format!("{} diagnose amplitude", rig.name),
+            a,
+            amplitude,
+            0.15,
+        );
         let saved = dir.path().join(format!("{}-added.toml", rig.name));
         let v = run_json(&args_with(
             "compare",
@@ -446,7 +461,10 @@ fn each_drive_diagnoses_and_adds_a_hidden_imbalance() {
             .iter()
             .find(|m| m["measure"] == "held_out")
             .unwrap_or_else(|| panic!("[{}] no held-out measure: {}", rig.name, v["save"]));
-        let (b, a) = (held["before"].as_f64().unwrap(), held["after"].as_f64().unwrap());
+        let (b, a) = (
+            held["before"].as_f64().unwrap(),
+            held["after"].as_f64().unwrap(),
+        );
         eprintln!("[{}] held-out {b:.4e} -> {a:.4e}", rig.name);
         assert!(a < b, "[{}] held-out {b} -> {a}", rig.name);
         assert_eq!(v["save"]["saved"], true, "[{}] {}", rig.name, v["save"]);
@@ -510,13 +528,20 @@ fn a_drive_needs_only_its_keys_and_its_input() {
     std::fs::write(&volt, voltage_rig().params_toml("")).unwrap();
     let cols = rig.columns();
     for cmd in ["identify", "compare", "diagnose"] {
-        let flag = if cmd == "identify" { "--params" } else { "--model" };
+        let flag = if cmd == "identify" {
+            "--params"
+        } else {
+            "--model"
+        };
         let (ok, out, err) = servo(&args_with(
             cmd,
             &logs[..1],
             &["--columns", &cols, flag, volt.to_str().unwrap()],
         ));
-        assert!(!ok, "{cmd} accepted a current log on a voltage model: {out}");
+        assert!(
+            !ok,
+            "{cmd} accepted a current log on a voltage model: {out}"
+        );
         assert!(
             err.contains("i_ref") && err.contains("voltage"),
             "{cmd}: {err}"
@@ -625,7 +650,13 @@ fn a_smart_servo_lifting_a_pendulum_is_identified_and_diagnosed() {
         let v = run_json(&args_with(
             "identify",
             &logs,
-            &["--columns", &cols, "--params", declared.to_str().unwrap(), "--json"],
+            &[
+                "--columns",
+                &cols,
+                "--params",
+                declared.to_str().unwrap(),
+                "--json",
+            ],
         ));
         let j = v["j_eq_kg_m2"]["value"].as_f64().unwrap();
         within(
@@ -641,12 +672,23 @@ fn a_smart_servo_lifting_a_pendulum_is_identified_and_diagnosed() {
             .find(|e| e["key"] == "amplitude")
             .and_then(|e| e["value"].as_f64())
             .unwrap_or_else(|| panic!("no amplitude: {v}"));
-        within(&format!("smart servo seed {seed} amplitude"), a, gravity, 0.10);
+        within(
+            &format!("smart servo seed {seed} amplitude"),
+            a,
+            gravity,
+            0.10,
+        );
         if seed == 1 {
             let v = run_json(&args_with(
                 "diagnose",
                 &logs,
-                &["--columns", &cols, "--model", bare.to_str().unwrap(), "--json"],
+                &[
+                    "--columns",
+                    &cols,
+                    "--model",
+                    bare.to_str().unwrap(),
+                    "--json",
+                ],
             ));
             let w = &v["ranking"][0];
             assert_eq!(w["effect"], "imbalance", "{}", v["verdict"]);

@@ -24,10 +24,10 @@
 //! k_drv = 1 V/V with no driver lag and R_eq = R_a + R_s + R_supply. The chain's input is then
 //! the current reference [A] or the bridge's effective voltage [V].
 
-#[cfg(feature = "alloc")]
-use crate::record::Record;
 use crate::math;
 use crate::params::PlantParams;
+#[cfg(feature = "alloc")]
+use crate::record::Record;
 #[cfg(feature = "alloc")]
 use alloc::{format, string::String, vec::Vec};
 
@@ -142,7 +142,10 @@ pub struct Drive {
 /// The `[params]` keys of the voltage chain that a drive may not use, with why.
 const CURRENT_UNUSED: [(&str, &str); 6] = [
     ("r_a", "its current loop sets the current"),
-    ("l_a", "its current loop sets the current's lag: give [drive] bandwidth_hz"),
+    (
+        "l_a",
+        "its current loop sets the current's lag: give [drive] bandwidth_hz",
+    ),
     ("k_e", "its current loop rejects the back-EMF"),
     ("k_drv", "its command is the current reference"),
     ("f_c_drv", "give the current loop's [drive] bandwidth_hz"),
@@ -443,11 +446,9 @@ impl Drive {
                         }
                         u.iter().map(|&u| self.input(u, 0.0)).collect()
                     }
-                    (Some(_), Some(_)) => {
-                        return Err(err(String::from(
-                            "the log has both `u` and `i_ref`: a current drive's input is one of them",
-                        )))
-                    }
+                    (Some(_), Some(_)) => return Err(err(String::from(
+                        "the log has both `u` and `i_ref`: a current drive's input is one of them",
+                    ))),
                     (None, None) => return Ok(()),
                 };
                 rec.u_v = Some(cmd);
@@ -471,12 +472,10 @@ impl Drive {
                 let supply: Vec<f64> = match (&rec.v_supply_v, self.v_supply_v) {
                     (Some(v), _) => v.clone(),
                     (None, Some(v)) => alloc::vec![v; d.len()],
-                    (None, None) => {
-                        return Err(err(String::from(
-                            "a duty drive needs its supply voltage: a `v_supply=<column>:V` column or \
+                    (None, None) => return Err(err(String::from(
+                        "a duty drive needs its supply voltage: a `v_supply=<column>:V` column or \
                              [drive] v_supply_v",
-                        )))
-                    }
+                    ))),
                 };
                 rec.u_v = Some(
                     d.iter()
@@ -539,8 +538,14 @@ mod tests {
         .unwrap();
         assert_eq!(e.k_t, 0.05);
         // A slow loop stays within L_a's sensible range.
-        Drive::current(Some(0.5)).equivalent(&motor()).validate().unwrap();
-        Drive::current(None).equivalent(&motor()).validate().unwrap();
+        Drive::current(Some(0.5))
+            .equivalent(&motor())
+            .validate()
+            .unwrap();
+        Drive::current(None)
+            .equivalent(&motor())
+            .validate()
+            .unwrap();
     }
 
     #[test]
@@ -573,12 +578,20 @@ mod tests {
             duty_limit: Some(1.5),
             ..Drive::duty(Some(12.0), None)
         };
-        assert!(bad.validate().unwrap_err().to_string().contains("duty_limit"));
+        assert!(bad
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("duty_limit"));
         let bad = Drive {
             i_limit_a: Some(-1.0),
             ..Drive::current(None)
         };
-        assert!(bad.validate().unwrap_err().to_string().contains("i_limit_a"));
+        assert!(bad
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("i_limit_a"));
         let bad = Drive {
             t_dead_s: Some(1e-6),
             ..Drive::duty(Some(12.0), None)
@@ -595,8 +608,14 @@ mod tests {
             i_a_a: Some(alloc::vec![0.4, 0.5]),
             ..Record::default()
         };
-        let e = Drive::VOLTAGE.prepare(&mut rec.clone()).unwrap_err().to_string();
-        assert!(e.contains("run.csv") && e.contains("i_ref") && e.contains("voltage"), "{e}");
+        let e = Drive::VOLTAGE
+            .prepare(&mut rec.clone())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("run.csv") && e.contains("i_ref") && e.contains("voltage"),
+            "{e}"
+        );
         let e = Drive::duty(Some(12.0), None)
             .prepare(&mut rec.clone())
             .unwrap_err()
@@ -616,7 +635,10 @@ mod tests {
             duty: Some(alloc::vec![0.5]),
             ..Record::default()
         };
-        let e = Drive::duty(None, None).prepare(&mut rec.clone()).unwrap_err().to_string();
+        let e = Drive::duty(None, None)
+            .prepare(&mut rec.clone())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("v_supply"), "{e}");
         rec.v_supply_v = Some(alloc::vec![11.0]);
         Drive::duty(None, None).prepare(&mut rec).unwrap();

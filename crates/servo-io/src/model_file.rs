@@ -60,13 +60,21 @@ struct RawParams {
     r_a: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none", alias = "l_a_h")]
     l_a: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none", alias = "k_e_v_s_rad")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        alias = "k_e_v_s_rad"
+    )]
     k_e: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none", alias = "k_t_n_m_a")]
     k_t: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none", alias = "j_m_kg_m2")]
     j_m: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none", alias = "b_m_n_m_s_rad")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        alias = "b_m_n_m_s_rad"
+    )]
     b_m: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     n: Option<f64>,
@@ -74,7 +82,11 @@ struct RawParams {
     j_72: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none", alias = "j_d_kg_m2")]
     j_d: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none", alias = "b_l_n_m_s_rad")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        alias = "b_l_n_m_s_rad"
+    )]
     b_l: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     k_drv: Option<f64>,
@@ -84,7 +96,11 @@ struct RawParams {
     r_s: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none", alias = "j_eq_kg_m2")]
     j_eq: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none", alias = "b_eq_n_m_s_rad")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        alias = "b_eq_n_m_s_rad"
+    )]
     b_eq: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none", alias = "tau_sf_n_m")]
     tau_sf: Option<f64>,
@@ -109,7 +125,10 @@ impl RawParams {
         let kind = drive.kind.name();
         for (key, why) in drive.unused_params() {
             if self.get(key).is_some() {
-                bail!("{}", servo_core::drive::DriveError::Unused { key, kind, why });
+                bail!(
+                    "{}",
+                    servo_core::drive::DriveError::Unused { key, kind, why }
+                );
             }
         }
         let unused = |k: &str| drive.unused_params().iter().any(|(u, _)| *u == k);
@@ -757,11 +776,23 @@ fn drive_toml(d: &Drive) -> String {
         d.kind.name()
     );
     let docs = [
-        ("bandwidth_hz", "current loop bandwidth [Hz] (instant when absent)"),
+        (
+            "bandwidth_hz",
+            "current loop bandwidth [Hz] (instant when absent)",
+        ),
         ("i_limit_a", "current reference limit [A]"),
-        ("k_i_a_per_v", "amps of reference per volt of a voltage command [A/V]"),
-        ("v_supply_v", "supply voltage [V] (when the log has no v_supply column)"),
-        ("r_supply_ohm", "supply internal resistance [ohm] (sag R i_a)"),
+        (
+            "k_i_a_per_v",
+            "amps of reference per volt of a voltage command [A/V]",
+        ),
+        (
+            "v_supply_v",
+            "supply voltage [V] (when the log has no v_supply column)",
+        ),
+        (
+            "r_supply_ohm",
+            "supply internal resistance [ohm] (sag R i_a)",
+        ),
         ("t_dead_s", "bridge dead time [s]"),
         ("f_pwm_hz", "PWM frequency [Hz]"),
         ("duty_limit", "largest duty magnitude [-]"),

@@ -254,7 +254,7 @@ impl Diagnose {
                 mf.sensors = model_file.sensors;
                 mf.transmission = model_file.transmission;
                 mf.drive = model_file.drive;
-        mf.drive = model_file.drive;
+                mf.drive = model_file.drive;
                 mf.provenance = model_file.provenance.clone();
                 if let Some(g) = gate.as_ref().filter(|_| worse) {
                     mf.provenance
