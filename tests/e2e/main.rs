@@ -9,6 +9,7 @@ mod custom;
 mod demo;
 mod design;
 mod diagnose;
+mod drives;
 mod frf;
 mod fuzz;
 mod gravity;

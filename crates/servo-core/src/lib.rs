@@ -6,6 +6,8 @@
 //!   simulator, the model fit and the diagnosis use.
 //! * [`custom`]: user-defined effects (an expression of the signals and parameters), their fit
 //!   and the discovery of a term outside the catalogue.
+//! * [`drive`]: the drive between command and motor (voltage amplifier, current drive, PWM
+//!   duty on a supply) and its equivalent voltage chain.
 //! * [`plant`]: a parameter set together with its active effects: the model of one gearmotor.
 //! * [`control`]: discrete PID, feedforward compensation, reference generators and sequences.
 //! * [`board`]: the servo board firmware core (protocol state machine over a small HAL trait).
@@ -36,6 +38,7 @@ pub mod custom;
 pub mod design;
 #[cfg(feature = "alloc")]
 pub mod diagnose;
+pub mod drive;
 pub mod effects;
 #[cfg(feature = "alloc")]
 pub mod fit;

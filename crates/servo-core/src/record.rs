@@ -28,6 +28,13 @@ pub struct Record {
     pub omega_m_rad_s: Option<Vec<f64>>,
     /// Armature current i_a [A].
     pub i_a_a: Option<Vec<f64>>,
+    /// Current reference i_ref [A] of a current (torque) drive ([`crate::drive`]), applied from
+    /// this row to the next.
+    pub i_ref_a: Option<Vec<f64>>,
+    /// Duty cycle [-1, 1] of a PWM H-bridge or smart servo ([`crate::drive`]).
+    pub duty: Option<Vec<f64>>,
+    /// Supply voltage [V] of a duty drive, per sample.
+    pub v_supply_v: Option<Vec<f64>>,
     /// Position reference [rad] at the load.
     pub ref_rad: Option<Vec<f64>>,
     /// Drive enable / torque-on flag per sample (nonzero = on, 0 = off), when the log has one:
@@ -70,6 +77,9 @@ impl Record {
             omega_l_rad_s: cut(&self.omega_l_rad_s),
             omega_m_rad_s: cut(&self.omega_m_rad_s),
             i_a_a: cut(&self.i_a_a),
+            i_ref_a: cut(&self.i_ref_a),
+            duty: cut(&self.duty),
+            v_supply_v: cut(&self.v_supply_v),
             ref_rad: cut(&self.ref_rad),
             enable: cut(&self.enable),
         }
@@ -84,6 +94,9 @@ impl Record {
             ("omega_l", self.omega_l_rad_s.is_some()),
             ("omega_m", self.omega_m_rad_s.is_some()),
             ("i_a", self.i_a_a.is_some()),
+            ("i_ref", self.i_ref_a.is_some()),
+            ("duty", self.duty.is_some()),
+            ("v_supply", self.v_supply_v.is_some()),
             ("ref", self.ref_rad.is_some()),
             ("enable", self.enable.is_some()),
         ] {

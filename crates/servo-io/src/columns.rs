@@ -166,6 +166,10 @@ impl ColumnMap {
         self.entries
             .iter()
             .map(|e| {
+                // A duty in counts: N counts are the full scale (a fraction of 1).
+                if let (Signal::Duty, super::units::Unit::Counts(n)) = (e.signal, e.unit) {
+                    return Ok(1.0 / n);
+                }
                 e.unit.factor_on(axis).ok_or_else(|| {
                     anyhow!(
                         "column `{}` holds {} in {}, a linear unit, but the model is a rotary gear: \

@@ -301,6 +301,9 @@ pub fn plausible_limit(signal: Signal) -> f64 {
         Signal::ThetaL | Signal::ThetaM | Signal::Ref => 1e9,
         Signal::OmegaL | Signal::OmegaM => 1e7,
         Signal::Enable => 1e9,
+        Signal::IRef => 1e5,
+        Signal::VSupply => 1e4,
+        Signal::Duty => 1e3,
     }
 }
 

@@ -9,7 +9,7 @@ use std::io::Write;
 use std::path::Path;
 
 /// Column order of servo's CSV.
-pub const ORDER: [Signal; 8] = [
+pub const ORDER: [Signal; 11] = [
     Signal::Time,
     Signal::U,
     Signal::ThetaL,
@@ -18,6 +18,9 @@ pub const ORDER: [Signal; 8] = [
     Signal::ThetaM,
     Signal::OmegaL,
     Signal::OmegaM,
+    Signal::IRef,
+    Signal::Duty,
+    Signal::VSupply,
 ];
 
 /// The samples of `signal` in `rec`, if present.
@@ -32,6 +35,9 @@ pub fn signal_of(rec: &Record, signal: Signal) -> Option<&[f64]> {
         Signal::IA => rec.i_a_a.as_deref(),
         Signal::Ref => rec.ref_rad.as_deref(),
         Signal::Enable => rec.enable.as_deref(),
+        Signal::IRef => rec.i_ref_a.as_deref(),
+        Signal::Duty => rec.duty.as_deref(),
+        Signal::VSupply => rec.v_supply_v.as_deref(),
     }
 }
 

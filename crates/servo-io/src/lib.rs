@@ -194,6 +194,22 @@ pub fn read_log_axis(
     Ok(rec)
 }
 
+/// [`read_log_axis`] on the axis and the drive of `model`: the log's input column (`u`,
+/// `i_ref`, `duty` with `v_supply`) is checked against the model's drive and turned into the
+/// input of its equivalent voltage chain ([`servo_core::drive::Drive::prepare`]).
+pub fn read_log_model(
+    path: &Path,
+    columns: Option<&str>,
+    model: &crate::model_file::ModelFile,
+) -> anyhow::Result<Record> {
+    let mut rec = read_log_axis(path, columns, &model.transmission)?;
+    model
+        .drive
+        .prepare(&mut rec)
+        .map_err(|e| crate::error::anyhow!("{e}"))?;
+    Ok(rec)
+}
+
 /// [`read_log_signals`] on the axis `axis` (from the model file's `[transmission]`): a CSV or
 /// MAT column in a length or linear speed unit (`x=q:mm`, `v_x=v:m/s`) becomes the load shaft's
 /// equivalent rotation [rad] (x / s, s the axis' travel per radian); on a rotary gear such a

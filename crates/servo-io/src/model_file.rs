@@ -25,6 +25,7 @@
 
 use crate::error::{self as anyhow, anyhow, bail, Context};
 use servo_core::custom::CustomSlots;
+use servo_core::drive::{Drive, DriveKind};
 use servo_core::effects::{Effect, EffectKind, Effects};
 use servo_core::sim::SensorConfig;
 use servo_core::transmission::{EncoderSide, Transmission, TransmissionKind};
@@ -35,7 +36,9 @@ use std::path::Path;
 #[derive(Debug, Clone, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 struct Raw {
-    params: PlantParams,
+    params: RawParams,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    drive: Option<RawDrive>,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     effects: BTreeMap<String, BTreeMap<String, f64>>,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
@@ -48,6 +51,263 @@ struct Raw {
     provenance: Option<toml::Table>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     limits: Option<toml::Table>,
+}
+
+/// `[params]` as written: every key optional here; which are required depends on the drive
+/// ([`ModelFile::from_raw`]: a voltage drive needs every Table 2 key, a current drive neither
+/// R_a, L_a, k_e, k_drv, f_c_drv nor R_s). Keys and their unit-suffixed aliases as in
+/// [`PlantParams`].
+#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+struct RawParams {
+    #[serde(default, skip_serializing_if = "Option::is_none", alias = "r_a_ohm")]
+    r_a: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none", alias = "l_a_h")]
+    l_a: Option<f64>,
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        alias = "k_e_v_s_rad"
+    )]
+    k_e: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none", alias = "k_t_n_m_a")]
+    k_t: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none", alias = "j_m_kg_m2")]
+    j_m: Option<f64>,
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        alias = "b_m_n_m_s_rad"
+    )]
+    b_m: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    n: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none", alias = "j_72_kg_m2")]
+    j_72: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none", alias = "j_d_kg_m2")]
+    j_d: Option<f64>,
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        alias = "b_l_n_m_s_rad"
+    )]
+    b_l: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    k_drv: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none", alias = "f_c_drv_hz")]
+    f_c_drv: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none", alias = "r_s_ohm")]
+    r_s: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none", alias = "j_eq_kg_m2")]
+    j_eq: Option<f64>,
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        alias = "b_eq_n_m_s_rad"
+    )]
+    b_eq: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none", alias = "tau_sf_n_m")]
+    tau_sf: Option<f64>,
+}
+
+/// Why a [params] key is needed, for the error naming it.
+fn why_needed(key: &str) -> &'static str {
+    match key {
+        "r_a" | "l_a" | "r_s" => "the armature circuit it drives",
+        "k_e" => "the back-EMF its voltage works against",
+        "k_t" => "the motor torque k_t i_a",
+        "k_drv" | "f_c_drv" => "the voltage amplifier's gain and lag",
+        "n" => "the gear ratio between motor and load",
+        _ => "the mechanics",
+    }
+}
+
+impl RawParams {
+    /// The parameters of `drive` (its equivalent voltage chain, [`Drive::equivalent`]): every
+    /// key the drive needs present, none it does not use.
+    fn params(&self, drive: &Drive) -> anyhow::Result<PlantParams> {
+        let kind = drive.kind.name();
+        for (key, why) in drive.unused_params() {
+            if self.get(key).is_some() {
+                bail!(
+                    "{}",
+                    servo_core::drive::DriveError::Unused { key, kind, why }
+                );
+            }
+        }
+        let unused = |k: &str| drive.unused_params().iter().any(|(u, _)| *u == k);
+        let optional = |k: &str| {
+            drive
+                .optional_params()
+                .iter()
+                .find(|(o, _)| *o == k)
+                .map(|o| o.1)
+        };
+        let base = PlantParams::TABLE2;
+        let need = |key: &'static str, dflt: f64| -> anyhow::Result<f64> {
+            match self.get(key) {
+                Some(v) => Ok(v),
+                None if unused(key) => Ok(dflt),
+                None => optional(key).ok_or_else(|| {
+                    anyhow!(
+                        "{}",
+                        servo_core::drive::DriveError::Missing {
+                            key,
+                            kind,
+                            why: why_needed(key)
+                        }
+                    )
+                }),
+            }
+        };
+        let p = PlantParams {
+            r_a: need("r_a", base.r_a)?,
+            l_a: need("l_a", base.l_a)?,
+            k_e: need("k_e", base.k_e)?,
+            k_t: need("k_t", base.k_t)?,
+            j_m: match (self.j_m, self.j_eq, drive.kind) {
+                (None, Some(j), DriveKind::Current | DriveKind::Duty) => j,
+                _ => need("j_m", base.j_m)?,
+            },
+            b_m: need("b_m", base.b_m)?,
+            n: need("n", base.n)?,
+            j_72: need("j_72", base.j_72)?,
+            j_d: need("j_d", base.j_d)?,
+            b_l: need("b_l", base.b_l)?,
+            k_drv: need("k_drv", base.k_drv)?,
+            f_c_drv: need("f_c_drv", base.f_c_drv)?,
+            r_s: need("r_s", base.r_s)?,
+            j_eq: self.j_eq,
+            b_eq: self.b_eq,
+            tau_sf: self.tau_sf,
+        };
+        Ok(drive.equivalent(&p))
+    }
+
+    fn get(&self, key: &str) -> Option<f64> {
+        match key {
+            "r_a" => self.r_a,
+            "l_a" => self.l_a,
+            "k_e" => self.k_e,
+            "k_t" => self.k_t,
+            "j_m" => self.j_m,
+            "b_m" => self.b_m,
+            "n" => self.n,
+            "j_72" => self.j_72,
+            "j_d" => self.j_d,
+            "b_l" => self.b_l,
+            "k_drv" => self.k_drv,
+            "f_c_drv" => self.f_c_drv,
+            "r_s" => self.r_s,
+            _ => None,
+        }
+    }
+
+    /// The table written for `p` (equivalent chain constants) on `drive`: the keys the drive
+    /// does not use are left out.
+    fn of(p: &PlantParams, drive: &Drive) -> RawParams {
+        let w = drive.written(p);
+        let keep = |k: &str, v: f64| {
+            let unused = drive.unused_params().iter().any(|(u, _)| *u == k);
+            let default = drive
+                .optional_params()
+                .iter()
+                .any(|(o, d)| *o == k && *d == v);
+            (!unused && !default).then_some(v)
+        };
+        RawParams {
+            r_a: keep("r_a", w.r_a),
+            l_a: keep("l_a", w.l_a),
+            k_e: keep("k_e", w.k_e),
+            k_t: Some(w.k_t),
+            j_m: Some(w.j_m),
+            b_m: keep("b_m", w.b_m),
+            n: Some(w.n),
+            j_72: keep("j_72", w.j_72),
+            j_d: keep("j_d", w.j_d),
+            b_l: keep("b_l", w.b_l),
+            k_drv: keep("k_drv", w.k_drv),
+            f_c_drv: keep("f_c_drv", w.f_c_drv),
+            r_s: keep("r_s", w.r_s),
+            j_eq: w.j_eq,
+            b_eq: w.b_eq,
+            tau_sf: w.tau_sf,
+        }
+    }
+}
+
+/// `kind` of a `[drive]`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+enum RawDriveKind {
+    #[default]
+    Voltage,
+    Current,
+    Duty,
+}
+
+/// The `[drive]` table as written ([`servo_core::drive`]).
+#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+struct RawDrive {
+    #[serde(default)]
+    kind: RawDriveKind,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    bandwidth_hz: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    i_limit_a: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    k_i_a_per_v: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    v_supply_v: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    r_supply_ohm: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    t_dead_s: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    f_pwm_hz: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    duty_limit: Option<f64>,
+}
+
+impl RawDrive {
+    fn drive(&self) -> anyhow::Result<Drive> {
+        let d = Drive {
+            kind: match self.kind {
+                RawDriveKind::Voltage => DriveKind::Voltage,
+                RawDriveKind::Current => DriveKind::Current,
+                RawDriveKind::Duty => DriveKind::Duty,
+            },
+            bandwidth_hz: self.bandwidth_hz,
+            i_limit_a: self.i_limit_a,
+            k_i_a_per_v: self.k_i_a_per_v,
+            v_supply_v: self.v_supply_v,
+            r_supply_ohm: self.r_supply_ohm,
+            t_dead_s: self.t_dead_s,
+            f_pwm_hz: self.f_pwm_hz,
+            duty_limit: self.duty_limit,
+        };
+        d.validate().map_err(|e| anyhow!("{e}"))?;
+        Ok(d)
+    }
+
+    fn of(d: &Drive) -> Option<RawDrive> {
+        (*d != Drive::VOLTAGE).then(|| RawDrive {
+            kind: match d.kind {
+                DriveKind::Voltage => RawDriveKind::Voltage,
+                DriveKind::Current => RawDriveKind::Current,
+                DriveKind::Duty => RawDriveKind::Duty,
+            },
+            bandwidth_hz: d.bandwidth_hz,
+            i_limit_a: d.i_limit_a,
+            k_i_a_per_v: d.k_i_a_per_v,
+            v_supply_v: d.v_supply_v,
+            r_supply_ohm: d.r_supply_ohm,
+            t_dead_s: d.t_dead_s,
+            f_pwm_hz: d.f_pwm_hz,
+            duty_limit: d.duty_limit,
+        })
+    }
 }
 
 /// `kind` of a `[transmission]`.
@@ -211,6 +471,10 @@ pub struct ModelFile {
     /// linear axis `params` holds the equivalent rotation's J_eq, B_eq, tau_sf, converted from
     /// the file's m_eq_kg, b_eq_n_s_m, f_c_n (and back when written).
     pub transmission: Transmission,
+    /// The drive (`[drive]`; a linear voltage amplifier when absent). `params` holds its
+    /// equivalent voltage chain ([`Drive::equivalent`]), what the simulator, the fits and the
+    /// design compute with; the file holds the keys the drive uses.
+    pub drive: Drive,
     pub sensors: Option<SensorConfig>,
     /// Free-form provenance (log, method, date, ...).
     pub provenance: Option<toml::Table>,
@@ -241,6 +505,7 @@ impl Default for ModelFile {
             effects: Effects::NONE,
             custom: CustomSlots::NONE,
             transmission: Transmission::GEAR,
+            drive: Drive::VOLTAGE,
             sensors: None,
             provenance: None,
             limits: BTreeMap::new(),
@@ -264,7 +529,11 @@ impl ModelFile {
 
     /// Validates the deserialised file: parameters, effect names and keys, complete effects.
     fn from_raw(raw: Raw) -> anyhow::Result<ModelFile> {
-        let mut params = raw.params;
+        let drive = match &raw.drive {
+            Some(d) => d.drive()?,
+            None => Drive::VOLTAGE,
+        };
+        let mut params = raw.params.params(&drive)?;
         let transmission = match &raw.transmission {
             Some(t) => {
                 let tr = t.transmission()?;
@@ -319,6 +588,7 @@ impl ModelFile {
             effects,
             custom,
             transmission,
+            drive,
             sensors: raw.sensors,
             provenance: raw.provenance,
             limits: parse_limits(raw.limits.as_ref())?,
@@ -343,6 +613,7 @@ impl ModelFile {
             effects: plant.effects,
             custom: plant.custom,
             transmission: Transmission::GEAR,
+            drive: Drive::VOLTAGE,
             sensors: None,
             provenance: None,
             limits: BTreeMap::new(),
@@ -390,7 +661,8 @@ impl ModelFile {
         let mut params = self.written_params();
         let transmission = RawTransmission::of(&self.transmission, &mut params);
         Raw {
-            params,
+            params: RawParams::of(&params, &self.drive),
+            drive: RawDrive::of(&self.drive),
             effects,
             custom,
             transmission,
@@ -442,8 +714,18 @@ impl ModelFile {
             ),
             ("r_s", p.r_s, "shunt resistance R_s [ohm]"),
         ];
-        for (k, v, doc) in rows {
-            s.push_str(&format!("{k} = {v:e}  # {doc}\n"));
+        let raw = RawParams::of(p, &self.drive);
+        for (k, _, doc) in rows {
+            match raw.get(k) {
+                Some(v) => s.push_str(&format!("{k} = {v:e}  # {doc}\n")),
+                None if self.drive.unused_params().iter().any(|(u, _)| *u == k) => s.push_str(
+                    &format!("# {k}: not used by a {} drive\n", self.drive.kind.name()),
+                ),
+                None => s.push_str(&format!(
+                    "# {k} = ...  # {doc} (a {} drive's default)\n",
+                    self.drive.kind.name()
+                )),
+            }
         }
         let opt: [(&str, Option<f64>, &str); 3] = [
             ("j_eq", p.j_eq, "identified total inertia at motor side J_eq [kg m^2] (overrides J_m + J_l/N^2)"),
@@ -463,6 +745,9 @@ impl ModelFile {
         let mut rest = written;
         if let Some(t) = RawTransmission::of(&self.transmission, &mut rest) {
             s.push_str(&transmission_toml(&t));
+        }
+        if self.drive != Drive::VOLTAGE {
+            s.push_str(&drive_toml(&self.drive));
         }
         for e in self.effects.iter().filter(|e| !Self::in_params(e.kind)) {
             s.push_str(&format!(
@@ -566,6 +851,42 @@ fn check_limit_key(key: &str) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The commented `[drive]` table.
+fn drive_toml(d: &Drive) -> String {
+    let mut s = format!(
+        "\n[drive]  # between the command and the motor\nkind = \"{}\"  # voltage | current | duty\n",
+        d.kind.name()
+    );
+    let docs = [
+        (
+            "bandwidth_hz",
+            "current loop bandwidth [Hz] (instant when absent)",
+        ),
+        ("i_limit_a", "current reference limit [A]"),
+        (
+            "k_i_a_per_v",
+            "amps of reference per volt of a voltage command [A/V]",
+        ),
+        (
+            "v_supply_v",
+            "supply voltage [V] (when the log has no v_supply column)",
+        ),
+        (
+            "r_supply_ohm",
+            "supply internal resistance [ohm] (sag R i_a)",
+        ),
+        ("t_dead_s", "bridge dead time [s]"),
+        ("f_pwm_hz", "PWM frequency [Hz]"),
+        ("duty_limit", "largest duty magnitude [-]"),
+    ];
+    for ((k, v), (_, doc)) in d.values().into_iter().zip(docs) {
+        if let Some(v) = v {
+            s.push_str(&format!("{k} = {v:e}  # {doc}\n"));
+        }
+    }
+    s
 }
 
 /// The commented `[transmission]` table.

@@ -28,6 +28,13 @@ pub enum Signal {
     Ref,
     /// Drive enable / torque-on flag: nonzero = the drive is on, 0 = off (the motor coasts).
     Enable,
+    /// Current reference of a current (torque) drive [A] ([`servo_core::drive`]).
+    IRef,
+    /// Duty cycle of a PWM H-bridge or smart servo (a fraction in [-1, 1]; `%`, or `counts:N`
+    /// with N the full scale).
+    Duty,
+    /// Supply voltage of a duty drive [V].
+    VSupply,
 }
 
 impl Signal {
@@ -44,6 +51,9 @@ impl Signal {
             Signal::IA => rec.i_a_a = Some(col),
             Signal::Ref => rec.ref_rad = Some(col),
             Signal::Enable => rec.enable = Some(col),
+            Signal::IRef => rec.i_ref_a = Some(col),
+            Signal::Duty => rec.duty = Some(col),
+            Signal::VSupply => rec.v_supply_v = Some(col),
         }
     }
 }
@@ -64,6 +74,8 @@ pub enum Dimension {
     LinearSpeed,
     /// A force [N] (no log signal is a force yet).
     Force,
+    /// A fraction (a duty cycle: 1 = full scale).
+    Fraction,
 }
 
 impl Dimension {
@@ -79,6 +91,7 @@ impl Dimension {
             Dimension::Length => "m, mm, um",
             Dimension::LinearSpeed => "m/s, mm/s",
             Dimension::Force => "N",
+            Dimension::Fraction => "fraction (1 = full scale), %, counts:N (N counts full scale)",
         }
     }
     fn name(self) -> &'static str {
@@ -92,13 +105,14 @@ impl Dimension {
             Dimension::Length => "a length",
             Dimension::LinearSpeed => "a linear speed",
             Dimension::Force => "a force",
+            Dimension::Fraction => "a fraction",
         }
     }
 }
 
 impl Signal {
     /// Every signal, in the order of servo's CSV columns.
-    pub const ALL: [Signal; 9] = [
+    pub const ALL: [Signal; 12] = [
         Signal::Time,
         Signal::U,
         Signal::ThetaL,
@@ -108,6 +122,9 @@ impl Signal {
         Signal::IA,
         Signal::Ref,
         Signal::Enable,
+        Signal::IRef,
+        Signal::Duty,
+        Signal::VSupply,
     ];
 
     /// The name users type.
@@ -122,6 +139,9 @@ impl Signal {
             Signal::IA => "i_a",
             Signal::Ref => "ref",
             Signal::Enable => "enable",
+            Signal::IRef => "i_ref",
+            Signal::Duty => "duty",
+            Signal::VSupply => "v_supply",
         }
     }
 
@@ -179,6 +199,9 @@ impl Signal {
             Signal::IA => "i_a_A",
             Signal::Ref => "ref_rad",
             Signal::Enable => "enable",
+            Signal::IRef => "i_ref_A",
+            Signal::Duty => "duty",
+            Signal::VSupply => "v_supply_V",
         }
     }
 
@@ -186,7 +209,9 @@ impl Signal {
     pub const fn dimension(self) -> Dimension {
         match self {
             Signal::Time => Dimension::Time,
-            Signal::U => Dimension::Voltage,
+            Signal::U | Signal::VSupply => Dimension::Voltage,
+            Signal::IRef => Dimension::Current,
+            Signal::Duty => Dimension::Fraction,
             Signal::ThetaL | Signal::ThetaM | Signal::Ref => Dimension::Angle,
             Signal::OmegaL | Signal::OmegaM => Dimension::AngularSpeed,
             Signal::IA => Dimension::Current,
@@ -206,6 +231,7 @@ impl Signal {
             Dimension::Length => Unit::Metre,
             Dimension::LinearSpeed => Unit::MetrePerS,
             Dimension::Force => Unit::Newton,
+            Dimension::Fraction => Unit::Fraction,
         }
     }
 
@@ -249,12 +275,16 @@ pub enum Unit {
     MetrePerS,
     MillimetrePerS,
     Newton,
+    /// A fraction (1 = full scale).
+    Fraction,
+    /// Percent of full scale.
+    Percent,
 }
 
 /// Why a unit string could not be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum UnitError {
-    #[error("unknown unit `{0}`; known units: s, ms, us, rad, deg, rev, counts:N, rad/s, deg/s, rpm, rev/s, V, mV, A, mA, m, mm, um, m/s, mm/s, N, flag")]
+    #[error("unknown unit `{0}`; known units: s, ms, us, rad, deg, rev, counts:N, rad/s, deg/s, rpm, rev/s, V, mV, A, mA, m, mm, um, m/s, mm/s, N, flag, fraction, %")]
     Unknown(String),
     #[error("`counts:N` needs N, the counts per revolution (> 0), got `{0}`")]
     BadCounts(String),
@@ -300,6 +330,8 @@ impl Unit {
             "m/s" | "m_per_s" | "m_s" => Unit::MetrePerS,
             "mm/s" | "mm_per_s" | "mm_s" => Unit::MillimetrePerS,
             "n" => Unit::Newton,
+            "fraction" | "frac" => Unit::Fraction,
+            "%" | "pct" | "percent" => Unit::Percent,
             "counts" => return Err(UnitError::BadCounts(String::new())),
             _ => return Err(UnitError::Unknown(t.to_string())),
         })
@@ -319,6 +351,7 @@ impl Unit {
             Unit::Metre | Unit::Millimetre | Unit::Micrometre => Dimension::Length,
             Unit::MetrePerS | Unit::MillimetrePerS => Dimension::LinearSpeed,
             Unit::Newton => Dimension::Force,
+            Unit::Fraction | Unit::Percent => Dimension::Fraction,
         }
     }
 
@@ -345,7 +378,11 @@ impl Unit {
     /// Checks that the unit fits `signal` (a load position, reference or speed also in its
     /// linear form: [`Signal::accepts_linear`]).
     pub fn check_for(self, signal: Signal, text: &str) -> Result<Unit, UnitError> {
-        if self.dimension() == signal.dimension() || signal.accepts_linear(self.dimension()) {
+        let duty_counts = signal == Signal::Duty && matches!(self, Unit::Counts(_));
+        if self.dimension() == signal.dimension()
+            || signal.accepts_linear(self.dimension())
+            || duty_counts
+        {
             Ok(self)
         } else {
             Err(UnitError::Mismatch {
@@ -361,7 +398,8 @@ impl Unit {
             Unit::Second | Unit::Rad | Unit::RadPerS | Unit::Volt | Unit::Ampere | Unit::Flag => {
                 1.0
             }
-            Unit::Metre | Unit::MetrePerS | Unit::Newton => 1.0,
+            Unit::Metre | Unit::MetrePerS | Unit::Newton | Unit::Fraction => 1.0,
+            Unit::Percent => 1e-2,
             Unit::Millisecond | Unit::Millivolt | Unit::Milliampere => 1e-3,
             Unit::Millimetre | Unit::MillimetrePerS => 1e-3,
             Unit::Microsecond | Unit::Micrometre => 1e-6,
@@ -411,6 +449,8 @@ impl fmt::Display for Unit {
             Unit::MetrePerS => f.write_str("m/s"),
             Unit::MillimetrePerS => f.write_str("mm/s"),
             Unit::Newton => f.write_str("N"),
+            Unit::Fraction => f.write_str("fraction"),
+            Unit::Percent => f.write_str("%"),
         }
     }
 }

@@ -205,6 +205,10 @@ impl Compare {
                 &model_file.transmission,
             )
             .with_context(|| format!("reading log {}", path.display()))?;
+            model_file
+                .drive
+                .prepare(&mut record)
+                .map_err(|e| anyhow!("reading log {}: {e}", path.display()))?;
             let used = self.part.apply(&mut record, path, k, self.logs.len())?;
             meta.feedforward_v = meta.feedforward_v.map(|f| used.slice_of(&f).to_vec());
             parts.push(used);

@@ -116,7 +116,7 @@ impl Diagnose {
         for (k, p) in self.logs.iter().enumerate() {
             let mut r = servo_core::diagnose::timing::timed(
                 || format!("read {}", p.display()),
-                || crate::io::read_log_axis(p, self.columns.as_deref(), &model_file.transmission),
+                || crate::io::read_log_model(p, self.columns.as_deref(), &model_file),
             )
             .with_context(|| format!("reading log {}", p.display()))?;
             parts.push(self.part.apply(&mut r, p, k, self.logs.len())?);
@@ -253,6 +253,8 @@ impl Diagnose {
                 let mut mf = ModelFile::from_plant(&final_plant);
                 mf.sensors = model_file.sensors;
                 mf.transmission = model_file.transmission;
+                mf.drive = model_file.drive;
+                mf.drive = model_file.drive;
                 mf.provenance = model_file.provenance.clone();
                 if let Some(g) = gate.as_ref().filter(|_| worse) {
                     mf.provenance

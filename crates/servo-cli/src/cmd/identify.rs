@@ -194,7 +194,7 @@ impl Identify {
                 1 => Some(self.columns[0].as_str()),
                 _ => Some(self.columns[k].as_str()),
             };
-            let mut rec = crate::io::read_log_axis(path, cols, &params.transmission)
+            let mut rec = crate::io::read_log_model(path, cols, &params)
                 .with_context(|| format!("reading log {}", path.display()))?;
             parts.push(self.part.apply(&mut rec, path, k, self.logs.len())?);
             records.push(rec);

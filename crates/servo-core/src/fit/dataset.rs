@@ -336,6 +336,7 @@ impl Dataset {
                 i_a_a: r.i_raw.clone(),
                 ref_rad: None,
                 enable: None,
+                ..Record::default()
             });
         }
         Self::prepared(
@@ -474,6 +475,9 @@ fn slice(r: &Record, a: usize, b: usize) -> Record {
         i_a_a: cut(&r.i_a_a),
         ref_rad: cut(&r.ref_rad),
         enable: cut(&r.enable),
+        i_ref_a: cut(&r.i_ref_a),
+        duty: cut(&r.duty),
+        v_supply_v: cut(&r.v_supply_v),
     }
 }
 

@@ -99,6 +99,7 @@ pub(super) fn gate_and_save(
         let mut mf = ModelFile::from_plant(plant);
         mf.sensors = model_file.sensors;
         mf.transmission = model_file.transmission;
+        mf.drive = model_file.drive;
         let mut prov = model_file.provenance.clone().unwrap_or_default();
         prov.insert(
             "compare_model".into(),

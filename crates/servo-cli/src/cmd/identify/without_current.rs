@@ -31,6 +31,20 @@ impl super::Identify {
         let tol_pct = 100.0 * DRIVE_CONSTANT_TOLERANCE;
         let mut notes = vec![if with_current {
             format!("the params file declares effects: J_eq, B_eq and tau_sf were fitted with them on the torque balance k_t i_a = J_eq dw/dt + B_eq w + tau_sf/N sign(w) + tau_effects/N (and the electrical balance), one least squares over every log (handout 4.3), instead of the dedicated friction and inertia tests; a {tol_pct:.0} % tolerance on each drive constant is added to the intervals")
+        } else if params.drive.kind == servo_core::drive::DriveKind::Current {
+            format!(
+                "current drive: J_eq, B_eq and tau_sf were estimated from the current reference and the angle, with the torque balance k_t i_ref = J_eq dw/dt + B_eq w + tau_sf/N sign(w), the reference through the current loop's lag ({} s) and clipped at its limit, k_t = {} from the params file (nothing electrical is fitted; a measured current is not used); its {tol_pct:.0} % tolerance is added to the intervals",
+                params.drive.loop_lag_s(),
+                params.params.k_t
+            )
+        } else if params.drive.kind == servo_core::drive::DriveKind::Duty {
+            format!(
+                "duty drive: J_eq, B_eq and tau_sf were estimated from the duty and the angle, with the input balance k_t u / R_eq = J_eq dw/dt + (B_eq + k_t k_e / R_eq) w + tau_sf/N sign(w) on the bridge's voltage u = duty x V_supply - dead-time loss, R_eq = {} ohm (R_a + R_s + the supply's {} ohm), k_e = {}, k_t = {} from the params file; their {tol_pct:.0} % tolerance each is added to the intervals",
+                params.params.r_eq(),
+                params.drive.r_supply(),
+                params.params.k_e,
+                params.params.k_t
+            )
         } else {
             format!(
             "no log records the armature current: J_eq, B_eq and tau_sf were estimated from u and the angle alone, with the u-driven balance k_drv k_t u / R_eq = J_eq dw/dt + (B_eq + k_t k_e / R_eq) w + tau_sf/N sign(w), taking k_drv = {}, R_eq = {} ohm, k_e = {}, k_t = {} from the params file; their {tol_pct:.0} % tolerance each is added to the intervals",
