@@ -174,17 +174,33 @@ mod tests {
             text.starts_with("time_s,u_V,x_m,ref_m,theta_m_rad,v_x_m_s\n"),
             "{text}"
         );
-        let row: Vec<f64> = text.lines().nth(2).unwrap().split(',').map(|v| v.parse().unwrap()).collect();
+        let row: Vec<f64> = text
+            .lines()
+            .nth(2)
+            .unwrap()
+            .split(',')
+            .map(|v| v.parse().unwrap())
+            .collect();
         assert!((row[2] - s).abs() < 1e-15 && (row[3] - 5.0 * s).abs() < 1e-15);
         assert_eq!(row[4], 3.0);
         let back = super::super::csv_read::parse_csv_on(&text, "mem", None, None, &axis)
             .unwrap()
             .record;
-        for (a, b) in back.theta_l_rad.unwrap().iter().zip(rec.theta_l_rad.unwrap()) {
+        for (a, b) in back
+            .theta_l_rad
+            .unwrap()
+            .iter()
+            .zip(rec.theta_l_rad.unwrap())
+        {
             assert!((a - b).abs() < 1e-12, "{a} {b}");
         }
         assert_eq!(back.theta_m_rad, rec.theta_m_rad);
-        for (a, b) in back.omega_l_rad_s.unwrap().iter().zip(rec.omega_l_rad_s.unwrap()) {
+        for (a, b) in back
+            .omega_l_rad_s
+            .unwrap()
+            .iter()
+            .zip(rec.omega_l_rad_s.unwrap())
+        {
             assert!((a - b).abs() < 1e-9, "{a} {b}");
         }
     }

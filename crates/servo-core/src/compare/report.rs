@@ -378,7 +378,9 @@ pub fn with_unit(v: f64, kind: SignalKind) -> String {
 /// rad of the equivalent rotation) in m and mm, a load speed in m/s.
 pub fn with_unit_on(v: f64, kind: SignalKind, metres_per_rad: Option<f64>) -> String {
     match (kind, metres_per_rad) {
-        (SignalKind::Position, Some(m)) => return format!("{:.4e} m ({:.4} mm)", v * m, v * m * 1e3),
+        (SignalKind::Position, Some(m)) => {
+            return format!("{:.4e} m ({:.4} mm)", v * m, v * m * 1e3)
+        }
         (SignalKind::Speed, Some(m)) => return format!("{:.4e} m/s", v * m),
         _ => {}
     }
@@ -402,10 +404,7 @@ pub fn describe_window(w: &Window, r: &CompareReport, opts: &CompareOptions) -> 
             w.omega_min_rad_s * m,
             w.omega_max_rad_s * m
         ),
-        None => format!(
-            "{:.2} to {:.2} rad/s",
-            w.omega_min_rad_s, w.omega_max_rad_s
-        ),
+        None => format!("{:.2} to {:.2} rad/s", w.omega_min_rad_s, w.omega_max_rad_s),
     };
     format!(
         "t = {:.3}-{:.3} s: {:.1} % of the squared error in {:.1} % of the time; mostly {}; speed from {speed}, |u| up to {:.2} V; the measurement is {} the model by {} on average",
@@ -435,9 +434,8 @@ fn findings(r: &CompareReport, opts: &CompareOptions) -> Vec<String> {
     let f = &h.figures;
     let lin = opts.metres_per_rad;
     let with_unit = |v: f64, k: SignalKind| with_unit_on(v, k, lin);
-    let regime_phrase = |g: Regime, c: &Classification, o: &RegimeOptions| {
-        regime_phrase_on(g, c, o, lin)
-    };
+    let regime_phrase =
+        |g: Regime, c: &Classification, o: &RegimeOptions| regime_phrase_on(g, c, o, lin);
     out.push(format!(
         "{}: {} fit {:.1} %, RMSE {}, max error {} at t = {:.3} s.",
         mode_words(r.mode, r.dt_s),

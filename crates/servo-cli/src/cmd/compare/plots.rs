@@ -177,18 +177,10 @@ pub fn compare_figures_svg_on(
     );
     let rl = format!("residual [{unit}]");
     out.push(one_series_chart(
-        t2,
-        "t [s]",
-        &rl,
-        "residual",
-        &r.time_s,
-        &residual,
+        t2, "t [s]", &rl, "residual", &r.time_s, &residual,
     )?);
     let (w, wl): (Vec<f64>, &str) = match metres_per_rad {
-        Some(m) => (
-            r.omega_l_rad_s.iter().map(|v| v * m).collect(),
-            "v_x [m/s]",
-        ),
+        Some(m) => (r.omega_l_rad_s.iter().map(|v| v * m).collect(), "v_x [m/s]"),
         None => (r.omega_l_rad_s.clone(), "omega_l [rad/s]"),
     };
     let lim = servo_core::compare::regimes::abs_percentile(&w, 0.995).max(1e-12);
@@ -204,7 +196,14 @@ pub fn compare_figures_svg_on(
             });
         let (bx, by) = binned_mean(&xs, &residual, lo, hi, 90);
         let t4 = format!("{name}: residual vs measured load position (mean per position bin)");
-        out.push(one_series_chart(t4, "x [mm]", &rl, "mean residual", &bx, &by)?);
+        out.push(one_series_chart(
+            t4,
+            "x [mm]",
+            &rl,
+            "mean residual",
+            &bx,
+            &by,
+        )?);
     } else if let Some(th) = &r.theta_l_rad {
         let (lo, hi) = th
             .iter()
