@@ -389,3 +389,395 @@ fn a_rotary_rig_with_a_motor_encoder_is_identified() {
     let logs = logs(&rig, &[], dir.path(), 7);
     check_identify(&rig, &logs, dir.path());
 }
+
+/// Another screw: a 20 mm lead (s = 3.18 mm/rad), directly coupled, a 4 kg carriage (5.4 kg
+/// equivalent with the rotor), a 1 um linear scale at the carriage and a 2000-count motor
+/// encoder; `encoder` says which of them the logs are read from.
+fn long_lead_screw_rig(encoder: EncoderSide) -> Rig {
+    let s: f64 = 0.02 / std::f64::consts::TAU;
+    Rig {
+        name: "screw20",
+        motor: small_motor(1.0),
+        transmission: Transmission {
+            kind: TransmissionKind::Screw { lead_m: 0.02 },
+            encoder,
+        },
+        mass: 4.0 + 1.4e-5 / (s * s),
+        viscous: 25.0,
+        coulomb: 17.0,
+        counts_per_rev: 2000.0,
+        scale_m: 1e-6,
+        step: 0.04,
+        pid: (3.0, 6.0, 0.04),
+    }
+}
+
+#[test]
+fn a_second_screw_round_trips_with_its_encoder_on_the_motor_the_load_or_both() {
+    let _cpu = servo_e2e::cpu_heavy();
+    let dir = tempfile::tempdir().unwrap();
+    // One simulation; the logs hold both encoders, each identify reads the ones its model names.
+    let logs = logs(&long_lead_screw_rig(EncoderSide::Load), &[], dir.path(), 21);
+    for encoder in [EncoderSide::Motor, EncoderSide::Load, EncoderSide::Both] {
+        let rig = long_lead_screw_rig(encoder);
+        let model = check_identify(&rig, &logs, dir.path());
+        let back = servo_cli::model_file::ModelFile::load(&model).unwrap();
+        assert_eq!(back.transmission.encoder, encoder);
+    }
+}
+
+/// The figures of one signal in a `compare --json` object.
+fn signal<'a>(v: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    v["signals"]
+        .as_array()
+        .and_then(|s| s.iter().find(|s| s["signal"] == name))
+        .unwrap_or_else(|| panic!("no signal {name} in {v}"))
+}
+
+/// Standard deviation of the central-difference speed [m/s] of a position column [mm] of a CSV
+/// written by [`write_log`] (every 1 ms), low-passed over 10 ms as the comparison's derivative is.
+fn speed_std_m_s(csv: &Path) -> f64 {
+    let text = std::fs::read_to_string(csv).unwrap();
+    let x: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(4).unwrap().parse::<f64>().unwrap() * 1e-3)
+        .collect();
+    let h = 5;
+    let v: Vec<f64> = (h..x.len() - h)
+        .map(|k| (x[k + h] - x[k - h]) / (2.0 * h as f64 * DT))
+        .collect();
+    let mean = v.iter().sum::<f64>() / v.len() as f64;
+    (v.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+/// Text of a report that shows an angle unit where the user gave metres.
+fn rad_in(text: &str) -> Option<&str> {
+    ["rad/s", " rad ", " rad)", " rad,", "[rad", "rad^"]
+        .into_iter()
+        .find(|p| text.contains(p))
+}
+
+#[test]
+fn a_screw_axis_with_a_direction_asymmetry_is_diagnosed_in_newtons_and_added() {
+    let _cpu = servo_e2e::cpu_heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let rig = long_lead_screw_rig(EncoderSide::Load);
+    let (f_pos, f_neg) = (22.0, 12.0);
+    let t = rig.transmission;
+    let hidden = Effect::parse(&format!(
+        "asymmetry:tau_sf_pos={},tau_sf_neg={}",
+        t.torque_of_force(f_pos).unwrap(),
+        t.torque_of_force(f_neg).unwrap()
+    ))
+    .unwrap();
+    let logs = logs(&rig, &[hidden], dir.path(), 23);
+    let cols = rig.columns();
+    // identify the base (one Coulomb level), as a user would first.
+    let nominal = rig.nominal_file(dir.path());
+    let model = dir.path().join("screw20-base.toml");
+    let (ok, _, err) = servo(&args_with(
+        "identify",
+        &logs,
+        &[
+            "--columns",
+            &cols,
+            "--params",
+            nominal.to_str().unwrap(),
+            "-o",
+            model.to_str().unwrap(),
+        ],
+    ));
+    assert!(ok, "{err}");
+    let m = model.to_str().unwrap();
+
+    // diagnose names the asymmetry, its two levels in N within 15 %.
+    let d = run_json(&args_with(
+        "diagnose",
+        &logs,
+        &["--columns", &cols, "--model", m, "--json"],
+    ));
+    servo_e2e::validate_output(&d).unwrap();
+    let best = &d["ranking"][0];
+    assert_eq!(best["effect"], "asymmetry", "{}", d["verdict"]);
+    assert_eq!(best["significant"], true, "{}", d["verdict"]);
+    for (key, want) in [("tau_sf_pos_n", f_pos), ("tau_sf_neg_n", f_neg)] {
+        let got = best["linear"][key]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{best}"));
+        within(&format!("diagnose {key}"), got, want, 0.15);
+    }
+    let (ok, text, err) = servo(&args_with(
+        "diagnose",
+        &logs,
+        &["--columns", &cols, "--model", m],
+    ));
+    assert!(ok, "{err}");
+    assert!(
+        text.contains("best candidate asymmetry: tau_sf_pos_n = "),
+        "{text}"
+    );
+
+    // compare --add asymmetry: the held-out error falls, the ladder says so, the model is saved
+    // with the effect as the registry stores it (N m at the screw).
+    let saved = dir.path().join("screw20-asym.toml");
+    let v = run_json(&args_with(
+        "compare",
+        &logs,
+        &[
+            "--columns",
+            &cols,
+            "--model",
+            m,
+            "--add",
+            "asymmetry",
+            "--save",
+            saved.to_str().unwrap(),
+            "--json",
+        ],
+    ));
+    servo_e2e::validate_output(&v).unwrap();
+    let ladder = v["ladder"].as_array().unwrap();
+    let (before, after) = (
+        ladder[0]["rmse"].as_f64().unwrap(),
+        ladder[1]["rmse"].as_f64().unwrap(),
+    );
+    eprintln!("[screw20 compare] replay RMSE {before:.4e} -> {after:.4e} m/s");
+    assert!(after < 0.9 * before, "{before} -> {after}");
+    // Linear units: the speed in m/s (its RMSE matches the fit and the measured speed's spread,
+    // which the rotary rad/s would miss by 1/s = 314).
+    assert_eq!(v["signal"], "v_x");
+    assert_eq!(v["unit"], "m/s");
+    assert_eq!(v["transmission"]["kind"], "screw");
+    let log0 = &v["logs"][0];
+    let s0 = signal(log0, "v_x");
+    let from_fit = (1.0 - s0["fit_pct"].as_f64().unwrap() / 100.0) * speed_std_m_s(&logs[0]);
+    within(
+        "compare v_x rmse vs fit",
+        s0["rmse"].as_f64().unwrap(),
+        from_fit,
+        0.1,
+    );
+    let lin = &v["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["effect"] == "asymmetry")
+        .unwrap()["linear"];
+    within(
+        "compare tau_sf_pos_n",
+        lin["tau_sf_pos_n"].as_f64().unwrap(),
+        f_pos,
+        0.15,
+    );
+    within(
+        "compare tau_sf_neg_n",
+        lin["tau_sf_neg_n"].as_f64().unwrap(),
+        f_neg,
+        0.15,
+    );
+    assert!(v["base"]["m_eq_kg"].as_f64().unwrap() > 0.0);
+    let save = &v["save"];
+    assert_eq!(save["saved"], true, "{save}");
+    assert_eq!(save["worse"], false, "{save}");
+    let held = save["measures"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|m| m["measure"] == "held_out")
+        .unwrap_or_else(|| panic!("no held-out measure: {save}"));
+    eprintln!(
+        "[screw20 compare] held-out error {} -> {} m",
+        held["before"], held["after"]
+    );
+    assert_eq!(held["unit"], "m");
+    assert!(
+        held["after"].as_f64().unwrap() < held["before"].as_f64().unwrap(),
+        "{held}"
+    );
+    let back = servo_cli::model_file::ModelFile::load(&saved).unwrap();
+    assert_eq!(back.transmission, rig.transmission);
+    let s = t.metres_per_rad().unwrap();
+    let pos = back
+        .effects
+        .value(servo_core::EffectKind::Asymmetry, "tau_sf_pos")
+        .unwrap();
+    within("saved tau_sf_pos [N m]", pos, f_pos * s, 0.15);
+
+    // The text: the ladder says the error fell, in linear units only.
+    let (ok, text, err) = servo(&args_with(
+        "compare",
+        &logs,
+        &["--columns", &cols, "--model", m, "--add", "asymmetry"],
+    ));
+    assert!(ok, "{err}");
+    let line = text
+        .lines()
+        .find(|l| l.contains("+ asymmetry") || (l.contains("asymmetry") && l.contains("% RMSE")))
+        .unwrap_or_else(|| panic!("no ladder line for asymmetry: {text}"));
+    assert!(line.contains("m/s") && line.contains("(-"), "{line}");
+    assert!(text.contains("v_x [m/s]"), "{text}");
+    assert!(text.contains("tau_sf_pos_n = "), "{text}");
+    assert!(rad_in(&text).is_none(), "`{:?}` in {text}", rad_in(&text));
+}
+
+/// A belt axis run on servo's simulator as a user would: a model file with the belt, a
+/// reference in mm, the CSV log in metres; `compare` and `identify` read that log back without
+/// `--columns`, in m and kg.
+#[test]
+fn a_belt_axis_runs_with_references_in_mm_and_logs_in_metres() {
+    let _cpu = servo_e2e::cpu_heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let rig = belt_rig();
+    let truth = dir.path().join("belt-truth.toml");
+    servo_cli::model_file::ModelFile {
+        params: rig.params(),
+        transmission: rig.transmission,
+        sensors: Some(SensorConfig {
+            counts_per_rev: 4096,
+            current_noise_a: 2e-3,
+            current_offset_a: 0.0,
+            seed: 4,
+        }),
+        ..Default::default()
+    }
+    .save(&truth)
+    .unwrap();
+    let gains = dir.path().join("belt-gains.toml");
+    std::fs::write(
+        &gains,
+        "[pid]\nkp = 6.0\nki = 12.0\nkd = 0.08\ntl_s = 0.003\nts_s = 0.001\nu_limit_v = 10.0\n",
+    )
+    .unwrap();
+    let closed = dir.path().join("belt-run.csv");
+    let (ok, out, err) = servo(&[
+        "run",
+        "--plant",
+        truth.to_str().unwrap(),
+        "--gains",
+        gains.to_str().unwrap(),
+        "--ref",
+        "square:amp=30mm,period=1.2",
+        "--duration",
+        "6",
+        "--csv",
+        closed.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("tracking error RMS") && out.contains(" mm)"),
+        "{out}"
+    );
+    let text = std::fs::read_to_string(&closed).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    for c in ["time_s", "u_V", "x_m", "ref_m", "v_x_m_s"] {
+        assert!(header.contains(&c), "{header:?}");
+    }
+    assert!(!header.contains(&"theta_l_rad"), "{header:?}");
+    let col = |name: &str| -> Vec<f64> {
+        let j = header.iter().position(|h| *h == name).unwrap();
+        text.lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(j).unwrap().parse().unwrap())
+            .collect()
+    };
+    let (x, r) = (col("x_m"), col("ref_m"));
+    let rmax = r.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    assert!((rmax - 0.03).abs() < 1e-12, "reference {rmax} m");
+    // Near +30 mm at the end of the first half period (0.6 s).
+    let k = 590;
+    assert!(
+        (x[k] - 0.03).abs() < 2e-3,
+        "x = {} m at {} s",
+        x[k],
+        k as f64 * DT
+    );
+
+    // compare reads it back in metres, no --columns.
+    let g = gains.to_str().unwrap();
+    let v = run_json(&[
+        "compare",
+        closed.to_str().unwrap(),
+        "--model",
+        truth.to_str().unwrap(),
+        "--gains",
+        g,
+        "--json",
+    ]);
+    servo_e2e::validate_output(&v).unwrap();
+    assert_eq!(v["mode"], "closed-loop");
+    assert_eq!(v["signal"], "x");
+    assert_eq!(v["unit"], "m");
+    let mean = x.iter().sum::<f64>() / x.len() as f64;
+    let std = (x.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / x.len() as f64).sqrt();
+    let from_fit = (1.0 - v["fit_pct"].as_f64().unwrap() / 100.0) * std;
+    within(
+        "run compare x rmse vs fit",
+        v["rmse"].as_f64().unwrap(),
+        from_fit,
+        0.02,
+    );
+    assert!(v["rmse"].as_f64().unwrap() < 1e-3, "{}", v["rmse"]);
+    let plot = dir.path().join("belt-compare.svg");
+    let (ok, text, err) = servo(&[
+        "compare",
+        closed.to_str().unwrap(),
+        "--model",
+        truth.to_str().unwrap(),
+        "--gains",
+        g,
+        "--plot",
+        plot.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(text.contains("x [m]"), "{text}");
+    assert!(rad_in(&text).is_none(), "`{:?}` in {text}", rad_in(&text));
+    let svg = std::fs::read_to_string(&plot).unwrap();
+    assert!(
+        svg.contains("x [mm]") && svg.contains("v_x [m/s]"),
+        "plot axes"
+    );
+    assert!(!svg.contains("[rad"), "rad in the plot");
+
+    // identify reads an open-loop run and the closed-loop run back, mass in kg within 3 %.
+    // (A staircase of voltages, handout 4.1: the `u` segments of an experiment stay in volts on
+    // a linear axis.)
+    let open = dir.path().join("belt-open.csv");
+    let stairs = dir.path().join("belt-stairs.toml");
+    let mut exp = String::new();
+    for u in [1.0, 2.0, 3.5, 5.0, -1.0, -2.0, -3.5, -5.0, 0.8, -0.8] {
+        writeln!(exp, "[[segment]]\nu = \"step:{u}\"\nduration_s = 0.8\n").unwrap();
+    }
+    std::fs::write(&stairs, exp).unwrap();
+    let (ok, _, err) = servo(&[
+        "run",
+        "--plant",
+        truth.to_str().unwrap(),
+        "--experiment",
+        stairs.to_str().unwrap(),
+        "--csv",
+        open.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let nominal = rig.nominal_file(dir.path());
+    let v = run_json(&[
+        "identify",
+        open.to_str().unwrap(),
+        closed.to_str().unwrap(),
+        "--params",
+        nominal.to_str().unwrap(),
+        "--json",
+    ]);
+    for (key, want) in [
+        ("m_eq_kg", rig.mass),
+        ("b_eq_n_s_m", rig.viscous),
+        ("f_c_n", rig.coulomb),
+    ] {
+        within(
+            &format!("run identify {key}"),
+            v[key]["value"].as_f64().unwrap(),
+            want,
+            0.03,
+        );
+    }
+}

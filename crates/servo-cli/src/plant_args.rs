@@ -144,6 +144,14 @@ impl PlantArgs {
         }
     }
 
+    /// The transmission of the `--plant` file (the handout's gear for a preset).
+    pub fn transmission(&self) -> anyhow::Result<servo_core::Transmission> {
+        match &self.plant {
+            Some(path) => Ok(ModelFile::load(path).context("--plant")?.transmission),
+            None => Ok(servo_core::Transmission::GEAR),
+        }
+    }
+
     /// The plant and sensor configuration these options describe.
     pub fn load(&self) -> anyhow::Result<(Plant, SensorConfig)> {
         let preset = self.plant_preset.unwrap_or(DEFAULT_PLANT);

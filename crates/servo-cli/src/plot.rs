@@ -184,32 +184,61 @@ pub fn line_chart(path: &std::path::Path, chart: &Chart, series: &[Series]) -> a
 
 /// Plots reference and angle [deg] over time, and the voltage (second SVG `<stem>_u.svg`).
 pub fn plot_run(path: &std::path::Path, out: &servo_hw::run::RunOutput) -> anyhow::Result<()> {
+    plot_run_on(path, out, &servo_core::Transmission::GEAR)
+}
+
+/// [`plot_run`] on the axis `axis`: on a linear axis the load position and the reference in mm.
+pub fn plot_run_on(
+    path: &std::path::Path,
+    out: &servo_hw::run::RunOutput,
+    axis: &servo_core::Transmission,
+) -> anyhow::Result<()> {
     let rec = &out.record;
-    let deg = |v: &Option<Vec<f64>>| {
-        v.as_ref()
-            .map(|v| v.iter().map(|x| x.to_degrees()).collect::<Vec<f64>>())
+    let (k, labels) = match axis.metres_per_rad() {
+        Some(m) => (
+            m * 1e3,
+            [
+                "reference [mm]",
+                "x [mm]",
+                "servo run: load position",
+                "position [mm]",
+            ],
+        ),
+        None => (
+            180.0 / std::f64::consts::PI,
+            [
+                "reference [deg]",
+                "theta_l [deg]",
+                "servo run: load angle",
+                "angle [deg]",
+            ],
+        ),
     };
-    let th = deg(&rec.theta_l_rad).unwrap_or_default();
-    let r = deg(&rec.ref_rad);
+    let scaled = |v: &Option<Vec<f64>>| {
+        v.as_ref()
+            .map(|v| v.iter().map(|x| x * k).collect::<Vec<f64>>())
+    };
+    let th = scaled(&rec.theta_l_rad).unwrap_or_default();
+    let r = scaled(&rec.ref_rad);
     let mut series = Vec::new();
     if let Some(r) = &r {
         series.push(Series {
-            label: "reference [deg]",
+            label: labels[0],
             x: &rec.time_s,
             y: r,
         });
     }
     series.push(Series {
-        label: "theta_l [deg]",
+        label: labels[1],
         x: &rec.time_s,
         y: &th,
     });
     line_chart(
         path,
         &Chart {
-            title: "servo run: load angle",
+            title: labels[2],
             x_label: "time [s]",
-            y_label: "angle [deg]",
+            y_label: labels[3],
             ..Chart::default()
         },
         &series,

@@ -311,16 +311,61 @@ impl SummaryAccumulator {
     }
 }
 
+/// A [`RunSummary`] shown on a linear axis: tracking errors in m (and mm) instead of rad
+/// ([`RunSummary::on_axis`]).
+pub struct SummaryOnAxis<'a> {
+    summary: &'a RunSummary,
+    metres_per_rad: Option<f64>,
+}
+
+impl RunSummary {
+    /// The summary for display on a linear axis whose load shaft travels `metres_per_rad`
+    /// [m/rad] (`None`: a rotary gear, as [`fmt::Display`] shows it).
+    pub fn on_axis(&self, metres_per_rad: Option<f64>) -> SummaryOnAxis<'_> {
+        SummaryOnAxis {
+            summary: self,
+            metres_per_rad,
+        }
+    }
+}
+
 impl fmt::Display for RunSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt::Display::fmt(&self.on_axis(None), f)
+    }
+}
+
+impl fmt::Display for SummaryOnAxis<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let s = self.summary;
+        s.fmt_on(f, self.metres_per_rad)
+    }
+}
+
+impl RunSummary {
+    fn fmt_on(&self, f: &mut fmt::Formatter<'_>, metres_per_rad: Option<f64>) -> fmt::Result {
         let deg = 180.0 / core::f64::consts::PI;
         writeln!(
             f,
             "run summary ({:.3} s, {} samples):",
             self.duration_s, self.samples
         )?;
-        match (self.err_rms_rad, self.err_max_rad) {
-            (Some(rms), Some(max)) => {
+        match (self.err_rms_rad, self.err_max_rad, metres_per_rad) {
+            (Some(rms), Some(max), Some(m)) => {
+                writeln!(
+                    f,
+                    "  tracking error RMS   {:.4e} m ({:.4} mm)",
+                    rms * m,
+                    rms * m * 1e3
+                )?;
+                writeln!(
+                    f,
+                    "  tracking error max   {:.4e} m ({:.4} mm)",
+                    max * m,
+                    max * m * 1e3
+                )?;
+            }
+            (Some(rms), Some(max), None) => {
                 writeln!(
                     f,
                     "  tracking error RMS   {rms:.5} rad ({:.3} deg)",
@@ -368,17 +413,21 @@ impl fmt::Display for RunSummary {
         write!(f, "  u RMS                {:.3} V", self.u_rms_v)?;
         if self.steps.len() > 1 {
             writeln!(f)?;
+            let (unit, k) = match metres_per_rad {
+                Some(m) => ("mm", m * 1e3),
+                None => ("deg", deg),
+            };
             write!(
                 f,
-                "  steps:  t [s]   from -> to [deg]   overshoot [%]   settling [s]"
+                "  steps:  t [s]   from -> to [{unit}]   overshoot [%]   settling [s]"
             )?;
             for s in &self.steps {
                 write!(
                     f,
                     "\n  {:8.3}   {:8.2} -> {:8.2}   {:8.2}        {}",
                     s.time_s,
-                    s.from_rad * deg,
-                    s.to_rad * deg,
+                    s.from_rad * k,
+                    s.to_rad * k,
                     s.overshoot_pct,
                     s.settling_time_s
                         .map_or("not settled".to_string(), |t| format!("{t:.4}"))

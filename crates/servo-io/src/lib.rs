@@ -46,7 +46,7 @@ pub use mcap_write::{LogEncoding, McapLog, McapLogOptions};
 
 pub use columns::ColumnMap;
 pub use controller::logged_controller;
-pub use csv_write::write_csv;
+pub use csv_write::{write_csv, write_csv_on};
 pub use error::{Context, Error, Result};
 pub use log_reader::{LogReader, Registry};
 pub use units::{Signal, Unit};

@@ -137,6 +137,17 @@ impl Experiment {
 
     /// Parses experiment TOML; `origin` names the source in errors (e.g. the path).
     pub fn parse(text: &str, origin: &str) -> anyhow::Result<Experiment> {
+        Experiment::parse_on(text, origin, None)
+    }
+
+    /// [`Experiment::parse`] on a linear axis whose load shaft travels `metres_per_rad` [m/rad]
+    /// (`None`: a rotary gear): the closed-loop segments' references are lengths (m, mm, um;
+    /// [`Reference::parse_on`]), the open-loop segments stay in volts.
+    pub fn parse_on(
+        text: &str,
+        origin: &str,
+        metres_per_rad: Option<f64>,
+    ) -> anyhow::Result<Experiment> {
         let file: FileToml =
             toml::from_str(text).map_err(|e| anyhow!("{origin}: {}", e.to_string().trim_end()))?;
         let line_of = |span: core::ops::Range<usize>| {
@@ -163,7 +174,8 @@ impl Experiment {
                 (None, None) => bail!("{origin}: segment {n} needs `ref = \"...\"` (closed loop, rad) or `u = \"...\"` (open loop, V)"),
             };
             let line = line_of(text_sp.span());
-            let reference = Reference::parse(text_sp.get_ref()).map_err(|e| {
+            let on = metres_per_rad.filter(|_| target == Target::Position);
+            let reference = Reference::parse_on(text_sp.get_ref(), on).map_err(|e| {
                 anyhow!(
                     "{origin}:{line}: segment {n}, `{key} = \"{}\"`: {e}",
                     text_sp.get_ref()
@@ -227,9 +239,14 @@ impl Experiment {
 
 /// Reads an experiment file.
 pub fn load_experiment(path: &Path) -> anyhow::Result<Experiment> {
+    load_experiment_on(path, None)
+}
+
+/// Reads an experiment file of a linear axis ([`Experiment::parse_on`]).
+pub fn load_experiment_on(path: &Path, metres_per_rad: Option<f64>) -> anyhow::Result<Experiment> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("reading experiment file {}", path.display()))?;
-    Experiment::parse(&text, &path.display().to_string())
+    Experiment::parse_on(&text, &path.display().to_string(), metres_per_rad)
 }
 
 #[cfg(test)]

@@ -9,7 +9,7 @@ use anyhow::{anyhow, bail, Context};
 use serde_json::{json, Value};
 use servo_core::compare::controller_check::{check_controller, ControllerCheck};
 use servo_core::compare::regimes::{detect_u_limit, Regime};
-use servo_core::compare::report::{describe_window, regime_phrase, with_unit};
+use servo_core::compare::report::{describe_window, regime_phrase_on, with_unit_on};
 use servo_io::controller::{
     pid_config, ControllerPart, LoggedController, PidOptions, PidSources, ResolvedPid,
 };
@@ -21,7 +21,7 @@ mod report_text;
 mod save;
 
 pub use added::{Added, ParseAdded};
-pub use plots::{compare_figures_svg, stack_svg};
+pub use plots::{compare_figures_svg, compare_figures_svg_on, stack_svg};
 use report_json::*;
 use report_text::*;
 pub use report_text::{controller_description, controller_words};
@@ -193,7 +193,13 @@ impl Compare {
             .iter()
             .map(|s| Added::parse(s, &library).map(|e| (s.clone(), e)))
             .collect::<anyhow::Result<_>>()?;
-        let opts = CompareOptions::default();
+        // On a linear axis the reports are in m, m/s and N (the analysis runs on the equivalent
+        // rotation either way).
+        let axis = crate::axis::Axis::of(&model_file);
+        let opts = CompareOptions {
+            metres_per_rad: model_file.transmission.metres_per_rad(),
+            ..CompareOptions::default()
+        };
         let mut logs = Vec::new();
         self.part.check(self.logs.len())?;
         let mut parts = Vec::new();
@@ -304,7 +310,7 @@ impl Compare {
                     .file_name()
                     .map(|s| s.to_string_lossy().into_owned())
                     .unwrap_or_default();
-                for (_, svg) in compare_figures_svg(r, &name)? {
+                for (_, svg) in compare_figures_svg_on(r, &name, opts.metres_per_rad)? {
                     panels.push(svg);
                 }
             }
@@ -318,6 +324,9 @@ impl Compare {
             }
             if let Some(s) = &saved {
                 v["save"] = s.json();
+            }
+            if let Some(a) = &axis {
+                linear_json(&mut v, a, &current);
             }
             v["log_parts"] = crate::log_part::json(&parts);
             crate::json_out::emit(&v)?;
@@ -335,6 +344,7 @@ impl Compare {
                     .map(save::SaveOutcome::lines)
                     .unwrap_or_default(),
                 self.plot.as_deref(),
+                axis.as_ref(),
             );
         }
         Ok((ladder, current))

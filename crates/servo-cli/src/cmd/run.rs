@@ -11,11 +11,11 @@
 mod said;
 
 use crate::gains_file::GainsFile;
-use crate::io::{meta_keys, write_csv, McapLog, McapLogOptions};
+use crate::io::{meta_keys, write_csv_on, McapLog, McapLogOptions};
 use crate::live;
 use crate::model_file::ModelFile;
 use crate::plant_args::PlantArgs;
-use crate::reference_file::load_experiment;
+use crate::reference_file::load_experiment_on;
 use anyhow::{anyhow, bail, Context};
 use servo_core::control::program::Program;
 use servo_core::control::Reference;
@@ -55,6 +55,8 @@ pub struct Run {
 
     /// Position reference at the load, e.g. `step:1.5`, `step:90deg@0.5`, `sine:amp=0.5,freq=1`,
     /// `trap:distance=3,vmax=10,amax=100`, `square:amp=1,period=2`, `prbs:amp=0.5,bit=0.05`.
+    /// On a linear axis (a `--plant` or `--model` file with a screw or belt `[transmission]`)
+    /// positions are lengths in m (`step:10mm`, `trap:20mm,vmax=50mm/s,amax=1m/s2`).
     #[arg(long = "ref", value_name = "REF", conflicts_with_all = ["voltage", "experiment"])]
     pub reference: Option<String>,
 
@@ -76,7 +78,8 @@ pub struct Run {
     #[arg(long, value_name = "FILE.mcap")]
     pub log: Option<PathBuf>,
 
-    /// Write the run to this CSV file (time_s,u_V,theta_l_rad,i_a_A,ref_rad,omega_l_rad_s).
+    /// Write the run to this CSV file (time_s,u_V,theta_l_rad,i_a_A,ref_rad,omega_l_rad_s; on a
+    /// linear axis x_m, ref_m and v_x_m_s in metres instead of the load angles).
     #[arg(long, value_name = "FILE.csv")]
     pub csv: Option<PathBuf>,
 
@@ -159,12 +162,33 @@ impl Run {
         Ok(())
     }
 
-    /// The program and the text describing it (for the log's metadata).
-    fn program(&self, duration_s: Option<f64>) -> anyhow::Result<(Program, String)> {
+    /// The axis of the run: the transmission of the `--plant` file, else of `--model`, else the
+    /// handout's gear. On a linear axis (a screw, a belt) references are lengths and the CSV log
+    /// is written in metres.
+    pub fn axis(&self) -> anyhow::Result<servo_core::Transmission> {
+        if self.plant.plant.is_some() {
+            return self.plant.transmission();
+        }
+        match &self.model {
+            Some(p) => Ok(ModelFile::load(p).context("--model")?.transmission),
+            None => Ok(servo_core::Transmission::GEAR),
+        }
+    }
+
+    /// The program and the text describing it (for the log's metadata); positions in metres on
+    /// a linear axis of travel `metres_per_rad` [m/rad].
+    fn program(
+        &self,
+        duration_s: Option<f64>,
+        metres_per_rad: Option<f64>,
+    ) -> anyhow::Result<(Program, String)> {
         let d = duration_s.unwrap_or(5.0);
         match (&self.reference, &self.voltage, &self.experiment) {
             (Some(r), None, None) => Ok((
-                Program::Position(Reference::parse(r).map_err(|e| anyhow!("--ref `{r}`: {e}"))?),
+                Program::Position(
+                    Reference::parse_on(r, metres_per_rad)
+                        .map_err(|e| anyhow!("--ref `{r}`: {e}"))?,
+                ),
                 r.clone(),
             )),
             (None, Some(v), None) => {
@@ -172,7 +196,7 @@ impl Run {
                 Ok((Program::open_loop(r, d)?, format!("voltage {v}")))
             }
             (None, None, Some(path)) => {
-                let exp = load_experiment(path)?;
+                let exp = load_experiment_on(path, metres_per_rad)?;
                 let text = std::fs::read_to_string(path).unwrap_or_default();
                 Ok((Program::Segments(exp.segments), text))
             }
@@ -210,7 +234,16 @@ impl Run {
                 bail!("--duration must be > 0 s, got {d}");
             }
         }
-        let (program, program_text) = self.program(self.duration)?;
+        let axis = self.axis()?;
+        let metres = axis.metres_per_rad();
+        let (program, program_text) = self.program(self.duration, metres)?;
+        if let Some(m) = metres {
+            eprintln!(
+                "linear axis ({}, {:.4} mm per radian of the screw/pulley): references in m (suffix mm, um), the CSV log in metres (x_m, v_x_m_s, ref_m)",
+                axis.kind_name(),
+                m * 1e3
+            );
+        }
         let duration_s = self.duration.or(program.duration_s()).unwrap_or(5.0);
         let gains = match &self.gains {
             Some(p) => Some(GainsFile::load(p)?),
@@ -308,7 +341,7 @@ impl Run {
             }
         };
         let summary = out.summary();
-        outln!("{summary}");
+        outln!("{}", summary.on_axis(metres));
         if let Some(ls) = &link {
             outln!("{ls}");
         }
@@ -321,11 +354,11 @@ impl Run {
             );
         }
         if let Some(p) = &self.csv {
-            write_csv(p, &out.record)?;
+            write_csv_on(p, &out.record, &axis)?;
             outln!("csv: {}", p.display());
         }
         if let Some(p) = &self.plot {
-            plot_run(p, &out)?;
+            crate::plot::plot_run_on(p, &out, &axis)?;
             outln!("plot: {}", p.display());
         }
         Ok(RunReport {

@@ -47,6 +47,31 @@ impl SignalKind {
             SignalKind::Voltage => "V",
         }
     }
+    /// Signal name on a linear axis of travel `metres_per_rad` [m/rad] (`x`, `v_x` for the load
+    /// position and speed; `None`: as [`SignalKind::name`]).
+    pub fn name_on(self, metres_per_rad: Option<f64>) -> &'static str {
+        match (self, metres_per_rad) {
+            (SignalKind::Position, Some(_)) => "x",
+            (SignalKind::Speed, Some(_)) => "v_x",
+            _ => self.name(),
+        }
+    }
+    /// SI unit on a linear axis (`m`, `m/s` for the load position and speed).
+    pub fn unit_on(self, metres_per_rad: Option<f64>) -> &'static str {
+        match (self, metres_per_rad) {
+            (SignalKind::Position, Some(_)) => "m",
+            (SignalKind::Speed, Some(_)) => "m/s",
+            _ => self.unit(),
+        }
+    }
+    /// The factor from this signal's SI unit to [`SignalKind::unit_on`]: the travel per radian
+    /// for the load position and speed on a linear axis, else 1.
+    pub fn scale_on(self, metres_per_rad: Option<f64>) -> f64 {
+        match (self, metres_per_rad) {
+            (SignalKind::Position | SignalKind::Speed, Some(m)) => m,
+            _ => 1.0,
+        }
+    }
     /// Words for a student.
     pub fn words(self) -> &'static str {
         match self {
@@ -77,6 +102,10 @@ pub struct CompareOptions {
     pub max_motor_harmonic: u32,
     /// Largest harmonic of the load angle searched (an eccentric load).
     pub max_load_harmonic: u32,
+    /// On a linear axis, the load shaft's travel per radian [m/rad]: the reports' positions and
+    /// speeds are then in m and m/s (`None`: a rotary gear, in rad and rad/s). The analysis
+    /// itself runs on the equivalent rotation either way.
+    pub metres_per_rad: Option<f64>,
 }
 
 impl Default for CompareOptions {
@@ -90,6 +119,7 @@ impl Default for CompareOptions {
             u_limit_v: None,
             max_motor_harmonic: 40,
             max_load_harmonic: 4,
+            metres_per_rad: None,
         }
     }
 }
@@ -288,6 +318,31 @@ pub fn compare(m: &Measured, replay: &Replay, n_gear: f64, opts: &CompareOptions
 
 /// Where a regime is, in words.
 pub fn regime_phrase(r: Regime, c: &Classification, opts: &RegimeOptions) -> String {
+    regime_phrase_on(r, c, opts, None)
+}
+
+/// [`regime_phrase`] on a linear axis of travel `metres_per_rad` [m/rad] (speeds in m/s).
+pub fn regime_phrase_on(
+    r: Regime,
+    c: &Classification,
+    opts: &RegimeOptions,
+    metres_per_rad: Option<f64>,
+) -> String {
+    match (r, metres_per_rad) {
+        (Regime::Standstill, Some(m)) => {
+            return format!(
+                "at standstill (|v_x| < {:.2} mm/s)",
+                1e3 * m * c.standstill_rad_s
+            )
+        }
+        (Regime::Acceleration, Some(m)) => {
+            return format!(
+                "while the motor accelerates or brakes (|a_x| > {:.3} m/s^2)",
+                m * c.acceleration_rad_s2
+            )
+        }
+        _ => {}
+    }
     match r {
         Regime::Reversal => format!(
             "within {:.0} ms of a velocity reversal",
@@ -316,6 +371,19 @@ pub fn regime_phrase(r: Regime, c: &Classification, opts: &RegimeOptions) -> Str
 
 /// Formats a value with its unit, adding degrees for angles.
 pub fn with_unit(v: f64, kind: SignalKind) -> String {
+    with_unit_on(v, kind, None)
+}
+
+/// [`with_unit`] on a linear axis of travel `metres_per_rad` [m/rad]: a load position (given in
+/// rad of the equivalent rotation) in m and mm, a load speed in m/s.
+pub fn with_unit_on(v: f64, kind: SignalKind, metres_per_rad: Option<f64>) -> String {
+    match (kind, metres_per_rad) {
+        (SignalKind::Position, Some(m)) => {
+            return format!("{:.4e} m ({:.4} mm)", v * m, v * m * 1e3)
+        }
+        (SignalKind::Speed, Some(m)) => return format!("{:.4e} m/s", v * m),
+        _ => {}
+    }
     match kind {
         SignalKind::Position => format!("{:.4} rad ({:.2} deg)", v, v * 180.0 / math::PI),
         SignalKind::Speed => format!("{v:.3} rad/s"),
@@ -329,18 +397,25 @@ pub fn describe_window(w: &Window, r: &CompareReport, opts: &CompareOptions) -> 
     let kind = r.headline_signal().kind;
     let time_pct = 100.0 * (w.end - w.start + 1) as f64 / r.time_s.len().max(1) as f64;
     let sign = if w.mean >= 0.0 { "above" } else { "below" };
+    let lin = opts.metres_per_rad;
+    let speed = match lin {
+        Some(m) => format!(
+            "{:.4} to {:.4} m/s",
+            w.omega_min_rad_s * m,
+            w.omega_max_rad_s * m
+        ),
+        None => format!("{:.2} to {:.2} rad/s", w.omega_min_rad_s, w.omega_max_rad_s),
+    };
     format!(
-        "t = {:.3}-{:.3} s: {:.1} % of the squared error in {:.1} % of the time; mostly {}; speed from {:.2} to {:.2} rad/s, |u| up to {:.2} V; the measurement is {} the model by {} on average",
+        "t = {:.3}-{:.3} s: {:.1} % of the squared error in {:.1} % of the time; mostly {}; speed from {speed}, |u| up to {:.2} V; the measurement is {} the model by {} on average",
         w.t_start_s,
         w.t_end_s,
         w.error_share_pct,
         time_pct,
-        regime_phrase(w.regime, &r.classification, &opts.regimes),
-        w.omega_min_rad_s,
-        w.omega_max_rad_s,
+        regime_phrase_on(w.regime, &r.classification, &opts.regimes, lin),
         w.u_abs_max_v,
         sign,
-        with_unit(libm::fabs(w.mean), kind)
+        with_unit_on(libm::fabs(w.mean), kind, lin)
     )
 }
 
@@ -357,6 +432,10 @@ fn findings(r: &CompareReport, opts: &CompareOptions) -> Vec<String> {
     let mut out = Vec::new();
     let h = r.headline_signal();
     let f = &h.figures;
+    let lin = opts.metres_per_rad;
+    let with_unit = |v: f64, k: SignalKind| with_unit_on(v, k, lin);
+    let regime_phrase =
+        |g: Regime, c: &Classification, o: &RegimeOptions| regime_phrase_on(g, c, o, lin);
     out.push(format!(
         "{}: {} fit {:.1} %, RMSE {}, max error {} at t = {:.3} s.",
         mode_words(r.mode, r.dt_s),

@@ -41,6 +41,35 @@ impl Quantity {
         }
     }
 
+    /// (suffix, factor to SI) of a position, speed or acceleration on a linear axis [m, m/s,
+    /// m/s^2], longest suffixes first so `mm` wins over `m`; `None` for other quantities.
+    fn linear_units(self) -> Option<&'static [(&'static str, f64)]> {
+        match self {
+            Quantity::Angle => Some(&[("um", 1e-6), ("mm", 1e-3), ("m", 1.0)]),
+            Quantity::Speed => Some(&[("um/s", 1e-6), ("mm/s", 1e-3), ("m/s", 1.0)]),
+            Quantity::Accel => Some(&[
+                ("mm/s^2", 1e-3),
+                ("mm/s2", 1e-3),
+                ("m/s^2", 1.0),
+                ("m/s2", 1.0),
+            ]),
+            _ => None,
+        }
+    }
+
+    fn expected_linear(self) -> &'static str {
+        match self {
+            Quantity::Angle => "a length in m on this linear axis (suffix m, mm or um allowed)",
+            Quantity::Speed => {
+                "a speed in m/s on this linear axis (suffix m/s, mm/s or um/s allowed)"
+            }
+            Quantity::Accel => {
+                "an acceleration in m/s^2 on this linear axis (suffix m/s2, mm/s2 allowed)"
+            }
+            q => q.expected(),
+        }
+    }
+
     fn expected(self) -> &'static str {
         match self {
             Quantity::Angle => "a number in rad (suffix rad, deg or rev allowed)",
@@ -147,12 +176,27 @@ fn strip_suffix_ci<'a>(s: &'a str, suffix: &str) -> Option<&'a str> {
     tail.eq_ignore_ascii_case(suffix).then_some(head)
 }
 
-/// Parses a number with an optional unit suffix into SI.
-fn parse_value(key: &'static str, q: Quantity, text: &str) -> Result<f64, RefParseError> {
+/// Parses a number with an optional unit suffix into SI. On a linear axis (`metres_per_rad`
+/// Some(s), s the travel per radian of the load shaft) positions, speeds and accelerations are
+/// lengths [m, m/s, m/s^2] converted to the load shaft's equivalent rotation (divided by s); a
+/// phase stays an angle.
+fn parse_value(
+    key: &'static str,
+    q: Quantity,
+    text: &str,
+    metres_per_rad: Option<f64>,
+) -> Result<f64, RefParseError> {
+    let linear = metres_per_rad
+        .filter(|_| key != "phase")
+        .and_then(|s| q.linear_units().map(|u| (s, u)));
     let bad = || RefParseError::BadValue {
         key,
         value: Snippet::new(text),
-        expected: q.expected(),
+        expected: if linear.is_some() {
+            q.expected_linear()
+        } else {
+            q.expected()
+        },
     };
     let t = text.trim();
     match q {
@@ -168,8 +212,11 @@ fn parse_value(key: &'static str, q: Quantity, text: &str) -> Result<f64, RefPar
         }
         _ => {}
     }
-    let (number, factor) = q
-        .units()
+    let (units, per) = match linear {
+        Some((s, units)) => (units, 1.0 / s),
+        None => (q.units(), 1.0),
+    };
+    let (number, factor) = units
         .iter()
         .find_map(|(suffix, factor)| {
             strip_suffix_ci(t, suffix).map(|head| (head.trim_end(), *factor))
@@ -179,10 +226,10 @@ fn parse_value(key: &'static str, q: Quantity, text: &str) -> Result<f64, RefPar
     if !v.is_finite() {
         return Err(bad());
     }
-    Ok(v * factor)
+    Ok(v * factor * per)
 }
 
-pub(crate) fn parse(text: &str) -> Result<Reference, RefParseError> {
+pub(crate) fn parse(text: &str, metres_per_rad: Option<f64>) -> Result<Reference, RefParseError> {
     let text = text.trim();
     if text.is_empty() {
         return Err(RefParseError::Empty);
@@ -216,7 +263,7 @@ pub(crate) fn parse(text: &str) -> Result<Reference, RefParseError> {
         if values[i].is_some() {
             return Err(RefParseError::Duplicate(name));
         }
-        values[i] = Some(parse_value(name, q, text)?);
+        values[i] = Some(parse_value(name, q, text, metres_per_rad)?);
         Ok(())
     };
     if !args.is_empty() {
@@ -252,6 +299,12 @@ pub(crate) fn parse(text: &str) -> Result<Reference, RefParseError> {
         set(n_own, t0)?;
     }
     let need = |i: usize, unit: &'static str| -> Result<f64, RefParseError> {
+        let unit = match (metres_per_rad, unit) {
+            (Some(_), "rad") => "m",
+            (Some(_), "rad/s") => "m/s",
+            (Some(_), "rad/s^2") => "m/s^2",
+            (_, u) => u,
+        };
         values[i].ok_or(RefParseError::Missing {
             kind: spec.kind,
             key: spec.keys[i].0,
@@ -336,7 +389,15 @@ impl Reference {
     /// Parses the text syntax of the [module documentation](super::reference). (Here, beside
     /// the parser, so that the reference's types do not import their parser.)
     pub fn parse(text: &str) -> Result<Reference, RefParseError> {
-        parse(text)
+        parse(text, None)
+    }
+
+    /// [`Reference::parse`] on a linear axis whose load shaft travels `metres_per_rad` [m/rad]
+    /// (a screw's lead / 2 pi, a belt's radius; `None`: a rotary gear): positions in m (suffix
+    /// `m`, `mm`, `um`), speeds in m/s (`mm/s`), accelerations in m/s^2 (`mm/s2`), converted to
+    /// the load shaft's equivalent rotation [rad]; a sine's phase stays in rad.
+    pub fn parse_on(text: &str, metres_per_rad: Option<f64>) -> Result<Reference, RefParseError> {
+        parse(text, metres_per_rad)
     }
 }
 
@@ -453,6 +514,60 @@ mod tests {
                 "{text} -> {r}"
             );
         }
+    }
+
+    #[test]
+    fn lengths_on_a_linear_axis_become_the_equivalent_rotation() {
+        // A 5 mm lead screw: s = 0.005 / 2 pi m/rad.
+        let s = 0.005 / math::TAU;
+        let r = Reference::parse_on("step:10mm@0.5", Some(s)).unwrap();
+        assert_eq!(r.t0_s, 0.5);
+        match r.shape {
+            Shape::Step { amplitude_rad } => {
+                assert!((amplitude_rad - 0.01 / s).abs() < 1e-9, "{amplitude_rad}")
+            }
+            _ => panic!("not a step"),
+        }
+        let r = Reference::parse_on("trap:0.02,vmax=50mm/s,amax=0.5m/s2", Some(s)).unwrap();
+        match r.shape {
+            Shape::Trapezoid {
+                distance_rad,
+                vmax_rad_s,
+                amax_rad_s2,
+            } => {
+                assert!((distance_rad * s - 0.02).abs() < 1e-12);
+                assert!((vmax_rad_s * s - 0.05).abs() < 1e-12);
+                assert!((amax_rad_s2 * s - 0.5).abs() < 1e-12);
+            }
+            _ => panic!("not a trapezoid"),
+        }
+        // A phase stays an angle; an angle unit is refused on a linear axis, with the lengths
+        // it takes named.
+        let r = Reference::parse_on("sine:amp=1mm,freq=2,phase=0.5", Some(s)).unwrap();
+        match r.shape {
+            Shape::Sine {
+                amplitude_rad,
+                phase_rad,
+                ..
+            } => {
+                assert!((amplitude_rad * s - 1e-3).abs() < 1e-12);
+                assert_eq!(phase_rad, 0.5);
+            }
+            _ => panic!("not a sine"),
+        }
+        let e = Reference::parse_on("step:90deg", Some(s))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("mm") && e.contains("linear axis"), "{e}");
+        let e = Reference::parse_on("trap:vmax=1,amax=2", Some(s))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("(m)"), "{e}");
+        // Without an axis nothing changes.
+        assert_eq!(
+            Reference::parse_on("step:1.5", None).unwrap(),
+            Reference::parse("step:1.5").unwrap()
+        );
     }
 
     #[test]

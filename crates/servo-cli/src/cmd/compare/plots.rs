@@ -63,13 +63,35 @@ pub(super) fn binned_mean(
 /// the headline signal, the residual over time, the residual against the measured speed and
 /// against the measured position (binned means). Used by `--plot` and the diagnose HTML report.
 pub fn compare_figures_svg(r: &CompareReport, name: &str) -> anyhow::Result<Vec<(String, String)>> {
+    compare_figures_svg_on(r, name, None)
+}
+
+/// [`compare_figures_svg`] on a linear axis of travel `metres_per_rad` [m/rad] (`None`: a
+/// rotary gear): the load position and its residual in mm, speeds in m/s.
+pub fn compare_figures_svg_on(
+    r: &CompareReport,
+    name: &str,
+    metres_per_rad: Option<f64>,
+) -> anyhow::Result<Vec<(String, String)>> {
     // the file's name, not its whole path, in the titles
     let name = std::path::Path::new(name)
         .file_name()
         .and_then(|n| n.to_str())
         .unwrap_or(name);
-    let h = r.headline_signal();
-    let (k, unit) = (h.kind.name(), h.kind.unit());
+    let h0 = r.headline_signal();
+    let (scale, k, unit) = match (h0.kind, metres_per_rad) {
+        (SignalKind::Position, Some(m)) => (m * 1e3, "x", "mm"),
+        (SignalKind::Speed, Some(m)) => (m, "v_x", "m/s"),
+        (kind, _) => (1.0, kind.name(), kind.unit()),
+    };
+    let sc = |v: &[f64]| v.iter().map(|x| x * scale).collect::<Vec<f64>>();
+    let h = servo_core::compare::SignalComparison {
+        kind: h0.kind,
+        measured: sc(&h0.measured),
+        model: sc(&h0.model),
+        figures: h0.figures,
+    };
+    let residual = sc(&r.residual);
     let mut out = Vec::new();
     let t1 = format!(
         "{name}: {} measured vs model ({}, fit {:.1} %)",
@@ -151,30 +173,38 @@ pub fn compare_figures_svg(r: &CompareReport, name: &str) -> anyhow::Result<Vec<
     }
     let t2 = format!(
         "{name}: residual (measured - model), RMSE {:.3e} {unit}",
-        h.figures.rmse
+        h.figures.rmse * scale
     );
     let rl = format!("residual [{unit}]");
     out.push(one_series_chart(
-        t2,
-        "t [s]",
-        &rl,
-        "residual",
-        &r.time_s,
-        &r.residual,
+        t2, "t [s]", &rl, "residual", &r.time_s, &residual,
     )?);
-    let w = &r.omega_l_rad_s;
-    let lim = servo_core::compare::regimes::abs_percentile(w, 0.995).max(1e-9);
-    let (bx, by) = binned_mean(w, &r.residual, -lim, lim, 60);
+    let (w, wl): (Vec<f64>, &str) = match metres_per_rad {
+        Some(m) => (r.omega_l_rad_s.iter().map(|v| v * m).collect(), "v_x [m/s]"),
+        None => (r.omega_l_rad_s.clone(), "omega_l [rad/s]"),
+    };
+    let lim = servo_core::compare::regimes::abs_percentile(&w, 0.995).max(1e-12);
+    let (bx, by) = binned_mean(&w, &residual, -lim, lim, 60);
     let t3 = format!("{name}: residual vs measured load speed (mean per speed bin)");
-    out.push(one_series_chart(
-        t3,
-        "omega_l [rad/s]",
-        &rl,
-        "mean residual",
-        &bx,
-        &by,
-    )?);
-    if let Some(th) = &r.theta_l_rad {
+    out.push(one_series_chart(t3, wl, &rl, "mean residual", &bx, &by)?);
+    if let (Some(th), Some(m)) = (&r.theta_l_rad, metres_per_rad) {
+        let xs: Vec<f64> = th.iter().map(|v| v * m * 1e3).collect();
+        let (lo, hi) = xs
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(*v), b.max(*v))
+            });
+        let (bx, by) = binned_mean(&xs, &residual, lo, hi, 90);
+        let t4 = format!("{name}: residual vs measured load position (mean per position bin)");
+        out.push(one_series_chart(
+            t4,
+            "x [mm]",
+            &rl,
+            "mean residual",
+            &bx,
+            &by,
+        )?);
+    } else if let Some(th) = &r.theta_l_rad {
         let (lo, hi) = th
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
@@ -191,7 +221,7 @@ pub fn compare_figures_svg(r: &CompareReport, name: &str) -> anyhow::Result<Vec<
         } else {
             (th.clone(), lo, hi, "theta_l [rad]")
         };
-        let (bx, by) = binned_mean(&xs, &r.residual, lo, hi, 90);
+        let (bx, by) = binned_mean(&xs, &residual, lo, hi, 90);
         let t4 = format!("{name}: residual vs measured load position (mean per position bin)");
         out.push(one_series_chart(t4, xl, &rl, "mean residual", &bx, &by)?);
     }

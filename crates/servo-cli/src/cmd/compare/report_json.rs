@@ -3,11 +3,14 @@
 
 use super::*;
 
-pub(super) fn figures_json(kind: SignalKind, f: &Figures) -> Value {
+/// One signal's figures; on a linear axis (`lin`: the travel per radian [m/rad]) the load
+/// position and speed are `x` [m] and `v_x` [m/s].
+pub(super) fn figures_json(kind: SignalKind, f: &Figures, lin: Option<f64>) -> Value {
+    let k = kind.scale_on(lin);
     json!({
-        "signal": kind.name(), "unit": kind.unit(),
-        "fit_pct": finite(f.fit_percent), "rmse": finite(f.rmse), "max_error": finite(f.max_abs_error),
-        "mean_error": finite(f.mean_error), "samples": f.samples,
+        "signal": kind.name_on(lin), "unit": kind.unit_on(lin),
+        "fit_pct": finite(f.fit_percent), "rmse": finite(f.rmse * k), "max_error": finite(f.max_abs_error * k),
+        "mean_error": finite(f.mean_error * k), "samples": f.samples,
     })
 }
 
@@ -19,8 +22,15 @@ pub(super) fn finite(v: f64) -> Value {
     }
 }
 
-/// Regime statistics pooled over the logs whose headline is `kind`.
-pub(super) fn pooled_regimes(c: &ModelComparison, kind: SignalKind) -> Vec<Value> {
+/// Regime statistics pooled over the logs whose headline is `kind` (rms and mean in the unit of
+/// [`SignalKind::unit_on`]).
+pub(super) fn pooled_regimes(
+    c: &ModelComparison,
+    kind: SignalKind,
+    opts: &CompareOptions,
+) -> Vec<Value> {
+    let lin = opts.metres_per_rad;
+    let k = kind.scale_on(lin);
     let mut per: Vec<(Regime, usize, f64, f64)> =
         Regime::ALL.iter().map(|r| (*r, 0, 0.0, 0.0)).collect();
     let (mut total_n, mut total_se) = (0usize, 0.0);
@@ -49,12 +59,12 @@ pub(super) fn pooled_regimes(c: &ModelComparison, kind: SignalKind) -> Vec<Value
             };
             json!({
                 "regime": g.name(),
-                "where": first.map(|r| regime_phrase(*g, &r.classification, &Default::default())),
+                "where": first.map(|r| regime_phrase_on(*g, &r.classification, &opts.regimes, lin)),
                 "samples": n,
                 "time_share_pct": time,
                 "error_share_pct": err,
-                "rms": if *n > 0 { (se / *n as f64).sqrt() } else { 0.0 },
-                "mean": if *n > 0 { s / *n as f64 } else { 0.0 },
+                "rms": if *n > 0 { k * (se / *n as f64).sqrt() } else { 0.0 },
+                "mean": if *n > 0 { k * s / *n as f64 } else { 0.0 },
                 "concentration": if time > 0.0 { err / time } else { 0.0 },
                 "suspects": g.suspects(),
             })
@@ -71,6 +81,8 @@ pub(super) fn to_json(
 ) -> Value {
     let pooled_figs = pooled(c);
     let (hk, hf) = pooled_figs[0];
+    let lin = opts.metres_per_rad;
+    let hs = hk.scale_on(lin);
     let effects: Vec<Value> = c
         .plant
         .effects
@@ -96,10 +108,11 @@ pub(super) fn to_json(
         .iter()
         .map(|s| {
             let (k, f) = s.cmp_fit[0];
+            let ks = k.scale_on(lin);
             json!({
-                "step": s.label, "effect": s.effect, "signal": k.name(), "unit": k.unit(),
-                "fit_pct": finite(f.fit_percent), "rmse": finite(f.rmse), "max_error": finite(f.max_abs_error),
-                "signals": s.cmp_fit.iter().map(|(k, f)| figures_json(*k, f)).collect::<Vec<_>>(),
+                "step": s.label, "effect": s.effect, "signal": k.name_on(lin), "unit": k.unit_on(lin),
+                "fit_pct": finite(f.fit_percent), "rmse": finite(f.rmse * ks), "max_error": finite(f.max_abs_error * ks),
+                "signals": s.cmp_fit.iter().map(|(k, f)| figures_json(*k, f, lin)).collect::<Vec<_>>(),
                 "fitted_params": fitted_json(s),
                 "base_refitted": s.base_refitted,
             })
@@ -124,18 +137,20 @@ pub(super) fn to_json(
             } else {
                 0.0
             };
-            windows.push((
-                share,
-                json!({
-                    "log": log.path.display().to_string(),
-                    "t_start_s": w.t_start_s, "t_end_s": w.t_end_s,
-                    "error_share_pct": share, "rms": w.rms, "mean": w.mean,
-                    "regime": w.regime.name(),
-                    "omega_min_rad_s": w.omega_min_rad_s, "omega_max_rad_s": w.omega_max_rad_s,
-                    "u_abs_max_v": w.u_abs_max_v,
-                    "description": describe_window(w, r, opts),
-                }),
-            ));
+            let mut j = json!({
+                "log": log.path.display().to_string(),
+                "t_start_s": w.t_start_s, "t_end_s": w.t_end_s,
+                "error_share_pct": share, "rms": w.rms * hs, "mean": w.mean * hs,
+                "regime": w.regime.name(),
+                "omega_min_rad_s": w.omega_min_rad_s, "omega_max_rad_s": w.omega_max_rad_s,
+                "u_abs_max_v": w.u_abs_max_v,
+                "description": describe_window(w, r, opts),
+            });
+            if let Some(m) = lin {
+                j["v_x_min_m_s"] = json!(w.omega_min_rad_s * m);
+                j["v_x_max_m_s"] = json!(w.omega_max_rad_s * m);
+            }
+            windows.push((share, j));
         }
     }
     windows.sort_by(|a, b| b.0.total_cmp(&a.0));
@@ -152,11 +167,11 @@ pub(super) fn to_json(
                 "speed_derived_from_position": l.measured.speed_derived,
                 "controller": controller_json(l),
                 "signal": r.headline_signal().kind.name(),
-                "signals": r.signals.iter().map(|s| figures_json(s.kind, &s.figures)).collect::<Vec<_>>(),
+                "signals": r.signals.iter().map(|s| figures_json(s.kind, &s.figures, lin)).collect::<Vec<_>>(),
                 "whiteness": whiteness_json(r),
                 "periodic": r.periodic.iter().map(|p| json!({
                     "angle": p.source.name(), "harmonic": p.harmonic, "share_pct": p.share_pct,
-                    "amplitude": p.amplitude, "phase_rad": p.phase_rad, "p_value": p.p_value, "significant": p.significant,
+                    "amplitude": p.amplitude * r.headline_signal().kind.scale_on(lin), "phase_rad": p.phase_rad, "p_value": p.p_value, "significant": p.significant,
                 })).collect::<Vec<_>>(),
                 "findings": r.findings,
             })
@@ -167,12 +182,12 @@ pub(super) fn to_json(
         "mode": r0.mode.name(),
         "mode_reason": modes[0].reason,
         "controller": controller_json(&logs[0]),
-        "signal": hk.name(),
-        "unit": hk.unit(),
+        "signal": hk.name_on(lin),
+        "unit": hk.unit_on(lin),
         "fit_pct": finite(hf.fit_percent),
-        "rmse": finite(hf.rmse),
-        "max_error": finite(hf.max_abs_error),
-        "signals": pooled_figs.iter().map(|(k, f)| figures_json(*k, f)).collect::<Vec<_>>(),
+        "rmse": finite(hf.rmse * hs),
+        "max_error": finite(hf.max_abs_error * hs),
+        "signals": pooled_figs.iter().map(|(k, f)| figures_json(*k, f, lin)).collect::<Vec<_>>(),
         "effects": effects,
         "custom": c.plant.custom.iter().map(|e| {
             let params: serde_json::Map<String, Value> = e
@@ -192,7 +207,7 @@ pub(super) fn to_json(
         }).collect::<Vec<_>>(),
         "base": base,
         "ladder": ladder_json,
-        "regimes": pooled_regimes(c, hk),
+        "regimes": pooled_regimes(c, hk, opts),
         "worst_windows": windows.into_iter().take(opts.worst_count).map(|(_, v)| v).collect::<Vec<_>>(),
         "whiteness": whiteness_json(r0),
         "input_xcorr": json!({
@@ -270,4 +285,23 @@ fn fitted_json(s: &LadderStep) -> Vec<Value> {
             })
         }))
         .collect()
+}
+
+/// The linear axis' additions to the report: the `transmission`, the base in kg, N s/m and N
+/// (`base.m_eq_kg`, `base.b_eq_n_s_m`, `base.f_c_n`) and each effect's load-side parameters in
+/// linear units (`effects[].linear`, keys with unit suffixes: `tau_sf_pos_n`).
+pub(super) fn linear_json(v: &mut Value, axis: &crate::axis::Axis, c: &ModelComparison) {
+    v["transmission"] = axis.json();
+    let p = &c.plant;
+    if let (Some(Value::Object(base)), Value::Object(l)) = (
+        v.get_mut("base"),
+        axis.base_json(p.params.j_eq(), p.b_eq(), p.tau_sf()),
+    ) {
+        base.extend(l);
+    }
+    if let Some(Value::Array(effects)) = v.get_mut("effects") {
+        for (j, e) in effects.iter_mut().zip(p.effects.iter()) {
+            j["linear"] = axis.effect_json(e);
+        }
+    }
 }

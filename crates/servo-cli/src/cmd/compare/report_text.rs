@@ -12,7 +12,15 @@ pub(super) fn print_text(
     refitted: Option<&str>,
     save: &[String],
     plot: Option<&Path>,
+    axis: Option<&crate::axis::Axis>,
 ) {
+    let lin = opts.metres_per_rad;
+    if let Some(a) = axis {
+        outln!(
+            "{} (positions in m, speeds in m/s, forces in N)",
+            a.describe()
+        );
+    }
     for ((log, r), mc) in logs.iter().zip(&c.reports).zip(modes) {
         outln!(
             "== {} ({} samples, {:.3} s, dt = {:.4} s)",
@@ -49,22 +57,24 @@ pub(super) fn print_text(
         );
         for s in &r.signals {
             let f = &s.figures;
+            let k = s.kind.scale_on(lin);
             outln!(
                 "{:<10} {:>9.2} {:>14} {:>14} {:>14}",
-                format!("{} [{}]", s.kind.name(), s.kind.unit()),
+                format!("{} [{}]", s.kind.name_on(lin), s.kind.unit_on(lin)),
                 f.fit_percent,
-                format!("{:.4e}", f.rmse),
-                format!("{:.4e}", f.max_abs_error),
-                format!("{:.3e}", f.mean_error)
+                format!("{:.4e}", f.rmse * k),
+                format!("{:.4e}", f.max_abs_error * k),
+                format!("{:.3e}", f.mean_error * k)
             );
         }
+        let hk = r.headline_signal().kind;
         outln!("where the {} error sits:", r.headline_signal().kind.words());
         outln!(
             "  {:<16} {:>8} {:>9} {:>12}",
             "regime",
             "time %",
             "error %",
-            "rms"
+            format!("rms [{}]", hk.unit_on(lin))
         );
         for s in r.regimes.iter().filter(|s| s.samples > 0) {
             outln!(
@@ -72,7 +82,7 @@ pub(super) fn print_text(
                 s.regime.name(),
                 s.time_share_pct,
                 s.error_share_pct,
-                s.rms
+                s.rms * hk.scale_on(lin)
             );
         }
         outln!("findings:");
@@ -100,7 +110,7 @@ pub(super) fn print_text(
                 "  {:<24} fit {:>7.2} %   RMSE {}{}",
                 s.label,
                 f.fit_percent,
-                with_unit(f.rmse, k),
+                with_unit_on(f.rmse, k, lin),
                 change
             );
             prev = Some(f.rmse);
@@ -114,6 +124,12 @@ pub(super) fn print_text(
                 .map(|(p, v)| format!("{} = {:.4e} {}", p.key, v, p.unit))
                 .collect();
             outln!("  {:<11} {}", e.kind.name(), kv.join(", "));
+            if let Some(a) = axis {
+                let linear = a.effect_text(e);
+                if linear != kv.join(", ") {
+                    outln!("  {:<11} {linear}", "");
+                }
+            }
         }
         for e in c.plant.custom.iter() {
             let kv: Vec<String> = e
@@ -138,6 +154,12 @@ pub(super) fn print_text(
             c.plant.params.r_eq(),
             c.plant.params.k_drv
         );
+        if let Some(a) = axis {
+            out!(
+                "  base      {}",
+                a.base_text(c.plant.params.j_eq(), c.plant.b_eq(), c.plant.tau_sf())
+            );
+        }
     }
     if let Some(r) = refitted {
         outln!("{r}");

@@ -93,6 +93,23 @@ pub(super) fn gate_and_save(
         }
         _ => None,
     };
+    // On a linear axis the errors the gate compares are said in m (or m/s), not in rad of the
+    // screw; the ratios the verdict rests on do not change.
+    let g = g.map(|mut g| {
+        if let Some(m) = model_file.transmission.metres_per_rad() {
+            for x in g.measures.iter_mut() {
+                let unit = match x.unit {
+                    "rad" => "m",
+                    "rad/s" => "m/s",
+                    _ => continue,
+                };
+                x.before *= m;
+                x.after *= m;
+                x.unit = unit;
+            }
+        }
+        g
+    });
     let worse = g.as_ref().is_some_and(|g| g.worse().is_some());
     let saved = !worse || cmd.force;
     if saved {
