@@ -124,6 +124,19 @@ fn fontdb() -> std::sync::Arc<resvg::usvg::fontdb::Database> {
     DB.get_or_init(|| {
         let mut db = resvg::usvg::fontdb::Database::new();
         db.load_system_fonts();
+        // plotters writes `font-family="sans-serif"`: map it to a sans family this machine has
+        let families: Vec<String> = db
+            .faces()
+            .flat_map(|f| f.families.iter().map(|(n, _)| n.clone()))
+            .collect();
+        if let Some(sans) = ["DejaVu Sans", "Liberation Sans", "Noto Sans", "Arial"]
+            .iter()
+            .find(|f| families.iter().any(|n| n == *f))
+            .map(|f| f.to_string())
+            .or_else(|| families.iter().find(|n| n.contains("Sans")).cloned())
+        {
+            db.set_sans_serif_family(sans);
+        }
         std::sync::Arc::new(db)
     })
     .clone()
@@ -190,6 +203,12 @@ fn render_and_check(svg_path: &Path, png: &Path) -> Vec<String> {
             "{}: {units} axis labels with a unit for {charts} chart(s)",
             svg_path.display()
         ));
+    }
+    // no negative zero among the tick labels ("-0e-6")
+    for (t, _) in &boxes {
+        if t.starts_with('-') && t.parse::<f64>() == Ok(0.0) {
+            problems.push(format!("{}: tick label `{t}`", svg_path.display()));
+        }
     }
     // the tick labels at small scales are not all alike ("0.0, 0.0, 0.0")
     let mut labels: Vec<&str> = boxes
@@ -359,6 +378,11 @@ fn a_three_log_diagnosis_report_shows_three_panels_of_points() {
             "no panel for {name}"
         );
     }
+    // the ranking's columns named as the text names them
+    assert!(
+        html.contains("<h2>Ranking</h2>") && html.contains("<th>held-out residual RMS drop</th>"),
+        "ranking header"
+    );
     // the residual against speed is a scatter (points), the residual over time a line
     assert!(
         html.contains("<circle"),

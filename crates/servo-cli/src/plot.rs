@@ -155,7 +155,8 @@ pub fn tick_label(v: f64, step: f64, max_abs: f64) -> String {
         }
         d
     };
-    if v == 0.0 {
+    // zero, also when plotters computes it as -1e-20 (no "-0e-6")
+    if v == 0.0 || v.abs() <= 1e-6 * step.abs() {
         return "0".into();
     }
     // the decimals the value needs (ticks are multiples of plotters' own 1-2-5 step), at most
@@ -331,15 +332,12 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
         if chart.log_x {
             // from the decade below the data: labels below the first power of ten inside
             let x0 = 10f64.powf(x0.log10().floor());
-            let decades = (x1 / x0).log10();
+            // Labels on the powers of ten alone: plotters' in-between key points repeat the
+            // next decade's (two `10` labels on one spot), and 2 and 5 crowd a wide band.
+            let decades = (x1 / x0).log10().ceil().max(1.0) as usize;
             let x_fmt = move |v: &f64| {
                 let m = v / 10f64.powf(v.log10().floor());
-                let labelled: &[f64] = if decades <= 3.0 {
-                    &[1.0, 2.0, 5.0]
-                } else {
-                    &[1.0]
-                };
-                if labelled.iter().any(|l| (m - l).abs() < 1e-6 * l) {
+                if (m - 1.0).abs() < 1e-6 {
                     log_tick_label(*v)
                 } else {
                     String::new()
@@ -350,7 +348,7 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
                     .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
                     .map_err(|e| anyhow!("plot: {e}"))?,
                 x_fmt,
-                30
+                5 * decades
             );
         } else {
             let x_fmt = |v: &f64| tick_label(*v, x_step, x_max_abs);

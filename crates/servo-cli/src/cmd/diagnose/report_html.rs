@@ -161,7 +161,7 @@ pub(super) fn html_report(
     );
     h.push_str(&residual_charts(records, model, first, opts)?);
     for (step, d) in diags.iter().enumerate() {
-        let _ = write!(h, "<h2>Ranking{}</h2><table><tr><th>effect</th><th>significant</th><th>{}</th><th>{}</th><th>BIC gain</th><th>evidence</th></tr>", servo_core::diagnose::phrase::RMS_DROP, servo_core::diagnose::phrase::SIM_DROP, if diags.len() > 1 { format!(", step {}", step + 1) } else { String::new() });
+        let _ = write!(h, "<h2>Ranking{}</h2><table><tr><th>effect</th><th>significant</th><th>{}</th><th>{}</th><th>BIC gain</th><th>evidence</th></tr>", if diags.len() > 1 { format!(", step {}", step + 1) } else { String::new() }, servo_core::diagnose::phrase::RMS_DROP, servo_core::diagnose::phrase::SIM_DROP);
         for c in &d.ranking {
             let _ = write!(
                 h,
