@@ -24,6 +24,7 @@ mod run_log;
 mod schemas;
 mod serial;
 mod sim;
+mod student;
 mod transmission;
 mod trend;
 mod util;

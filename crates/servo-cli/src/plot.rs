@@ -19,6 +19,8 @@ pub struct Chart<'a> {
     pub log_x: bool,
     /// Ticks on whole numbers of x only (counts: "effects added").
     pub integer_x: bool,
+    /// Points instead of lines (a residual against a state: samples, not a path in time).
+    pub scatter: bool,
     pub width: u32,
     pub height: u32,
 }
@@ -31,6 +33,7 @@ impl Default for Chart<'_> {
             y_label: "",
             log_x: false,
             integer_x: false,
+            scatter: false,
             width: 900,
             height: 400,
         }
@@ -108,6 +111,148 @@ fn runs(s: &Series) -> Vec<Vec<(f64, f64)>> {
     out
 }
 
+/// About `n` "nice" tick values (1, 2 or 5 times a power of ten apart) covering [lo, hi], and
+/// their spacing.
+pub fn nice_ticks(lo: f64, hi: f64, n: usize) -> (Vec<f64>, f64) {
+    if !(lo.is_finite() && hi.is_finite()) || hi <= lo {
+        return (vec![lo], 1.0);
+    }
+    let raw = (hi - lo) / n.max(1) as f64;
+    let p = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * p)
+        .find(|s| *s >= raw)
+        .unwrap_or(10.0 * p);
+    let first = (lo / step).ceil() as i64;
+    let last = (hi / step).floor() as i64;
+    let ticks = (first..=last)
+        .map(|k| {
+            let v = k as f64 * step;
+            if v.abs() < 1e-9 * step {
+                0.0
+            } else {
+                v
+            }
+        })
+        .collect();
+    (ticks, step)
+}
+
+/// The label of tick `v` on an axis of tick spacing `step` reaching `max_abs`: plain decimals
+/// with as many places as the spacing needs when the axis reaches 0.01 to 10^4, else
+/// engineering notation (a mantissa and an exponent that is a multiple of 3: `12.5e-6`), so
+/// ticks at a 1e-5 scale never all read `0.0`.
+pub fn tick_label(v: f64, step: f64, max_abs: f64) -> String {
+    let places = |step: f64| -> usize {
+        let mut d = 0usize;
+        while d < 9 {
+            let x = step * 10f64.powi(d as i32);
+            if (x - x.round()).abs() < 1e-6 * x.abs().max(1.0) {
+                break;
+            }
+            d += 1;
+        }
+        d
+    };
+    // zero, also when plotters computes it as -1e-20 (no "-0e-6")
+    if v == 0.0 || v.abs() <= 1e-6 * step.abs() {
+        return "0".into();
+    }
+    // the decimals the value needs (ticks are multiples of plotters' own 1-2-5 step), at most
+    // those of a tenth of the step estimated here
+    let need = |x: f64, most: usize| -> usize {
+        (0..=most)
+            .find(|&d| {
+                let y = x * 10f64.powi(d as i32);
+                (y - y.round()).abs() < 1e-6 * y.abs().max(1.0)
+            })
+            .unwrap_or(most)
+    };
+    if (1e-2..1e4).contains(&max_abs) {
+        return format!("{:.*}", need(v, places(step) + 1), v);
+    }
+    let e = 3 * (max_abs.log10() / 3.0).floor() as i32;
+    let scale = 10f64.powi(e);
+    format!(
+        "{:.*}e{e}",
+        need(v / scale, places(step / scale) + 1),
+        v / scale
+    )
+}
+
+/// A label for a log-axis tick: 3 significant figures without trailing zeros, engineering
+/// notation outside 0.01..1e4.
+pub fn log_tick_label(v: f64) -> String {
+    let trim = |s: String| -> String {
+        if s.contains('.') && !s.contains('e') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    };
+    if (1e-2..1e4).contains(&v.abs()) {
+        trim(servo_core::math::sig(v, 3))
+    } else {
+        let e = 3 * (v.abs().log10() / 3.0).floor() as i32;
+        format!("{}e{e}", trim(servo_core::math::sig(v / 10f64.powi(e), 3)))
+    }
+}
+
+/// The points of a run reduced for a chart `columns` pixels wide: when the run has more than
+/// two points per column, each column keeps its first, lowest, highest and last point in time
+/// order (the trace's envelope is kept, a spike stays visible), so the SVG's size is bounded by
+/// the chart's width, not by the log's length. `log_x`: columns spaced on a log scale.
+pub fn decimate(
+    run: Vec<(f64, f64)>,
+    x0: f64,
+    x1: f64,
+    columns: usize,
+    log_x: bool,
+) -> Vec<(f64, f64)> {
+    if run.len() <= 4 * columns.max(1) || x1 <= x0 {
+        return run;
+    }
+    let map = |x: f64| {
+        if log_x {
+            x.max(f64::MIN_POSITIVE).ln()
+        } else {
+            x
+        }
+    };
+    let (a, b) = (map(x0), map(x1));
+    let col = |x: f64| {
+        (((map(x) - a) / (b - a) * columns as f64).floor().max(0.0) as usize).min(columns - 1)
+    };
+    let mut out = Vec::with_capacity(4 * columns);
+    let mut i = 0;
+    while i < run.len() {
+        let c = col(run[i].0);
+        let mut j = i;
+        let (mut lo, mut hi) = (i, i);
+        while j < run.len() && col(run[j].0) == c {
+            if run[j].1 < run[lo].1 {
+                lo = j;
+            }
+            if run[j].1 > run[hi].1 {
+                hi = j;
+            }
+            j += 1;
+        }
+        let mut keep = [i, lo, hi, j - 1];
+        keep.sort_unstable();
+        let mut last = usize::MAX;
+        for k in keep {
+            if k != last {
+                out.push(run[k]);
+                last = k;
+            }
+        }
+        i = j;
+    }
+    out
+}
+
 /// Renders a line chart to an SVG string.
 pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String> {
     let mut svg = String::new();
@@ -116,14 +261,19 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
             SVGBackend::with_string(&mut svg, (chart.width, chart.height)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| anyhow!("plot: {e}"))?;
         let ((x0, x1), (y0, y1)) = bounds(series, chart.log_x);
+        let (_, y_step) = nice_ticks(y0, y1, 7);
+        let y_max_abs = y0.abs().max(y1.abs());
+        let (_, x_step) = nice_ticks(x0, x1, 8);
+        let x_max_abs = x0.abs().max(x1.abs());
+        let columns = chart.width.saturating_sub(80).max(50) as usize;
         let mut builder = ChartBuilder::on(&root);
         builder
             .caption(chart.title, ("sans-serif", 16))
             .margin(10)
             .x_label_area_size(35)
-            .y_label_area_size(60);
+            .y_label_area_size(70);
         macro_rules! draw {
-            ($ctx:expr) => {{
+            ($ctx:expr, $x_fmt:expr, $x_labels:expr) => {{
                 let mut ctx = $ctx;
                 let integer_ticks = |x: &f64| {
                     if (x - x.round()).abs() < 1e-6 {
@@ -132,8 +282,14 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
                         String::new()
                     }
                 };
+                let y_fmt = |v: &f64| tick_label(*v, y_step, y_max_abs);
                 let mut mesh = ctx.configure_mesh();
-                mesh.x_desc(chart.x_label).y_desc(chart.y_label);
+                mesh.x_desc(chart.x_label)
+                    .y_desc(chart.y_label)
+                    .y_labels(7)
+                    .x_labels($x_labels)
+                    .y_label_formatter(&y_fmt)
+                    .x_label_formatter(&$x_fmt);
                 if chart.integer_x {
                     mesh.x_labels(((x1 - x0).round() as usize + 1).clamp(2, 12))
                         .x_label_formatter(&integer_ticks);
@@ -141,8 +297,19 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
                 mesh.draw().map_err(|e| anyhow!("plot: {e}"))?;
                 for (i, s) in series.iter().enumerate() {
                     let color = COLORS[i % COLORS.len()];
+                    if chart.scatter {
+                        let pts: Vec<(f64, f64)> = runs(s).into_iter().flatten().collect();
+                        let pts = thin_points(pts, x0, x1, y0, y1, columns);
+                        let dots = ctx
+                            .draw_series(pts.into_iter().map(|p| Circle::new(p, 1, color.filled())))
+                            .map_err(|e| anyhow!("plot: {e}"))?;
+                        dots.label(s.label)
+                            .legend(move |(x, y)| Circle::new((x + 7, y), 3, color.filled()));
+                        continue;
+                    }
                     // one line per run of valid points: no line across a gap
                     for (j, run) in runs(s).into_iter().enumerate() {
+                        let run = decimate(run, x0, x1, columns, chart.log_x);
                         let line = ctx
                             .draw_series(LineSeries::new(run, color.stroke_width(1)))
                             .map_err(|e| anyhow!("plot: {e}"))?;
@@ -163,17 +330,63 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
             }};
         }
         if chart.log_x {
-            draw!(builder
-                .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
-                .map_err(|e| anyhow!("plot: {e}"))?);
+            // from the decade below the data: labels below the first power of ten inside
+            let x0 = 10f64.powf(x0.log10().floor());
+            // Labels on the powers of ten alone: plotters' in-between key points repeat the
+            // next decade's (two `10` labels on one spot), and 2 and 5 crowd a wide band.
+            let decades = (x1 / x0).log10().ceil().max(1.0) as usize;
+            let x_fmt = move |v: &f64| {
+                let m = v / 10f64.powf(v.log10().floor());
+                if (m - 1.0).abs() < 1e-6 {
+                    log_tick_label(*v)
+                } else {
+                    String::new()
+                }
+            };
+            draw!(
+                builder
+                    .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
+                    .map_err(|e| anyhow!("plot: {e}"))?,
+                x_fmt,
+                5 * decades
+            );
         } else {
-            draw!(builder
-                .build_cartesian_2d(x0..x1, y0..y1)
-                .map_err(|e| anyhow!("plot: {e}"))?);
+            let x_fmt = |v: &f64| tick_label(*v, x_step, x_max_abs);
+            draw!(
+                builder
+                    .build_cartesian_2d(x0..x1, y0..y1)
+                    .map_err(|e| anyhow!("plot: {e}"))?,
+                x_fmt,
+                8
+            );
         }
         root.present().map_err(|e| anyhow!("plot: {e}"))?;
     }
     Ok(svg)
+}
+
+/// At most one point per pixel of a `columns` x `columns / 2` grid over the plot area: a
+/// scatter of a long log stays small, and every occupied pixel keeps a point.
+fn thin_points(
+    pts: Vec<(f64, f64)>,
+    x0: f64,
+    x1: f64,
+    y0: f64,
+    y1: f64,
+    columns: usize,
+) -> Vec<(f64, f64)> {
+    let rows = (columns / 2).max(1);
+    if pts.len() <= columns || x1 <= x0 || y1 <= y0 {
+        return pts;
+    }
+    let mut seen = std::collections::HashSet::new();
+    pts.into_iter()
+        .filter(|&(x, y)| {
+            let c = ((x - x0) / (x1 - x0) * columns as f64) as i64;
+            let r = ((y - y0) / (y1 - y0) * rows as f64) as i64;
+            seen.insert((c, r))
+        })
+        .collect()
 }
 
 /// Renders a line chart to an SVG file.

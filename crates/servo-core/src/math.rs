@@ -141,3 +141,45 @@ pub fn linspace(a: f64, b: f64, n: usize) -> alloc::vec::Vec<f64> {
 pub fn logspace(a: f64, b: f64, n: usize) -> alloc::vec::Vec<f64> {
     linspace(ln(a), ln(b), n).into_iter().map(exp).collect()
 }
+
+/// `x` with `digits` significant figures (at least 1), in plain decimals between 1e-3 and 1e6
+/// and in scientific notation (`1.16e-7`) outside: `sig(0.012345, 3)` is `0.0123`,
+/// `sig(20765.5, 3)` is `20800`, `sig(-1.1604e-7, 3)` is `-1.16e-7`. Non-finite values print
+/// as Rust prints them (`NaN`, `inf`).
+pub fn sig(x: f64, digits: usize) -> alloc::string::String {
+    let digits = digits.max(1);
+    if !x.is_finite() {
+        return alloc::format!("{x}");
+    }
+    if x == 0.0 {
+        return "0".into();
+    }
+    let a = x.abs();
+    if !(1e-3..1e6).contains(&a) {
+        return alloc::format!("{:.*e}", digits - 1, x);
+    }
+    // the exponent of the rounded value (9.996 with 3 figures is 10.0: exponent 1)
+    let e = floor(log10(a)) as i32;
+    let scale = pow(10.0, (digits as i32 - 1 - e) as f64);
+    let r = round(a * scale) / scale;
+    let e = floor(log10(r)) as i32;
+    let decimals = (digits as i32 - 1 - e).max(0) as usize;
+    alloc::format!("{:.*}", decimals, if x < 0.0 { -r } else { r })
+}
+
+#[cfg(all(test, feature = "alloc"))]
+mod sig_tests {
+    use super::sig;
+
+    #[test]
+    fn significant_figures() {
+        assert_eq!(sig(0.012345, 3), "0.0123");
+        assert_eq!(sig(20765.5, 3), "20800");
+        assert_eq!(sig(-1.1604e-7, 3), "-1.16e-7");
+        assert_eq!(sig(9.996, 3), "10.0");
+        assert_eq!(sig(3.23341, 5), "3.2334");
+        assert_eq!(sig(100.0, 4), "100.0");
+        assert_eq!(sig(0.0, 3), "0");
+        assert_eq!(sig(1.5e6, 2), "1.5e6");
+    }
+}

@@ -136,23 +136,36 @@ struct OpenStep {
     last_out: Option<usize>,
     /// Time of the sample after `last_out`.
     t_after_out_s: Option<f64>,
+    /// The reference left the step's new value before the next step: not a step (a multisine,
+    /// a chirp, a ramp after a jump), no overshoot or settling time to measure.
+    moved: bool,
+    /// Samples the reference held the new value.
+    held: usize,
 }
 
+/// Samples a reference must hold after a jump for the jump to count as a step (a multisine's
+/// fast change after a hold is a jump of one sample, not a step).
+const MIN_HOLD_SAMPLES: usize = 10;
+
 impl OpenStep {
-    fn close(self, k1: usize) -> StepMetrics {
+    /// The step's figures, `None` when the reference did not hold after the jump.
+    fn close(self, k1: usize) -> Option<StepMetrics> {
+        if self.moved || self.held < MIN_HOLD_SAMPLES {
+            return None;
+        }
         let size = self.to_rad - self.from_rad;
         let settling_time_s = match self.last_out {
             None => Some(0.0),
             Some(k) if k + 1 < k1 => self.t_after_out_s.map(|t| t - self.time_s),
             Some(_) => None,
         };
-        StepMetrics {
+        Some(StepMetrics {
             time_s: self.time_s,
             from_rad: self.from_rad,
             to_rad: self.to_rad,
             overshoot_pct: (100.0 * self.peak / size.abs()).max(0.0),
             settling_time_s,
-        }
+        })
     }
 }
 
@@ -249,7 +262,7 @@ impl SummaryAccumulator {
             };
             if let Some(from) = start {
                 if let Some(o) = self.open.take() {
-                    self.steps.push(o.close(k));
+                    self.steps.extend(o.close(k));
                 }
                 if (r - from).abs() > thresh {
                     self.open = Some(OpenStep {
@@ -260,11 +273,18 @@ impl SummaryAccumulator {
                         peak: f64::NEG_INFINITY,
                         last_out: None,
                         t_after_out_s: None,
+                        moved: false,
+                        held: 0,
                     });
                 }
             }
             if let Some(o) = self.open.as_mut() {
                 let size = o.to_rad - o.from_rad;
+                if (r - o.to_rad).abs() > 1e-6 * size.abs() + 1e-12 {
+                    o.moved = true;
+                } else if !o.moved {
+                    o.held += 1;
+                }
                 if o.last_out == Some(k.wrapping_sub(1)) && k > o.k0 {
                     o.t_after_out_s = Some(t);
                 }
@@ -289,7 +309,7 @@ impl SummaryAccumulator {
     pub fn finish(mut self) -> RunSummary {
         self.flush_block();
         if let Some(o) = self.open.take() {
-            self.steps.push(o.close(self.n));
+            self.steps.extend(o.close(self.n));
         }
         let rms = |sq: f64, n: usize| {
             if n == 0 {
@@ -368,13 +388,15 @@ impl RunSummary {
             (Some(rms), Some(max), None) => {
                 writeln!(
                     f,
-                    "  tracking error RMS   {rms:.5} rad ({:.3} deg)",
-                    rms * deg
+                    "  tracking error RMS   {} rad ({} deg)",
+                    math::sig(rms, 3),
+                    math::sig(rms * deg, 3)
                 )?;
                 writeln!(
                     f,
-                    "  tracking error max   {max:.5} rad ({:.3} deg)",
-                    max * deg
+                    "  tracking error max   {} rad ({} deg)",
+                    math::sig(max, 3),
+                    math::sig(max * deg, 3)
                 )?;
             }
             _ => writeln!(f, "  tracking error       n/a (open loop)")?,
@@ -382,15 +404,21 @@ impl RunSummary {
         match self.overshoot_pct() {
             Some(os) => writeln!(
                 f,
-                "  overshoot (max)      {os:.2} % over {} step(s)",
+                "  overshoot (max)      {} % over {} step(s)",
+                math::sig(os, 3),
                 self.steps.len()
             )?,
-            None => writeln!(f, "  overshoot            n/a (no steps in the reference)")?,
+            None if self.err_rms_rad.is_some() => writeln!(
+                f,
+                "  overshoot            n/a (the reference has no steps: see the tracking error)"
+            )?,
+            None => writeln!(f, "  overshoot            n/a (open loop)")?,
         }
         match self.settling_time_s() {
             Some(Some(ts)) => writeln!(
                 f,
-                "  settling time (max)  {ts:.4} s ({:.0} % band)",
+                "  settling time (max)  {} s ({:.0} % band)",
+                math::sig(ts, 3),
                 self.band * 100.0
             )?,
             Some(None) => writeln!(
@@ -407,10 +435,11 @@ impl RunSummary {
         };
         writeln!(
             f,
-            "  saturation time      {:.4} s ({pct:.1} % of the run)",
-            self.saturation_time_s
+            "  saturation time      {} s ({} % of the run)",
+            math::sig(self.saturation_time_s, 3),
+            math::sig(pct, 3)
         )?;
-        write!(f, "  u RMS                {:.3} V", self.u_rms_v)?;
+        write!(f, "  u RMS                {} V", math::sig(self.u_rms_v, 3))?;
         if self.steps.len() > 1 {
             writeln!(f)?;
             let (unit, k) = match metres_per_rad {
@@ -483,6 +512,41 @@ mod tests {
         assert!((s.saturation_time_s - 0.1).abs() < 1e-9);
         assert!((s.err_max_rad.unwrap() - amp).abs() < 1e-9);
         assert!(s.to_string().contains("overshoot (max)"));
+    }
+
+    #[test]
+    fn a_multisine_has_no_steps() {
+        // A hold at 0, then a multisine: its fast lines change the reference by more than 50
+        // times the block's median change at places, but it never holds after such a jump.
+        let r =
+            crate::control::Reference::parse("multisine:amp=0.2,f0=0.2,f1=20,period=10,lines=40")
+                .unwrap();
+        let n = 12_000;
+        let ts = 1e-3;
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * ts).collect();
+        let rr: Vec<f64> = t
+            .iter()
+            .map(|&t| if t < 1.0 { 0.0 } else { r.at(t - 1.0).pos_rad })
+            .collect();
+        let mut y = vec![0.0; n];
+        for k in 1..n {
+            y[k] = y[k - 1] + (rr[k - 1] - y[k - 1]) * ts / 0.01;
+        }
+        let rec = Record {
+            time_s: t,
+            u_v: Some(vec![0.0; n]),
+            theta_l_rad: Some(y),
+            ref_rad: Some(rr),
+            ..Record::default()
+        };
+        let s = RunSummary::compute(&rec, &[], 0.05);
+        assert!(s.steps.is_empty(), "{:?}", s.steps);
+        let text = s.to_string();
+        assert!(
+            text.contains("no steps") && !text.contains("overshoot (max)"),
+            "{text}"
+        );
+        assert!(s.err_rms_rad.is_some());
     }
 
     #[test]

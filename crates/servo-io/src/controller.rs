@@ -302,7 +302,13 @@ impl ResolvedPid {
     pub fn describe(&self) -> String {
         self.parts
             .iter()
-            .map(|p| format!("{} ({})", p.words, p.source))
+            .map(|p| {
+                if p.source.is_empty() {
+                    p.words.clone()
+                } else {
+                    format!("{} ({})", p.words, p.source)
+                }
+            })
             .collect::<Vec<_>>()
             .join("; ")
     }

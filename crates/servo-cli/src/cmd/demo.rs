@@ -69,6 +69,8 @@ pub struct DemoContext {
     pub ident_log: Option<PathBuf>,
     /// Model file identified by `servo identify`.
     pub ident_model: Option<PathBuf>,
+    /// Files a stage's command already announced ("wrote ..."): the demo does not repeat them.
+    pub announced: Vec<PathBuf>,
     /// Effect named by the first diagnosis.
     pub winner: Option<EffectKind>,
     /// Model file with the winner added (`servo compare --add --save`).
@@ -234,6 +236,7 @@ impl Demo {
             ident_model: None,
             winner: None,
             extended_model: None,
+            announced: Vec::new(),
         };
         let all = stages();
         let t0 = std::time::Instant::now();
@@ -244,7 +247,7 @@ impl Demo {
             let (headline, written) =
                 (st.run)(&mut ctx).with_context(|| format!("demo stage `{}`", st.name))?;
             outln!("   -> {headline}");
-            for f in &written {
+            for f in written.iter().filter(|f| !ctx.announced.contains(f)) {
                 outln!("      wrote {}", f.display());
             }
             files.extend(written);

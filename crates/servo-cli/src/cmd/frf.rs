@@ -17,7 +17,6 @@ use crate::model_file::ModelFile;
 use crate::plot::{line_chart_svg, Chart, Series};
 use anyhow::{bail, Context};
 use serde_json::{json, Value};
-use servo_core::design::Complex;
 use servo_core::frf::analysis::{analyze, FrfController, FrfLog, FrfRequest};
 use servo_core::frf::{Frf as Estimate, Interval};
 use servo_core::record::Record;
@@ -136,6 +135,21 @@ impl Frf {
                 .map(|g| (g, "the log's gains".to_string())),
         };
         let pid_opts = PidOptions::default();
+        // The output limit: the gains file's `u_limit_v`, else the logged controller's.
+        let u_limit = gains_src
+            .as_ref()
+            .and_then(|(g, n)| {
+                g.pid
+                    .u_limit_v
+                    .map(|l| (l, format!("from {n} [pid] u_limit_v")))
+            })
+            .or_else(|| {
+                logs[0]
+                    .logged
+                    .as_ref()
+                    .and_then(|l| l.u_limit_v)
+                    .map(|l| (l, "from the log's controller record".to_string()))
+            });
         let controller = match (&gains_src, &logs[0].logged) {
             (None, None) => None,
             (g, logged) => Some(pid_config(
@@ -145,7 +159,7 @@ impl Frf {
                     gains_file: g.as_ref().map(|(g, n)| (*g, n.as_str())),
                 },
                 inputs[0].sample_period_s,
-                None,
+                u_limit,
             )?),
         };
         let described = controller.as_ref().map(|c| c.describe());
@@ -182,7 +196,7 @@ impl Frf {
             print_text(&a, logs.len());
         }
         if let Some(path) = &self.plot {
-            std::fs::write(path, plot(&a.plant, a.model_response.as_deref())?)
+            std::fs::write(path, plot(&a)?)
                 .with_context(|| format!("writing {}", path.display()))?;
             if !self.json {
                 outln!("plot: {}", path.display());

@@ -251,6 +251,26 @@ impl Identify {
             }
             // Where the next command reads them: the friction effects of the template (which
             // override [params]) take the identified values too.
+            // A negative friction estimate is unphysical: written as 0, and said so.
+            let mut clamped: Vec<String> = Vec::new();
+            for (name, unit, est) in [("B_eq", "N m s/rad", b), ("tau_sf", "N m", t)] {
+                if let Some((e, _)) = est.filter(|(e, _)| e.value < 0.0) {
+                    clamped.push(format!(
+                        "{name} came out negative ({} {unit}): unphysical, written as 0 in {}; \
+                         the logs hold too little of that friction to measure it, or a torque \
+                         the model lacks",
+                        servo_core::math::sig(e.value, 3),
+                        out.display()
+                    ));
+                }
+            }
+            for c in &clamped {
+                if self.json {
+                    eprintln!("note: {c}");
+                } else {
+                    outln!("note: {c}");
+                }
+            }
             if let Some((e, _)) = b {
                 file.params.b_eq = Some(e.value.max(0.0));
                 file.effects

@@ -46,8 +46,7 @@ pub fn statistical_gates(c: &Candidate, opts: &DiagnoseOptions) -> Vec<GateOutco
     let eq_drop_pct = if sim_only {
         c.oe_reduction_pct
     } else {
-        let r = 1.0 - c.error_reduction_pct / 100.0;
-        Some(100.0 * (1.0 - r * r))
+        Some(super::phrase::squared_from_rms(c.error_reduction_pct))
     };
     let drop_bar = if sim_only {
         "min_simulation_oe_drop_pct"
@@ -93,8 +92,8 @@ pub fn refused_by(c: &Candidate, opts: &DiagnoseOptions) -> Option<alloc::string
 fn label(name: &str) -> &'static str {
     match name {
         "min_bic_gain" => "BIC gain",
-        "min_eq_drop_pct" => "held-out residual drop",
-        "min_simulation_oe_drop_pct" | "min_oe_drop_pct" => "held-out simulation drop",
+        "min_eq_drop_pct" => super::phrase::SQUARED_DROP,
+        "min_simulation_oe_drop_pct" | "min_oe_drop_pct" => super::phrase::SIM_DROP,
         _ => "figure",
     }
 }

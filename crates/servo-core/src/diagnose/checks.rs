@@ -90,14 +90,22 @@ fn agree(
         if !detail.is_empty() {
             detail.push_str("; ");
         }
+        // Enough figures that two values which differ print differently.
+        let rel = diff / scale.max(1e-300);
+        let digits = if rel > 0.0 {
+            (5.0 - math::log10(rel).min(0.0)).min(15.0) as usize
+        } else {
+            5
+        };
         detail.push_str(&alloc::format!(
-            "{key} = {:.4e} vs {:.4e} {} on {what} ({:.0} % apart; allowed {:.0} % or {} standard errors)",
-            pa.value,
-            pb.value,
+            "{key} = {} vs {} {} on {what} ({} % apart; allowed {:.0} % or {} standard errors: {})",
+            math::sig(pa.value, digits),
+            math::sig(pb.value, digits),
             pa.unit,
-            100.0 * diff / scale.max(1e-300),
+            math::sig(100.0 * rel, 2),
             th.consistency_tol_pct,
-            th.consistency_std_errors
+            th.consistency_std_errors,
+            if ok { "agrees" } else { "differs" }
         ));
     }
     Check {

@@ -139,21 +139,19 @@ pub fn describe(
     if super::on_simulation(kind) {
         let _ = write!(
             s,
-            "It lowers the held-out simulation error by {:.1} %",
-            100.0 * oe_drop.unwrap_or(0.0)
+            "It {}",
+            super::phrase::change(
+                "the held-out simulation error",
+                100.0 * oe_drop.unwrap_or(0.0)
+            )
         );
     } else {
-        let _ = write!(
-            s,
-            "It removes {:.1} % of the held-out {} residual (RMS)",
-            rms_pct,
-            eq.name()
-        );
+        let _ = write!(s, "It {}", super::phrase::rms_drop(eq.name(), rms_pct));
         if let Some(d) = oe_drop {
             let _ = write!(
                 s,
-                " and changes the held-out simulation error by {:+.1} %",
-                -100.0 * d
+                " and {}",
+                super::phrase::change("the held-out simulation error", 100.0 * d)
             );
         }
     }
@@ -202,11 +200,18 @@ pub fn describe(
         } else {
             let _ = write!(
                 s,
-                " Not significant (BIC gain {bic_gain:.1}, held-out residual drop {:.1} %",
-                100.0 * eq_drop
+                " Not significant (BIC gain {bic_gain:.1}, {} {} % (residual RMS drop {} %)",
+                super::phrase::SQUARED_DROP,
+                super::phrase::pct(100.0 * eq_drop),
+                super::phrase::pct(rms_pct)
             );
             if let Some(d) = oe_drop {
-                let _ = write!(s, ", held-out simulation drop {:.1} %", 100.0 * d);
+                let _ = write!(
+                    s,
+                    ", {} {} %",
+                    super::phrase::SIM_DROP,
+                    super::phrase::pct(100.0 * d)
+                );
             }
             s.push_str(").");
         }

@@ -40,6 +40,7 @@ mod judge;
 pub mod kinds;
 pub mod neighbours;
 mod options;
+pub mod phrase;
 mod rank;
 pub mod regimes;
 pub mod resonance;

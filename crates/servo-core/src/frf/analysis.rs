@@ -5,8 +5,7 @@
 //! whether the gain depends on the excitation's amplitude (friction).
 
 use super::against::{
-    against_model, amplitude_dependence, low_coherence_ranges, AmplitudeDependence, AtAmplitude,
-    Comparison,
+    against_model, amplitude_dependence, AmplitudeDependence, AtAmplitude, Comparison,
 };
 use super::{
     achieved_margins, estimate, loop_from_t, AchievedMargins, CrossSpectra, Frf, FrfError, Signals,
@@ -119,10 +118,13 @@ pub struct FrfAnalysis {
     /// RMS of u per log [V].
     pub u_rms_v: Vec<f64>,
     pub amplitude: Option<AmplitudeDependence>,
-    /// Fraction of the bins with coherence >= 0.9, and the band they span [Hz].
+    /// Fraction of the excited bins (see [`excited_bins`]) with coherence >= 0.9, and the band
+    /// they span [Hz].
     pub fraction_above_0_9: f64,
     pub band_hz_above_0_9: Option<(f64, f64)>,
-    /// Ranges with coherence < 0.5 [rad/s]: no information there.
+    /// Number of bins the excitation reached (see [`excited_bins`]).
+    pub excited_bins: usize,
+    /// Ranges of excited bins with coherence < 0.5 [rad/s]: no information there.
     pub no_information_rad_s: Vec<(f64, f64)>,
     /// Caveats for the user.
     pub notes: Vec<String>,
@@ -293,14 +295,17 @@ pub fn analyze(req: &FrfRequest) -> Result<FrfAnalysis, FrfAnalysisError> {
         .collect();
     let amplitude = amplitude_dependence(&ats);
 
-    // Information content.
-    let coh_hi: Vec<usize> = plant.coherent(0.9).collect();
+    // Information content, over the bins the excitation reached (a multisine's lines, not the
+    // gaps between them, where nothing was excited and nothing can be learnt).
+    let excited = excited_bins(&spectra, &plant);
+    let excited_count = excited.iter().filter(|&&e| e).count();
+    let coh_hi: Vec<usize> = plant.coherent(0.9).filter(|&i| excited[i]).collect();
     let band_hz_above_0_9 = match (coh_hi.first(), coh_hi.last()) {
         (Some(&a), Some(&b)) => Some((plant.freq_hz[a], plant.freq_hz[b])),
         _ => None,
     };
-    let fraction_above_0_9 = coh_hi.len() as f64 / plant.len().max(1) as f64;
-    let no_information_rad_s = low_coherence_ranges(&plant, 0.5);
+    let fraction_above_0_9 = coh_hi.len() as f64 / excited_count.max(1) as f64;
+    let no_information_rad_s = low_coherence_ranges_where(&plant, 0.5, &excited);
     let resolution_hz = plant.freq_hz.first().copied().unwrap_or(f64::NAN);
     let method = if closed {
         "joint input-output: P = G_{r,theta}/G_{r,u} (reference r as instrument; the direct u -> theta estimate is biased in closed loop)"
@@ -326,7 +331,48 @@ pub fn analyze(req: &FrfRequest) -> Result<FrfAnalysis, FrfAnalysisError> {
         amplitude,
         fraction_above_0_9,
         band_hz_above_0_9,
+        excited_bins: excited_count,
         no_information_rad_s,
         notes,
     })
+}
+
+/// Share of the largest input power from which a bin counts as excited.
+pub const EXCITED_FRACTION: f64 = 1e-2;
+
+/// The bins of `plant` the excitation reached: the input's (reference's in closed loop, u's open
+/// loop) power G_xx at least [`EXCITED_FRACTION`] of its largest. All bins when the spectra do
+/// not line up with the estimate's bins.
+pub fn excited_bins(spectra: &CrossSpectra, plant: &Frf) -> Vec<bool> {
+    if spectra.gxx.len() != plant.len() {
+        return alloc::vec![true; plant.len()];
+    }
+    let max = spectra
+        .gxx
+        .iter()
+        .copied()
+        .filter(|g| g.is_finite())
+        .fold(0.0f64, f64::max);
+    spectra
+        .gxx
+        .iter()
+        .map(|&g| max > 0.0 && g >= EXCITED_FRACTION * max)
+        .collect()
+}
+
+/// Ranges [rad/s] of excited bins (`mask`) with coherence below `level`: a bin outside the mask
+/// ends a range.
+pub fn low_coherence_ranges_where(est: &Frf, level: f64, mask: &[bool]) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    let mut open: Option<(f64, f64)> = None;
+    for i in 0..est.len() {
+        let w = est.omega(i);
+        if mask.get(i).copied().unwrap_or(true) && est.coherence[i] < level {
+            open = Some(open.map_or((w, w), |(a, _)| (a, w)));
+        } else if let Some(r) = open.take() {
+            out.push(r);
+        }
+    }
+    out.extend(open);
+    out
 }

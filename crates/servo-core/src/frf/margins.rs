@@ -190,6 +190,17 @@ pub fn achieved_margins(l: &Frf, min_coherence: f64, start_deg: f64) -> Achieved
         }
     }
     match best {
+        Some((wc, pm)) if pm.hi - pm.lo >= 360.0 => {
+            out.crossover_rad_s = Some(wc);
+            out.notes.push(alloc::format!(
+                "phase margin not measured: its {:.0} % interval [{}, {}] deg is wider than the circle (the bounds around L near the crossover {}..{} rad/s allow any phase); average more periods or excite more strongly",
+                100.0 * l.confidence,
+                math::sig(pm.lo, 3),
+                math::sig(pm.hi, 3),
+                math::sig(wc.lo, 3),
+                math::sig(wc.hi, 3)
+            ));
+        }
         Some((wc, pm)) => {
             out.crossover_rad_s = Some(wc);
             out.phase_margin_deg = Some(pm);
@@ -201,7 +212,7 @@ pub fn achieved_margins(l: &Frf, min_coherence: f64, start_deg: f64) -> Achieved
         )),
     }
     // Phase crossovers at -180 + 360 k.
-    let mut best_gm: Option<(Interval, Interval)> = None;
+    let mut best_gm: Option<(Interval, Interval, bool)> = None;
     for k in 0..pts.len() - 1 {
         let (a, b) = (&pts[k], &pts[k + 1]);
         let (lo, hi) = (a.ph.min(b.ph), a.ph.max(b.ph));
@@ -236,13 +247,30 @@ pub fn achieved_margins(l: &Frf, min_coherence: f64, start_deg: f64) -> Achieved
                 lo: glo.min(gm),
                 hi: ghi.max(gm),
             };
-            if !matches!(&best_gm, Some((_, g)) if g.value.abs() <= gm.abs()) {
-                best_gm = Some((wp, gmi));
+            // the circle around L contains 0 somewhere in the interval: any gain, any phase
+            let origin = pts
+                .iter()
+                .filter(|p| p.lw >= left && p.lw <= right)
+                .any(|p| p.rel >= 1.0);
+            if !matches!(&best_gm, Some((_, g, _)) if g.value.abs() <= gm.abs()) {
+                best_gm = Some((wp, gmi, origin));
             }
         }
     }
     match best_gm {
-        Some((wp, gm)) => {
+        // The bound around |L| reaches 0 somewhere near the phase crossover (the interval's top
+        // is then -20 log10 of ~0): the gain margin could be anything.
+        Some((wp, gm, origin)) if origin || !(gm.hi - gm.lo).is_finite() => {
+            out.notes.push(alloc::format!(
+                "gain margin not measured: its {:.0} % interval [{}, {}] dB spans more than the data can tell (the bounds around L near the phase crossover {}..{} rad/s contain L = 0, so any gain and phase); average more periods or excite more strongly",
+                100.0 * l.confidence,
+                math::sig(gm.lo, 3),
+                math::sig(gm.hi, 3),
+                math::sig(wp.lo, 3),
+                math::sig(wp.hi, 3)
+            ));
+        }
+        Some((wp, gm, _)) => {
             out.phase_crossover_rad_s = Some(wp);
             out.gain_margin_db = Some(gm);
         }
@@ -301,6 +329,32 @@ mod tests {
         assert!(wc.lo < wc.value && wc.value < wc.hi);
         assert!(pm.hi - pm.lo > 2.0 * 5.7 - 0.1, "{pm:?}"); // asin 0.1 = 5.74 deg each side
         assert!(gm.lo < gm.value - 0.8 && gm.hi > gm.value + 0.8, "{gm:?}");
+    }
+
+    #[test]
+    fn intervals_wider_than_the_circle_are_not_measured() {
+        // A confidence circle as large as |L| itself: the phase can be anything.
+        let m = achieved_margins(&loop_frf(1.2), 0.9, -90.0);
+        assert!(m.phase_margin_deg.is_none(), "{m:?}");
+        assert!(m.gain_margin_db.is_none(), "{m:?}");
+        assert!(
+            m.notes
+                .iter()
+                .any(|n| n.contains("phase margin not measured")),
+            "{:?}",
+            m.notes
+        );
+        assert!(
+            m.notes
+                .iter()
+                .any(|n| n.contains("gain margin not measured")),
+            "{:?}",
+            m.notes
+        );
+        // still measured with tight bounds
+        assert!(achieved_margins(&loop_frf(0.1), 0.9, -90.0)
+            .phase_margin_deg
+            .is_some());
     }
 
     #[test]

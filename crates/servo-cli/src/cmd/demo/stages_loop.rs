@@ -85,7 +85,15 @@ pub(super) fn stage_run(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<Pa
         logged: None,
         gains_file: Some((&gains, "the demo's gains")),
     };
-    let pid = pid_config(&src, 1e-3, Some((10.0, String::new())))?.config;
+    let resolved = pid_config(&src, 1e-3, Some((10.0, "the demo's 10 V driver".into())))?;
+    // the one line every simulating command prints: which plant, which controller
+    let hidden: Vec<String> = ctx.truth.effects.iter().map(|e| e.to_string()).collect();
+    outln!(
+        "simulated plant: the demo's motor (truth_hidden.toml: {}); controller: PID, {}",
+        hidden.join(" "),
+        resolved.describe()
+    );
+    let pid = resolved.config;
     let program = demo_program()?;
     let duration_s = program.duration_s().unwrap_or(6.0);
     let mut backend = SimBackend::new(&ctx.truth, ctx.sensors, 1e-3).context("simulator")?;
@@ -260,6 +268,8 @@ pub(super) fn stage_identify(ctx: &mut DemoContext) -> anyhow::Result<(String, V
         path_arg(&model),
     ])?;
     cmd.run()?;
+    // `servo identify -o` printed "wrote <model>" itself
+    ctx.announced.push(model.clone());
     let id = ModelFile::load(&model)?.plant()?;
     let t = &ctx.truth;
     ctx.ident_model = Some(model.clone());

@@ -8,8 +8,8 @@ pub(super) fn esc(s: &str) -> String {
         .replace('>', "&gt;")
 }
 
-/// Residual of the torque (or u-driven) balance over time and versus speed, before and after the
-/// winner, for the first record.
+/// Residual of the torque (or u-driven) balance over time and against speed, before and after
+/// the winner: one panel (`<div class="panel">`) per log.
 pub(super) fn residual_charts(
     records: &[Record],
     model: &Plant,
@@ -33,78 +33,85 @@ pub(super) fn residual_charts(
         None => None,
     };
     let sol_a = after.as_ref().and_then(|a| a.equation(eq));
-    let sel: Vec<usize> = (0..rows.len()).filter(|&i| rows.rec[i] == 0).collect();
-    let t: Vec<f64> = sel.iter().map(|&i| ds.recs[0].time_s[rows.k[i]]).collect();
-    let w: Vec<f64> = sel.iter().map(|&i| ds.recs[0].omega_f[rows.k[i]]).collect();
-    let rb: Vec<f64> = sel.iter().map(|&i| sol_b.resid[i]).collect();
-    let ra: Vec<f64> = sol_a
-        .map(|s| sel.iter().map(|&i| s.resid[i]).collect())
-        .unwrap_or_default();
     let label_a = winner.map_or(String::new(), |w| format!("with {}", w.effect));
-    let mut series = vec![Series {
-        label: "model",
-        x: &t,
-        y: &rb,
-    }];
-    if !ra.is_empty() {
-        series.push(Series {
-            label: &label_a,
+    let unit_label = format!("{} residual [{}]", eq.name(), eq.unit());
+    // One panel per log (small multiples): its residual over time and against speed.
+    let mut html = String::new();
+    for (r, rec) in ds.recs.iter().enumerate() {
+        let sel: Vec<usize> = (0..rows.len()).filter(|&i| rows.rec[i] == r).collect();
+        if sel.is_empty() {
+            continue;
+        }
+        let t: Vec<f64> = sel.iter().map(|&i| rec.time_s[rows.k[i]]).collect();
+        let w: Vec<f64> = sel.iter().map(|&i| rec.omega_f[rows.k[i]]).collect();
+        let rb: Vec<f64> = sel.iter().map(|&i| sol_b.resid[i]).collect();
+        let ra: Vec<f64> = sol_a
+            .map(|s| sel.iter().map(|&i| s.resid[i]).collect())
+            .unwrap_or_default();
+        let mut series = vec![Series {
+            label: "model",
             x: &t,
-            y: &ra,
-        });
-    }
-    let title = format!(
-        "{} residual [{}] over time ({})",
-        eq.name(),
-        eq.unit(),
+            y: &rb,
+        }];
+        if !ra.is_empty() {
+            series.push(Series {
+                label: &label_a,
+                x: &t,
+                y: &ra,
+            });
+        }
         // the file's name: a long path is not a title
-        std::path::Path::new(&ds.recs[0].source)
+        let name = std::path::Path::new(&rec.source)
             .file_name()
-            .map_or(ds.recs[0].source.clone(), |n| n
-                .to_string_lossy()
-                .into_owned())
-    );
-    let mut html = line_chart_svg(
-        &Chart {
-            title: &title,
-            x_label: "time [s]",
-            y_label: eq.unit(),
-            ..Chart::default()
-        },
-        &series,
-    )?;
-    // Residual versus speed: sort by speed so that the line reads as a scatter envelope.
-    let mut order: Vec<usize> = (0..w.len()).collect();
-    order.sort_by(|&a, &b| w[a].total_cmp(&w[b]));
-    let ws: Vec<f64> = order.iter().map(|&i| w[i]).collect();
-    let rbs: Vec<f64> = order.iter().map(|&i| rb[i]).collect();
-    let ras: Vec<f64> = if ra.is_empty() {
-        vec![]
-    } else {
-        order.iter().map(|&i| ra[i]).collect()
-    };
-    let mut series = vec![Series {
-        label: "model",
-        x: &ws,
-        y: &rbs,
-    }];
-    if !ras.is_empty() {
-        series.push(Series {
-            label: &label_a,
-            x: &ws,
-            y: &ras,
-        });
+            .map_or(rec.source.clone(), |n| n.to_string_lossy().into_owned());
+        let _ = write!(
+            html,
+            "<div class=\"panel\" data-log=\"{}\"><h3>log {} of {}: {}</h3>",
+            esc(&name),
+            r + 1,
+            ds.recs.len(),
+            esc(&name)
+        );
+        let title = format!("{} residual over time ({name})", eq.name());
+        html.push_str(&line_chart_svg(
+            &Chart {
+                title: &title,
+                x_label: "time [s]",
+                y_label: &unit_label,
+                width: 480,
+                height: 320,
+                ..Chart::default()
+            },
+            &series,
+        )?);
+        // Residual against speed: points, not a path in time.
+        let mut series = vec![Series {
+            label: "model",
+            x: &w,
+            y: &rb,
+        }];
+        if !ra.is_empty() {
+            series.push(Series {
+                label: &label_a,
+                x: &w,
+                y: &ra,
+            });
+        }
+        let title = format!("{} residual against motor speed ({name})", eq.name());
+        html.push_str(&line_chart_svg(
+            &Chart {
+                title: &title,
+                x_label: "motor speed [rad/s]",
+                y_label: &unit_label,
+                scatter: true,
+                width: 480,
+                height: 320,
+                ..Chart::default()
+            },
+            &series,
+        )?);
+        html.push_str("</div>");
     }
-    let title = format!("{} residual versus motor speed", eq.name());
-    html.push_str(&line_chart_svg(
-        &Chart {
-            title: &title,
-            x_label: "motor speed [rad/s]",
-            y_label: eq.unit(),
-            ..Chart::default()
-        },
-        &series,
-    )?);
     Ok(html)
 }
 
@@ -122,7 +129,8 @@ pub(super) fn html_report(
         "<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>servo diagnose report</title><style>\
          body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}\
          table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:4px 8px;vertical-align:top}\
-         .yes{color:#080;font-weight:bold}.no{color:#888}</style></head><body>",
+         .yes{color:#080;font-weight:bold}.no{color:#888}\
+         .panel{display:flex;flex-wrap:wrap;border-top:1px solid #ccc;margin:0.5em 0}.panel h3{width:100%;margin:0.3em 0}</style></head><body>",
     );
     let _ = write!(
         h,
@@ -153,16 +161,16 @@ pub(super) fn html_report(
     );
     h.push_str(&residual_charts(records, model, first, opts)?);
     for (step, d) in diags.iter().enumerate() {
-        let _ = write!(h, "<h2>Ranking{}</h2><table><tr><th>effect</th><th>significant</th><th>equation residual drop (held out)</th><th>simulation error drop (held out)</th><th>BIC gain</th><th>evidence</th></tr>", if diags.len() > 1 { format!(", step {}", step + 1) } else { String::new() });
+        let _ = write!(h, "<h2>Ranking{}</h2><table><tr><th>effect</th><th>significant</th><th>{}</th><th>{}</th><th>BIC gain</th><th>evidence</th></tr>", if diags.len() > 1 { format!(", step {}", step + 1) } else { String::new() }, servo_core::diagnose::phrase::RMS_DROP, servo_core::diagnose::phrase::SIM_DROP);
         for c in &d.ranking {
             let _ = write!(
                 h,
-                "<tr><td>{}</td><td class=\"{}\">{}</td><td>{:.1} %</td><td>{}</td><td>{:.1}</td><td>{}{}</td></tr>",
+                "<tr><td>{}</td><td class=\"{}\">{}</td><td>{} %</td><td>{}</td><td>{:.1}</td><td>{}{}</td></tr>",
                 c.effect,
                 if c.significant { "yes" } else { "no" },
                 if c.significant { "yes" } else if c.resolvable { "no" } else { "not resolvable" },
-                c.error_reduction_pct,
-                c.oe_reduction_pct.map_or("-".into(), |v| format!("{v:.1} %")),
+                servo_core::diagnose::phrase::pct(c.error_reduction_pct),
+                c.oe_reduction_pct.map_or("-".into(), |v| format!("{} %", servo_core::diagnose::phrase::pct(v))),
                 c.bic_gain,
                 esc(&c.evidence),
                 c.experiment.as_ref().map_or(String::new(), |e| format!("<br><i>To resolve: {}</i>", esc(e)))

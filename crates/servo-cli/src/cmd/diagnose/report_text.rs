@@ -83,8 +83,12 @@ pub(super) fn text_report(
         let _ = writeln!(s, "\nCandidates, best first:");
         let _ = writeln!(
             s,
-            "  {:<11} {:>11} {:>10} {:>10} {:>9}  refused by",
-            "effect", "significant", "eq. drop", "sim. drop", "BIC gain"
+            "  {:<11} {:>11} {:>12} {:>10} {:>9}  refused by",
+            "effect",
+            "significant",
+            servo_core::diagnose::phrase::RMS_DROP_COLUMN,
+            "sim. drop",
+            "BIC gain"
         );
         for c in &d.ranking {
             let refused = if c.significant {
@@ -99,7 +103,7 @@ pub(super) fn text_report(
             };
             let _ = writeln!(
                 s,
-                "  {:<11} {:>11} {:>9.1}% {:>10} {:>9.1}  {refused}",
+                "  {:<11} {:>11} {:>11}% {:>10} {:>9.1}  {refused}",
                 c.effect.name(),
                 if c.significant {
                     "YES"
@@ -108,9 +112,11 @@ pub(super) fn text_report(
                 } else {
                     "unresolved"
                 },
-                c.error_reduction_pct,
-                c.oe_reduction_pct
-                    .map_or("-".to_string(), |v| format!("{v:.1}%")),
+                servo_core::diagnose::phrase::pct(c.error_reduction_pct),
+                c.oe_reduction_pct.map_or("-".to_string(), |v| format!(
+                    "{}%",
+                    servo_core::diagnose::phrase::pct(v)
+                )),
                 c.bic_gain
             );
         }

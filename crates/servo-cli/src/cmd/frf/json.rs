@@ -41,7 +41,7 @@ pub(super) fn json_document(
         "design": a.design.map(|m| json!({"crossover_rad_s": m.crossover_rad_s, "phase_margin_deg": m.phase_margin_deg,
                 "gain_margin_db": if m.gain_margin_db.is_finite() { json!(m.gain_margin_db) } else { Value::Null },
                 "loop": m.loop_words})),
-        "coherence": {"fraction_above_0_9": a.fraction_above_0_9, "band_hz_above_0_9": a.band_hz_above_0_9.map(|b| vec![b.0, b.1]),
+        "coherence": {"fraction_above_0_9": a.fraction_above_0_9, "excited_bins": a.excited_bins, "band_hz_above_0_9": a.band_hz_above_0_9.map(|b| vec![b.0, b.1]),
                       "no_information_rad_s": a.no_information_rad_s.iter().map(|r| vec![r.0, r.1]).collect::<Vec<_>>()},
         "against_model": a.against_model.as_ref().map(|c| json!({
             "sentences": c.sentences,

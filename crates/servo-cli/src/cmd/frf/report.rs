@@ -13,7 +13,12 @@ pub(super) fn interval(i: &Option<Interval>) -> Value {
 
 pub(super) fn fmt_i(i: &Option<Interval>, unit: &str, what: &str) -> String {
     match i {
-        Some(i) => format!("{what} {:.2} {unit} [{:.2}, {:.2}]", i.value, i.lo, i.hi),
+        Some(i) => format!(
+            "{what} {} {unit} [{}, {}]",
+            servo_core::math::sig(i.value, 4),
+            servo_core::math::sig(i.lo, 4),
+            servo_core::math::sig(i.hi, 4)
+        ),
         None => format!("{what} not measured"),
     }
 }
@@ -31,7 +36,7 @@ pub(super) fn print_text(a: &FrfAnalysis, n_logs: usize) {
     outln!("estimate: Welch/H1, Hann window of {} samples ({:.3} Hz resolution), {:.0} % overlap, {} segments (~{:.1} independent averages), {:.0} % bounds", sp.segment_len, df, 100.0 * sp.overlap, sp.segments, sp.averages, 100.0 * a.welch.confidence);
     outln!("plant: {}", a.method);
     match a.band_hz_above_0_9 {
-        Some((lo, hi)) => outln!("coherence: >= 0.9 in {:.0} % of the bins, between {lo:.3} and {hi:.2} Hz ({:.2}-{:.1} rad/s)", 100.0 * a.fraction_above_0_9, lo * std::f64::consts::TAU, hi * std::f64::consts::TAU),
+        Some((lo, hi)) => outln!("coherence: >= 0.9 in {} % of the {} excited bins (input power >= 1 % of its peak), between {} and {} Hz ({}-{} rad/s)", servo_core::math::sig(100.0 * a.fraction_above_0_9, 3), a.excited_bins, servo_core::math::sig(lo, 3), servo_core::math::sig(hi, 3), servo_core::math::sig(lo * std::f64::consts::TAU, 3), servo_core::math::sig(hi * std::f64::consts::TAU, 3)),
         None => outln!("coherence: never reaches 0.9: the data carry little information on the frequency response (steps and holds excite few frequencies; use a chirp or multisine)"),
     }
     let no_info = &a.no_information_rad_s;
@@ -43,7 +48,7 @@ pub(super) fn print_text(a: &FrfAnalysis, n_logs: usize) {
         .collect();
     if !shown.is_empty() {
         outln!(
-            "no information (coherence < 0.5) at {} rad/s{}",
+            "no information (coherence < 0.5 where the input was excited) at {} rad/s{}",
             shown.join(", "),
             if no_info.len() > 6 { ", ..." } else { "" }
         );
