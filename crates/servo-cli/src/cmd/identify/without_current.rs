@@ -117,6 +117,24 @@ impl super::Identify {
                     "widening": (e.std_err > 0.0).then(|| e.std_err_total / e.std_err),
                 });
             }
+            // A linear axis: the same estimates in the user's units (kg, N s/m, N at the load).
+            if let Some(axis) = crate::axis::Axis::of(&params) {
+                v["transmission"] = axis.json();
+                for e in &est {
+                    let (key, unit, k) = match e.key {
+                        "j_eq" => ("m_eq_kg", "kg", axis.mass_per_j()),
+                        "b_eq" => ("b_eq_n_s_m", "N s/m", axis.mass_per_j()),
+                        "tau_sf" => ("f_c_n", "N", axis.force_per_tau()),
+                        _ => continue,
+                    };
+                    v[key] = serde_json::json!({
+                        "value": k * e.value, "unit": unit, "side": "load",
+                        "method": "u-driven balance", "std_err": k * e.std_err,
+                        "std_err_with_drive_tolerance": k * e.std_err_total,
+                        "widening": (e.std_err > 0.0).then(|| e.std_err_total / e.std_err),
+                    });
+                }
+            }
             crate::json_out::emit(&v)?;
         } else {
             out!("{}", crate::log_part::text(parts));
@@ -133,6 +151,22 @@ impl super::Identify {
                     e.std_err_total,
                     if e.std_err > 0.0 { e.std_err_total / e.std_err } else { f64::NAN }
                 );
+            }
+            if let Some(axis) = crate::axis::Axis::of(&params) {
+                outln!("{} (load side):", axis.describe());
+                for e in &est {
+                    let (name, unit, k) = match e.key {
+                        "j_eq" => ("m_eq", "kg", axis.mass_per_j()),
+                        "b_eq" => ("b_eq", "N s/m", axis.mass_per_j()),
+                        "tau_sf" => ("F_c", "N", axis.force_per_tau()),
+                        _ => continue,
+                    };
+                    outln!(
+                        "  {name:<7} = {:.4e} {unit:<10} +/- {:.2e} with the drive-constant tolerance",
+                        k * e.value,
+                        k * e.std_err_total
+                    );
+                }
             }
             for line in &effect_lines {
                 outln!("  {line}");
