@@ -180,3 +180,67 @@ pub fn consistency_with(
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A catalogue kind whose halves are compared (named through the registry).
+    fn compared_kind() -> EffectKind {
+        EffectKind::ALL
+            .into_iter()
+            .find(|k| !k.model().compared().is_empty())
+            .unwrap()
+    }
+
+    fn estimate(key: &'static str, value: f64) -> ParamEstimate {
+        ParamEstimate {
+            effect: Some(compared_kind()),
+            key,
+            unit: "-",
+            value,
+            std_err: None,
+            fitted: true,
+        }
+    }
+
+    /// Issue 30: a halves check printed "3.2334 vs 3.2334 V" as a failure. Two values that
+    /// differ print differently, and the verdict word matches the outcome.
+    #[test]
+    fn a_halves_check_shows_the_difference_it_judges() {
+        let kind = compared_kind();
+        let key = kind.model().compared()[0];
+        let th = Thresholds::default();
+        let close = agree(
+            "same in both halves",
+            "the halves",
+            kind,
+            &[estimate(key, 3.23341)],
+            &[estimate(key, 3.23344)],
+            &th,
+        );
+        assert!(close.passed, "{}", close.detail);
+        assert!(close.detail.contains("agrees"), "{}", close.detail);
+        let (a, b) = close
+            .detail
+            .split_once(" vs ")
+            .map(|(a, b)| {
+                (
+                    a.rsplit(' ').next().unwrap_or(""),
+                    b.split(' ').next().unwrap_or(""),
+                )
+            })
+            .unwrap_or_default();
+        assert_ne!(a, b, "the two values print alike: {}", close.detail);
+        let far = agree(
+            "same in both halves",
+            "the halves",
+            kind,
+            &[estimate(key, 3.2)],
+            &[estimate(key, 1.6)],
+            &th,
+        );
+        assert!(!far.passed, "{}", far.detail);
+        assert!(far.detail.contains("differs"), "{}", far.detail);
+    }
+}
