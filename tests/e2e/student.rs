@@ -171,7 +171,7 @@ fn render_and_check(svg_path: &Path, png: &Path) -> Vec<String> {
     );
     pixmap.save_png(png).unwrap();
     let boxes = text_boxes(&tree);
-    if fontdb().len() > 0 {
+    if !fontdb().is_empty() {
         assert!(
             !boxes.is_empty(),
             "{}: no text rendered",

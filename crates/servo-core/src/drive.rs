@@ -228,7 +228,7 @@ impl Drive {
                 });
             }
             let (ok, what) = match key {
-                "r_supply_ohm" | "t_dead_s" => (v >= 0.0 && v < 1e4, "a finite number >= 0"),
+                "r_supply_ohm" | "t_dead_s" => ((0.0..1e4).contains(&v), "a finite number >= 0"),
                 "duty_limit" => (v > 0.0 && v <= 1.0, "a fraction in (0, 1]"),
                 "bandwidth_hz" => (v > 0.0 && v < 1e7, "a positive frequency in Hz"),
                 _ => (v > 0.0 && v < 1e6, "a positive finite number"),

@@ -65,7 +65,7 @@ mod tests {
         };
         let model = crate::plant::Plant::from_params(truth.params).unwrap();
         assert_eq!(
-            diagnose(&[log.clone()], &model, &opts).err(),
+            diagnose(core::slice::from_ref(&log), &model, &opts).err(),
             Some(FitError::Cancelled)
         );
         // The same options with the flag cleared run to the end.

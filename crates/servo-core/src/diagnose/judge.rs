@@ -20,12 +20,6 @@ use crate::math;
 use alloc::string::String;
 use alloc::vec::Vec;
 
-/// Judges candidate `kind` fitted as `cand` against `base` (its balance: `balance_rms` over the
-/// noise floor `balance_floor`) and the simulation `reference`: the information criterion, the
-/// held-out residual and simulation drops, then the practical-significance checks and the
-/// effect's constraints. `given_others`: `kind` is a member of a joint model judged given the
-/// other members (its share of the structured error may be measured in the motion).
-
 /// Judges every fitted candidate of `survey` (in parallel): [`judge`], then the mimic checks
 /// ([`structure_check`], [`resonance_check`]) of those that pass.
 ///
@@ -221,6 +215,12 @@ pub(super) fn simulation_bic(x: f64, y: f64, n: f64, kind: EffectKind, th: &Thre
     n * math::ln(x * x / (y * y)) - th.bic_search_charge * q * math::ln(n)
 }
 
+/// Judges candidate `kind` fitted as `cand` against `base` (its balance: `balance_rms` over the
+/// noise floor `balance_floor`) and the simulation `reference`: the information criterion, the
+/// held-out residual and simulation drops, then the practical-significance checks and the
+/// effect's constraints. `given_others`: `kind` is a member of a joint model judged given the
+/// other members (its share of the structured error may be measured in the motion).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn judge(
     ds: &Dataset,
     labels: &regimes::Labels,
