@@ -183,3 +183,20 @@ mod sig_tests {
         assert_eq!(sig(1.5e6, 2), "1.5e6");
     }
 }
+
+/// Lag-1 autocorrelation of a residual (rows in order), clamped to [0, 0.99]: the correlation
+/// the effective number of independent rows of an information criterion is computed with.
+pub fn lag1(r: &[f64]) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for w in r.windows(2) {
+        num += w[0] * w[1];
+    }
+    for v in r {
+        den += v * v;
+    }
+    if den > 0.0 {
+        (num / den).clamp(0.0, 0.99)
+    } else {
+        0.0
+    }
+}

@@ -34,10 +34,7 @@ impl Base {
 
     /// The noise floor of balance `eq` (0 when it has none).
     pub fn floor_of(&self, eq: Equation) -> f64 {
-        self.floors
-            .iter()
-            .find(|(e, _)| *e == eq)
-            .map_or(0.0, |(_, f)| *f)
+        structure::floor_in(&self.floors, eq)
     }
 }
 

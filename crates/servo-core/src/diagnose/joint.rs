@@ -53,10 +53,7 @@ pub(super) struct Context<'a> {
 
 impl Context<'_> {
     pub(super) fn floor_of(&self, eq: Equation) -> f64 {
-        self.floors
-            .iter()
-            .find(|(e, _)| *e == eq)
-            .map_or(0.0, |(_, f)| *f)
+        structure::floor_in(self.floors, eq)
     }
 }
 

@@ -36,12 +36,7 @@ pub(super) fn all(
     opts: &DiagnoseOptions,
 ) -> Vec<Candidate> {
     let th = &opts.thresholds;
-    let floor_of = |eq: Equation| {
-        floors
-            .iter()
-            .find(|(e, _)| *e == eq)
-            .map_or(0.0, |(_, f)| *f)
-    };
+    let floor_of = |eq: Equation| structure::floor_in(floors, eq);
     let sols: Vec<&EqSolution> = core::iter::once(&base.mech)
         .chain(base.elec.as_ref())
         .collect();
@@ -187,22 +182,6 @@ pub(super) fn resonance_check(
     })
 }
 
-/// Lag-1 autocorrelation of a residual (rows in order).
-fn lag1(r: &[f64]) -> f64 {
-    let (mut num, mut den) = (0.0, 0.0);
-    for w in r.windows(2) {
-        num += w[0] * w[1];
-    }
-    for v in r {
-        den += v * v;
-    }
-    if den > 0.0 {
-        (num / den).clamp(0.0, 0.99)
-    } else {
-        0.0
-    }
-}
-
 /// The information criterion of `kind` judged on the simulation alone (a gear play): the
 /// simulation cost `x` [rad] without it against `y` with it over `n` independent terms, each
 /// nonlinear parameter searched costing [`Thresholds::bic_search_charge`] (as in the equation's criterion).
@@ -265,9 +244,9 @@ pub(super) fn judge(
     // noise's correlation.
     let th = &opts.thresholds;
     let rho = if c.rss_fit < frac(th.dominant_residual_pct) * b.rss_fit {
-        lag1(&c.resid)
+        math::lag1(&c.resid)
     } else {
-        lag1(&b.resid)
+        math::lag1(&b.resid)
     };
     let n_eff = (b.n_fit as f64 * (1.0 - rho) / (1.0 + rho)).max(1.0);
     let q_lin = c.p.saturating_sub(b.p) as f64;

@@ -90,6 +90,15 @@ fn filter_gains(r: &RecData) -> (f64, f64, f64) {
     (ss(&h), ss(&h1), ss(&h2))
 }
 
+/// The noise floor of balance `eq` in `floors` (per balance, [`noise_floor`]); 0 when it has
+/// none.
+pub fn floor_in(floors: &[(Equation, f64)], eq: Equation) -> f64 {
+    floors
+        .iter()
+        .find(|(e, _)| *e == eq)
+        .map_or(0.0, |(_, f)| *f)
+}
+
 /// Noise floor (RMS) of an equation's residual [unit]: white current noise `sigma_i_a` and the
 /// encoder quantisation of the angle (uniform, q / sqrt(12)), through the filter and the
 /// derivatives each term takes.

@@ -87,21 +87,6 @@ pub struct Judged {
     pub checks: Vec<(&'static str, bool, String)>,
 }
 
-fn lag1(r: &[f64]) -> f64 {
-    let (mut num, mut den) = (0.0, 0.0);
-    for w in r.windows(2) {
-        num += w[0] * w[1];
-    }
-    for v in r {
-        den += v * v;
-    }
-    if den > 0.0 {
-        (num / den).clamp(0.0, 0.99)
-    } else {
-        0.0
-    }
-}
-
 /// The simulation reference: the base model's held-out output-error cost.
 pub fn reference_oe(ds: &Dataset, base: &Solved) -> Option<f64> {
     let rigid = ds.refine_rigid_on_simulation(&base.plant);
@@ -133,7 +118,7 @@ pub fn judge(
         (Some(b), Some(c)) => (b, c),
         _ => return Err(FitError::BadModel(String::from("equation missing"))),
     };
-    let rho = lag1(&b.resid);
+    let rho = math::lag1(&b.resid);
     let n_eff = (b.n_fit as f64 * (1.0 - rho) / (1.0 + rho)).max(1.0);
     let n_unknown = effect.values().iter().filter(|v| v.is_nan()).count();
     let q_lin = c.p.saturating_sub(b.p) as f64;
@@ -571,7 +556,7 @@ pub fn discover(
     let mut rejected = Vec::new();
     let mut found = Vec::new();
     while let Some(s) = solve(&active, &fit_rows) {
-        let rho = lag1(resid);
+        let rho = math::lag1(resid);
         let infl = math::sqrt((1.0 + rho) / (1.0 - rho));
         let half = fit_rows.len() / 2;
         let (h1, h2) = (
