@@ -113,6 +113,7 @@ pub enum DriveError {
         why: &'static str,
     },
     /// The log's input column does not match the drive.
+    #[cfg(feature = "alloc")]
     #[error("{log}: {why}")]
     Input { log: String, why: String },
 }

@@ -146,6 +146,7 @@ pub fn logspace(a: f64, b: f64, n: usize) -> alloc::vec::Vec<f64> {
 /// and in scientific notation (`1.16e-7`) outside: `sig(0.012345, 3)` is `0.0123`,
 /// `sig(20765.5, 3)` is `20800`, `sig(-1.1604e-7, 3)` is `-1.16e-7`. Non-finite values print
 /// as Rust prints them (`NaN`, `inf`).
+#[cfg(feature = "alloc")]
 pub fn sig(x: f64, digits: usize) -> alloc::string::String {
     let digits = digits.max(1);
     if !x.is_finite() {

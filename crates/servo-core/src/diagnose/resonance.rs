@@ -75,8 +75,9 @@ pub fn prominence_needed(k_eff: f64, bins: f64, alpha: f64) -> f64 {
     let nu = 2.0 * k_eff.max(1.0);
     let c = 2.0 / (9.0 * nu);
     let z = normal_upper_quantile(alpha / bins.max(1.0));
-    let q = (1.0 - c + z * math::sqrt(c)).powi(3);
-    let med = (1.0 - c).powi(3);
+    let cube = |x: f64| x * x * x;
+    let q = cube(1.0 - c + z * math::sqrt(c));
+    let med = cube(1.0 - c);
     (q / med).max(MIN_PROMINENCE)
 }
 
