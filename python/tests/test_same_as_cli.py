@@ -104,3 +104,28 @@ def test_in_memory_logs_equal_their_csv(story, cli_json, tmp_path):
     # the log's name differs (a temporary file); everything else is the same
     got = re.sub(r'"[^"]*servo-[^"/]+/log0\.csv"', '"LOG"', json.dumps(r.to_dict()))
     assert got == json.dumps(want).replace(json.dumps(str(rc_csv)), '"LOG"')
+
+
+def test_trend_equals_cli_and_reuses_its_cache(story, cli_json, tmp_path):
+    """servo.trend is `servo trend --json`: the same document, and a second call on the same
+    cache fits nothing again."""
+    import shutil
+    fleet = tmp_path / "fleet"
+    for unit in ("u1", "u2"):
+        (fleet / unit).mkdir(parents=True)
+        shutil.copy(story / "ol.mcap", fleet / unit / "ol.mcap")
+        shutil.copy(story / "cl.mcap", fleet / unit / "cl.mcap")
+    cache = tmp_path / "cache"
+    r = servo.trend(fleet, servo.Model.load(story / "model.toml"), cache=str(cache), jobs=1,
+                    limits={"tau_sf": 0.05})
+    d = r.to_dict()
+    assert d["schema"] == "servo.trend/1"
+    assert [a["actuator"] for a in d["actuators"]] == ["u1", "u2"], d["actuators"]
+    assert d["cache"]["new"] == 4 and d["cache"]["hits"] == 0, d["cache"]
+    want = cli_json("trend", fleet, "--model", story / "model.toml", "--cache", cache, "--jobs",
+                    "1", "--limit", "tau_sf=0.05", "--quiet")
+    assert want["cache"]["hits"] == 4 and want["cache"]["new"] == 0, want["cache"]
+    assert [a["parameters"] for a in d["actuators"]] == [a["parameters"] for a in want["actuators"]]
+    again = servo.trend(fleet, story / "model.toml", cache=str(cache), jobs=1,
+                        limits={"tau_sf": 0.05})
+    assert again.cache["hits"] == 4 and again.cache["new"] == 0, again.cache

@@ -500,3 +500,50 @@ fn the_logged_feedforward_is_replayed() {
     );
     assert!(f(&n["controller"]["check_rms_v"]) > 0.1);
 }
+
+/// Every simulating command says in one line which plant and which controller it simulated:
+/// `compare` in closed loop (the PID of the run, Tustin here), open loop (none in the replay, the
+/// log's PID named beside it), and `diagnose` (none: the logged u drives the model).
+#[test]
+fn compare_and_diagnose_say_their_plant_and_controller_in_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_gains, model, log) = tustin_square_run(dir.path());
+    let line_of = |out: &str| -> String {
+        let lines: Vec<&str> = out
+            .lines()
+            .filter(|l| l.starts_with("simulated plant:"))
+            .collect();
+        assert_eq!(lines.len(), 1, "not one plant line:\n{out}");
+        lines[0].to_string()
+    };
+    let (l, m) = (log.to_str().unwrap(), model.to_str().unwrap());
+    let (ok, out, err) = servo(&["compare", l, "--model", m]);
+    assert!(ok, "{err}\n{out}");
+    let line = line_of(&out);
+    assert!(
+        line.contains(m) && line.contains("no effects beyond") && line.contains("controller: PID"),
+        "{line}"
+    );
+    assert!(line.contains("Tustin"), "{line}");
+    assert!(!out.lines().any(|l| l.starts_with("controller: ")), "{out}");
+
+    let (ok, out, err) = servo(&["compare", l, "--model", m, "--mode", "speed"]);
+    assert!(ok, "{err}\n{out}");
+    let line = line_of(&out);
+    assert!(
+        line.contains("controller: none in the replay")
+            && line.contains("the log's controller: PID"),
+        "{line}"
+    );
+
+    let (ok, out, err) = servo(&["diagnose", l, "--model", m]);
+    assert!(ok, "{err}\n{out}");
+    let line = line_of(&out);
+    assert!(
+        line.contains(m)
+            && line.contains("no effects beyond")
+            && line.contains("controller: none in the simulation")
+            && line.contains("0.25 s"),
+        "{line}"
+    );
+}

@@ -516,6 +516,51 @@ fn multisine_run_and_frf_say_what_was_measured() {
         svg.contains("loop L: phase") && svg.contains("crossover"),
         "no loop Bode plot"
     );
+    // The bounds follow the estimate: no spike from a bin between the multisine's lines, where
+    // the noise alone passes coherence 0.5 and the circle is around nothing. In the magnitude
+    // panel no point of the upper bound (green) sits more than a quarter of the plot's height
+    // above the estimate (blue) at the same x pixel (the old plot: spikes of 30 dB, half the
+    // height).
+    let panel = svg.split("<svg x=").nth(1).expect("a first panel");
+    let points = |stroke: &str| -> Vec<(i64, i64)> {
+        let mut v = Vec::new();
+        for pl in panel.split("<polyline").skip(1) {
+            let tag = pl.split("/>").next().unwrap_or("");
+            if !tag.contains(&format!("stroke=\"{stroke}\"")) {
+                continue;
+            }
+            let pts = tag.split("points=\"").nth(1).unwrap_or("").split('"').next().unwrap_or("");
+            for xy in pts.split_whitespace() {
+                if let Some((x, y)) = xy.split_once(',') {
+                    v.push((x.parse().unwrap(), y.parse().unwrap()));
+                }
+            }
+        }
+        v
+    };
+    let measured = points("#1F77B4");
+    let upper = points("#2CA02C");
+    assert!(measured.len() > 10 && upper.len() > 10, "no estimate or bound drawn");
+    let (top, bottom) = measured
+        .iter()
+        .chain(&upper)
+        .fold((i64::MAX, i64::MIN), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    let height = (bottom - top).max(1) as f64;
+    let worst = upper
+        .iter()
+        .filter_map(|&(x, y)| {
+            measured
+                .iter()
+                .filter(|m| m.0 == x)
+                .map(|m| (m.1 - y) as f64 / height)
+                .reduce(f64::min)
+        })
+        .fold(0.0f64, f64::max);
+    assert!(
+        worst < 0.25,
+        "the upper bound spikes {:.0} % of the plot's height above the estimate",
+        100.0 * worst
+    );
     let problems = render_and_check(&plot, &png_dir().join("frf_multisine.png"));
     assert!(problems.is_empty(), "{}", problems.join("\n"));
 }

@@ -283,3 +283,193 @@ fn a_fleet_s_wear_is_found_forecast_and_cached() {
         "{text}"
     );
 }
+
+/// `path`'s CSV with two columns more: `unit_id` (the actuator, text) and `unix_time_s` (the
+/// recording time, the same on every row).
+fn add_columns(path: &Path, unit: &str, unix_s: i64) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut out = String::new();
+    for (i, line) in text.lines().enumerate() {
+        if line.starts_with('#') {
+            out.push_str(line);
+        } else if i == 0 || !line.chars().next().is_some_and(|c| c.is_ascii_digit() || c == '-') {
+            out.push_str(&format!("{line},unit_id,unix_time_s"));
+        } else {
+            out.push_str(&format!("{line},{unit},{unix_s}"));
+        }
+        out.push('\n');
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+fn run_json(args: &[&str]) -> serde_json::Value {
+    let (ok, out, err) = servo_e2e::servo(args);
+    assert!(ok, "servo {args:?} failed: {err}");
+    serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"))
+}
+
+/// `--group-by FIELD` groups by a column's value (two units in one folder); the times come from
+/// each log's own source: a CSV date column, an MCAP run's start, else the modification time,
+/// each said in the log's `time_from`.
+#[test]
+fn trend_groups_by_a_field_and_takes_each_log_s_time_from_its_source() {
+    let _cpu = servo_e2e::cpu_heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let mixed = tmp.path().join("mixed");
+    // 2 x 3 CSV logs, all in the folder `arm-3`, units A and B, dated a week apart.
+    let t0 = 86_400 * servo_cli::trend::when::days_from_civil(2026, 1, 5);
+    for k in 0..6 {
+        write_log(&mixed, "arm-3", k);
+        let p = mixed.join("arm-3").join(date_name(k));
+        let unit = if k % 2 == 0 { "A" } else { "B" };
+        add_columns(&p, unit, t0 + 7 * 86_400 * k as i64);
+    }
+    let model = tmp.path().join("fleet.toml");
+    write_model(&model);
+    let cache = tmp.path().join("cache");
+    let (d, m, c) = (
+        mixed.to_str().unwrap(),
+        model.to_str().unwrap(),
+        cache.to_str().unwrap(),
+    );
+    let v = run_json(&[
+        "trend", d, "--model", m, "--cache", c, "--group-by", "unit_id", "--quiet", "--json",
+    ]);
+    let acts = v["actuators"].as_array().unwrap();
+    let names: Vec<&str> = acts.iter().map(|a| a["actuator"].as_str().unwrap()).collect();
+    assert_eq!(names, ["A", "B"], "{}", v["actuators"]);
+    for a in acts {
+        assert_eq!(a["logs"].as_array().unwrap().len(), 3, "{a}");
+        for l in a["logs"].as_array().unwrap() {
+            assert_eq!(l["time_from"], "column:unix_time_s", "{l}");
+            // the date of the column, not the file's modification time (today)
+            let t = l["time_unix_s"].as_f64().unwrap();
+            assert!(
+                (t0 as f64..(t0 + 6 * 7 * 86_400) as f64).contains(&t),
+                "{l}"
+            );
+        }
+    }
+    // the same logs by folder (the default): one actuator, times still from the column
+    let v = run_json(&["trend", d, "--model", m, "--cache", c, "--quiet", "--json"]);
+    assert_eq!(v["actuators"].as_array().unwrap().len(), 1, "{v}");
+    assert_eq!(v["cache"]["hits"], 6, "{}", v["cache"]);
+
+    // An MCAP run dates itself; a CSV without a date column takes its modification time, and
+    // the text says so.
+    let other = tmp.path().join("other");
+    std::fs::create_dir_all(&other).unwrap();
+    let mcap = other.join("run.mcap");
+    let (ok, _, err) = servo_e2e::servo(&[
+        "run",
+        "--voltage",
+        "prbs:amp=4,bit=0.2",
+        "--duration",
+        "3",
+        "--log",
+        mcap.to_str().unwrap(),
+        "--progress",
+        "never",
+    ]);
+    assert!(ok, "{err}");
+    write_log(&other, "arm-2", 0);
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64();
+    let lab = tmp.path().join("lab.toml");
+    let (ok, out, err) = servo_e2e::servo(&["params"]);
+    assert!(ok, "{err}");
+    std::fs::write(&lab, out).unwrap();
+    let v = run_json(&[
+        "trend",
+        other.to_str().unwrap(),
+        "--model",
+        lab.to_str().unwrap(),
+        "--cache",
+        c,
+        "--group-by",
+        "file",
+        "--quiet",
+        "--json",
+    ]);
+    let mut sources: Vec<(String, f64)> = v["actuators"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|a| a["logs"].as_array().unwrap().iter())
+        .map(|l| {
+            (
+                l["time_from"].as_str().unwrap().to_string(),
+                l["time_unix_s"].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    sources.sort_by(|a, b| a.0.cmp(&b.0));
+    assert_eq!(sources.len(), 2, "{v}");
+    assert_eq!(sources[0].0, "mcap", "{sources:?}");
+    assert_eq!(sources[1].0, "mtime", "{sources:?}");
+    for (src, t) in &sources {
+        assert!((t - now).abs() < 600.0, "{src}: {t} is not about now ({now})");
+    }
+}
+
+/// A run killed halfway resumes from the cache: what was fitted before the kill is not fitted
+/// again, and the rest is.
+#[test]
+fn an_interrupted_trend_resumes_from_the_cache() {
+    let _cpu = servo_e2e::cpu_heavy();
+    let tmp = tempfile::tempdir().unwrap();
+    let fleet = tmp.path().join("fleet");
+    const N: usize = 12;
+    for k in 0..N {
+        write_log(&fleet, "arm-2", k);
+    }
+    let model = tmp.path().join("fleet.toml");
+    write_model(&model);
+    let cache = tmp.path().join("cache");
+    let args = [
+        "trend",
+        fleet.to_str().unwrap(),
+        "--model",
+        model.to_str().unwrap(),
+        "--cache",
+        cache.to_str().unwrap(),
+        "--jobs",
+        "1",
+        "--quiet",
+    ];
+    let mut child = std::process::Command::new(servo_e2e::servo_bin())
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let entries = || {
+        std::fs::read_dir(&cache)
+            .map(|d| {
+                d.filter_map(Result::ok)
+                    .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
+                    .count()
+            })
+            .unwrap_or(0)
+    };
+    let t = std::time::Instant::now();
+    while entries() < 3 && t.elapsed().as_secs() < 300 {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    let before = entries();
+    assert!(
+        (1..N).contains(&before),
+        "{before} cache entries at the kill: not halfway"
+    );
+    let (ok, text, err) = servo_e2e::servo(&args);
+    assert!(ok, "the resumed run failed: {err}");
+    let want = format!("{before} from the cache, {} fitted, 0 failed", N - before);
+    assert!(text.contains(&want), "expected `{want}`:\n{text}");
+}

@@ -21,6 +21,10 @@ pub struct Chart<'a> {
     pub integer_x: bool,
     /// Points instead of lines (a residual against a state: samples, not a path in time).
     pub scatter: bool,
+    /// One line through the valid points however far apart in x (a frequency response measured
+    /// on a multisine's sparse lines). Otherwise a jump of more than 5 median steps in x starts
+    /// a new line (a log with a hole). Non-finite values break a line either way.
+    pub join_gaps: bool,
     pub width: u32,
     pub height: u32,
 }
@@ -34,6 +38,7 @@ impl Default for Chart<'_> {
             log_x: false,
             integer_x: false,
             scatter: false,
+            join_gaps: false,
             width: 900,
             height: 400,
         }
@@ -80,13 +85,13 @@ fn bounds(series: &[Series], log_x: bool) -> ((f64, f64), (f64, f64)) {
 /// The points of `s` cut into runs that a line may join: a non-finite value (an empty bin, a
 /// missing sample) ends a run, and so does a step in x more than 5 times the median step (a
 /// time gap between records or segments).
-fn runs(s: &Series) -> Vec<Vec<(f64, f64)>> {
+fn runs(s: &Series, join_gaps: bool) -> Vec<Vec<(f64, f64)>> {
     let mut steps: Vec<f64> =
         s.x.windows(2)
             .map(|w| (w[1] - w[0]).abs())
             .filter(|d| d.is_finite() && *d > 0.0)
             .collect();
-    let gap = if steps.len() >= 8 {
+    let gap = if steps.len() >= 8 && !join_gaps {
         steps.sort_by(f64::total_cmp);
         5.0 * steps[steps.len() / 2]
     } else {
@@ -298,7 +303,7 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
                 for (i, s) in series.iter().enumerate() {
                     let color = COLORS[i % COLORS.len()];
                     if chart.scatter {
-                        let pts: Vec<(f64, f64)> = runs(s).into_iter().flatten().collect();
+                        let pts: Vec<(f64, f64)> = runs(s, chart.join_gaps).into_iter().flatten().collect();
                         let pts = thin_points(pts, x0, x1, y0, y1, columns);
                         let dots = ctx
                             .draw_series(pts.into_iter().map(|p| Circle::new(p, 1, color.filled())))
@@ -308,7 +313,7 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
                         continue;
                     }
                     // one line per run of valid points: no line across a gap
-                    for (j, run) in runs(s).into_iter().enumerate() {
+                    for (j, run) in runs(s, chart.join_gaps).into_iter().enumerate() {
                         let run = decimate(run, x0, x1, columns, chart.log_x);
                         let line = ctx
                             .draw_series(LineSeries::new(run, color.stroke_width(1)))

@@ -24,7 +24,7 @@ pub use added::{Added, ParseAdded};
 pub use plots::{compare_figures_svg, compare_figures_svg_on, stack_svg};
 use report_json::*;
 use report_text::*;
-pub use report_text::{controller_description, controller_words};
+pub use report_text::{controller_description, controller_words, plant_and_controller};
 
 pub use servo_core::compare::logs::LadderStep;
 use servo_core::compare::logs::{
@@ -345,6 +345,7 @@ impl Compare {
                     .unwrap_or_default(),
                 self.plot.as_deref(),
                 axis.as_ref(),
+                &self.model,
             );
         }
         Ok((ladder, current))

@@ -225,6 +225,7 @@ impl Diagnose {
             crate::json_out::emit(&v)?;
         } else {
             out!("{}", crate::log_part::text(&parts));
+            outln!("{}", plant_and_controller(&self.model, &model, &opts));
             out!("{}", text_report(first, &ladder, &diags, self.auto, &opts));
             if let Some(axis) = crate::axis::Axis::of(&model_file) {
                 out!("{}", linear_text(&axis, last, &ladder));

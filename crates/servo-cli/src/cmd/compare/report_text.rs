@@ -13,6 +13,7 @@ pub(super) fn print_text(
     save: &[String],
     plot: Option<&Path>,
     axis: Option<&crate::axis::Axis>,
+    model: &Path,
 ) {
     let lin = opts.metres_per_rad;
     if let Some(a) = axis {
@@ -30,9 +31,7 @@ pub(super) fn print_text(
             r.dt_s
         );
         outln!("mode: {} -- {}", r.mode.name(), mc.reason);
-        if let Some(line) = controller_description(log) {
-            outln!("{line}");
-        }
+        outln!("{}", plant_and_controller(model, &c.plant, &r.mode, log));
         if let Some(line) = controller_words(log) {
             outln!("{line}");
         }
@@ -190,6 +189,49 @@ pub fn controller_words(log: &LogData) -> Option<String> {
         }
     }
     Some(s)
+}
+
+/// The one line every simulating command prints: which plant (the model file and its effects)
+/// and which controller structure the replay of `log` in `mode` ran.
+pub fn plant_and_controller(
+    model: &Path,
+    plant: &servo_core::plant::Plant,
+    mode: &ReplayMode,
+    log: &LogData,
+) -> String {
+    let mut effects: Vec<String> = plant
+        .effects
+        .iter()
+        .map(|e| e.kind.name().to_string())
+        .collect();
+    effects.extend(plant.custom.iter().map(|e| format!("{} (user-defined)", e.name())));
+    let effects = if effects.is_empty() {
+        String::from("no effects beyond the base model")
+    } else {
+        format!("effects: {}", effects.join(", "))
+    };
+    let logged = log
+        .controller
+        .as_ref()
+        .map(|c| format!("; the log's controller: PID, {}", c.describe()))
+        .unwrap_or_default();
+    let controller = match (mode, &log.controller) {
+        (ReplayMode::ClosedLoop, Some(c)) => format!("controller: PID, {}", c.describe()),
+        (ReplayMode::ClosedLoop, None) => String::from("controller: unknown"),
+        (ReplayMode::Speed, _) => format!(
+            "controller: none in the replay (open loop: the logged u drives the model from the first measured state){logged}"
+        ),
+        (ReplayMode::KStep { k }, _) => format!(
+            "controller: none in the replay (the logged u drives the model {k} samples ahead of each measured state){logged}"
+        ),
+        (ReplayMode::Segments { len }, _) => format!(
+            "controller: none in the replay (the logged u drives the model, restarted from the measured state every {len} samples){logged}"
+        ),
+    };
+    format!(
+        "simulated plant: the model of {} ({effects}); {controller}",
+        model.display()
+    )
 }
 
 /// The controller of the replay in words: every part with where it came from.

@@ -29,6 +29,33 @@ pub(super) fn headline(ladder: &[Rung], last: &Diagnosis) -> String {
     }
 }
 
+/// The one line every simulating command prints: which plant (the model file, its effects, its
+/// base refitted) and which controller: none, the logged input drives the model over short
+/// horizons from the measured state (the same on closed-loop logs).
+pub(super) fn plant_and_controller(
+    model_path: &std::path::Path,
+    model: &servo_core::plant::Plant,
+    opts: &DiagnoseOptions,
+) -> String {
+    let mut effects: Vec<String> = model
+        .effects
+        .iter()
+        .map(|e| e.kind.name().to_string())
+        .collect();
+    effects.extend(model.custom.iter().map(|e| format!("{} (user-defined)", e.name())));
+    let effects = if effects.is_empty() {
+        String::from("no effects beyond the base model")
+    } else {
+        format!("effects: {}", effects.join(", "))
+    };
+    format!(
+        "simulated plant: the model of {} ({effects}; base parameters refitted on the logs, each candidate effect fitted with them); \
+         controller: none in the simulation (the logged u drives the model over {} s horizons from the measured state, on closed-loop logs too)",
+        model_path.display(),
+        servo_core::math::sig(opts.fit.oe_horizon_s, 3)
+    )
+}
+
 pub(super) fn where_it_fails(d: &Diagnosis) -> String {
     let mut s = String::new();
     for (eq, rms, share, occ) in &d.base.equations {

@@ -2,7 +2,17 @@
 //! and the loop's Bode plot with the achieved margins marked.
 
 use super::*;
-use servo_core::frf::analysis::FrfAnalysis;
+use servo_core::frf::analysis::{excited_bins, FrfAnalysis};
+
+/// The bins a Bode plot shows: coherence >= 0.5 on a bin the excitation reached (input power
+/// >= 1 % of its peak). Between a multisine's lines the coherence of the noise alone often
+/// passes 0.5, and those bins' bounds, from a circle around nothing, zig-zagged the plot.
+pub fn plotted_bins(a: &FrfAnalysis, f: &Estimate) -> Vec<usize> {
+    let excited = excited_bins(&a.spectra, f);
+    f.coherent(0.5)
+        .filter(|&i| excited.get(i).copied().unwrap_or(true))
+        .collect()
+}
 
 /// The loop L's magnitude and phase (bins with coherence >= 0.5), the 0 dB and -180 deg lines,
 /// and the crossover and phase crossover marked where they were measured.
@@ -10,7 +20,7 @@ pub(super) fn loop_plot(a: &FrfAnalysis) -> anyhow::Result<Option<Vec<String>>> 
     let Some(l) = &a.loop_frf else {
         return Ok(None);
     };
-    let keep: Vec<usize> = l.coherent(0.5).collect();
+    let keep = plotted_bins(a, l);
     if keep.len() < 2 {
         return Ok(None);
     }
@@ -100,6 +110,7 @@ pub(super) fn loop_plot(a: &FrfAnalysis) -> anyhow::Result<Option<Vec<String>>> 
         x_label: "omega [rad/s]",
         y_label,
         log_x: true,
+        join_gaps: true,
         ..Chart::default()
     };
     Ok(Some(vec![
@@ -115,16 +126,28 @@ pub(super) fn loop_plot(a: &FrfAnalysis) -> anyhow::Result<Option<Vec<String>>> 
 /// and the coherence.
 pub(super) fn plot(a: &FrfAnalysis) -> anyhow::Result<String> {
     let (p, model) = (&a.plant, a.model_response.as_deref());
-    let keep: Vec<usize> = p.coherent(0.5).collect();
+    let keep = plotted_bins(a, p);
     let w: Vec<f64> = keep.iter().map(|&i| p.omega(i)).collect();
     let db = |x: f64| 20.0 * x.log10();
     let ph = p.phase_deg(-90.0);
     let mag: Vec<f64> = keep.iter().map(|&i| db(p.mag(i))).collect();
-    let lo: Vec<f64> = keep.iter().map(|&i| db(p.mag_bounds(i).0)).collect();
+    // A bound the circle does not give (it holds the origin) is left out, not drawn at -inf dB
+    // or +-180 deg.
+    let lo: Vec<f64> = keep
+        .iter()
+        .map(|&i| match p.mag_bounds(i).0 {
+            m if m > 0.0 => db(m),
+            _ => f64::NAN,
+        })
+        .collect();
     let hi: Vec<f64> = keep.iter().map(|&i| db(p.mag_bounds(i).1)).collect();
     let phm: Vec<f64> = keep.iter().map(|&i| ph[i]).collect();
-    let phl: Vec<f64> = keep.iter().map(|&i| ph[i] - p.phase_bound_deg(i)).collect();
-    let phh: Vec<f64> = keep.iter().map(|&i| ph[i] + p.phase_bound_deg(i)).collect();
+    let ph_bound = |i: usize| match p.phase_bound_deg(i) {
+        b if b < 180.0 => b,
+        _ => f64::NAN,
+    };
+    let phl: Vec<f64> = keep.iter().map(|&i| ph[i] - ph_bound(i)).collect();
+    let phh: Vec<f64> = keep.iter().map(|&i| ph[i] + ph_bound(i)).collect();
     let (mm, mp): (Vec<f64>, Vec<f64>) = match model {
         Some(m) => keep
             .iter()
@@ -189,6 +212,7 @@ pub(super) fn plot(a: &FrfAnalysis) -> anyhow::Result<String> {
         x_label: "omega [rad/s]",
         y_label,
         log_x: true,
+        join_gaps: true,
         ..Chart::default()
     };
     let mut panels = vec![

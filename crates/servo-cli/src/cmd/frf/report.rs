@@ -3,6 +3,7 @@
 
 use super::*;
 use servo_core::frf::analysis::FrfAnalysis;
+use servo_core::math::sig;
 
 pub(super) fn interval(i: &Option<Interval>) -> Value {
     match i {
@@ -44,7 +45,7 @@ pub(super) fn print_text(a: &FrfAnalysis, n_logs: usize) {
         .iter()
         .filter(|r| r.1 > r.0)
         .take(6)
-        .map(|r| format!("{:.2}-{:.1}", r.0, r.1))
+        .map(|r| format!("{}-{}", sig(r.0, 3), sig(r.1, 3)))
         .collect();
     if !shown.is_empty() {
         outln!(
@@ -67,12 +68,12 @@ pub(super) fn print_text(a: &FrfAnalysis, n_logs: usize) {
     }
     if let Some(d) = &a.design {
         outln!(
-            "design ({}): crossover {:.2} rad/s, phase margin {:.2} deg, gain margin {}",
+            "design ({}): crossover {} rad/s, phase margin {} deg, gain margin {}",
             d.loop_words,
-            d.crossover_rad_s,
-            d.phase_margin_deg,
+            sig(d.crossover_rad_s, 4),
+            sig(d.phase_margin_deg, 4),
             if d.gain_margin_db.is_finite() {
-                format!("{:.2} dB", d.gain_margin_db)
+                format!("{} dB", sig(d.gain_margin_db, 4))
             } else {
                 "infinite".into()
             }
