@@ -521,7 +521,7 @@ fn compare_and_diagnose_say_their_plant_and_controller_in_one_line() {
     assert!(ok, "{err}\n{out}");
     let line = line_of(&out);
     assert!(
-        line.contains(m) && line.contains("no effects beyond") && line.contains("controller: PID"),
+        line.contains(m) && line.contains("coulomb") && line.contains("controller: PID"),
         "{line}"
     );
     assert!(line.contains("Tustin"), "{line}");
@@ -541,9 +541,9 @@ fn compare_and_diagnose_say_their_plant_and_controller_in_one_line() {
     let line = line_of(&out);
     assert!(
         line.contains(m)
-            && line.contains("no effects beyond")
+            && line.contains("coulomb")
             && line.contains("controller: none in the simulation")
-            && line.contains("0.25 s"),
+            && line.contains("0.250 s horizons"),
         "{line}"
     );
 }

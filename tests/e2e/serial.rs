@@ -1119,9 +1119,51 @@ mod qemu_cli {
         assert!(stats.contains("runs 1 "), "{stats}");
     }
 
+    /// True when the QEMU statistics line shows the emulated board overran its `period_us`
+    /// (a tick served late, or a period's work longer than the period): QEMU's TCG on a loaded
+    /// host, not the firmware.
+    fn emulator_overran(stats: &str, period_us: u64) -> bool {
+        let after = |key: &str| -> Option<u64> {
+            stats
+                .split(key)
+                .nth(1)?
+                .split_whitespace()
+                .next()?
+                .parse()
+                .ok()
+        };
+        after("late ticks ").is_some_and(|n| n > 0)
+            || after("busy/period max ").is_some_and(|us| us > period_us)
+    }
+
     #[test]
     fn identify_ramp_over_serial_recovers_the_lab_plant_within_5_percent() {
         let _rt = realtime();
+        // One retry on a fresh board when a run stopped on a board fault while the emulated
+        // board overran its 2 ms period (QEMU's timing, said in the output); any other failure,
+        // or a second one, fails the test.
+        let mut tries = 0;
+        let (dir, out, err) = loop {
+            tries += 1;
+            let Some(r) = identify_ramp_over_qemu() else {
+                return;
+            };
+            let (dir, ok, out, err, stats) = r;
+            if !ok && tries == 1 && err.contains("board fault") && emulator_overran(&stats, 2000) {
+                eprintln!(
+                    "retrying on a fresh board: the emulated board overran its period ({stats})"
+                );
+                continue;
+            }
+            assert!(ok, "{out}\n{err}");
+            break (dir, out, err);
+        };
+        check_identify_ramp(&dir, &out, &err);
+    }
+
+    /// `servo identify --ramp` over serial on a fresh QEMU board: (dir, ok, stdout, stderr, the
+    /// board's statistics line); None (skip) without qemu or the image.
+    fn identify_ramp_over_qemu() -> Option<(tempfile::TempDir, bool, String, String, String)> {
         let dir = tempfile::tempdir().unwrap();
         let wide = [
             "--watchdog-ms",
@@ -1131,9 +1173,7 @@ mod qemu_cli {
             "--theta-max-rad",
             "1e6",
         ];
-        let Some(board) = QemuProc::start(dir.path(), &wide) else {
-            return;
-        };
+        let board = QemuProc::start(dir.path(), &wide)?;
         // Shorter recipes than the built-in ones (the estimator needs >= 1 s per step).
         let fr = dir.path().join("friction.toml");
         std::fs::write(
@@ -1169,7 +1209,10 @@ mod qemu_cli {
         let stats = board.stats_after(Duration::from_millis(1200));
         board.quit();
         eprintln!("{err}\nQEMU: {stats}");
-        assert!(ok, "{out}\n{err}");
+        Some((dir, ok, out, err, stats))
+    }
+
+    fn check_identify_ramp(dir: &tempfile::TempDir, out: &str, err: &str) {
         // Live progress (stderr is not a terminal here: a line every 2 s), then the log's
         // speed reference: the staircase the runner's speed loop followed.
         assert!(
@@ -1190,7 +1233,7 @@ mod qemu_cli {
             w_ref.iter().any(|w| (w + top).abs() < 1e-9),
             "no -{top} rad/s step"
         );
-        let v: serde_json::Value = serde_json::from_str(&out).expect("JSON report");
+        let v: serde_json::Value = serde_json::from_str(out).expect("JSON report");
         let truth = servo_core::PlantParams::LAB;
         for (key, want) in [
             ("b_eq_n_m_s_rad", truth.b_eq()),

@@ -529,7 +529,13 @@ fn multisine_run_and_frf_say_what_was_measured() {
             if !tag.contains(&format!("stroke=\"{stroke}\"")) {
                 continue;
             }
-            let pts = tag.split("points=\"").nth(1).unwrap_or("").split('"').next().unwrap_or("");
+            let pts = tag
+                .split("points=\"")
+                .nth(1)
+                .unwrap_or("")
+                .split('"')
+                .next()
+                .unwrap_or("");
             for xy in pts.split_whitespace() {
                 if let Some((x, y)) = xy.split_once(',') {
                     v.push((x.parse().unwrap(), y.parse().unwrap()));
@@ -540,7 +546,10 @@ fn multisine_run_and_frf_say_what_was_measured() {
     };
     let measured = points("#1F77B4");
     let upper = points("#2CA02C");
-    assert!(measured.len() > 10 && upper.len() > 10, "no estimate or bound drawn");
+    assert!(
+        measured.len() > 10 && upper.len() > 10,
+        "no estimate or bound drawn"
+    );
     let (top, bottom) = measured
         .iter()
         .chain(&upper)

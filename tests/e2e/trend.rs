@@ -292,7 +292,12 @@ fn add_columns(path: &Path, unit: &str, unix_s: i64) {
     for (i, line) in text.lines().enumerate() {
         if line.starts_with('#') {
             out.push_str(line);
-        } else if i == 0 || !line.chars().next().is_some_and(|c| c.is_ascii_digit() || c == '-') {
+        } else if i == 0
+            || !line
+                .chars()
+                .next()
+                .is_some_and(|c| c.is_ascii_digit() || c == '-')
+        {
             out.push_str(&format!("{line},unit_id,unix_time_s"));
         } else {
             out.push_str(&format!("{line},{unit},{unix_s}"));
@@ -333,10 +338,22 @@ fn trend_groups_by_a_field_and_takes_each_log_s_time_from_its_source() {
         cache.to_str().unwrap(),
     );
     let v = run_json(&[
-        "trend", d, "--model", m, "--cache", c, "--group-by", "unit_id", "--quiet", "--json",
+        "trend",
+        d,
+        "--model",
+        m,
+        "--cache",
+        c,
+        "--group-by",
+        "unit_id",
+        "--quiet",
+        "--json",
     ]);
     let acts = v["actuators"].as_array().unwrap();
-    let names: Vec<&str> = acts.iter().map(|a| a["actuator"].as_str().unwrap()).collect();
+    let names: Vec<&str> = acts
+        .iter()
+        .map(|a| a["actuator"].as_str().unwrap())
+        .collect();
     assert_eq!(names, ["A", "B"], "{}", v["actuators"]);
     for a in acts {
         assert_eq!(a["logs"].as_array().unwrap().len(), 3, "{a}");
@@ -410,7 +427,10 @@ fn trend_groups_by_a_field_and_takes_each_log_s_time_from_its_source() {
     assert_eq!(sources[0].0, "mcap", "{sources:?}");
     assert_eq!(sources[1].0, "mtime", "{sources:?}");
     for (src, t) in &sources {
-        assert!((t - now).abs() < 600.0, "{src}: {t} is not about now ({now})");
+        assert!(
+            (t - now).abs() < 600.0,
+            "{src}: {t} is not about now ({now})"
+        );
     }
 }
 

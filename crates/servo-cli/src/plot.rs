@@ -303,7 +303,8 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
                 for (i, s) in series.iter().enumerate() {
                     let color = COLORS[i % COLORS.len()];
                     if chart.scatter {
-                        let pts: Vec<(f64, f64)> = runs(s, chart.join_gaps).into_iter().flatten().collect();
+                        let pts: Vec<(f64, f64)> =
+                            runs(s, chart.join_gaps).into_iter().flatten().collect();
                         let pts = thin_points(pts, x0, x1, y0, y1, columns);
                         let dots = ctx
                             .draw_series(pts.into_iter().map(|p| Circle::new(p, 1, color.filled())))

@@ -27,6 +27,10 @@ pub fn content_key(bytes: &[u8]) -> String {
     format!("{:016x}-{}", fnv1a(FNV_OFFSET, bytes), bytes.len())
 }
 
+/// The entries' format: raised when [`super::fit_log::LogFit`] changes what it holds (2: a CSV's
+/// first-row values in its metadata, for `--group-by`), so an older entry is a miss.
+const FORMAT: u32 = 2;
+
 /// A cache directory for one model and servo version.
 #[derive(Debug, Clone)]
 pub struct Cache {
@@ -52,7 +56,7 @@ impl Cache {
 
     fn path(&self, content: &str) -> PathBuf {
         self.dir.join(format!(
-            "{content}-{}-v{}.json",
+            "{content}-{}-v{}-f{FORMAT}.json",
             self.model_key,
             env!("CARGO_PKG_VERSION")
         ))

@@ -27,7 +27,8 @@ pub struct LogFit {
     pub estimates: Vec<ParamValue>,
     /// The log's own time [Unix s] and where it came from (`mcap`, `mat`, `column:NAME`).
     pub content_time: Option<(f64, String)>,
-    /// The log's short metadata entries (MCAP key/values), for `--group-by`.
+    /// The log's short metadata entries (MCAP key/values; a CSV's first-row values by column),
+    /// for `--group-by`.
     pub meta: std::collections::BTreeMap<String, String>,
     /// Samples of the log.
     pub samples: usize,
@@ -98,14 +99,22 @@ pub fn fit_log(
         _ => super::when::csv_column_time(bytes, time_column)
             .map(|(t, c)| (t, format!("column:{c}"))),
     };
+    let mut short: std::collections::BTreeMap<String, String> = meta
+        .entries
+        .into_iter()
+        .filter(|(_, v)| v.len() <= 200 && !v.contains('\n'))
+        .collect();
+    // A CSV's columns are its metadata for `--group-by NAME`: the first row's value of each
+    // (an `actuator` or `unit_id` column), beside what the reader read (which takes precedence).
+    if !matches!(ext.as_str(), "mcap" | "mat") {
+        for (k, v) in super::when::csv_first_row(bytes) {
+            short.entry(k).or_insert(v);
+        }
+    }
     Ok(LogFit {
         estimates,
         content_time,
-        meta: meta
-            .entries
-            .into_iter()
-            .filter(|(_, v)| v.len() <= 200 && !v.contains('\n'))
-            .collect(),
+        meta: short,
         samples: record.len(),
     })
 }

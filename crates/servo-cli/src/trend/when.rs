@@ -244,6 +244,30 @@ pub fn mat_header_time(bytes: &[u8]) -> Option<f64> {
     unix(y, mo, d, *hms.first()?, *hms.get(1)?, *hms.get(2)?).ok()
 }
 
+/// The header and first data row of a CSV (comment lines `#` skipped) as (column, value) pairs,
+/// at most 64 columns of values up to 200 characters; empty when the text is not a CSV.
+pub fn csv_first_row(bytes: &[u8]) -> Vec<(String, String)> {
+    let Some(text) = bytes
+        .get(..bytes.len().min(64 * 1024))
+        .and_then(|b| std::str::from_utf8(b).ok())
+    else {
+        return Vec::new();
+    };
+    let mut lines = text
+        .lines()
+        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
+    let (Some(header), Some(row)) = (lines.next(), lines.next()) else {
+        return Vec::new();
+    };
+    header
+        .split(',')
+        .zip(row.split(','))
+        .take(64)
+        .map(|(h, v)| (h.trim().to_string(), v.trim().to_string()))
+        .filter(|(h, v)| !h.is_empty() && !v.is_empty() && v.len() <= 200)
+        .collect()
+}
+
 /// The first value of column `name` (or, with `None`, of the first of [`DATE_COLUMNS`]) of a CSV
 /// as a date; Unix seconds and the column's name.
 pub fn csv_column_time(bytes: &[u8], name: Option<&str>) -> Option<(f64, String)> {

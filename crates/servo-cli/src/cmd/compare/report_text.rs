@@ -204,7 +204,12 @@ pub fn plant_and_controller(
         .iter()
         .map(|e| e.kind.name().to_string())
         .collect();
-    effects.extend(plant.custom.iter().map(|e| format!("{} (user-defined)", e.name())));
+    effects.extend(
+        plant
+            .custom
+            .iter()
+            .map(|e| format!("{} (user-defined)", e.name())),
+    );
     let effects = if effects.is_empty() {
         String::from("no effects beyond the base model")
     } else {

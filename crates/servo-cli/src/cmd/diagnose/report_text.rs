@@ -42,7 +42,12 @@ pub(super) fn plant_and_controller(
         .iter()
         .map(|e| e.kind.name().to_string())
         .collect();
-    effects.extend(model.custom.iter().map(|e| format!("{} (user-defined)", e.name())));
+    effects.extend(
+        model
+            .custom
+            .iter()
+            .map(|e| format!("{} (user-defined)", e.name())),
+    );
     let effects = if effects.is_empty() {
         String::from("no effects beyond the base model")
     } else {

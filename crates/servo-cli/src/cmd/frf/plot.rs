@@ -124,6 +124,9 @@ pub(super) fn loop_plot(a: &FrfAnalysis) -> anyhow::Result<Option<Vec<String>>> 
 
 /// Bode plot of the plant estimate (bins with coherence >= 0.5) with its bounds and the model,
 /// and the coherence.
+/// Largest relative radius r/|P| of a bin whose bounds the plot draws (see [`plot`]).
+pub const PLOTTED_MAX_REL_RADIUS: f64 = 0.5;
+
 pub(super) fn plot(a: &FrfAnalysis) -> anyhow::Result<String> {
     let (p, model) = (&a.plant, a.model_response.as_deref());
     let keep = plotted_bins(a, p);
@@ -131,23 +134,28 @@ pub(super) fn plot(a: &FrfAnalysis) -> anyhow::Result<String> {
     let db = |x: f64| 20.0 * x.log10();
     let ph = p.phase_deg(-90.0);
     let mag: Vec<f64> = keep.iter().map(|&i| db(p.mag(i))).collect();
-    // A bound the circle does not give (it holds the origin) is left out, not drawn at -inf dB
-    // or +-180 deg.
-    let lo: Vec<f64> = keep
+    // The bounds are drawn through the bins where they say something: a circle of radius at
+    // most half |P| (+3.5/-6 dB, +-30 deg). Beside a multisine's lines the Hann window's
+    // leakage leaves bins with a circle around (nearly) the origin; joined with the lines'
+    // narrow bounds they zig-zagged over 30 dB. Those bins keep their estimate (and the
+    // coherence panel shows them); only their bounds are left out.
+    let bounded: Vec<usize> = keep
         .iter()
-        .map(|&i| match p.mag_bounds(i).0 {
-            m if m > 0.0 => db(m),
-            _ => f64::NAN,
-        })
+        .copied()
+        .filter(|&i| p.rel_radius[i] <= PLOTTED_MAX_REL_RADIUS)
         .collect();
-    let hi: Vec<f64> = keep.iter().map(|&i| db(p.mag_bounds(i).1)).collect();
+    let wb: Vec<f64> = bounded.iter().map(|&i| p.omega(i)).collect();
+    let lo: Vec<f64> = bounded.iter().map(|&i| db(p.mag_bounds(i).0)).collect();
+    let hi: Vec<f64> = bounded.iter().map(|&i| db(p.mag_bounds(i).1)).collect();
     let phm: Vec<f64> = keep.iter().map(|&i| ph[i]).collect();
-    let ph_bound = |i: usize| match p.phase_bound_deg(i) {
-        b if b < 180.0 => b,
-        _ => f64::NAN,
-    };
-    let phl: Vec<f64> = keep.iter().map(|&i| ph[i] - ph_bound(i)).collect();
-    let phh: Vec<f64> = keep.iter().map(|&i| ph[i] + ph_bound(i)).collect();
+    let phl: Vec<f64> = bounded
+        .iter()
+        .map(|&i| ph[i] - p.phase_bound_deg(i))
+        .collect();
+    let phh: Vec<f64> = bounded
+        .iter()
+        .map(|&i| ph[i] + p.phase_bound_deg(i))
+        .collect();
     let (mm, mp): (Vec<f64>, Vec<f64>) = match model {
         Some(m) => keep
             .iter()
@@ -168,12 +176,12 @@ pub(super) fn plot(a: &FrfAnalysis) -> anyhow::Result<String> {
         },
         Series {
             label: "lower bound",
-            x: &w,
+            x: &wb,
             y: &lo,
         },
         Series {
             label: "upper bound",
-            x: &w,
+            x: &wb,
             y: &hi,
         },
     ];
@@ -185,12 +193,12 @@ pub(super) fn plot(a: &FrfAnalysis) -> anyhow::Result<String> {
         },
         Series {
             label: "lower bound",
-            x: &w,
+            x: &wb,
             y: &phl,
         },
         Series {
             label: "upper bound",
-            x: &w,
+            x: &wb,
             y: &phh,
         },
     ];
@@ -218,7 +226,7 @@ pub(super) fn plot(a: &FrfAnalysis) -> anyhow::Result<String> {
     let mut panels = vec![
         line_chart_svg(
             &chart(
-                "plant u -> theta_l: magnitude (coherence >= 0.5)",
+                "plant u -> theta_l: magnitude (coherence >= 0.5; 95 % bounds where within +3.5/-6 dB)",
                 "|P| [dB rad/V]",
             ),
             &s1,
