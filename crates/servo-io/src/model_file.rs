@@ -292,7 +292,7 @@ impl RawDrive {
     }
 
     fn of(d: &Drive) -> Option<RawDrive> {
-        (*d != Drive::VOLTAGE).then(|| RawDrive {
+        (*d != Drive::VOLTAGE).then_some(RawDrive {
             kind: match d.kind {
                 DriveKind::Voltage => RawDriveKind::Voltage,
                 DriveKind::Current => RawDriveKind::Current,
@@ -389,7 +389,7 @@ impl RawTransmission {
 
     /// Moves the linear mass, viscous and Coulomb values into `params` (motor-side J_eq, B_eq,
     /// load-side tau_sf); a quantity given in both tables is refused.
-    fn into_params(&self, t: &Transmission, params: &mut PlantParams) -> anyhow::Result<()> {
+    fn write_params(&self, t: &Transmission, params: &mut PlantParams) -> anyhow::Result<()> {
         let given = [
             ("m_eq_kg", self.m_eq_kg, "j_eq", params.j_eq.is_some()),
             ("b_eq_n_s_m", self.b_eq_n_s_m, "b_eq", params.b_eq.is_some()),
@@ -537,7 +537,7 @@ impl ModelFile {
         let transmission = match &raw.transmission {
             Some(t) => {
                 let tr = t.transmission()?;
-                t.into_params(&tr, &mut params)?;
+                t.write_params(&tr, &mut params)?;
                 tr
             }
             None => Transmission::GEAR,

@@ -162,10 +162,10 @@ fn parse_with_pattern(text: &str, pattern: &str) -> Result<f64, String> {
             ));
         }
         *i += n;
-        Ok(std::str::from_utf8(part)
+        std::str::from_utf8(part)
             .map_err(|e| e.to_string())?
             .parse::<u32>()
-            .map_err(|e| e.to_string())?)
+            .map_err(|e| e.to_string())
     };
     let mut fields = 0;
     while let Some(c) = p.next() {

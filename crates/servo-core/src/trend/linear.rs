@@ -83,7 +83,8 @@ pub fn linear_trend(points: &[Point]) -> Option<LinearTrend> {
         .zip(&w)
         .map(|(p, w)| w * (p.t_day - t_ref) * (p.t_day - t_ref))
         .sum();
-    if !(stt > 0.0) {
+    // also refuses a NaN sum
+    if stt.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
         return None;
     }
     let sty: f64 = points

@@ -5,7 +5,7 @@ use super::*;
 use servo_core::frf::analysis::{excited_bins, FrfAnalysis};
 
 /// The bins a Bode plot shows: coherence >= 0.5 on a bin the excitation reached (input power
-/// >= 1 % of its peak). Between a multisine's lines the coherence of the noise alone often
+/// at least 1 % of its peak). Between a multisine's lines the coherence of the noise alone often
 /// passes 0.5, and those bins' bounds, from a circle around nothing, zig-zagged the plot.
 pub fn plotted_bins(a: &FrfAnalysis, f: &Estimate) -> Vec<usize> {
     let excited = excited_bins(&a.spectra, f);
