@@ -9,6 +9,12 @@
 #   N      logs (1000 for the issue's figure; run it on an idle machine)
 #   DIR    work directory (logs in DIR/fleet, caches in DIR/cache-*); reused when the logs exist
 #   SERVO  the servo binary (default target/release/servo)
+#
+# RUNS (environment) picks the runs, in order, default "serial 1 2 warm":
+#   serial  one worker pinned to one core (`taskset -c 0`): no parallelism at all, the baseline
+#   1       one worker on every core (a fit splits its own work onto an idle core)
+#   2       two workers
+#   warm    two workers again on the cache of run 2 (needs run 2 first)
 set -euo pipefail
 N=${1:?usage: trend_fleet.sh N DIR [SERVO]}
 DIR=${2:?usage: trend_fleet.sh N DIR [SERVO]}
@@ -37,9 +43,11 @@ if [ "$have" -lt "$N" ]; then
   done
   echo "simulated in $(( $(date +%s) - start )) s"
 fi
-run() { # workers cache label
+RUNS=${RUNS:-serial 1 2 warm}
+rm -f "$DIR"/serial.time "$DIR"/one_worker.time "$DIR"/two_workers.time "$DIR"/warm.time
+run() { # workers cache label [pin]
   rm -rf "$DIR/$2"
-  "$TIME" -v "$SERVO" trend "$DIR/fleet" --model "$DIR/model.toml" --jobs "$1" --cache "$DIR/$2" \
+  ${4:+taskset -c 0} "$TIME" -v "$SERVO" trend "$DIR/fleet" --model "$DIR/model.toml" --jobs "$1" --cache "$DIR/$2" \
     --time-from mtime --quiet > "$DIR/$3.txt" 2> "$DIR/$3.time"
   local wall rss
   wall=$(grep 'Elapsed (wall clock)' "$DIR/$3.time" | awk '{print $NF}')
@@ -47,12 +55,25 @@ run() { # workers cache label
   echo "$3: wall $wall, peak RSS $((rss / 1024)) MiB; $(grep -o '[0-9]* from the cache, [0-9]* fitted, [0-9]* failed' "$DIR/$3.txt")"
 }
 secs() { awk -F: '{ if (NF == 3) print $1 * 3600 + $2 * 60 + $3; else print $1 * 60 + $2 }' <<< "$1"; }
-run 1 cache-1 one_worker
-run 2 cache-2 two_workers
-# warm: the cache of the 2-worker run, kept
-"$TIME" -v "$SERVO" trend "$DIR/fleet" --model "$DIR/model.toml" --jobs 2 --cache "$DIR/cache-2" \
-  --time-from mtime --quiet > "$DIR/warm.txt" 2> "$DIR/warm.time"
-echo "warm cache: wall $(grep 'Elapsed (wall clock)' "$DIR/warm.time" | awk '{print $NF}'); $(grep -o '[0-9]* from the cache, [0-9]* fitted, [0-9]* failed' "$DIR/warm.txt")"
-w1=$(secs "$(grep 'Elapsed (wall clock)' "$DIR/one_worker.time" | awk '{print $NF}')")
-w2=$(secs "$(grep 'Elapsed (wall clock)' "$DIR/two_workers.time" | awk '{print $NF}')")
-awk -v n="$N" -v a="$w1" -v b="$w2" 'BEGIN { printf "per log: %.3f s (1 worker), %.3f s wall (2 workers); speed-up 1 -> 2 workers: %.2fx\n", a / n, b / n, a / b }'
+for r in $RUNS; do
+  case "$r" in
+    serial) run 1 cache-s serial pin ;;
+    1) run 1 cache-1 one_worker ;;
+    2) run 2 cache-2 two_workers ;;
+    warm)
+      "$TIME" -v "$SERVO" trend "$DIR/fleet" --model "$DIR/model.toml" --jobs 2 --cache "$DIR/cache-2" \
+        --time-from mtime --quiet > "$DIR/warm.txt" 2> "$DIR/warm.time"
+      echo "warm cache: wall $(grep 'Elapsed (wall clock)' "$DIR/warm.time" | awk '{print $NF}'); $(grep -o '[0-9]* from the cache, [0-9]* fitted, [0-9]* failed' "$DIR/warm.txt")"
+      ;;
+    *) echo "RUNS: unknown run \`$r\` (expected serial, 1, 2 or warm)"; exit 1 ;;
+  esac
+done
+wall_of() { [ -f "$DIR/$1.time" ] && secs "$(grep 'Elapsed (wall clock)' "$DIR/$1.time" | awk '{print $NF}')"; }
+ws=$(wall_of serial || true); w1=$(wall_of one_worker || true); w2=$(wall_of two_workers || true)
+awk -v n="$N" -v s="$ws" -v a="$w1" -v b="$w2" 'BEGIN {
+  if (s != "") printf "per log: %.3f s serial (one core)\n", s / n
+  if (a != "") printf "per log: %.3f s wall, 1 worker\n", a / n
+  if (b != "") printf "per log: %.3f s wall, 2 workers\n", b / n
+  if (s != "" && b != "") printf "speed-up serial -> 2 workers: %.2fx\n", s / b
+  if (a != "" && b != "") printf "speed-up 1 -> 2 workers: %.2fx\n", a / b
+}'
