@@ -45,9 +45,11 @@ if [ "$have" -lt "$N" ]; then
 fi
 RUNS=${RUNS:-serial 1 2 warm}
 rm -f "$DIR"/serial.time "$DIR"/one_worker.time "$DIR"/two_workers.time "$DIR"/warm.time
-run() { # workers cache label [pin]
-  rm -rf "$DIR/$2"
-  ${4:+taskset -c 0} "$TIME" -v "$SERVO" trend "$DIR/fleet" --model "$DIR/model.toml" --jobs "$1" --cache "$DIR/$2" \
+run() { # workers cache label [pinned|warm]
+  local pin=()
+  [ "${4:-}" = pinned ] && pin=(taskset -c 0)
+  [ "${4:-}" = warm ] || rm -rf "$DIR/$2"
+  "${pin[@]}" "$TIME" -v "$SERVO" trend "$DIR/fleet" --model "$DIR/model.toml" --jobs "$1" --cache "$DIR/$2" \
     --time-from mtime --quiet > "$DIR/$3.txt" 2> "$DIR/$3.time"
   local wall rss
   wall=$(grep 'Elapsed (wall clock)' "$DIR/$3.time" | awk '{print $NF}')
@@ -57,14 +59,10 @@ run() { # workers cache label [pin]
 secs() { awk -F: '{ if (NF == 3) print $1 * 3600 + $2 * 60 + $3; else print $1 * 60 + $2 }' <<< "$1"; }
 for r in $RUNS; do
   case "$r" in
-    serial) run 1 cache-s serial pin ;;
+    serial) run 1 cache-s serial pinned ;;
     1) run 1 cache-1 one_worker ;;
     2) run 2 cache-2 two_workers ;;
-    warm)
-      "$TIME" -v "$SERVO" trend "$DIR/fleet" --model "$DIR/model.toml" --jobs 2 --cache "$DIR/cache-2" \
-        --time-from mtime --quiet > "$DIR/warm.txt" 2> "$DIR/warm.time"
-      echo "warm cache: wall $(grep 'Elapsed (wall clock)' "$DIR/warm.time" | awk '{print $NF}'); $(grep -o '[0-9]* from the cache, [0-9]* fitted, [0-9]* failed' "$DIR/warm.txt")"
-      ;;
+    warm) run 2 cache-2 warm warm ;; # the cache of run 2, kept
     *) echo "RUNS: unknown run \`$r\` (expected serial, 1, 2 or warm)"; exit 1 ;;
   esac
 done
