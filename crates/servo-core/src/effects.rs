@@ -281,6 +281,44 @@ pub enum Regime {
     ConstantSpeed,
 }
 
+/// How a controller compensates an effect ([`crate::control::compensation`], issue #29): what
+/// [`EffectModel::compensation`] declares.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Compensation {
+    /// Part of the linear feedforward (B_eq: the `viscous` term of `--ff`).
+    Linear,
+    /// A torque the drive adds: [`EffectModel::torque_nm`] evaluated on the reference state
+    /// (speeds and accelerations of the reference; the angle as `angle` says), converted to
+    /// volts through the motor (eqs. 1, 5, 22).
+    Torque {
+        /// Where the angle comes from.
+        angle: AngleFrom,
+    },
+    /// The plant's dry-friction curve ([`torque::Friction`]) at the reference speed, with a
+    /// smoothed sign.
+    DryFriction,
+    /// The inverse of the input map, [`EffectModel::inverse_input_v`], on the whole command.
+    InputInverse,
+    /// A bound of the input: the controller's output limit is narrowed to it, so that its
+    /// anti-windup sees the real bound.
+    Limit,
+    /// A transport delay: the feedforward reads the reference `input_delay_s` ahead (a phase
+    /// lead of the feedforward; the PID still sees the delay).
+    Lead,
+    /// Not compensated, and why (one sentence).
+    Not(&'static str),
+}
+
+/// The angle a [`Compensation::Torque`] is evaluated at.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AngleFrom {
+    /// The reference's load angle (pure feedforward).
+    Reference,
+    /// The measured load angle (and the motor angle N theta_l from it): cancellation of a
+    /// position-dependent torque where the shaft is, not where it should be.
+    Measured,
+}
+
 /// A physical mechanism: everything servo needs to simulate it, fit it and diagnose it.
 ///
 /// Catalogue effects are unit structs in `effects/<name>.rs` listed once in the registry; a
@@ -369,6 +407,39 @@ pub trait EffectModel: Sync + Send {
     fn measured_theta_l_rad(&self, v: &[f64], s: &Signals) -> f64 {
         let _ = v;
         s.theta_l_rad
+    }
+
+    // ---- compensation ----
+    /// How a controller compensates this effect. Default from the simulator role: a smooth
+    /// torque is compensated as a torque at the reference state (at the measured angle when it
+    /// depends on the angle only), dry friction by the friction curve, a delay by a lead, the
+    /// linear part by the linear feedforward; an input map without a declared inverse, a contact
+    /// and a sensor map are not compensated.
+    fn compensation(&self) -> Compensation {
+        match self.sim_role() {
+            SimRole::Linear => Compensation::Linear,
+            SimRole::DryFriction => Compensation::DryFriction,
+            SimRole::Smooth => Compensation::Torque {
+                angle: if self.depends_on_angle_only() {
+                    AngleFrom::Measured
+                } else {
+                    AngleFrom::Reference
+                },
+            },
+            SimRole::InputMap { .. } => Compensation::Not("the input map declares no inverse"),
+            SimRole::InputDelay => Compensation::Lead,
+            SimRole::Contact => Compensation::Not(
+                "a play between motor and load cannot be cancelled from the load angle",
+            ),
+            SimRole::Sensor => Compensation::Not("a sensor map changes no torque"),
+        }
+    }
+    /// [`Compensation::InputInverse`]: the command u [V] for which the input map gives
+    /// `u_in_v`, its sign smoothed over `smooth_v` [V] (> 0) around 0 so that the command does
+    /// not chatter at rest. Must be odd in `u_in_v` for a symmetric map. Default identity.
+    fn inverse_input_v(&self, v: &[f64], u_in_v: f64, smooth_v: f64) -> f64 {
+        let _ = (v, smooth_v);
+        u_in_v
     }
 
     // ---- fit ----

@@ -15,6 +15,7 @@
 //! * `program` (alloc): what a run applies over time: a position reference, a sequence of
 //!   position and voltage segments, or a load-speed profile.
 
+pub mod compensation;
 pub mod feedforward;
 pub mod pid;
 #[cfg(feature = "alloc")]
@@ -24,6 +25,7 @@ mod reference_parse;
 pub mod sequence;
 pub mod speed;
 
+pub use compensation::{EffectCompensator, EffectSelect};
 pub use feedforward::{
     Feedforward, FeedforwardConfig, FeedforwardParams, FeedforwardTerms, SmoothSign,
 };

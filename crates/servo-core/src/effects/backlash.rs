@@ -101,6 +101,11 @@ impl EffectModel for Backlash {
     fn sim_role(&self) -> SimRole {
         SimRole::Contact
     }
+    fn compensation(&self) -> super::Compensation {
+        super::Compensation::Not(
+            "crossing the play needs the motor angle, and servo logs the load angle only: a reversal pre-compensation would guess where the motor sits inside the gap; the PID's integral takes it up",
+        )
+    }
     fn contact(&self, v: &[f64]) -> Option<Contact> {
         Some(Contact {
             gap_rad: *v.first()?,

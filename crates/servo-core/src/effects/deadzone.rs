@@ -30,6 +30,17 @@ pub fn input_v(width: f64, u_v: f64) -> f64 {
     }
 }
 
+/// Inverse of the dead band [V]: the command that makes the driver see `u_in_v`,
+/// u_in + width tanh(u_in / smooth) (exact, u_in + sign(u_in) width, once |u_in| is a few
+/// `smooth_v` away from 0; continuous through 0 so that a resting loop does not chatter).
+#[inline]
+pub fn inverse_v(width: f64, u_in_v: f64, smooth_v: f64) -> f64 {
+    if width <= 0.0 {
+        return u_in_v;
+    }
+    u_in_v + width * crate::math::tanh(u_in_v / smooth_v.max(1e-9))
+}
+
 impl EffectModel for Deadzone {
     fn name(&self) -> &str {
         "deadzone"
@@ -49,6 +60,12 @@ impl EffectModel for Deadzone {
     }
     fn input_v(&self, v: &[f64], u_v: f64) -> f64 {
         input_v(v[0], u_v)
+    }
+    fn compensation(&self) -> super::Compensation {
+        super::Compensation::InputInverse
+    }
+    fn inverse_input_v(&self, v: &[f64], u_in_v: f64, smooth_v: f64) -> f64 {
+        inverse_v(v[0], u_in_v, smooth_v)
     }
     fn search(&self, _key: &str) -> Search {
         Search {
@@ -116,6 +133,16 @@ impl super::FitHooks for Deadzone {
 mod tests {
     use crate::effects::torque::InputNonlinearity;
     use crate::effects::{Effect, EffectKind, Effects};
+
+    #[test]
+    fn inverse_undoes_the_dead_band_away_from_zero() {
+        for u in [-5.0, -1.2, 0.8, 3.0] {
+            let c = super::inverse_v(0.5, u, 0.01);
+            assert!((super::input_v(0.5, c) - u).abs() < 1e-9, "{u} -> {c}");
+        }
+        assert_eq!(super::inverse_v(0.5, 0.0, 0.01), 0.0);
+        assert_eq!(super::inverse_v(0.0, 0.3, 0.01), 0.3);
+    }
 
     #[test]
     fn input_nonlinearity_by_hand() {

@@ -49,6 +49,9 @@ impl EffectModel for Saturation {
     fn input_v(&self, v: &[f64], u_v: f64) -> f64 {
         input_v(v[0], u_v)
     }
+    fn compensation(&self) -> super::Compensation {
+        super::Compensation::Limit
+    }
     fn search(&self, _key: &str) -> Search {
         Search {
             no_effect_at: NoEffectAt::Last,

@@ -1,0 +1,313 @@
+//! Compensation of the identified effects (issue #29): what `diagnose` found and `--add` fitted,
+//! cancelled in the loop from the same model file.
+//!
+//! Each effect declares how it is compensated ([`EffectModel::compensation`], one method behind
+//! the registry); this module only combines the declarations, so it names no effect:
+//!
+//! * a torque (an unbalanced load, cogging, a user's torque expression) is evaluated on the
+//!   reference state, at the measured angle when it depends on the angle only, and added to the
+//!   motor torque demand: u = R_eq tau_m / (k_t k_drv) (eqs. 1, 5, 22, as the inertia and
+//!   friction feedforward);
+//! * dry friction (Coulomb, Stribeck, direction asymmetry) is the plant's friction curve at the
+//!   reference speed with a smoothed sign, in place of the symmetric tau_sf term;
+//! * an input map with an inverse (the dead band) is inverted on the whole command;
+//! * a bound of the input (saturation) narrows the controller's limit ([`EffectCompensator::limit_v`]);
+//! * a delay makes the feedforward read the reference ahead ([`EffectCompensator::lead_s`]);
+//! * anything else (gear play) is not compensated, with the effect's reason
+//!   ([`EffectCompensator::plan`]).
+//!
+//! `no_std`, no heap: the compensator is a fixed-size copy of the effects it needs, so the same
+//! code can run in the board core.
+
+use super::feedforward::SmoothSign;
+use super::reference::RefSample;
+use crate::effects::torque::Friction;
+use crate::effects::{ActsOn, AngleFrom, Compensation, Effect, EffectKind, Signals};
+use crate::plant::Plant;
+
+/// Most torque effects one compensator carries.
+pub const MAX_COMPENSATED: usize = 8;
+/// Most inverted input maps.
+pub const MAX_INVERSES: usize = 4;
+
+/// Which of a model's effects to compensate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
+pub enum EffectSelect {
+    /// None (the linear feedforward only).
+    #[default]
+    None,
+    /// Every effect of the model that declares a compensation.
+    All,
+    /// The effects whose registry slots are set in the mask (bit k: slot k).
+    Mask(u32),
+}
+
+impl EffectSelect {
+    /// True when `kind` is selected.
+    pub fn selects(&self, kind: EffectKind) -> bool {
+        match *self {
+            EffectSelect::None => false,
+            EffectSelect::All => true,
+            EffectSelect::Mask(m) => kind.slot() < 32 && m & (1u32 << kind.slot()) != 0,
+        }
+    }
+    /// This selection with `kind` added.
+    pub fn with(self, kind: EffectKind) -> EffectSelect {
+        let bit = if kind.slot() < 32 {
+            1u32 << kind.slot()
+        } else {
+            0
+        };
+        match self {
+            EffectSelect::None => EffectSelect::Mask(bit),
+            EffectSelect::All => EffectSelect::All,
+            EffectSelect::Mask(m) => EffectSelect::Mask(m | bit),
+        }
+    }
+    /// True when nothing is selected.
+    pub fn is_none(&self) -> bool {
+        matches!(self, EffectSelect::None | EffectSelect::Mask(0))
+    }
+}
+
+/// The compensation of a model's selected effects, with its constants precomputed.
+#[derive(Debug, Clone, Copy)]
+pub struct EffectCompensator {
+    torques: [Option<(Effect, AngleFrom)>; MAX_COMPENSATED],
+    friction: Option<Friction>,
+    inverses: [Option<Effect>; MAX_INVERSES],
+    limit_v: f64,
+    lead_s: f64,
+    /// R_eq / (k_t k_drv) [V/(N m)], motor side.
+    volts_per_nm: f64,
+    /// Gear ratio N.
+    n: f64,
+    sign: SmoothSign,
+    /// Smoothing of the inverse maps' sign [V].
+    smooth_v: f64,
+}
+
+impl PartialEq for EffectCompensator {
+    fn eq(&self, o: &EffectCompensator) -> bool {
+        let fr = |f: &Option<Friction>| {
+            f.map(|f| {
+                (
+                    f.tau_c_pos,
+                    f.tau_c_neg,
+                    f.breakaway.map(|b| (b.tau_s, b.omega_s)),
+                )
+            })
+        };
+        self.torques == o.torques
+            && fr(&self.friction) == fr(&o.friction)
+            && self.inverses == o.inverses
+            && self.limit_v == o.limit_v
+            && self.lead_s == o.lead_s
+            && self.volts_per_nm == o.volts_per_nm
+            && self.n == o.n
+            && self.sign == o.sign
+    }
+}
+
+impl EffectCompensator {
+    /// The compensation of the effects of `plant` that `select` picks, the friction sign
+    /// smoothed by `sign`. Effects that declare no compensation are skipped (see [`Self::plan`]);
+    /// beyond [`MAX_COMPENSATED`] torques or [`MAX_INVERSES`] maps the rest are skipped too.
+    pub fn new(plant: &Plant, select: EffectSelect, sign: SmoothSign) -> EffectCompensator {
+        let p = plant.linear_params();
+        let mut c = EffectCompensator {
+            torques: [None; MAX_COMPENSATED],
+            friction: None,
+            inverses: [None; MAX_INVERSES],
+            limit_v: f64::INFINITY,
+            lead_s: 0.0,
+            volts_per_nm: p.r_eq() / (p.k_t * p.k_drv),
+            n: p.n,
+            sign,
+            smooth_v: 0.02,
+        };
+        let (mut nt, mut ni) = (0, 0);
+        let mut dry = false;
+        for e in plant.effects.iter().filter(|e| select.selects(e.kind)) {
+            let model = e.kind.model();
+            match model.compensation() {
+                Compensation::Torque { angle } if nt < MAX_COMPENSATED => {
+                    c.torques[nt] = Some((*e, angle));
+                    nt += 1;
+                }
+                Compensation::DryFriction => dry = true,
+                Compensation::InputInverse if ni < MAX_INVERSES => {
+                    c.inverses[ni] = Some(*e);
+                    ni += 1;
+                }
+                Compensation::Limit => {
+                    // The bound the map puts on u: where a large command ends up.
+                    let big = model.input_v(e.values(), 1e9);
+                    if big.is_finite() && big > 0.0 {
+                        c.limit_v = c.limit_v.min(big);
+                    }
+                }
+                Compensation::Lead => c.lead_s += model.input_delay_s(e.values()).max(0.0),
+                _ => {}
+            }
+        }
+        if dry {
+            // The whole curve: the selected shape on the model's Coulomb level.
+            c.friction = Some(Friction::from_effects(&plant.effects));
+        }
+        c
+    }
+
+    /// How each effect of `plant` is (or is not) compensated, in registry order.
+    pub fn plan(plant: &Plant) -> impl Iterator<Item = (EffectKind, Compensation)> + '_ {
+        plant
+            .effects
+            .iter()
+            .map(|e| (e.kind, e.kind.model().compensation()))
+    }
+
+    /// True when the dry-friction curve replaces the symmetric Coulomb term.
+    pub fn has_friction_curve(&self) -> bool {
+        self.friction.is_some()
+    }
+
+    /// The compensated torques [V] at reference `r`, time `t_s` [s] and measured load angle
+    /// `theta_l_meas_rad` [rad] (used by the effects compensated at the measured angle).
+    #[inline]
+    pub fn torque_v(&self, r: &RefSample, t_s: f64, theta_l_meas_rad: f64) -> f64 {
+        let mut tau_m = 0.0;
+        for (e, angle) in self.torques.iter().flatten() {
+            let theta_l = match angle {
+                AngleFrom::Reference => r.pos_rad,
+                AngleFrom::Measured if theta_l_meas_rad.is_finite() => theta_l_meas_rad,
+                AngleFrom::Measured => r.pos_rad,
+            };
+            let s = Signals {
+                t_s,
+                theta_l_rad: theta_l,
+                theta_m_rad: self.n * theta_l,
+                omega_l_rad_s: r.vel_rad_s,
+                omega_m_rad_s: self.n * r.vel_rad_s,
+                i_a_a: 0.0,
+                u_v: 0.0,
+            };
+            let tau = e.kind.model().torque_nm(e.values(), &s);
+            tau_m += match e.kind.acts_on() {
+                ActsOn::LoadTorque => tau / self.n,
+                ActsOn::MotorTorque => tau,
+                _ => 0.0,
+            };
+        }
+        if tau_m.is_finite() {
+            self.volts_per_nm * tau_m
+        } else {
+            0.0
+        }
+    }
+
+    /// The dry friction [V] at the reference load speed `omega_l_rad_s`: the curve's level in
+    /// that direction times the smoothed sign. None without a friction curve.
+    #[inline]
+    pub fn friction_v(&self, omega_l_rad_s: f64) -> Option<f64> {
+        let f = self.friction.as_ref()?;
+        let dir = if omega_l_rad_s < 0.0 { -1.0 } else { 1.0 };
+        let level = f.torque_l(omega_l_rad_s, dir).abs();
+        Some(self.volts_per_nm * level / self.n * self.sign.eval(omega_l_rad_s))
+    }
+
+    /// The command [V] that makes the plant's inverted input maps give `u_v` (identity without
+    /// any).
+    #[inline]
+    pub fn input_inverse_v(&self, u_v: f64) -> f64 {
+        let mut u = u_v;
+        for e in self.inverses.iter().flatten() {
+            u = e.kind.model().inverse_input_v(e.values(), u, self.smooth_v);
+        }
+        u
+    }
+
+    /// True when some input map is inverted.
+    pub fn inverts_input(&self) -> bool {
+        self.inverses.iter().any(Option::is_some)
+    }
+
+    /// The bound of the input a compensated saturation puts on the command [V] (infinite
+    /// without one): the controller's limit should not exceed it.
+    pub fn limit_v(&self) -> f64 {
+        self.limit_v
+    }
+
+    /// How far ahead [s] the feedforward reads the reference (the compensated delays).
+    pub fn lead_s(&self) -> f64 {
+        self.lead_s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::PlantParams;
+
+    fn plant(specs: &[&str]) -> Plant {
+        let mut p = Plant::from_params(PlantParams::TABLE2).unwrap();
+        for s in specs {
+            p.effects.insert(Effect::parse(s).unwrap());
+        }
+        p
+    }
+
+    #[test]
+    fn an_imbalance_is_cancelled_at_the_measured_angle() {
+        let p = plant(&["imbalance:amplitude=0.05,phase=0.3"]);
+        let c = EffectCompensator::new(&p, EffectSelect::All, SmoothSign::default());
+        let lp = p.linear_params();
+        let vpn = lp.r_eq() / (lp.k_t * lp.k_drv);
+        let r = RefSample {
+            pos_rad: 0.0,
+            vel_rad_s: 1.0,
+            acc_rad_s2: 0.0,
+        };
+        let want = vpn * 0.05 * (1.2f64 + 0.3).sin() / lp.n;
+        assert!((c.torque_v(&r, 0.0, 1.2) - want).abs() < 1e-12);
+        // Not selected: nothing.
+        let none = EffectCompensator::new(&p, EffectSelect::None, SmoothSign::default());
+        assert_eq!(none.torque_v(&r, 0.0, 1.2), 0.0);
+    }
+
+    #[test]
+    fn friction_curve_dead_band_saturation_delay_and_play() {
+        let p = plant(&[
+            "coulomb:tau_sf=0.01",
+            "stribeck:tau_s=0.02,omega_s=0.5",
+            "deadzone:width=0.4",
+            "saturation:limit=6",
+            "delay:delay=0.004",
+            "backlash:gap=0.01",
+        ]);
+        let sel = EffectSelect::None
+            .with(EffectKind::Stribeck)
+            .with(EffectKind::Deadzone)
+            .with(EffectKind::Saturation)
+            .with(EffectKind::Delay)
+            .with(EffectKind::Backlash);
+        let c = EffectCompensator::new(&p, sel, SmoothSign::Exact);
+        assert!(c.has_friction_curve());
+        // The curve is the breakaway at low speed, the Coulomb level far above omega_s.
+        let slow = c.friction_v(0.01).unwrap();
+        let fast = c.friction_v(50.0).unwrap();
+        assert!(slow > fast && fast > 0.0, "{slow} {fast}");
+        assert!((c.friction_v(-50.0).unwrap() + fast).abs() < 1e-12);
+        // The dead band's inverse, then the map, gives the command back.
+        let u = c.input_inverse_v(2.0);
+        assert!((crate::effects::deadzone::input_v(0.4, u) - 2.0).abs() < 1e-9);
+        assert_eq!(c.limit_v(), 6.0);
+        assert!((c.lead_s() - 0.004).abs() < 1e-15);
+        // The play says why it is not compensated.
+        let why = EffectCompensator::plan(&p)
+            .find(|(k, _)| *k == EffectKind::Backlash)
+            .map(|(_, c)| c);
+        assert!(matches!(why, Some(Compensation::Not(w)) if w.contains("motor angle")));
+    }
+}
