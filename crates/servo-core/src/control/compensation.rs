@@ -4,7 +4,7 @@
 //! Each effect declares how it is compensated ([`EffectModel::compensation`], one method behind
 //! the registry); this module only combines the declarations, so it names no effect:
 //!
-//! * a torque (an unbalanced load, cogging, a user's torque expression) is evaluated on the
+//! * a torque (an unbalanced load, a periodic motor torque, a user's torque expression) is evaluated on the
 //!   reference state, at the measured angle when it depends on the angle only, and added to the
 //!   motor torque demand: u = R_eq tau_m / (k_t k_drv) (eqs. 1, 5, 22, as the inertia and
 //!   friction feedforward);
@@ -242,72 +242,5 @@ impl EffectCompensator {
     /// How far ahead [s] the feedforward reads the reference (the compensated delays).
     pub fn lead_s(&self) -> f64 {
         self.lead_s
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::params::PlantParams;
-
-    fn plant(specs: &[&str]) -> Plant {
-        let mut p = Plant::from_params(PlantParams::TABLE2).unwrap();
-        for s in specs {
-            p.effects.insert(Effect::parse(s).unwrap());
-        }
-        p
-    }
-
-    #[test]
-    fn an_imbalance_is_cancelled_at_the_measured_angle() {
-        let p = plant(&["imbalance:amplitude=0.05,phase=0.3"]);
-        let c = EffectCompensator::new(&p, EffectSelect::All, SmoothSign::default());
-        let lp = p.linear_params();
-        let vpn = lp.r_eq() / (lp.k_t * lp.k_drv);
-        let r = RefSample {
-            pos_rad: 0.0,
-            vel_rad_s: 1.0,
-            acc_rad_s2: 0.0,
-        };
-        let want = vpn * 0.05 * (1.2f64 + 0.3).sin() / lp.n;
-        assert!((c.torque_v(&r, 0.0, 1.2) - want).abs() < 1e-12);
-        // Not selected: nothing.
-        let none = EffectCompensator::new(&p, EffectSelect::None, SmoothSign::default());
-        assert_eq!(none.torque_v(&r, 0.0, 1.2), 0.0);
-    }
-
-    #[test]
-    fn friction_curve_dead_band_saturation_delay_and_play() {
-        let p = plant(&[
-            "coulomb:tau_sf=0.01",
-            "stribeck:tau_s=0.02,omega_s=0.5",
-            "deadzone:width=0.4",
-            "saturation:limit=6",
-            "delay:delay=0.004",
-            "backlash:gap=0.01",
-        ]);
-        let sel = EffectSelect::None
-            .with(EffectKind::Stribeck)
-            .with(EffectKind::Deadzone)
-            .with(EffectKind::Saturation)
-            .with(EffectKind::Delay)
-            .with(EffectKind::Backlash);
-        let c = EffectCompensator::new(&p, sel, SmoothSign::Exact);
-        assert!(c.has_friction_curve());
-        // The curve is the breakaway at low speed, the Coulomb level far above omega_s.
-        let slow = c.friction_v(0.01).unwrap();
-        let fast = c.friction_v(50.0).unwrap();
-        assert!(slow > fast && fast > 0.0, "{slow} {fast}");
-        assert!((c.friction_v(-50.0).unwrap() + fast).abs() < 1e-12);
-        // The dead band's inverse, then the map, gives the command back.
-        let u = c.input_inverse_v(2.0);
-        assert!((crate::effects::deadzone::input_v(0.4, u) - 2.0).abs() < 1e-9);
-        assert_eq!(c.limit_v(), 6.0);
-        assert!((c.lead_s() - 0.004).abs() < 1e-15);
-        // The play says why it is not compensated.
-        let why = EffectCompensator::plan(&p)
-            .find(|(k, _)| *k == EffectKind::Backlash)
-            .map(|(_, c)| c);
-        assert!(matches!(why, Some(Compensation::Not(w)) if w.contains("motor angle")));
     }
 }

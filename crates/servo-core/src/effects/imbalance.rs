@@ -133,6 +133,27 @@ impl EffectModel for Imbalance {
 mod tests {
     use super::*;
 
+    /// The compensator cancels it at the measured angle, in volts through the motor.
+    #[test]
+    fn compensated_at_the_measured_angle() {
+        use crate::control::{EffectCompensator, EffectSelect, RefSample, SmoothSign};
+        let mut p = crate::plant::Plant::from_params(crate::params::PlantParams::TABLE2).unwrap();
+        p.effects
+            .insert(crate::effects::Effect::parse("imbalance:amplitude=0.05,phase=0.3").unwrap());
+        let c = EffectCompensator::new(&p, EffectSelect::All, SmoothSign::default());
+        let lp = p.linear_params();
+        let vpn = lp.r_eq() / (lp.k_t * lp.k_drv);
+        let r = RefSample {
+            pos_rad: 0.0,
+            vel_rad_s: 1.0,
+            acc_rad_s2: 0.0,
+        };
+        let want = vpn * 0.05 * (1.2f64 + 0.3).sin() / lp.n;
+        assert!((c.torque_v(&r, 0.0, 1.2) - want).abs() < 1e-12);
+        let none = EffectCompensator::new(&p, EffectSelect::None, SmoothSign::default());
+        assert_eq!(none.torque_v(&r, 0.0, 1.2), 0.0);
+    }
+
     #[test]
     fn periodic_torque_by_hand() {
         assert!((torque_l(0.02, 0.5, 1.0) - 0.02 * 1.5f64.sin()).abs() < 1e-15);
