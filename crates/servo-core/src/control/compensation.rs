@@ -8,7 +8,7 @@
 //!   reference state, at the measured angle when it depends on the angle only, and added to the
 //!   motor torque demand: u = R_eq tau_m / (k_t k_drv) (eqs. 1, 5, 22, as the inertia and
 //!   friction feedforward);
-//! * dry friction (Coulomb, Stribeck, direction asymmetry) is the plant's friction curve at the
+//! * dry friction (Coulomb, a breakaway and its decay, direction asymmetry) is the plant's friction curve at the
 //!   reference speed with a smoothed sign, in place of the symmetric tau_sf term;
 //! * an input map with an inverse (the dead band) is inverted on the whole command;
 //! * a bound of the input (saturation) narrows the controller's limit ([`EffectCompensator::limit_v`]);
@@ -87,28 +87,6 @@ pub struct EffectCompensator {
     sign: SmoothSign,
     /// Smoothing of the inverse maps' sign [V].
     smooth_v: f64,
-}
-
-impl PartialEq for EffectCompensator {
-    fn eq(&self, o: &EffectCompensator) -> bool {
-        let fr = |f: &Option<Friction>| {
-            f.map(|f| {
-                (
-                    f.tau_c_pos,
-                    f.tau_c_neg,
-                    f.breakaway.map(|b| (b.tau_s, b.omega_s)),
-                )
-            })
-        };
-        self.torques == o.torques
-            && fr(&self.friction) == fr(&o.friction)
-            && self.inverses == o.inverses
-            && self.limit_v == o.limit_v
-            && self.lead_s == o.lead_s
-            && self.volts_per_nm == o.volts_per_nm
-            && self.n == o.n
-            && self.sign == o.sign
-    }
 }
 
 impl EffectCompensator {
@@ -243,4 +221,18 @@ impl EffectCompensator {
     pub fn lead_s(&self) -> f64 {
         self.lead_s
     }
+}
+
+/// The compensator of the default plant with a Coulomb level and the effect `spec`
+/// (`name:key=value,...`), everything selected, exact sign: the effects' own tests use it.
+#[cfg(test)]
+pub(crate) fn test_compensator(spec: &str) -> (EffectCompensator, Plant) {
+    let mut p = Plant::from_params(crate::params::PlantParams::TABLE2).unwrap();
+    p.effects
+        .insert(Effect::parse("coulomb:tau_sf=0.01").unwrap());
+    p.effects.insert(Effect::parse(spec).unwrap());
+    (
+        EffectCompensator::new(&p, EffectSelect::All, SmoothSign::Exact),
+        p,
+    )
 }

@@ -825,6 +825,19 @@ mod fit {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn not_compensated_and_says_why() {
+        let (c, p) = crate::control::compensation::test_compensator("backlash:gap=0.01");
+        let why = crate::control::EffectCompensator::plan(&p)
+            .find(|(k, _)| *k == crate::effects::EffectKind::Backlash)
+            .map(|(_, c)| c);
+        assert!(
+            matches!(why, Some(crate::effects::Compensation::Not(w)) if w.contains("motor angle"))
+        );
+        assert_eq!(c.input_inverse_v(1.0), 1.0);
+        assert_eq!(c.limit_v(), f64::INFINITY);
+    }
     use super::*;
 
     #[test]

@@ -131,6 +131,14 @@ impl super::FitHooks for Deadzone {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn compensated_by_the_inverse_on_the_command() {
+        let (c, _) = crate::control::compensation::test_compensator("deadzone:width=0.4");
+        assert!(c.inverts_input());
+        let u = c.input_inverse_v(2.0);
+        assert!((super::input_v(0.4, u) - 2.0).abs() < 1e-9);
+    }
     use crate::effects::torque::InputNonlinearity;
     use crate::effects::{Effect, EffectKind, Effects};
 

@@ -100,3 +100,12 @@ impl super::FitHooks for Delay {
         }]
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn compensated_by_a_lead_of_the_feedforward() {
+        let (c, _) = crate::control::compensation::test_compensator("delay:delay=0.004");
+        assert!((c.lead_s() - 0.004).abs() < 1e-15);
+    }
+}

@@ -126,3 +126,12 @@ impl super::FitHooks for Saturation {
         }]
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn compensated_by_narrowing_the_limit() {
+        let (c, _) = crate::control::compensation::test_compensator("saturation:limit=6");
+        assert_eq!(c.limit_v(), 6.0);
+    }
+}

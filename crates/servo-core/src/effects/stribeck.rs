@@ -209,6 +209,18 @@ impl super::FitHooks for Stribeck {
 
 #[cfg(test)]
 mod tests {
+
+    /// The compensator uses the whole curve: the breakaway at low speed, the Coulomb level far
+    /// above omega_s, odd in speed.
+    #[test]
+    fn compensated_by_the_friction_curve() {
+        let (c, _) = crate::control::compensation::test_compensator("stribeck:tau_s=0.02,omega_s=0.5");
+        assert!(c.has_friction_curve());
+        let slow = c.friction_v(0.01).unwrap();
+        let fast = c.friction_v(50.0).unwrap();
+        assert!(slow > fast && fast > 0.0, "{slow} {fast}");
+        assert!((c.friction_v(-50.0).unwrap() + fast).abs() < 1e-12);
+    }
     use crate::effects::torque::Friction;
     use crate::effects::{Effect, EffectKind, Effects};
 
