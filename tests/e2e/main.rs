@@ -4,6 +4,7 @@
 //! Run one area with `cargo test --release --test e2e diagnose::`.
 
 mod compare;
+mod compensation;
 mod control_loop;
 mod custom;
 mod demo;

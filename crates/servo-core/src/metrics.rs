@@ -188,6 +188,9 @@ pub struct SummaryAccumulator {
     block: Vec<(f64, f64, f64)>,
     /// Reference of the sample before the block.
     r_prev: Option<f64>,
+    /// |r_prev - the reference before it| [rad]: a step jumps by much more than the previous
+    /// sample's change (the last sample of a smooth move that stops is no step).
+    d_prev: f64,
     open: Option<OpenStep>,
     steps: Vec<StepMetrics>,
 }
@@ -207,6 +210,7 @@ impl SummaryAccumulator {
             e_max: 0.0,
             block: Vec::with_capacity(STEP_BLOCK),
             r_prev: None,
+            d_prev: 0.0,
             open: None,
             steps: Vec::new(),
         }
@@ -257,7 +261,7 @@ impl SummaryAccumulator {
             let k = first + j;
             let start = match self.r_prev {
                 None if (r - y).abs() > thresh => Some(y),
-                Some(p) if (r - p).abs() > thresh => Some(p),
+                Some(p) if (r - p).abs() > thresh.max(50.0 * self.d_prev) => Some(p),
                 _ => None,
             };
             if let Some(from) = start {
@@ -293,6 +297,10 @@ impl SummaryAccumulator {
                 if e.abs() > self.band * size.abs() {
                     o.last_out = Some(k);
                 }
+            }
+            if let Some(p) = self.r_prev {
+                let x = (r - p).abs();
+                self.d_prev = if x.is_finite() { x } else { 0.0 };
             }
             self.r_prev = Some(r);
         }
@@ -512,6 +520,34 @@ mod tests {
         assert!((s.saturation_time_s - 0.1).abs() < 1e-9);
         assert!((s.err_max_rad.unwrap() - amp).abs() < 1e-9);
         assert!(s.to_string().contains("overshoot (max)"));
+    }
+
+    #[test]
+    fn the_end_of_a_smooth_move_is_no_step() {
+        // Holds, then a short move of 0.5 rad (0.32 s) that stops and holds, inside one block of
+        // the detector: the move's last sample changes the reference by ~1e-5 rad after a
+        // block that mostly holds; that is no step (it gave an overshoot of 10^5 % of it).
+        let r = crate::control::Reference::parse("trap:distance=0.5,vmax=3,amax=20").unwrap();
+        let n = 6_000;
+        let ts = 1e-3;
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * ts).collect();
+        let rr: Vec<f64> = t
+            .iter()
+            .map(|&t| if t < 2.3 { 0.0 } else { r.at(t - 2.3).pos_rad })
+            .collect();
+        let mut y = vec![0.0; n];
+        for k in 1..n {
+            y[k] = y[k - 1] + (rr[k - 1] - y[k - 1]) * ts / 0.01;
+        }
+        let rec = Record {
+            time_s: t,
+            u_v: Some(vec![0.0; n]),
+            theta_l_rad: Some(y),
+            ref_rad: Some(rr),
+            ..Record::default()
+        };
+        let s = RunSummary::compute(&rec, &[], 0.05);
+        assert!(s.steps.is_empty(), "{:?}", s.steps);
     }
 
     #[test]

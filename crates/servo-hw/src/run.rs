@@ -40,8 +40,8 @@
 use crate::backend::{Backend, HwError};
 use servo_core::control::program::Setpoint;
 use servo_core::control::{
-    ControlError, Feedforward, Pid, PidConfig, Program, SpeedEstimator, SpeedLoop, SpeedLoopConfig,
-    SpeedProfile,
+    ControlError, LoopCompensation, Pid, PidConfig, Program, SpeedEstimator, SpeedLoop,
+    SpeedLoopConfig, SpeedProfile,
 };
 use servo_core::metrics::{RunSummary, SummaryAccumulator};
 use servo_core::record::Record;
@@ -131,8 +131,10 @@ pub struct RunConfig {
     /// The PID (required when the program has closed-loop parts). Its output limits are
     /// narrowed to +-`u_limit_v`.
     pub pid: Option<PidConfig>,
-    /// Feedforward from the reference's speed and acceleration, added before the limit.
-    pub feedforward: Option<Feedforward>,
+    /// Feedforward from the reference's speed and acceleration and the compensation of the
+    /// model's effects ([`LoopCompensation`]), added to the PID's output before the limit; an
+    /// inverted input map (a dead band) acts on the whole command after the PID.
+    pub feedforward: Option<LoopCompensation>,
     /// Limit of the driver input [V] (symmetric); the board's own limit applies on top.
     pub u_limit_v: f64,
     /// Bandwidth of the speed estimator [rad/s].
@@ -376,7 +378,13 @@ pub fn run_loop_monitored(
                     p.ts_s, ts
                 ));
             }
-            Some(Pid::new(effective_pid_config(p, u_limit, ts)).map_err(RunError::Controller)?)
+            // A compensation's inverted input map (a dead band) and a compensated saturation
+            // narrow the PID's own limit, so that its anti-windup sees the drive's bound.
+            let pid_limit = cfg
+                .feedforward
+                .as_ref()
+                .map_or(u_limit, |c| c.pid_limit_v(u_limit));
+            Some(Pid::new(effective_pid_config(p, pid_limit, ts)).map_err(RunError::Controller)?)
         }
         (None, true) => return bad(
             "the program has closed-loop (position) parts but no controller was given (--gains)"
@@ -454,10 +462,18 @@ pub fn run_loop_monitored(
                         pid.reset();
                         was_open_loop = false;
                     }
-                    let ff = cfg
-                        .feedforward
-                        .as_ref()
-                        .map_or(0.0, |f| f.for_sample(&r).total_v);
+                    let comp = cfg.feedforward.as_ref();
+                    let ff = comp.map_or(0.0, |c| {
+                        // The reference read ahead by the compensated delays (same segment).
+                        let ahead = match c.lead_s() {
+                            l if l > 0.0 => match cfg.program.at(t + l) {
+                                Setpoint::Position(ra) => ra,
+                                _ => r,
+                            },
+                            _ => r,
+                        };
+                        c.feedforward(&ahead, t, s.theta_l_rad).total_v
+                    });
                     let o = pid.update(r.pos_rad, s.theta_l_rad, ff);
                     if o.invalid_input {
                         return Err(RunError::NonFinite {
@@ -465,7 +481,12 @@ pub fn run_loop_monitored(
                             theta_l_rad: s.theta_l_rad,
                         });
                     }
-                    (o.u_v, r.pos_rad, [o.p_v, o.i_v, o.d_v, o.ff_v], o.saturated)
+                    let u = comp.map_or(o.u_v, |c| c.command_v(o.u_v, t, u_limit));
+                    // ff_v: the feedforward plus what an inverted input map added after the
+                    // PID (the replay adds it as logged).
+                    let ff_v = o.ff_v + (u - o.u_v);
+                    let sat = o.saturated || (u != o.u_v && u.abs() >= u_limit);
+                    (u, r.pos_rad, [o.p_v, o.i_v, o.d_v, ff_v], sat)
                 }
                 Setpoint::Voltage { u_v } => {
                     was_open_loop = true;

@@ -21,6 +21,7 @@
 //!   in `--columns`, Simulink Scope structures.
 
 pub mod columns;
+pub mod compensation;
 pub mod controller;
 pub mod csv_read;
 pub mod csv_write;
@@ -108,6 +109,11 @@ pub mod meta_keys {
     pub const MODEL_TOML: &str = "model_toml";
     /// Feedforward terms in use (`inertia,friction` or `none`).
     pub const FEEDFORWARD: &str = "feedforward";
+    /// The effects a run compensated, comma-separated registry names (`imbalance,coulomb`;
+    /// empty for none): `servo compare` checks each against the log.
+    pub const COMPENSATED_EFFECTS: &str = "compensated_effects";
+    /// How each effect was compensated, or why not, `; `-separated sentences.
+    pub const COMPENSATION: &str = "compensation";
     /// Simulator noise seed.
     pub const SEED: &str = "seed";
     /// Voltage limit applied to the controller output [V].

@@ -606,6 +606,40 @@ impl ModelFile {
         Ok(plant)
     }
 
+    /// The 95 % interval [lo, hi] of `key` (`<effect>.<key>`, e.g. `imbalance.amplitude`) as
+    /// `[provenance.intervals]` records it (written by `compare --add --save`); None when the
+    /// file records none.
+    pub fn interval(&self, key: &str) -> Option<(f64, f64)> {
+        let t = self.provenance.as_ref()?.get("intervals")?.as_table()?;
+        let a = t.get(key)?.as_array()?;
+        let num = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
+        match (a.first().and_then(num), a.get(1).and_then(num)) {
+            (Some(lo), Some(hi)) if lo.is_finite() && hi.is_finite() && lo <= hi => Some((lo, hi)),
+            _ => None,
+        }
+    }
+
+    /// Records the 95 % interval [lo, hi] of `key` in `[provenance.intervals]` (replacing an
+    /// older one); non-finite bounds are not recorded.
+    pub fn set_interval(&mut self, key: &str, lo: f64, hi: f64) {
+        if !(lo.is_finite() && hi.is_finite()) {
+            return;
+        }
+        let prov = self.provenance.get_or_insert_with(toml::Table::new);
+        let entry = prov
+            .entry("intervals")
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        if !entry.is_table() {
+            *entry = toml::Value::Table(toml::Table::new());
+        }
+        if let Some(t) = entry.as_table_mut() {
+            t.insert(
+                key.to_string(),
+                toml::Value::Array(vec![toml::Value::Float(lo), toml::Value::Float(hi)]),
+            );
+        }
+    }
+
     /// A model file describing `plant` (friction written as effects).
     pub fn from_plant(plant: &Plant) -> ModelFile {
         ModelFile {
@@ -779,8 +813,11 @@ impl ModelFile {
             ));
         }
         if let Some(pv) = &self.provenance {
-            s.push_str("\n[provenance]\n");
-            s.push_str(&toml::to_string(pv).unwrap_or_default());
+            // Under its own key, so that sub-tables come out as [provenance.intervals].
+            let mut wrap = toml::Table::new();
+            wrap.insert("provenance".into(), toml::Value::Table(pv.clone()));
+            s.push('\n');
+            s.push_str(&toml::to_string(&wrap).unwrap_or_default());
         }
         if !self.limits.is_empty() {
             s.push_str("\n[limits]  # maintenance limits servo trend forecasts (SI units)\n");

@@ -10,6 +10,7 @@ use serde_json::{json, Value};
 use servo_core::compare::controller_check::{check_controller, ControllerCheck};
 use servo_core::compare::regimes::{detect_u_limit, Regime};
 use servo_core::compare::report::{describe_window, regime_phrase_on, with_unit_on};
+use servo_core::compare::suspects::check_compensated;
 use servo_io::controller::{
     pid_config, ControllerPart, LoggedController, PidOptions, PidSources, ResolvedPid,
 };
@@ -149,6 +150,8 @@ pub struct LogData {
     pub notes: Vec<String>,
     /// How well that controller reproduces the logged u.
     pub check: Option<ControllerCheck>,
+    /// The effects the run compensated (the log's `compensated_effects`).
+    pub compensated: Vec<servo_core::effects::EffectKind>,
 }
 
 impl LogData {
@@ -249,6 +252,14 @@ impl Compare {
                 },
                 notes: Vec::new(),
                 check: None,
+                compensated: meta
+                    .get(meta_keys::COMPENSATED_EFFECTS)
+                    .map(|v| {
+                        v.split(',')
+                            .filter_map(|n| servo_core::effects::EffectKind::from_name(n.trim()))
+                            .collect()
+                    })
+                    .unwrap_or_default(),
             };
             self.log_controller(&mut log, &meta, gains.as_ref())?;
             if !self.json {
@@ -287,6 +298,15 @@ impl Compare {
                 e => anyhow::Error::new(e),
             },
         )?;
+
+        // The effects a run compensated, each checked against its log: is the model without
+        // it a better prediction (a wrong compensation)?
+        let compensated: Vec<_> = logs.iter().map(|l| l.compensated.clone()).collect();
+        let checks = if compensated.iter().any(|c| !c.is_empty()) {
+            check_compensated(&plant, &current, &replays, &modes, &compensated, &opts)?
+        } else {
+            Vec::new()
+        };
 
         let saved = match &self.save {
             Some(path) => Some(save::gate_and_save(
@@ -329,6 +349,9 @@ impl Compare {
                 linear_json(&mut v, a, &current);
             }
             v["log_parts"] = crate::log_part::json(&parts);
+            if !checks.is_empty() {
+                v["compensation_checks"] = report_json::compensation_checks(&logs, &checks);
+            }
             crate::json_out::emit(&v)?;
         } else {
             out!("{}", crate::log_part::text(&parts));
@@ -347,6 +370,9 @@ impl Compare {
                 axis.as_ref(),
                 &self.model,
             );
+            for line in report_text::compensation_lines(&logs, &checks, &self.model) {
+                outln!("{line}");
+            }
         }
         Ok((ladder, current))
     }

@@ -23,7 +23,8 @@ use servo_core::control::Reference;
 use servo_core::metrics::RunSummary;
 use servo_hw::run::logged::close_log;
 use servo_hw::run::{LogSink, RunConfig, RunOutput, StopOutcome, StopReason};
-use servo_io::controller::{feedforward, run_controller, PidOptions};
+use servo_io::compensation::CompensationChoice;
+use servo_io::controller::{run_controller, PidOptions};
 use std::path::PathBuf;
 
 /// The plots of a run (also used by `servo demo`).
@@ -127,12 +128,21 @@ pub struct Run {
     #[arg(long = "u-limit", value_name = "VOLTS")]
     pub u_limit: Option<f64>,
 
-    /// Feedforward terms from the reference's speed and acceleration: `inertia` (J_eq and
-    /// back-EMF), `friction` (B_eq and tau_sf), `viscous`, `coulomb`, `back_emf`, `all`, `none`.
+    /// Feedforward and compensation, a comma list: linear terms from the reference's speed and
+    /// acceleration, `inertia` (J_eq and back-EMF), `friction` (B_eq and tau_sf), `viscous`,
+    /// `coulomb`, `back_emf`; effects of the --model file by name (`imbalance`, `cogging`,
+    /// `stribeck`, `asymmetry`, `deadzone`, `saturation`, `delay`, ...), each compensated as its
+    /// effect file declares; `all` (every term and every effect of the model); `none`.
     #[arg(long, value_name = "TERMS")]
     pub ff: Option<String>,
 
-    /// Model file for the feedforward constants (J_eq, B_eq, tau_sf, ...); default Table 2.
+    /// Ramp the effects' compensation in over this time from the start of the run [s] (0: at
+    /// once).
+    #[arg(long = "ff-ramp", value_name = "SECONDS", default_value_t = 0.0)]
+    pub ff_ramp_s: f64,
+
+    /// Model file for the feedforward constants (J_eq, B_eq, tau_sf, ...) and the effects `--ff`
+    /// compensates; default Table 2.
     #[arg(long, value_name = "FILE")]
     pub model: Option<PathBuf>,
 
@@ -264,11 +274,19 @@ impl Run {
         if self.ff.is_some() && model.is_none() {
             eprintln!("note: --ff without --model: feedforward constants from Table 2 (nominal)");
         }
-        let feedforward = self
-            .ff
-            .as_deref()
-            .map(|terms| feedforward(terms, model.as_ref()))
-            .transpose()?;
+        let choice = match self.ff.as_deref() {
+            Some(terms) => {
+                let mf = model.clone().unwrap_or_default();
+                let plant = mf.plant().context("--model")?;
+                let c = CompensationChoice::parse(terms, &mf, &plant, self.ff_ramp_s)?;
+                for line in c.lines() {
+                    eprintln!("{line}");
+                }
+                Some((c.build(&plant)?, c))
+            }
+            None => None,
+        };
+        let feedforward = choice.as_ref().map(|(c, _)| *c);
 
         let (mut backend, mut meta) = self.open_backend(ts_s, u_limit_v)?;
         let info = backend.info();
@@ -279,7 +297,7 @@ impl Run {
                 u_limit_v,
                 gains.as_ref(),
                 pid.as_ref(),
-                feedforward.as_ref(),
+                choice.as_ref().map(|(c, ch)| (c, ch)),
                 model.as_ref(),
             )?
             .put(

@@ -9,6 +9,8 @@
 //! * [`regimes`], [`periodic`], [`windows`]: where the error sits (operating regimes, position-
 //!   periodic components, worst time windows).
 //! * [`report`]: all of the above for one log, with plain-language findings.
+//! * [`suspects`]: which effect a run compensated wrongly (the replay without it predicts the
+//!   log better).
 //! * [`measured`], [`quantum`]: the measured side (signals, speed from position through
 //!   [`crate::signal::ZeroPhase`], encoder grid).
 
@@ -27,6 +29,7 @@ pub use crate::signal::quantum;
 pub mod regimes;
 pub mod replay;
 pub mod report;
+pub mod suspects;
 pub mod whiteness;
 pub mod windows;
 

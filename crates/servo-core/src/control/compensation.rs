@@ -146,6 +146,16 @@ impl EffectCompensator {
             .map(|e| (e.kind, e.kind.model().compensation()))
     }
 
+    /// True when anything is compensated (a torque, a friction curve, an inverted map, a
+    /// limit or a lead).
+    pub fn is_active(&self) -> bool {
+        self.torques.iter().any(Option::is_some)
+            || self.friction.is_some()
+            || self.inverts_input()
+            || self.limit_v.is_finite()
+            || self.lead_s > 0.0
+    }
+
     /// True when the dry-friction curve replaces the symmetric Coulomb term.
     pub fn has_friction_curve(&self) -> bool {
         self.friction.is_some()

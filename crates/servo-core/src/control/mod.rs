@@ -17,6 +17,7 @@
 
 pub mod compensation;
 pub mod feedforward;
+pub mod loop_compensation;
 pub mod pid;
 #[cfg(feature = "alloc")]
 pub mod program;
@@ -29,6 +30,7 @@ pub use compensation::{EffectCompensator, EffectSelect};
 pub use feedforward::{
     Feedforward, FeedforwardConfig, FeedforwardParams, FeedforwardTerms, SmoothSign,
 };
+pub use loop_compensation::{CompensationTerms, LoopCompensation};
 pub use pid::{AntiWindup, DerivativeOn, Discretization, Pid, PidConfig, PidGains, PidOutput};
 #[cfg(feature = "alloc")]
 pub use program::{Program, ProgramError, SpeedPiece, SpeedProfile};

@@ -8,10 +8,11 @@
 use super::{chain, effective_pid_config, RunError, RunOutput};
 use crate::backend::BoardInfo;
 use crate::serial::LinkStats;
-use servo_core::control::{Feedforward, PidConfig};
+use servo_core::control::{LoopCompensation, PidConfig};
 use servo_core::sim::SensorConfig;
 use servo_core::Plant;
-use servo_io::controller::{ff_name, LoggedController};
+use servo_io::compensation::CompensationChoice;
+use servo_io::controller::LoggedController;
 use servo_io::gains_file::GainsFile;
 use servo_io::model_file::ModelFile;
 use servo_io::{meta_keys, McapLog};
@@ -77,28 +78,26 @@ impl RunMetadata {
         u_limit_v: f64,
         gains: Option<&GainsFile>,
         pid: Option<&PidConfig>,
-        feedforward: Option<&Feedforward>,
+        feedforward: Option<(&LoopCompensation, &CompensationChoice)>,
         model: Option<&ModelFile>,
     ) -> servo_io::Result<&mut Self> {
         if let Some(g) = gains {
             self.put(meta_keys::GAINS_TOML, g.to_toml_commented());
         }
-        let ff_config = feedforward.map(|f| *f.config());
+        let label = feedforward.map_or_else(|| "none".to_string(), |(_, ch)| ch.label());
         if let Some(pid) = pid {
-            let runs = effective_pid_config(
-                pid,
-                u_limit_v.min(info.voltage_limit_v),
-                info.sample_period_s,
-            );
-            self.put(
-                meta_keys::CONTROLLER_TOML,
-                LoggedController::of(&runs, ff_config.as_ref()).to_toml()?,
-            );
+            let limit = u_limit_v.min(info.voltage_limit_v);
+            let pid_limit = feedforward.map_or(limit, |(c, _)| c.pid_limit_v(limit));
+            let runs = effective_pid_config(pid, pid_limit, info.sample_period_s);
+            let mut logged = LoggedController::of(&runs, None);
+            logged.feedforward = Some(label.clone());
+            self.put(meta_keys::CONTROLLER_TOML, logged.to_toml()?);
         }
-        self.put(
-            meta_keys::FEEDFORWARD,
-            ff_config.as_ref().map_or("none".into(), ff_name),
-        );
+        self.put(meta_keys::FEEDFORWARD, label);
+        if let Some((_, ch)) = feedforward {
+            self.put(meta_keys::COMPENSATED_EFFECTS, ch.effect_names());
+            self.put(meta_keys::COMPENSATION, ch.lines().join("; "));
+        }
         if feedforward.is_some() {
             self.put(
                 meta_keys::MODEL_TOML,

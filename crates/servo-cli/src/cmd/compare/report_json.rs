@@ -305,3 +305,27 @@ pub(super) fn linear_json(v: &mut Value, axis: &crate::axis::Axis, c: &ModelComp
         }
     }
 }
+
+/// The `"compensation_checks"` array: each compensated effect replayed without it per log.
+pub(super) fn compensation_checks(
+    logs: &[LogData],
+    checks: &[servo_core::compare::suspects::CompensationCheck],
+) -> Value {
+    Value::Array(
+        checks
+            .iter()
+            .map(|c| {
+                json!({
+                    "log": logs.get(c.log).map(|l| l.name.clone()).unwrap_or_default(),
+                    "effect": c.effect.name(),
+                    "rmse_with": finite(c.rmse_with),
+                    "rmse_without": finite(c.rmse_without),
+                    "unit": c.unit,
+                    "change_pct": finite(100.0 * c.change()),
+                    "suspect": c.suspect,
+                    "min_drop_pct": 100.0 * servo_core::compare::suspects::SUSPECT_MIN_DROP,
+                })
+            })
+            .collect(),
+    )
+}

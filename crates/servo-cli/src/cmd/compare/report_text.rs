@@ -245,3 +245,49 @@ pub fn controller_description(log: &LogData) -> Option<String> {
         .as_ref()
         .map(|c| format!("controller: {}", c.describe()))
 }
+
+/// The check of each effect a run compensated against its log: the suspect first, in words.
+pub(super) fn compensation_lines(
+    logs: &[LogData],
+    checks: &[servo_core::compare::suspects::CompensationCheck],
+    model: &Path,
+) -> Vec<String> {
+    use servo_core::compare::suspects::SUSPECT_MIN_DROP;
+    let mut out = Vec::new();
+    if checks.is_empty() {
+        return out;
+    }
+    out.push(format!(
+        "== compensated effects (the run's log says which), each replayed without it (suspect when \
+         the error falls by >= {} %: suspect_min_drop)",
+        servo_core::math::sig(SUSPECT_MIN_DROP * 100.0, 2)
+    ));
+    for c in checks {
+        let Some(log) = logs.get(c.log) else { continue };
+        let name = c.effect.name();
+        let figures = format!(
+            "{} RMSE {} {} with it, {} {} without ({:+.1} %)",
+            log.name,
+            servo_core::math::sig(c.rmse_with, 3),
+            c.unit,
+            servo_core::math::sig(c.rmse_without, 3),
+            c.unit,
+            100.0 * c.change()
+        );
+        if c.suspect {
+            out.push(format!(
+                "SUSPECT: the compensated {name} -- the model without it predicts this log better \
+                 ({figures}): the motor does not have the {name} the compensation cancelled (wrong \
+                 sign, size or phase); refit it: servo compare {} --model {} --add {name} --save \
+                 refit.toml",
+                log.name,
+                model.display()
+            ));
+        } else {
+            out.push(format!(
+                "compensated {name}: consistent with this log ({figures})"
+            ));
+        }
+    }
+    out
+}

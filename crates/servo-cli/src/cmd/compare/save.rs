@@ -146,6 +146,20 @@ pub(super) fn gate_and_save(
             prov.insert("compare_forced".into(), toml::Value::String(g.sentence()));
         }
         mf.provenance = Some(prov);
+        // The 95 % intervals of the fitted effect parameters: `servo run --ff` refuses to
+        // compensate an effect whose size holds zero.
+        if let Some(last) = ladder.last() {
+            for p in &last.params {
+                if let (Some(kind), Some(se)) = (p.effect, p.std_err) {
+                    let half = 1.96 * se;
+                    mf.set_interval(
+                        &format!("{}.{}", kind.name(), p.key),
+                        p.value - half,
+                        p.value + half,
+                    );
+                }
+            }
+        }
         mf.save(path)?;
     }
     Ok(SaveOutcome {

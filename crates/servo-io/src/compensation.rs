@@ -1,0 +1,246 @@
+//! `--ff` with effects (issue #29): which linear feedforward terms and which of a model's
+//! identified effects a run compensates, checked against the model before anything runs.
+//!
+//! `--ff` is a comma list of
+//! * the linear terms of the handout's feedforward: `inertia` (J_eq and back-EMF), `friction`
+//!   (B_eq and tau_sf), `viscous`, `coulomb`, `back_emf`;
+//! * effect names of the registry (`imbalance`, `cogging`, `stribeck`, `asymmetry`, `deadzone`,
+//!   `saturation`, `delay`, ...): compensate that effect of the model file, as its effect file
+//!   declares ([`servo_core::effects::Compensation`]);
+//! * `all`: every linear term and every effect of the model that declares a compensation;
+//! * `none`.
+//!
+//! An effect named but absent from the model, or one that declares no compensation (a gear
+//! play), is refused with the reason; so is an effect whose fitted interval (the model file's
+//! `[provenance.intervals]`, written by `compare --add --save`) holds zero for a parameter that
+//! sizes it: its sign or size is doubtful, and compensating it could double the error.
+
+use crate::error::{self as anyhow, bail};
+use crate::model_file::ModelFile;
+use servo_core::control::{EffectSelect, FeedforwardConfig, LoopCompensation};
+use servo_core::effects::{AngleFrom, Compensation, EffectKind};
+use servo_core::Plant;
+
+/// What a run compensates, checked against the model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CompensationChoice {
+    /// The linear feedforward terms.
+    pub linear: FeedforwardConfig,
+    /// The effects selected.
+    pub select: EffectSelect,
+    /// Each compensated effect and how, in registry order.
+    pub compensated: Vec<(&'static str, String)>,
+    /// Each effect of the model left out and why (with `all`: the effects that declare no
+    /// compensation).
+    pub left_out: Vec<(&'static str, String)>,
+    /// The ramp-in time of the effects' compensation [s].
+    pub ramp_s: f64,
+}
+
+/// How a compensation works, in words.
+pub fn how(c: Compensation, e: &servo_core::effects::Effect) -> Option<String> {
+    Some(match c {
+        Compensation::Linear => return None,
+        Compensation::Torque {
+            angle: AngleFrom::Measured,
+        } => "its torque at the measured angle".into(),
+        Compensation::Torque {
+            angle: AngleFrom::Reference,
+        } => "its torque on the reference".into(),
+        Compensation::DryFriction => "the friction curve at the reference speed".into(),
+        Compensation::InputInverse => "the inverse of its input map on the whole command".into(),
+        Compensation::Limit => "the controller's limit narrowed to its bound".into(),
+        Compensation::Lead => format!(
+            "the feedforward read {} s ahead",
+            servo_core::math::sig(e.kind.model().input_delay_s(e.values()), 3)
+        ),
+        Compensation::Not(why) => format!("not compensated: {why}"),
+    })
+}
+
+impl CompensationChoice {
+    /// Parses `--ff` `text` against the effects of `model` (`plant`: its plant), ramped in over
+    /// `ramp_s` [s].
+    pub fn parse(
+        text: &str,
+        model: &ModelFile,
+        plant: &Plant,
+        ramp_s: f64,
+    ) -> anyhow::Result<CompensationChoice> {
+        if !(ramp_s.is_finite() && ramp_s >= 0.0) {
+            bail!("--ff-ramp: expected a time >= 0 s, got {ramp_s}");
+        }
+        let mut linear = FeedforwardConfig::OFF;
+        linear.sign = FeedforwardConfig::FULL.sign;
+        let mut select = EffectSelect::None;
+        let mut named: Vec<EffectKind> = Vec::new();
+        for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            match item {
+                "inertia" => {
+                    linear.inertia = true;
+                    linear.back_emf = true;
+                }
+                "friction" => {
+                    linear.viscous = true;
+                    linear.coulomb = true;
+                }
+                "viscous" => linear.viscous = true,
+                "coulomb" => linear.coulomb = true,
+                "back_emf" | "bemf" => linear.back_emf = true,
+                "all" => {
+                    linear = FeedforwardConfig::FULL;
+                    select = EffectSelect::All;
+                }
+                "none" => {
+                    linear = FeedforwardConfig::OFF;
+                    select = EffectSelect::None;
+                    named.clear();
+                }
+                other => {
+                    let Some(kind) = EffectKind::from_name(other) else {
+                        bail!(
+                            "--ff: unknown term `{other}`; use inertia, friction, viscous, coulomb, \
+                             back_emf, all, none or an effect of the model ({})",
+                            effect_names(plant)
+                        );
+                    };
+                    if plant.effects.get(kind).is_none() {
+                        bail!(
+                            "--ff {other}: the model has no {other} to compensate (its effects: {}); \
+                             add it first (`servo compare LOG --model M --add {other} --save M2`)",
+                            effect_names(plant)
+                        );
+                    }
+                    if let Compensation::Not(why) = kind.model().compensation() {
+                        bail!("--ff {other}: {other} is not compensated: {why}");
+                    }
+                    select = select.with(kind);
+                    named.push(kind);
+                }
+            }
+        }
+        let mut compensated = Vec::new();
+        let mut left_out = Vec::new();
+        for e in plant.effects.iter() {
+            let c = e.kind.model().compensation();
+            if c == Compensation::Linear {
+                continue;
+            }
+            let name = e.kind.name();
+            if !select.selects(e.kind) {
+                if !select.is_none() {
+                    left_out.push((name, "not selected".to_string()));
+                }
+                continue;
+            }
+            if let Compensation::Not(why) = c {
+                left_out.push((name, why.to_string()));
+                continue;
+            }
+            if let Some(doubt) = doubtful(model, e) {
+                if named.contains(&e.kind) || select == EffectSelect::All {
+                    bail!(
+                        "--ff: {name} is not compensated: {doubt}; its sign or size is doubtful \
+                         (refit it on more data, or leave it out: --ff without {name})"
+                    );
+                }
+            }
+            if let Some(words) = how(c, e) {
+                compensated.push((name, words));
+            }
+        }
+        Ok(CompensationChoice {
+            linear,
+            select,
+            compensated,
+            left_out,
+            ramp_s,
+        })
+    }
+
+    /// The compensation of `plant` this choice makes.
+    pub fn build(&self, plant: &Plant) -> anyhow::Result<LoopCompensation> {
+        LoopCompensation::new(plant, self.linear, self.select, self.ramp_s)
+            .map_err(|e| crate::error::anyhow!("--ff: {e}"))
+    }
+
+    /// The `--ff` form of what runs: the linear terms, then the effects (`none` for nothing),
+    /// e.g. `inertia,back_emf,viscous,coulomb,imbalance`.
+    pub fn label(&self) -> String {
+        let mut v = Vec::new();
+        let lin = crate::controller::ff_name(&self.linear);
+        if lin != "none" {
+            v.push(lin);
+        }
+        v.extend(self.compensated.iter().map(|(n, _)| n.to_string()));
+        if v.is_empty() {
+            "none".into()
+        } else {
+            v.join(",")
+        }
+    }
+
+    /// The compensated effects' names, comma-separated (empty for none).
+    pub fn effect_names(&self) -> String {
+        self.compensated
+            .iter()
+            .map(|(n, _)| *n)
+            .collect::<Vec<_>>()
+            .join(",")
+    }
+
+    /// One line per effect: how it is compensated, or why not.
+    pub fn lines(&self) -> Vec<String> {
+        let mut out: Vec<String> = self
+            .compensated
+            .iter()
+            .map(|(n, w)| format!("compensated: {n} ({w})"))
+            .collect();
+        out.extend(
+            self.left_out
+                .iter()
+                .map(|(n, w)| format!("not compensated: {n} ({w})")),
+        );
+        if self.ramp_s > 0.0 && !self.compensated.is_empty() {
+            out.push(format!(
+                "the effects' compensation ramps in over {} s",
+                servo_core::math::sig(self.ramp_s, 3)
+            ));
+        }
+        out
+    }
+}
+
+/// The effects of `plant` by name, comma-separated (`none`).
+fn effect_names(plant: &Plant) -> String {
+    let v: Vec<&str> = plant
+        .effects
+        .iter()
+        .filter(|e| e.kind.model().compensation() != Compensation::Linear)
+        .map(|e| e.kind.name())
+        .collect();
+    if v.is_empty() {
+        "none".into()
+    } else {
+        v.join(", ")
+    }
+}
+
+/// Why `e` is doubtful: a parameter that sizes it (linear in the torque or voltage) whose
+/// interval in the model file holds zero.
+fn doubtful(model: &ModelFile, e: &servo_core::effects::Effect) -> Option<String> {
+    for spec in e.kind.params().iter().filter(|s| !s.nonlinear) {
+        let key = format!("{}.{}", e.kind.name(), spec.key);
+        if let Some((lo, hi)) = model.interval(&key) {
+            if lo < 0.0 && hi > 0.0 {
+                return Some(format!(
+                    "the 95 % interval of {key} [{} .. {}] {} holds zero",
+                    servo_core::math::sig(lo, 3),
+                    servo_core::math::sig(hi, 3),
+                    spec.unit
+                ));
+            }
+        }
+    }
+    None
+}
