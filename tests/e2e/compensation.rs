@@ -129,16 +129,25 @@ fn check_cut(hidden: &str, name: &str, min_cut: f64) {
     let dir = tempfile::tempdir().unwrap();
     let fitted = identified_with(dir.path(), hidden, name);
     let (friction, _) = tracking(dir.path(), hidden, &fitted, "friction", None);
+    let (linear, _) = tracking(dir.path(), hidden, &fitted, "inertia,friction", None);
     let (all, said) = tracking(dir.path(), hidden, &fitted, "all", None);
+    // The effects' own share: against every linear term (inertia and back-EMF too).
+    assert!(
+        all < 0.7 * linear,
+        "{hidden}: compensating the effects did not cut the error of the linear feedforward by \
+         30 %: {linear:.4e} -> {all:.4e} rad"
+    );
     assert!(
         said.contains(&format!("compensated: {name}")),
         "the run does not say it compensates {name}:\n{said}"
     );
     let cut = 1.0 - all / friction;
     eprintln!(
-        "{hidden}: tracking error RMS {friction:.4e} rad with --ff friction, {all:.4e} rad with \
-         --ff all: cut {:.1} %",
-        100.0 * cut
+        "{hidden}: tracking error RMS {friction:.4e} rad with --ff friction, {linear:.4e} rad \
+         with --ff inertia,friction, {all:.4e} rad with --ff all: cut {:.1} % (against every \
+         linear term {:.1} %)",
+        100.0 * cut,
+        100.0 * (1.0 - all / linear)
     );
     assert!(
         cut >= min_cut,
@@ -156,7 +165,11 @@ fn an_identified_imbalance_is_compensated_and_the_error_falls_70_percent() {
 
 #[test]
 fn an_identified_cogging_is_compensated_and_the_error_falls_50_percent() {
-    check_cut("cogging:amplitude=4e-4", "cogging", 0.50);
+    check_cut(
+        "cogging:amplitude=3e-4,harmonic=12,phase=0.3",
+        "cogging",
+        0.50,
+    );
 }
 
 #[test]
@@ -199,14 +212,15 @@ fn a_wrong_sign_makes_the_error_rise_and_compare_names_the_suspect() {
     let fitted = identified_with(dir.path(), hidden, "imbalance");
     let wrong = dir.path().join("wrong.toml");
     flipped(&fitted, &wrong);
-    let (friction, _) = tracking(dir.path(), hidden, &fitted, "friction", None);
+    // Every linear term, no effect: what the same run gives without compensating the imbalance.
+    let (linear, _) = tracking(dir.path(), hidden, &fitted, "inertia,friction", None);
     let (right, _) = tracking(dir.path(), hidden, &fitted, "all", Some("right.mcap"));
     let (bad, _) = tracking(dir.path(), hidden, &wrong, "all", Some("wrong.mcap"));
-    eprintln!("friction {friction:.4e}, right {right:.4e}, wrong sign {bad:.4e} rad");
+    eprintln!("linear terms only {linear:.4e}, right {right:.4e}, wrong sign {bad:.4e} rad");
     assert!(
-        bad > friction && bad > 2.0 * right,
-        "a wrong-sign imbalance should make the error rise: friction {friction:.4e}, right \
-         {right:.4e}, wrong {bad:.4e} rad"
+        bad > 1.3 * linear && bad > 3.0 * right,
+        "a wrong-sign imbalance should make the error rise above leaving it out: linear terms \
+         only {linear:.4e}, right {right:.4e}, wrong {bad:.4e} rad"
     );
     // compare on the wrong run with the wrong model: the compensated imbalance is the suspect.
     let wrong_log = dir.path().join("wrong.mcap");

@@ -472,7 +472,7 @@ pub fn run_loop_monitored(
                             },
                             _ => r,
                         };
-                        c.feedforward(&ahead, t, s.theta_l_rad).total_v
+                        c.feedforward(&ahead, t, s.theta_l_rad, omega).total_v
                     });
                     let o = pid.update(r.pos_rad, s.theta_l_rad, ff);
                     if o.invalid_input {

@@ -195,13 +195,23 @@ impl EffectCompensator {
         }
     }
 
-    /// The dry friction [V] at the reference load speed `omega_l_rad_s`: the curve's level in
-    /// that direction times the smoothed sign. None without a friction curve.
+    /// The dry friction [V] for the reference load speed `omega_l_rad_s` and the measured one
+    /// `omega_l_meas_rad_s` (NaN when unknown): the curve's level in the reference's direction
+    /// times the smoothed sign of the reference speed. The level is read at the measured speed
+    /// while the shaft is still or moves in the reference's direction (a stuck shaft needs the
+    /// breakaway torque; a falling Stribeck curve read at the reference speed would leave the
+    /// plant's negative damping in the loop, a stick-slip cycle), at the reference speed
+    /// otherwise. None without a friction curve.
     #[inline]
-    pub fn friction_v(&self, omega_l_rad_s: f64) -> Option<f64> {
+    pub fn friction_v(&self, omega_l_rad_s: f64, omega_l_meas_rad_s: f64) -> Option<f64> {
         let f = self.friction.as_ref()?;
         let dir = if omega_l_rad_s < 0.0 { -1.0 } else { 1.0 };
-        let level = f.torque_l(omega_l_rad_s, dir).abs();
+        let w = if omega_l_meas_rad_s.is_finite() && omega_l_meas_rad_s * dir >= 0.0 {
+            omega_l_meas_rad_s
+        } else {
+            omega_l_rad_s
+        };
+        let level = f.torque_l(w, dir).abs();
         Some(self.volts_per_nm * level / self.n * self.sign.eval(omega_l_rad_s))
     }
 

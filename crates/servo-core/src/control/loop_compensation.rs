@@ -113,16 +113,22 @@ impl LoopCompensation {
     }
 
     /// The compensation [V] at control time `t_s` [s] for the reference sample `r` (read
-    /// [`Self::lead_s`] ahead) and the measured load angle `theta_l_meas_rad` [rad] (NaN when
-    /// unknown: the reference angle is used).
+    /// [`Self::lead_s`] ahead), the measured load angle `theta_l_meas_rad` [rad] and speed
+    /// `omega_l_meas_rad_s` [rad/s] (NaN when unknown: the reference's are used).
     #[inline]
-    pub fn feedforward(&self, r: &RefSample, t_s: f64, theta_l_meas_rad: f64) -> CompensationTerms {
+    pub fn feedforward(
+        &self,
+        r: &RefSample,
+        t_s: f64,
+        theta_l_meas_rad: f64,
+        omega_l_meas_rad_s: f64,
+    ) -> CompensationTerms {
         let linear_v = self.linear.for_sample(r).total_v;
         let (mut torque_v, mut friction_v) = (0.0, 0.0);
         if let Some(c) = &self.effects {
             let k = self.ramp(t_s);
             torque_v = k * c.torque_v(r, t_s, theta_l_meas_rad);
-            friction_v = k * c.friction_v(r.vel_rad_s).unwrap_or(0.0);
+            friction_v = k * c.friction_v(r.vel_rad_s, omega_l_meas_rad_s).unwrap_or(0.0);
         }
         CompensationTerms {
             linear_v,
@@ -221,7 +227,7 @@ mod tests {
         let ff = Feedforward::new(FeedforwardParams::from_plant(&p), cfg).unwrap();
         let r = sample(0.3, 2.0);
         assert_eq!(
-            c.feedforward(&r, 0.0, 0.3).total_v,
+            c.feedforward(&r, 0.0, 0.3, f64::NAN).total_v,
             ff.for_sample(&r).total_v
         );
         assert!(c.effects().is_none());
@@ -236,9 +242,9 @@ mod tests {
         let cfg = exact(FeedforwardConfig::FRICTION);
         let c = LoopCompensation::new(&p, cfg, EffectSelect::All, 0.0).unwrap();
         assert!(!c.linear_part().config().coulomb);
-        let t = c.feedforward(&sample(0.0, 0.5), 1.0, 0.0);
+        let t = c.feedforward(&sample(0.0, 0.5), 1.0, 0.0, f64::NAN);
         let lin = LoopCompensation::new(&p, cfg, EffectSelect::None, 0.0).unwrap();
-        let t0 = lin.feedforward(&sample(0.0, 0.5), 1.0, 0.0);
+        let t0 = lin.feedforward(&sample(0.0, 0.5), 1.0, 0.0, f64::NAN);
         assert!(t.friction_v > 0.0 && t.friction_v > t0.total_v - t0.linear_v + 0.0);
         assert!(
             t.friction_v > t0.linear_v - t.linear_v,
@@ -247,7 +253,7 @@ mod tests {
             t0.linear_v - t.linear_v
         );
         // Odd in the speed.
-        let m = c.feedforward(&sample(0.0, -0.5), 1.0, 0.0);
+        let m = c.feedforward(&sample(0.0, -0.5), 1.0, 0.0, f64::NAN);
         assert!((m.total_v + t.total_v).abs() < 1e-12);
     }
 
@@ -257,12 +263,12 @@ mod tests {
         let cfg = exact(FeedforwardConfig::INERTIA);
         let c = LoopCompensation::new(&p, cfg, EffectSelect::All, 2.0).unwrap();
         let r = sample(1.0, 0.0);
-        let full = c.feedforward(&r, 5.0, 1.0);
-        let half = c.feedforward(&r, 1.0, 1.0);
+        let full = c.feedforward(&r, 5.0, 1.0, 0.0);
+        let half = c.feedforward(&r, 1.0, 1.0, 0.0);
         assert!(full.torque_v.abs() > 0.01, "{full:?}");
         assert!((half.torque_v - 0.5 * full.torque_v).abs() < 1e-12);
         assert_eq!(half.linear_v, full.linear_v);
-        assert_eq!(c.feedforward(&r, 0.0, 1.0).torque_v, 0.0);
+        assert_eq!(c.feedforward(&r, 0.0, 1.0, 0.0).torque_v, 0.0);
         assert!(LoopCompensation::new(&p, cfg, EffectSelect::All, -1.0).is_err());
     }
 

@@ -216,10 +216,15 @@ mod tests {
     fn compensated_by_the_friction_curve() {
         let (c, _) = crate::control::compensation::test_compensator("stribeck:tau_s=0.02,omega_s=0.5");
         assert!(c.has_friction_curve());
-        let slow = c.friction_v(0.01).unwrap();
-        let fast = c.friction_v(50.0).unwrap();
+        let slow = c.friction_v(0.01, f64::NAN).unwrap();
+        let fast = c.friction_v(50.0, f64::NAN).unwrap();
         assert!(slow > fast && fast > 0.0, "{slow} {fast}");
-        assert!((c.friction_v(-50.0).unwrap() + fast).abs() < 1e-12);
+        assert!((c.friction_v(-50.0, f64::NAN).unwrap() + fast).abs() < 1e-12);
+        // The level at the measured speed: a stuck shaft (0 rad/s) gets the breakaway while
+        // the reference moves fast; a shaft moving against the reference gets the reference's.
+        let stuck = c.friction_v(50.0, 0.0).unwrap();
+        assert!(stuck > fast && stuck == c.friction_v(1e-9, 0.0).unwrap());
+        assert_eq!(c.friction_v(50.0, -3.0).unwrap(), fast);
     }
     use crate::effects::torque::Friction;
     use crate::effects::{Effect, EffectKind, Effects};
