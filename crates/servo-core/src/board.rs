@@ -40,7 +40,7 @@
 //!   against [`SafetyLimits`] → 0 V, Fault(OverCurrent/PositionLimit), Idle. A non-finite command
 //!   is Fault(BadCommand).
 
-use crate::control::{AntiWindup, Pid, PidConfig, PidGains};
+use crate::control::{AntiWindup, LoopCompensation, Pid, PidConfig, PidGains, RefSample};
 use crate::math;
 use crate::protocol::{
     flags, Decoder, DecoderStats, Fault, FaultCode, Frame, HelloAck, LoopGains, Message, Sample,
@@ -177,6 +177,8 @@ pub struct BoardCore {
     run: Option<Run>,
     bad_cmd_reported: bool,
     stats: BoardStats,
+    /// The compensation of the on-board loop (issue #29), set by the firmware.
+    compensation: Option<LoopCompensation>,
 }
 
 impl BoardCore {
@@ -191,7 +193,23 @@ impl BoardCore {
             run: None,
             bad_cmd_reported: false,
             stats: BoardStats::default(),
+            compensation: None,
         })
+    }
+
+    /// Compensates the identified effects in the on-board loop (LoopReference): the effects'
+    /// torques at the measured angle (an unbalanced load, cogging) and the reference's (a
+    /// holding reference has no speed), the inverted input maps on the PID's output and the PID's
+    /// limit narrowed for them ([`LoopCompensation`]); `None` switches it off. The same value
+    /// `servo run --ff` computes on the host; no heap. Takes effect at the next LoopReference
+    /// from idle (the PID's limit is set when the loop starts).
+    pub fn set_compensation(&mut self, compensation: Option<LoopCompensation>) {
+        self.compensation = compensation;
+    }
+
+    /// The on-board loop's compensation, if any.
+    pub fn compensation(&self) -> Option<&LoopCompensation> {
+        self.compensation.as_ref()
     }
 
     /// The configuration.
@@ -295,7 +313,21 @@ impl BoardCore {
             return;
         }
         if let Some((pid, ref_rad)) = r.onboard.as_mut() {
-            r.u_v = pid.update(*ref_rad, theta_rad, 0.0).u_v as f32;
+            let u = match &self.compensation {
+                Some(c) => {
+                    let t_s = r.k as f64 * self.cfg.sample_period_us as f64 * 1e-6;
+                    let limit = self.cfg.limits.voltage_limit_v;
+                    let hold = RefSample {
+                        pos_rad: *ref_rad,
+                        vel_rad_s: 0.0,
+                        acc_rad_s2: 0.0,
+                    };
+                    let ff = c.feedforward(&hold, t_s, theta_rad, f64::NAN).total_v;
+                    c.command_v(pid.update(*ref_rad, theta_rad, ff).u_v, t_s, limit)
+                }
+                None => pid.update(*ref_rad, theta_rad, 0.0).u_v,
+            };
+            r.u_v = u as f32;
             hal.set_voltage(r.u_v);
         }
         let sample = Sample {
@@ -434,10 +466,14 @@ impl BoardCore {
             kd: g.kd as f64,
             tl_s: g.tau_f_s as f64,
         };
+        let limit = self.cfg.limits.voltage_limit_v;
         let cfg = PidConfig {
             anti_windup: AntiWindup::Clamping,
-            ..PidConfig::new(gains, self.cfg.sample_period_us as f64 * 1e-6)
-                .with_symmetric_limit(self.cfg.limits.voltage_limit_v)
+            ..PidConfig::new(gains, self.cfg.sample_period_us as f64 * 1e-6).with_symmetric_limit(
+                self.compensation
+                    .as_ref()
+                    .map_or(limit, |c| c.pid_limit_v(limit)),
+            )
         };
         Pid::new(cfg).ok()
     }
