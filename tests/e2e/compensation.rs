@@ -23,12 +23,12 @@ fn p(path: &Path) -> &str {
     path.to_str().unwrap()
 }
 
-fn tracking_experiment() -> PathBuf {
+pub(crate) fn tracking_experiment() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("experiments/tracking.toml")
 }
 
 /// The tracking error RMS [rad] `servo run` prints.
-fn printed_rms_rad(out: &str) -> f64 {
+pub(crate) fn printed_rms_rad(out: &str) -> f64 {
     let line = out
         .lines()
         .find(|l| l.contains("tracking error RMS"))
@@ -41,7 +41,7 @@ fn printed_rms_rad(out: &str) -> f64 {
 
 /// The lab plant with `hidden` (`name:key=value,...`): logs, identified model, diagnosis and the
 /// fitted model with the effect `name` added, in `dir`. Returns the fitted model's path.
-fn identified_with(dir: &Path, hidden: &str, name: &str) -> PathBuf {
+pub(crate) fn identified_with(dir: &Path, hidden: &str, name: &str) -> PathBuf {
     let d = |n: &str| dir.join(n).to_string_lossy().into_owned();
     let (plant, gains, run, model, fitted) = (
         d("plant.toml"),

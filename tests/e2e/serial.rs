@@ -1099,6 +1099,85 @@ mod qemu_cli {
         (th.len(), th.last().expect("samples").1)
     }
 
+    /// `servo run --backend serial` of the tracking reference on a fresh QEMU board simulating
+    /// the lab plant with an unbalanced load, compensated by `ff` with `model`: the RMS tracking
+    /// error [rad].
+    fn qemu_tracking(dir: &Path, g: &Path, model: &Path, ff: &str) -> Option<f64> {
+        let board = QemuProc::start(
+            dir,
+            &["--watchdog-ms", "250", "--qemu-plant", "lab-imbalance"],
+        )?;
+        let exp = crate::compensation::tracking_experiment();
+        let log = dir.join(format!("qemu-{}.mcap", ff.replace(',', "-")));
+        let args: Vec<String> = [
+            "run",
+            "--backend",
+            "serial",
+            "--port",
+            &board.port,
+            "--gains",
+            g.to_str().unwrap(),
+            "--experiment",
+            exp.to_str().unwrap(),
+            "--model",
+            model.to_str().unwrap(),
+            "--ff",
+            ff,
+            "--board-timeout-ms",
+            "500",
+            "--log",
+            log.to_str().unwrap(),
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        let (ok, out, err) = servo_owned(&args);
+        let stats = board.stats_after(Duration::from_millis(1200));
+        board.quit();
+        eprintln!("{out}\n{err}\nQEMU: {stats}");
+        assert!(ok, "{out}\n{err}");
+        Some(crate::compensation::printed_rms_rad(&out))
+    }
+
+    /// Issue #29 on the QEMU board: the imbalance identified and added on the simulator's logs,
+    /// compensated over the serial link on the emulated board (its own copy of the physics, at
+    /// 2 ms), cuts the tracking error by 70 % against the friction feedforward.
+    #[test]
+    fn compensation_on_the_qemu_board_cuts_the_tracking_error() {
+        if servo_e2e::qemu_image().is_none() {
+            eprintln!("skipped: no QEMU image (build firmware/ with cargo build --release -p servo-board-qemu)");
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let fitted = {
+            let _heavy = servo_e2e::cpu_heavy();
+            crate::compensation::identified_with(
+                dir.path(),
+                "imbalance:amplitude=0.01,phase=0.5",
+                "imbalance",
+            )
+        };
+        let _rt = realtime();
+        let g = gains_2ms(dir.path());
+        let Some(friction) = qemu_tracking(dir.path(), &g, &fitted, "friction") else {
+            return;
+        };
+        let Some(all) = qemu_tracking(dir.path(), &g, &fitted, "all") else {
+            return;
+        };
+        let cut = 1.0 - all / friction;
+        eprintln!(
+            "QEMU board, lab plant with an imbalance: tracking error RMS {friction:.4e} rad with \
+             --ff friction, {all:.4e} rad with --ff all: cut {:.1} %",
+            100.0 * cut
+        );
+        assert!(
+            cut >= 0.70,
+            "on the QEMU board --ff all cut the tracking error by {:.1} % (< 70 %)",
+            100.0 * cut
+        );
+    }
+
     #[test]
     fn closed_loop_step_reaches_its_reference() {
         let _rt = realtime();

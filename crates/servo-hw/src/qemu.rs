@@ -35,6 +35,9 @@ pub enum QemuPlant {
     Lab,
     /// `Plant::nominal()`: Table 2 without friction.
     Table2,
+    /// `Plant::lab()` with an unbalanced load (`imbalance:amplitude=0.01,phase=0.5`, the
+    /// README's motor with a secret): the compensation tests' plant.
+    LabImbalance,
 }
 
 /// How to start the QEMU board.
@@ -146,6 +149,7 @@ impl QemuBoard {
         let plant = match cfg.plant {
             QemuPlant::Lab => 0,
             QemuPlant::Table2 => 1,
+            QemuPlant::LabImbalance => 2,
         };
         let words = [
             BOOT_MAGIC,

@@ -28,6 +28,7 @@ use servo_core::board::{BoardConfig, BoardCore, BoardHal, SimDrive};
 use servo_core::protocol::{fixed_text, FaultCode};
 use servo_core::safety::SafetyLimits;
 use servo_core::sim::SensorConfig;
+use servo_core::effects::{Effect, EffectKind};
 use servo_core::Plant;
 
 /// Core clock of the AN386 image [Hz].
@@ -48,7 +49,8 @@ struct BootConfig {
     watchdog_ms: u32,
     /// Physics sub-steps per period.
     substeps: u32,
-    /// 0: the lab plant (`Plant::lab`), 1: Table 2 without friction (`Plant::nominal`).
+    /// 0: the lab plant (`Plant::lab`), 1: Table 2 without friction (`Plant::nominal`), 2: the
+    /// lab plant with an unbalanced load (imbalance amplitude 0.01 N m, phase 0.5 rad).
     plant: u32,
     /// Soft position limit ± from Start [mrad]; 0 = the default ±2 rev.
     theta_limit_mrad: u32,
@@ -259,10 +261,16 @@ fn main() -> ! {
 
     let period_us = boot.period_us as u64;
     let subs = boot.substeps as u64;
-    let plant = if boot.plant == 1 {
-        Plant::nominal()
-    } else {
-        Plant::lab()
+    let plant = match boot.plant {
+        1 => Plant::nominal(),
+        2 => {
+            let mut p = Plant::lab();
+            if let Ok(e) = Effect::new(EffectKind::Imbalance, &[0.01, 0.5]) {
+                p.effects.insert(e);
+            }
+            p
+        }
+        _ => Plant::lab(),
     };
     let sensors = SensorConfig::default();
     let cfg = BoardConfig {

@@ -37,9 +37,10 @@ pub struct Board {
         requires = "qemu"
     )]
     pub qemu_bin: PathBuf,
-    /// The plant simulated inside the QEMU image: lab (friction as measured on real SRV-02s)
-    /// or table2 (no friction).
-    #[arg(long = "qemu-plant", value_name = "PLANT", default_value = "lab", value_parser = ["lab", "table2"], requires = "qemu")]
+    /// The plant simulated inside the QEMU image: lab (friction as measured on real SRV-02s),
+    /// table2 (no friction) or lab-imbalance (lab with imbalance:amplitude=0.01,phase=0.5, an
+    /// unbalanced load to identify and compensate).
+    #[arg(long = "qemu-plant", value_name = "PLANT", default_value = "lab", value_parser = ["lab", "table2", "lab-imbalance"], requires = "qemu")]
     pub qemu_plant: String,
     /// Write the QEMU firmware's loop statistics (one line a second) to this file.
     #[arg(long = "stats-file", value_name = "FILE", requires = "qemu")]
@@ -194,10 +195,10 @@ impl Board {
             watchdog_ms: self.watchdog_ms.round() as u32,
             substeps: self.physics_substeps,
             theta_limit_mrad: (theta_limit_rad * 1e3).round().min(u32::MAX as f64) as u32,
-            plant: if self.qemu_plant == "table2" {
-                servo_hw::qemu::QemuPlant::Table2
-            } else {
-                servo_hw::qemu::QemuPlant::Lab
+            plant: match self.qemu_plant.as_str() {
+                "table2" => servo_hw::qemu::QemuPlant::Table2,
+                "lab-imbalance" => servo_hw::qemu::QemuPlant::LabImbalance,
+                _ => servo_hw::qemu::QemuPlant::Lab,
             },
             stats_file: self.stats_file.clone(),
         };
