@@ -1,13 +1,14 @@
-//! PID update cost (target < 20 ns per step), plus the feedforward and reference evaluation that
-//! run next to it every sample.
+//! PID update cost (target < 20 ns per step), plus the feedforward, the compensation of the
+//! identified effects (issue #29) and the reference evaluation that run next to it every sample.
 //!
 //! `cargo bench -p servo-core --bench pid -- --warm-up-time 1 --measurement-time 3`
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use servo_core::control::{
-    AntiWindup, DerivativeOn, Discretization, Feedforward, FeedforwardConfig, FeedforwardParams,
-    Pid, PidConfig, PidGains, Reference,
+    AntiWindup, DerivativeOn, Discretization, EffectSelect, Feedforward, FeedforwardConfig,
+    FeedforwardParams, LoopCompensation, Pid, PidConfig, PidGains, RefSample, Reference,
 };
+use servo_core::effects::Effect;
 use std::hint::black_box;
 
 fn bench(c: &mut Criterion) {
@@ -48,6 +49,47 @@ fn bench(c: &mut Criterion) {
     .expect("valid params");
     c.bench_function("feedforward_terms", |b| {
         b.iter(|| black_box(ff.terms(black_box(2.0), black_box(10.0))))
+    });
+    // One control step of `servo run --ff all` on a model with five identified effects (an
+    // unbalanced load, cogging, a Stribeck hump, a direction asymmetry, a dead band): the
+    // linear feedforward, the effects' torques, the friction curve and the dead-band inverse.
+    let mut plant = servo_core::Plant::lab();
+    for spec in [
+        "imbalance:amplitude=0.01,phase=0.5",
+        "cogging:amplitude=3e-4,harmonic=12,phase=0.3",
+        "stribeck:tau_s=0.02,omega_s=1",
+        "asymmetry:tau_sf_pos=0.004,tau_sf_neg=0.012",
+        "deadzone:width=0.4",
+    ] {
+        plant.effects.insert(Effect::parse(spec).expect("valid effect"));
+    }
+    let comp = LoopCompensation::new(&plant, FeedforwardConfig::FULL, EffectSelect::All, 0.0)
+        .expect("valid compensation");
+    let mut t = 0.0f64;
+    c.bench_function("compensation_step_five_effects", |b| {
+        b.iter(|| {
+            t = if t > 20.0 { 0.0 } else { t + 1e-3 };
+            let r = RefSample {
+                pos_rad: t.sin(),
+                vel_rad_s: t.cos(),
+                acc_rad_s2: -t.sin(),
+            };
+            let ff = comp.feedforward(black_box(&r), t, black_box(r.pos_rad - 1e-3), 0.9);
+            black_box(comp.command_v(black_box(ff.total_v + 0.2), t, 10.0))
+        })
+    });
+    let linear = LoopCompensation::linear(ff);
+    c.bench_function("compensation_step_linear_only", |b| {
+        b.iter(|| {
+            t = if t > 20.0 { 0.0 } else { t + 1e-3 };
+            let r = RefSample {
+                pos_rad: t.sin(),
+                vel_rad_s: t.cos(),
+                acc_rad_s2: -t.sin(),
+            };
+            let ff = linear.feedforward(black_box(&r), t, black_box(r.pos_rad), 0.9);
+            black_box(linear.command_v(black_box(ff.total_v + 0.2), t, 10.0))
+        })
     });
     for text in [
         "trap:distance=3,vmax=10,amax=100",
