@@ -61,7 +61,9 @@ fn bench(c: &mut Criterion) {
         "asymmetry:tau_sf_pos=0.004,tau_sf_neg=0.012",
         "deadzone:width=0.4",
     ] {
-        plant.effects.insert(Effect::parse(spec).expect("valid effect"));
+        plant
+            .effects
+            .insert(Effect::parse(spec).expect("valid effect"));
     }
     let comp = LoopCompensation::new(&plant, FeedforwardConfig::FULL, EffectSelect::All, 0.0)
         .expect("valid compensation");
