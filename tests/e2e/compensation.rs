@@ -300,3 +300,223 @@ fn doubtful_or_uncompensable_effects_are_refused_with_the_reason() {
         "{err}\n{out}"
     );
 }
+
+// ---- the compensation in the library (servo_core::control::LoopCompensation) ----
+
+mod library {
+    use servo_core::control::{
+        EffectSelect, Feedforward, FeedforwardConfig, FeedforwardParams, LoopCompensation,
+        RefSample, SmoothSign,
+    };
+    use servo_core::effects::Effect;
+    use servo_core::{Plant, PlantParams};
+
+    fn plant(spec: &[&str]) -> Plant {
+        let mut p = Plant::from_params(PlantParams {
+            tau_sf: Some(0.01),
+            ..PlantParams::TABLE2
+        })
+        .unwrap();
+        for s in spec {
+            p.effects.insert(Effect::parse(s).unwrap());
+        }
+        p
+    }
+
+    fn exact(cfg: FeedforwardConfig) -> FeedforwardConfig {
+        FeedforwardConfig {
+            sign: SmoothSign::Exact,
+            ..cfg
+        }
+    }
+
+    fn sample(pos: f64, vel: f64) -> RefSample {
+        RefSample {
+            pos_rad: pos,
+            vel_rad_s: vel,
+            acc_rad_s2: 0.0,
+        }
+    }
+
+    #[test]
+    fn without_effects_it_is_the_linear_feedforward() {
+        let p = plant(&[]);
+        let cfg = exact(FeedforwardConfig::FULL);
+        let c = LoopCompensation::new(&p, cfg, EffectSelect::None, 0.0).unwrap();
+        let ff = Feedforward::new(FeedforwardParams::from_plant(&p), cfg).unwrap();
+        let r = sample(0.3, 2.0);
+        assert_eq!(
+            c.feedforward(&r, 0.0, 0.3, f64::NAN).total_v,
+            ff.for_sample(&r).total_v
+        );
+        assert!(c.effects().is_none());
+        assert_eq!(c.pid_limit_v(10.0), 10.0);
+        assert_eq!(c.command_v(12.0, 0.0, 10.0), 10.0);
+    }
+
+    #[test]
+    fn a_friction_curve_replaces_the_linear_coulomb_term() {
+        // Stribeck: the curve's level at 0.5 rad/s is above tau_sf; the linear Coulomb is off.
+        let p = plant(&["stribeck:tau_s=0.02,omega_s=0.5"]);
+        let cfg = exact(FeedforwardConfig::FRICTION);
+        let c = LoopCompensation::new(&p, cfg, EffectSelect::All, 0.0).unwrap();
+        assert!(!c.linear_part().config().coulomb);
+        let t = c.feedforward(&sample(0.0, 0.5), 1.0, 0.0, f64::NAN);
+        let lin = LoopCompensation::new(&p, cfg, EffectSelect::None, 0.0).unwrap();
+        let t0 = lin.feedforward(&sample(0.0, 0.5), 1.0, 0.0, f64::NAN);
+        assert!(t.friction_v > 0.0 && t.friction_v > t0.total_v - t0.linear_v + 0.0);
+        assert!(
+            t.friction_v > t0.linear_v - t.linear_v,
+            "curve {} V vs Coulomb {} V",
+            t.friction_v,
+            t0.linear_v - t.linear_v
+        );
+        // Odd in the speed.
+        let m = c.feedforward(&sample(0.0, -0.5), 1.0, 0.0, f64::NAN);
+        assert!((m.total_v + t.total_v).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_ramp_scales_the_effects_not_the_linear_part() {
+        let p = plant(&["imbalance:amplitude=0.02,phase=0"]);
+        let cfg = exact(FeedforwardConfig::INERTIA);
+        let c = LoopCompensation::new(&p, cfg, EffectSelect::All, 2.0).unwrap();
+        let r = sample(1.0, 0.0);
+        let full = c.feedforward(&r, 5.0, 1.0, 0.0);
+        let half = c.feedforward(&r, 1.0, 1.0, 0.0);
+        assert!(full.torque_v.abs() > 0.01, "{full:?}");
+        assert!((half.torque_v - 0.5 * full.torque_v).abs() < 1e-12);
+        assert_eq!(half.linear_v, full.linear_v);
+        assert_eq!(c.feedforward(&r, 0.0, 1.0, 0.0).torque_v, 0.0);
+        assert!(LoopCompensation::new(&p, cfg, EffectSelect::All, -1.0).is_err());
+    }
+
+    #[test]
+    fn the_dead_band_inverse_stays_inside_the_limit() {
+        let p = plant(&["deadzone:width=0.5"]);
+        let c = LoopCompensation::new(&p, exact(FeedforwardConfig::OFF), EffectSelect::All, 0.0)
+            .unwrap();
+        let l = c.pid_limit_v(10.0);
+        assert!((l - 9.5).abs() < 1e-6, "{l}");
+        assert!(c.command_v(l, 1.0, 10.0) <= 10.0 + 1e-12);
+        // Away from 0 the command adds the width.
+        assert!((c.command_v(2.0, 1.0, 10.0) - 2.5).abs() < 1e-6);
+        assert!((c.command_v(-2.0, 1.0, 10.0) + 2.5).abs() < 1e-6);
+        assert_eq!(c.command_v(f64::NAN, 1.0, 10.0), 0.0);
+    }
+
+    #[test]
+    fn a_compensated_saturation_narrows_the_limit() {
+        let p = plant(&["saturation:limit=4.5"]);
+        let c = LoopCompensation::new(&p, exact(FeedforwardConfig::OFF), EffectSelect::All, 0.0)
+            .unwrap();
+        assert!((c.limit_v(10.0) - 4.5).abs() < 1e-9, "{}", c.limit_v(10.0));
+        assert!((c.command_v(8.0, 0.0, 10.0) - 4.5).abs() < 1e-9);
+    }
+}
+
+// ---- the compensation in the board core's on-board loop ----
+
+mod board_core {
+    fn board_config() -> servo_core::board::BoardConfig {
+        servo_core::board::BoardConfig {
+            firmware: servo_core::protocol::fixed_text("test"),
+            sample_period_us: 1000,
+            watchdog_ms: 50,
+            limits: servo_core::safety::SafetyLimits::default(),
+            counts_per_rev: 4096,
+            current_scale_a_per_lsb: 1e-3,
+        }
+    }
+
+    /// The simulated gearmotor behind the core, stepped `substeps` physics steps per tick.
+    struct SimHal {
+        drive: servo_core::board::SimDrive,
+        now_us: u32,
+    }
+
+    impl servo_core::board::BoardHal for SimHal {
+        fn now_us(&mut self) -> u32 {
+            self.now_us
+        }
+        fn encoder_count(&mut self) -> i32 {
+            self.drive.encoder_count()
+        }
+        fn current_raw(&mut self) -> i16 {
+            self.drive.current_raw()
+        }
+        fn set_voltage(&mut self, u_v: f32) {
+            self.drive.set_voltage(u_v);
+        }
+        fn restart_tick(&mut self) {}
+        fn write(&mut self, _bytes: &[u8]) {}
+    }
+
+    /// The on-board loop holding 1 rad against an unbalanced load for 2 s, P only (no integral to
+    /// hide the load): the final error [rad], with and without the compensation of the imbalance.
+    fn onboard_hold_error(compensated: bool) -> f64 {
+        use servo_core::control::{EffectSelect, FeedforwardConfig};
+        // Table 2 without friction: the error the load needs is not hidden in a friction band.
+        let mut plant = servo_core::Plant::nominal();
+        plant.effects.insert(
+            servo_core::effects::Effect::parse("imbalance:amplitude=0.01,phase=0.5").unwrap(),
+        );
+        let sensors = servo_core::sim::SensorConfig::default();
+        let drive = servo_core::board::SimDrive::new(&plant, sensors, 2e-4, 1e-3).unwrap();
+        let mut hal = SimHal { drive, now_us: 0 };
+        let mut core = servo_core::board::BoardCore::new(board_config()).unwrap();
+        if compensated {
+            // The model knows the imbalance: its torque at the measured angle, no linear term.
+            let c = servo_core::control::LoopCompensation::new(
+                &plant,
+                FeedforwardConfig::OFF,
+                EffectSelect::All.with(servo_core::effects::EffectKind::Imbalance),
+                0.0,
+            )
+            .unwrap();
+            core.set_compensation(Some(c));
+            assert!(core.compensation().is_some());
+        }
+        let g = servo_core::protocol::LoopGains {
+            kp: 8.0,
+            ki: 0.0,
+            kd: 0.15,
+            tau_f_s: 1.0 / 150.0,
+        };
+        core.receive(
+            &mut hal,
+            servo_core::protocol::Frame::new(&servo_core::protocol::Message::LoopGains(g))
+                .as_bytes(),
+        );
+        for k in 0..2000u32 {
+            if k % 20 == 0 {
+                // The host's reference, often enough for the 50 ms watchdog.
+                let m = servo_core::protocol::Message::LoopReference {
+                    seq: k,
+                    ref_rad: 1.0,
+                };
+                core.receive(&mut hal, servo_core::protocol::Frame::new(&m).as_bytes());
+            }
+            for _ in 0..5 {
+                hal.drive.step();
+            }
+            hal.now_us += 1000;
+            core.tick(&mut hal);
+            assert!(core.is_running(), "the board stopped at tick {k}");
+        }
+        1.0 - hal.drive.plant_sim().state().theta_l_rad
+    }
+
+    #[test]
+    fn onboard_loop_compensates_an_unbalanced_load() {
+        let plain = onboard_hold_error(false);
+        let comp = onboard_hold_error(true);
+        eprintln!("on-board hold of 1 rad, P only: error {plain:.4e} rad without, {comp:.4e} rad with the compensation");
+        // P only: the imbalance's torque needs an error to hold; compensated, only the encoder's
+        // quantum remains.
+        assert!(
+            plain.abs() > 0.01 && comp.abs() < 0.1 * plain.abs(),
+            "hold error without {plain:.4e} rad, with the compensation {comp:.4e} rad"
+        );
+    }
+}

@@ -1105,7 +1105,7 @@ mod qemu_cli {
     fn qemu_tracking(dir: &Path, g: &Path, model: &Path, ff: &str) -> Option<f64> {
         let board = QemuProc::start(
             dir,
-            &["--watchdog-ms", "250", "--qemu-plant", "lab-imbalance"],
+            &["--watchdog-ms", "250", "--qemu-plant", "lab-unbalanced"],
         )?;
         let exp = crate::compensation::tracking_experiment();
         let log = dir.join(format!("qemu-{}.mcap", ff.replace(',', "-")));

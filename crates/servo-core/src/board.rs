@@ -198,7 +198,7 @@ impl BoardCore {
     }
 
     /// Compensates the identified effects in the on-board loop (LoopReference): the effects'
-    /// torques at the measured angle (an unbalanced load, cogging) and the reference's (a
+    /// torques at the measured angle (an unbalanced load, a periodic motor torque) and the reference's (a
     /// holding reference has no speed), the inverted input maps on the PID's output and the PID's
     /// limit narrowed for them ([`LoopCompensation`]); `None` switches it off. The same value
     /// `servo run --ff` computes on the host; no heap. Takes effect at the next LoopReference

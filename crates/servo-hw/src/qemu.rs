@@ -35,9 +35,9 @@ pub enum QemuPlant {
     Lab,
     /// `Plant::nominal()`: Table 2 without friction.
     Table2,
-    /// `Plant::lab()` with an unbalanced load (`imbalance:amplitude=0.01,phase=0.5`, the
+    /// `Plant::lab()` with an unbalanced load (an eccentric mass: 0.01 N m at phase 0.5 rad, the
     /// README's motor with a secret): the compensation tests' plant.
-    LabImbalance,
+    LabUnbalanced,
 }
 
 /// How to start the QEMU board.
@@ -149,7 +149,7 @@ impl QemuBoard {
         let plant = match cfg.plant {
             QemuPlant::Lab => 0,
             QemuPlant::Table2 => 1,
-            QemuPlant::LabImbalance => 2,
+            QemuPlant::LabUnbalanced => 2,
         };
         let words = [
             BOOT_MAGIC,

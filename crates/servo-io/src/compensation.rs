@@ -4,9 +4,8 @@
 //! `--ff` is a comma list of
 //! * the linear terms of the handout's feedforward: `inertia` (J_eq and back-EMF), `friction`
 //!   (B_eq and tau_sf), `viscous`, `coulomb`, `back_emf`;
-//! * effect names of the registry (`imbalance`, `cogging`, `stribeck`, `asymmetry`, `deadzone`,
-//!   `saturation`, `delay`, ...): compensate that effect of the model file, as its effect file
-//!   declares ([`servo_core::effects::Compensation`]);
+//! * effect names of the registry (every catalogue effect but the linear ones): compensate
+//!   that effect of the model file, as its effect file declares ([`servo_core::effects::Compensation`]);
 //! * `all`: every linear term and every effect of the model that declares a compensation;
 //! * `none`.
 //!
@@ -165,7 +164,7 @@ impl CompensationChoice {
     }
 
     /// The `--ff` form of what runs: the linear terms, then the effects (`none` for nothing),
-    /// e.g. `inertia,back_emf,viscous,coulomb,imbalance`.
+    /// e.g. `inertia,back_emf,viscous,coulomb,<effect>`.
     pub fn label(&self) -> String {
         let mut v = Vec::new();
         let lin = crate::controller::ff_name(&self.linear);

@@ -109,7 +109,7 @@ pub mod meta_keys {
     pub const MODEL_TOML: &str = "model_toml";
     /// Feedforward terms in use (`inertia,friction` or `none`).
     pub const FEEDFORWARD: &str = "feedforward";
-    /// The effects a run compensated, comma-separated registry names (`imbalance,coulomb`;
+    /// The effects a run compensated, comma-separated registry names (`<effect>,<effect>`;
     /// empty for none): `servo compare` checks each against the log.
     pub const COMPENSATED_EFFECTS: &str = "compensated_effects";
     /// How each effect was compensated, or why not, `; `-separated sentences.

@@ -606,7 +606,7 @@ impl ModelFile {
         Ok(plant)
     }
 
-    /// The 95 % interval [lo, hi] of `key` (`<effect>.<key>`, e.g. `imbalance.amplitude`) as
+    /// The 95 % interval [lo, hi] of `key` (`<effect>.<key>`, an effect's amplitude) as
     /// `[provenance.intervals]` records it (written by `compare --add --save`); None when the
     /// file records none.
     pub fn interval(&self, key: &str) -> Option<(f64, f64)> {

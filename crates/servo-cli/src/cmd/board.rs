@@ -38,9 +38,9 @@ pub struct Board {
     )]
     pub qemu_bin: PathBuf,
     /// The plant simulated inside the QEMU image: lab (friction as measured on real SRV-02s),
-    /// table2 (no friction) or lab-imbalance (lab with imbalance:amplitude=0.01,phase=0.5, an
+    /// table2 (no friction) or lab-unbalanced (lab with an eccentric load of 0.01 N m at phase 0.5 rad, an
     /// unbalanced load to identify and compensate).
-    #[arg(long = "qemu-plant", value_name = "PLANT", default_value = "lab", value_parser = ["lab", "table2", "lab-imbalance"], requires = "qemu")]
+    #[arg(long = "qemu-plant", value_name = "PLANT", default_value = "lab", value_parser = ["lab", "table2", "lab-unbalanced"], requires = "qemu")]
     pub qemu_plant: String,
     /// Write the QEMU firmware's loop statistics (one line a second) to this file.
     #[arg(long = "stats-file", value_name = "FILE", requires = "qemu")]
@@ -197,7 +197,7 @@ impl Board {
             theta_limit_mrad: (theta_limit_rad * 1e3).round().min(u32::MAX as f64) as u32,
             plant: match self.qemu_plant.as_str() {
                 "table2" => servo_hw::qemu::QemuPlant::Table2,
-                "lab-imbalance" => servo_hw::qemu::QemuPlant::LabImbalance,
+                "lab-unbalanced" => servo_hw::qemu::QemuPlant::LabUnbalanced,
                 _ => servo_hw::qemu::QemuPlant::Lab,
             },
             stats_file: self.stats_file.clone(),

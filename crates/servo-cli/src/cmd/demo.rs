@@ -134,6 +134,11 @@ pub fn stages() -> Vec<Stage> {
             what: "servo diagnose on the extended model: is anything significant left?",
             run: stage_rediagnose,
         },
+        Stage {
+            name: "compensate",
+            what: "servo run --ff all: the extended model's effects compensated in the loop; tracking error against the friction feedforward",
+            run: stage_compensate,
+        },
     ]
 }
 

@@ -199,7 +199,7 @@ impl EffectCompensator {
     /// `omega_l_meas_rad_s` (NaN when unknown): the curve's level in the reference's direction
     /// times the smoothed sign of the reference speed. The level is read at the measured speed
     /// while the shaft is still or moves in the reference's direction (a stuck shaft needs the
-    /// breakaway torque; a falling Stribeck curve read at the reference speed would leave the
+    /// breakaway torque; a curve that falls with the speed, read at the reference speed would leave the
     /// plant's negative damping in the loop, a stick-slip cycle), at the reference speed
     /// otherwise. None without a friction curve.
     #[inline]

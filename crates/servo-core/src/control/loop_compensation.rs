@@ -11,7 +11,7 @@
 //! u      = v + ramp(t) [inverse(v) - v], clipped to +-min(u_limit, saturation bound)
 //! ```
 //!
-//! * With a dry-friction curve selected (Coulomb, Stribeck, direction asymmetry), the curve
+//! * With a dry-friction curve selected (the dry-friction effects), the curve
 //!   replaces the linear feedforward's symmetric Coulomb term (never both).
 //! * The PID's own limit is narrowed so that the inverted input map of its largest output stays
 //!   inside the limit: the PID's anti-windup then acts on the bound the drive really has.
@@ -32,7 +32,7 @@ use crate::plant::Plant;
 pub struct CompensationTerms {
     /// The linear feedforward (inertia, viscous, back-EMF, and Coulomb without a curve) [V].
     pub linear_v: f64,
-    /// The effects' torques (imbalance, cogging, user torques) after the ramp [V].
+    /// The effects' torques (position- and speed-dependent torques) after the ramp [V].
     pub torque_v: f64,
     /// The dry-friction curve after the ramp [V] (0 without a curve).
     pub friction_v: f64,
@@ -182,116 +182,5 @@ impl LoopCompensation {
         } else {
             0.0
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::control::SmoothSign;
-    use crate::effects::Effect;
-    use crate::params::PlantParams;
-
-    fn plant(spec: &[&str]) -> Plant {
-        let mut p = Plant::from_params(PlantParams {
-            tau_sf: Some(0.01),
-            ..PlantParams::TABLE2
-        })
-        .unwrap();
-        for s in spec {
-            p.effects.insert(Effect::parse(s).unwrap());
-        }
-        p
-    }
-
-    fn exact(cfg: FeedforwardConfig) -> FeedforwardConfig {
-        FeedforwardConfig {
-            sign: SmoothSign::Exact,
-            ..cfg
-        }
-    }
-
-    fn sample(pos: f64, vel: f64) -> RefSample {
-        RefSample {
-            pos_rad: pos,
-            vel_rad_s: vel,
-            acc_rad_s2: 0.0,
-        }
-    }
-
-    #[test]
-    fn without_effects_it_is_the_linear_feedforward() {
-        let p = plant(&[]);
-        let cfg = exact(FeedforwardConfig::FULL);
-        let c = LoopCompensation::new(&p, cfg, EffectSelect::None, 0.0).unwrap();
-        let ff = Feedforward::new(FeedforwardParams::from_plant(&p), cfg).unwrap();
-        let r = sample(0.3, 2.0);
-        assert_eq!(
-            c.feedforward(&r, 0.0, 0.3, f64::NAN).total_v,
-            ff.for_sample(&r).total_v
-        );
-        assert!(c.effects().is_none());
-        assert_eq!(c.pid_limit_v(10.0), 10.0);
-        assert_eq!(c.command_v(12.0, 0.0, 10.0), 10.0);
-    }
-
-    #[test]
-    fn a_friction_curve_replaces_the_linear_coulomb_term() {
-        // Stribeck: the curve's level at 0.5 rad/s is above tau_sf; the linear Coulomb is off.
-        let p = plant(&["stribeck:tau_s=0.02,omega_s=0.5"]);
-        let cfg = exact(FeedforwardConfig::FRICTION);
-        let c = LoopCompensation::new(&p, cfg, EffectSelect::All, 0.0).unwrap();
-        assert!(!c.linear_part().config().coulomb);
-        let t = c.feedforward(&sample(0.0, 0.5), 1.0, 0.0, f64::NAN);
-        let lin = LoopCompensation::new(&p, cfg, EffectSelect::None, 0.0).unwrap();
-        let t0 = lin.feedforward(&sample(0.0, 0.5), 1.0, 0.0, f64::NAN);
-        assert!(t.friction_v > 0.0 && t.friction_v > t0.total_v - t0.linear_v + 0.0);
-        assert!(
-            t.friction_v > t0.linear_v - t.linear_v,
-            "curve {} V vs Coulomb {} V",
-            t.friction_v,
-            t0.linear_v - t.linear_v
-        );
-        // Odd in the speed.
-        let m = c.feedforward(&sample(0.0, -0.5), 1.0, 0.0, f64::NAN);
-        assert!((m.total_v + t.total_v).abs() < 1e-12);
-    }
-
-    #[test]
-    fn the_ramp_scales_the_effects_not_the_linear_part() {
-        let p = plant(&["imbalance:amplitude=0.02,phase=0"]);
-        let cfg = exact(FeedforwardConfig::INERTIA);
-        let c = LoopCompensation::new(&p, cfg, EffectSelect::All, 2.0).unwrap();
-        let r = sample(1.0, 0.0);
-        let full = c.feedforward(&r, 5.0, 1.0, 0.0);
-        let half = c.feedforward(&r, 1.0, 1.0, 0.0);
-        assert!(full.torque_v.abs() > 0.01, "{full:?}");
-        assert!((half.torque_v - 0.5 * full.torque_v).abs() < 1e-12);
-        assert_eq!(half.linear_v, full.linear_v);
-        assert_eq!(c.feedforward(&r, 0.0, 1.0, 0.0).torque_v, 0.0);
-        assert!(LoopCompensation::new(&p, cfg, EffectSelect::All, -1.0).is_err());
-    }
-
-    #[test]
-    fn the_dead_band_inverse_stays_inside_the_limit() {
-        let p = plant(&["deadzone:width=0.5"]);
-        let c = LoopCompensation::new(&p, exact(FeedforwardConfig::OFF), EffectSelect::All, 0.0)
-            .unwrap();
-        let l = c.pid_limit_v(10.0);
-        assert!((l - 9.5).abs() < 1e-6, "{l}");
-        assert!(c.command_v(l, 1.0, 10.0) <= 10.0 + 1e-12);
-        // Away from 0 the command adds the width.
-        assert!((c.command_v(2.0, 1.0, 10.0) - 2.5).abs() < 1e-6);
-        assert!((c.command_v(-2.0, 1.0, 10.0) + 2.5).abs() < 1e-6);
-        assert_eq!(c.command_v(f64::NAN, 1.0, 10.0), 0.0);
-    }
-
-    #[test]
-    fn a_compensated_saturation_narrows_the_limit() {
-        let p = plant(&["saturation:limit=4.5"]);
-        let c = LoopCompensation::new(&p, exact(FeedforwardConfig::OFF), EffectSelect::All, 0.0)
-            .unwrap();
-        assert!((c.limit_v(10.0) - 4.5).abs() < 1e-9, "{}", c.limit_v(10.0));
-        assert!((c.command_v(8.0, 0.0, 10.0) - 4.5).abs() < 1e-9);
     }
 }

@@ -191,3 +191,61 @@ pub(super) fn stage_rediagnose(ctx: &mut DemoContext) -> anyhow::Result<(String,
     };
     Ok((headline, vec![report]))
 }
+
+/// The standard tracking reference of compensation (`experiments/tracking.toml`).
+const TRACKING: &str = include_str!("../../../../../experiments/tracking.toml");
+
+/// The story's end (issue #29): the extended model's effects compensated in the loop, on the
+/// same motor and the same reference, against the handout's friction feedforward.
+pub(super) fn stage_compensate(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
+    use servo_core::control::{EffectSelect, FeedforwardConfig, LoopCompensation};
+    let Some(model) = ctx.extended_model.clone() else {
+        return Ok((String::from("skipped: no effect was added"), vec![]));
+    };
+    let mf = ModelFile::load(&model)?;
+    let plant = mf.plant()?;
+    let choice = servo_io::compensation::CompensationChoice::parse("all", &mf, &plant, 0.0)?;
+    let gains = ctx.gains.clone().unwrap_or_else(handout_gains);
+    let src = PidSources {
+        opts: &PidOptions::default(),
+        logged: None,
+        gains_file: Some((&gains, "the demo's gains")),
+    };
+    let pid = pid_config(&src, 1e-3, Some((10.0, "the demo's 10 V driver".into())))?.config;
+    let exp = servo_io::reference_file::Experiment::parse(TRACKING, "experiments/tracking.toml")?;
+    let program = Program::Segments(exp.segments);
+    let duration_s = program.duration_s().unwrap_or(18.0);
+    let run = |linear: FeedforwardConfig, select: EffectSelect| -> anyhow::Result<f64> {
+        let comp = LoopCompensation::new(&plant, linear, select, 0.0)
+            .map_err(|e| anyhow!("compensation: {e}"))?;
+        let mut backend = SimBackend::new(&ctx.truth, ctx.sensors, 1e-3).context("simulator")?;
+        let mut cfg = RunConfig::closed_loop(program.clone(), pid, duration_s);
+        cfg.feedforward = Some(comp);
+        cfg.keep_record = false;
+        let out = servo_hw::run::run_loop(&mut backend, &cfg, None)?;
+        out.summary
+            .err_rms_rad
+            .ok_or_else(|| anyhow!("the tracking run has no error"))
+    };
+    let friction = run(FeedforwardConfig::FRICTION, EffectSelect::None)?;
+    let all = run(choice.linear, choice.select)?;
+    let m = path_arg(&model);
+    outln!(
+        "   servo run --plant truth_hidden.toml --gains ... --experiment experiments/tracking.toml \
+         --model {m} --ff friction   (then --ff all)"
+    );
+    for line in choice.lines() {
+        outln!("   {line}");
+    }
+    Ok((
+        format!(
+            "tracking error RMS {} rad with the friction feedforward -> {} rad compensating {} \
+             ({:+.0} %)",
+            servo_core::math::sig(friction, 3),
+            servo_core::math::sig(all, 3),
+            choice.effect_names(),
+            100.0 * (all / friction - 1.0)
+        ),
+        vec![],
+    ))
+}
