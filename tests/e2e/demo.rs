@@ -99,6 +99,18 @@ fn demo_tells_the_whole_story() {
         again.starts_with("nothing significant left"),
         "re-diagnose headline: {again}"
     );
+    // The story ends with the added effect compensated in the loop: the tracking error falls
+    // by at least half against the friction feedforward (issue #29).
+    let comp = headline(&stdout, "compensate");
+    let n = numbers(comp);
+    assert!(
+        comp.contains("compensating") && comp.contains("imbalance") && n.len() >= 3,
+        "compensate headline: {comp}"
+    );
+    assert!(
+        n[1] < 0.5 * n[0] && n[2] >= 50.0 && comp.contains("(-"),
+        "the compensation did not halve the tracking error: {comp}"
+    );
     // It prints where its files are.
     assert!(stdout.contains("demo done in"), "{stdout}");
     assert!(stdout.contains("diagnose.html"), "{stdout}");
