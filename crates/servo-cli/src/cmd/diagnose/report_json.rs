@@ -67,6 +67,7 @@ pub(super) fn balance_json(b: &BalanceReport) -> Value {
             "share_of_heldout_residual": f(s.share),
             "explained_rms": f(s.explained_rms),
             "measured_on": if s.on_simulation { "simulation" } else { "balance" },
+            "rows_and_band": s.measured_on,
         })).collect::<Vec<_>>(),
         "experiment": b.experiment,
     })

@@ -101,10 +101,11 @@ pub(super) fn text_report(
             b.equation.unit(),
             b.ratio_to_noise,
             b.signatures.first().map_or(String::new(), |g| format!(
-                "; strongest shape: {} ({:.0} % of the held-out {})",
+                "; strongest shape: {} ({:.0} % of the held-out {}; measured on {})",
                 g.description,
                 100.0 * g.share,
-                g.share_of()
+                g.share_of(),
+                g.measured_on
             ))
         );
     }
