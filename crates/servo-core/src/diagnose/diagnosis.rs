@@ -13,7 +13,8 @@ use alloc::vec::Vec;
 pub enum Status {
     /// Nothing material is left in any balance.
     Complete,
-    /// A catalogue effect passes every check: it is `ranking[0]`.
+    /// A catalogue effect passes every check: it is `ranking[0]`; or, with none, a user-defined
+    /// effect or a discovered term passes every guard ([`super::user_effects::conclude`]).
     Missing,
     /// Structured error above the noise floor that no catalogue effect explains.
     Unexplained,
