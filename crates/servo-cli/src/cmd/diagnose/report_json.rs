@@ -73,6 +73,20 @@ pub(super) fn balance_json(b: &BalanceReport) -> Value {
     })
 }
 
+/// An effect below its balance's noise floor
+/// ([`servo_core::diagnose::Unresolvable`]): "not resolvable with these logs".
+pub(super) fn unresolvable_json(u: &servo_core::diagnose::Unresolvable) -> Value {
+    json!({
+        "effect": u.effect.name(),
+        "balance": u.equation.name(),
+        "unit": u.equation.unit(),
+        "size": u.size.map(|(key, unit, value)| json!({ "key": key, "unit": unit, "value": f(value) })),
+        "explained_rms": f(u.explained_rms),
+        "noise_floor": f(u.floor),
+        "experiment": u.experiment,
+    })
+}
+
 /// A lead beyond the catalogue ([`servo_core::diagnose::checks::Neighbour`]); `reference_rad`:
 /// the reference's held-out simulation error.
 pub(super) fn neighbour_json(n: &Neighbour, reference_rad: Option<f64>) -> Value {
