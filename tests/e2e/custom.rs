@@ -162,14 +162,38 @@ fn hidden_cable_is_fitted_discovered_and_the_proposal_round_trips() {
     assert!(fits[1] > fits[0] + 1.0, "fit {fits:?}");
     let true_fit = fits[1];
 
-    // --discover on the plain model proposes a load torque proportional to the load angle.
+    // --discover on the plain model proposes a load torque proportional to the load angle;
+    // --save-effect adds it to an effects file already there, keeping that file's effects.
     let found = c._dir.path().join("found.toml");
+    std::fs::write(&found, OTHERS).unwrap();
     let d = diagnose(
         &c,
         &["--discover", "--save-effect", found.to_str().unwrap()],
     );
     let prop = &d["discovery"];
     println!("discovery: {prop}");
+    assert_eq!(d["saved_effect"]["written"], true, "{}", d["saved_effect"]);
+    let saved = EffectsFile::parse(&std::fs::read_to_string(&found).unwrap()).unwrap();
+    for name in ["eccentric", "offset", prop["name"].as_str().unwrap()] {
+        assert!(saved.get(name).is_some(), "{name} missing from {found:?}");
+    }
+    // No catalogue effect explains the cable; the discovered term that passes every guard is
+    // what the model misses: status missing, and the verdict names it.
+    assert!(
+        !catalogue_named(&d),
+        "a catalogue effect was named: {}",
+        d["verdict"]
+    );
+    assert_eq!(prop["significant"], true, "{prop}");
+    assert_eq!(d["status"], "missing", "{}", d["verdict"]);
+    assert!(
+        d["verdict"]
+            .as_str()
+            .unwrap()
+            .contains("found by --discover"),
+        "{}",
+        d["verdict"]
+    );
     let terms = prop["terms"].as_array().unwrap();
     let angle = terms
         .iter()
@@ -254,6 +278,99 @@ fn user_sensor_effect_round_trips() {
         .unwrap();
     assert!((e / 0.02 - 1.0).abs() < 0.15, "diagnose: e = {e}");
     assert_eq!(cand["significant"], true, "{cand}");
+    // No catalogue effect explains a sensor error: the user effect that passes every guard is
+    // what the model misses, and the status says so (not "no catalogue effect explains it").
+    assert!(
+        !catalogue_named(&d),
+        "a catalogue effect was named: {}",
+        d["verdict"]
+    );
+    assert_eq!(d["status"], "missing", "{}", d["verdict"]);
+    let verdict = d["verdict"].as_str().unwrap();
+    assert!(
+        verdict.contains("user-defined effect `eccentric`")
+            && !verdict.contains("status: unexplained"),
+        "{verdict}"
+    );
+}
+
+/// Whether the diagnosis JSON `d` names a catalogue effect (a significant candidate).
+fn catalogue_named(d: &Value) -> bool {
+    d["ranking"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|c| c["significant"] == true)
+}
+
+/// `--save-effect` writes beside the report, never instead of it: with nothing to discover (the
+/// model is the plant), the text report is printed whole, with a line saying why nothing was
+/// written, and no file appears; `--json` says the same in `saved_effect`.
+#[test]
+fn save_effect_never_replaces_the_report() {
+    let c = case(&base_plant(), CABLE);
+    let found = c._dir.path().join("found.toml");
+    let f = found.to_str().unwrap();
+    let (ok, out, err) = servo(&[
+        "diagnose",
+        c.log.to_str().unwrap(),
+        "--model",
+        c.model.to_str().unwrap(),
+        "--columns",
+        COLS,
+        "--discover",
+        "--save-effect",
+        f,
+    ]);
+    println!("{out}");
+    assert!(ok, "servo diagnose failed: {err}");
+    assert!(
+        out.contains("Status: ") && out.contains("Candidates, best first"),
+        "{out}"
+    );
+    assert!(
+        out.contains(&format!(
+            "--save-effect {f}: not written: nothing discovered to write"
+        )),
+        "{out}"
+    );
+    assert!(!found.exists(), "{found:?} written");
+    let d = diagnose(&c, &["--discover", "--save-effect", f]);
+    assert_eq!(d["saved_effect"]["written"], false, "{}", d["saved_effect"]);
+    assert!(d["verdict"].as_str().is_some_and(|v| !v.is_empty()));
+    assert!(!found.exists(), "{found:?} written");
+}
+
+/// The discovery's library holds a friction growing with the transmitted torque
+/// (`abs(i_a) * sign(omega_l)`): hidden as a user effect in a closed-loop log, `--discover`
+/// on the plain model proposes that term, sized within 30 %.
+#[test]
+fn a_friction_growing_with_the_transmitted_torque_is_discovered() {
+    const LOADFRIC: &str = r#"
+[custom.loadfric]
+acts_on = "load_torque"
+expr = "mu * abs(i_a) * sign(omega_l)"
+description = "a gear loss growing with the transmitted torque"
+[custom.loadfric.params]
+mu = { value = 0.0, min = 0.0, unit = "N m/A" }
+"#;
+    let mu = 0.01;
+    let truth = with_custom(LOADFRIC, "loadfric", &[("mu", mu)]);
+    let c = case(&truth, LOADFRIC);
+    let d = diagnose(&c, &["--discover"]);
+    let prop = &d["discovery"];
+    println!(
+        "status {}: {}\ndiscovery: {prop}",
+        d["status"], d["verdict"]
+    );
+    let term = prop["terms"]
+        .as_array()
+        .unwrap_or_else(|| panic!("discovery did not run: {prop}"))
+        .iter()
+        .find(|t| t["signal_term"] == "abs(i_a) * sign(omega_l)")
+        .unwrap_or_else(|| panic!("no load-dependent friction term in {prop}"));
+    let got = term["value"].as_f64().unwrap();
+    assert!((got / mu - 1.0).abs() < 0.3, "mu found {got}, true {mu}");
 }
 
 #[test]

@@ -146,30 +146,41 @@ impl Diagnose {
         }
         let library = crate::effects_file::load_many(&self.effects)?;
         let steps = if self.auto { self.max_steps } else { 0 };
-        let (ladder, diags) = diagnose::diagnose_loop(&records, &model, &opts, steps)
+        let (ladder, mut diags) = diagnose::diagnose_loop(&records, &model, &opts, steps)
             .map_err(|e| anyhow!("diagnosis failed: {e}"))?;
+        let final_plant = ladder.last().map(|r| r.plant).unwrap_or(model);
+        let user = {
+            let last = diags
+                .last()
+                .ok_or_else(|| anyhow!("diagnosis produced no result"))?;
+            servo_core::diagnose::timing::timed(
+                || "user effects".into(),
+                || {
+                    crate::cmd::diagnose_custom::run(
+                        &records,
+                        &final_plant,
+                        &opts,
+                        &library,
+                        last,
+                        self.discover,
+                        &self.effect_name,
+                    )
+                },
+            )?
+        };
+        // A user effect or a discovered term that passes every guard is what the model misses.
+        if let Some(last) = diags.last_mut() {
+            servo_core::diagnose::user_effects::conclude(last, &user, &opts.thresholds);
+        }
         let first = diags
             .first()
             .ok_or_else(|| anyhow!("diagnosis produced no result"))?;
         let last = diags.last().unwrap_or(first);
-        let final_plant = ladder.last().map(|r| r.plant).unwrap_or(model);
-        let user = servo_core::diagnose::timing::timed(
-            || "user effects".into(),
-            || {
-                crate::cmd::diagnose_custom::run(
-                    &records,
-                    &final_plant,
-                    &opts,
-                    &library,
-                    last,
-                    self.discover,
-                    &self.effect_name,
-                )
-            },
-        )?;
-        if let Some(path) = &self.save_effect {
-            user.save_effect(path)?;
-        }
+        // Written beside the report, never instead of it.
+        let saved = match &self.save_effect {
+            Some(path) => Some(user.save_effect(path)?),
+            None => None,
+        };
         let gate = self.save.as_ref().map(|_| {
             let added: Vec<&str> = ladder
                 .iter()
@@ -202,10 +213,14 @@ impl Diagnose {
                 "bars": bars_json(&opts),
                 "ranking": last.ranking.iter().map(|c| candidate_json(c, &opts)).collect::<Vec<_>>(),
                 "verdict": last.verdict,
+                "not_resolvable": last.unresolvable.iter().map(unresolvable_json).collect::<Vec<_>>(),
                 "base": base_json(first),
                 "log_parts": crate::log_part::json(&parts),
             });
             user.add_json(&mut v);
+            if let Some(sv) = &saved {
+                v["saved_effect"] = sv.json();
+            }
             if let (Some(g), Some(p)) = (&gate, &self.save) {
                 v["save"] = save_json(g, p, save_ok, self.force);
             }
@@ -231,8 +246,8 @@ impl Diagnose {
                 out!("{}", linear_text(&axis, last, &ladder));
             }
             out!("{}", user.text());
-            if let Some(p) = &self.save_effect {
-                outln!("discovered effect written to {}", p.display());
+            if let Some(sv) = &saved {
+                outln!("{}", sv.text());
             }
         }
         if let Some(path) = &self.report {

@@ -13,6 +13,29 @@ use servo_core::Plant;
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// What `--save-effect` did: the file, whether the discovered effect was written to it, and
+/// why not.
+pub struct SavedEffect {
+    pub path: std::path::PathBuf,
+    pub written: bool,
+    pub why: Option<String>,
+}
+
+impl SavedEffect {
+    /// One line for the text report.
+    pub fn text(&self) -> String {
+        match &self.why {
+            None => format!("discovered effect written to {}", self.path.display()),
+            Some(why) => format!("--save-effect {}: not written: {why}", self.path.display()),
+        }
+    }
+
+    /// The `saved_effect` object of the diagnosis JSON.
+    pub fn json(&self) -> Value {
+        json!({ "path": self.path.display().to_string(), "written": self.written, "why": self.why })
+    }
+}
+
 /// The user effects judged and what the discovery found (servo_core::diagnose::user_effects),
 /// with their JSON, text and TOML.
 pub struct UserFindings(pub user_effects::UserFindings);
@@ -89,18 +112,57 @@ impl UserFindings {
         )]))
     }
 
-    /// Writes the discovered effect to `path`; an error when nothing was discovered.
-    pub fn save_effect(&self, path: &Path) -> anyhow::Result<()> {
-        let text = self.proposal_toml().ok_or_else(|| {
-            anyhow!(
-                "--save-effect {}: nothing discovered to write ({})",
-                path.display(),
+    /// Writes the discovered effect to `path`, as a new file or as a section added to an
+    /// effects file already there; never replaces an effect of that file nor anything else.
+    /// Nothing written (and why) when nothing was discovered or the file cannot take it: the
+    /// diagnosis is reported either way. An error only when writing fails.
+    pub fn save_effect(&self, path: &Path) -> anyhow::Result<SavedEffect> {
+        let not = |why: String| {
+            Ok(SavedEffect {
+                path: path.to_path_buf(),
+                written: false,
+                why: Some(why),
+            })
+        };
+        let Some(text) = self.proposal_toml() else {
+            return not(format!(
+                "nothing discovered to write ({})",
                 self.discovery_skipped
                     .clone()
                     .unwrap_or_else(|| String::from("no term passed the gates"))
-            )
-        })?;
-        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+            ));
+        };
+        let name = self
+            .discovery
+            .as_ref()
+            .and_then(|d| d.proposal.as_ref())
+            .map(|(a, _)| a.name())
+            .unwrap_or_default();
+        let text = match std::fs::read_to_string(path) {
+            Ok(old) => match EffectsFile::parse(&old) {
+                Ok(lib) if lib.get(name).is_some() => {
+                    return not(format!(
+                        "{} already defines `{name}`: choose another --effect-name",
+                        path.display()
+                    ))
+                }
+                Ok(_) => format!("{}\n{text}", old.trim_end()),
+                Err(e) => {
+                    return not(format!(
+                        "{} exists and is not an effects file ({e:#}): nothing is replaced",
+                        path.display()
+                    ))
+                }
+            },
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => text,
+            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+        };
+        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+        Ok(SavedEffect {
+            path: path.to_path_buf(),
+            written: true,
+            why: None,
+        })
     }
 
     /// Adds `custom_candidates` and `discovery` to the diagnosis JSON.

@@ -4,10 +4,11 @@
 //! ([`super::neighbours`]), and the verdict in words ([`super::evidence::verdict`]).
 
 use super::base::Base;
+use super::judge::{FLOOR_CHECK, STRUCTURED_CHECK};
 use super::structure::BalanceReport;
 use super::survey::Survey;
 use super::{evidence, neighbours, regimes, timing, BaseSummary, Candidate, DiagnoseOptions};
-use super::{Diagnosis, Status};
+use super::{on_simulation, phrase, Diagnosis, Status, Thresholds, Unresolvable};
 use crate::effects::EffectKind;
 use crate::fit::Dataset;
 use crate::math;
@@ -75,7 +76,15 @@ pub(super) fn run(
             leads = found.into_iter().map(|(n, _)| n).collect();
         }
     }
-    let mut verdict = evidence::verdict(status, &ranking, &unexplained, &opts.thresholds);
+    let unresolvable = unresolvable(&ranking, &balances, &opts.thresholds);
+    let mut verdict = evidence::verdict(
+        status,
+        &ranking,
+        &unexplained,
+        &balances,
+        &unresolvable,
+        &opts.thresholds,
+    );
     if let Some(j) = base.unphysical_j_eq {
         verdict.push_str(&alloc::format!(
             " The bare base model was unphysical on these logs (the fitted inertia J_eq = {} kg m^2 is not positive: a large torque it lacks, such as an arm's gravity, was absorbed into it); each candidate was fitted with the base refitted beside it.",
@@ -93,5 +102,52 @@ pub(super) fn run(
         balances,
         unexplained,
         neighbours: leads,
+        unresolvable,
     }
+}
+
+/// The candidates the logs show but cannot resolve: not significant, yet their own balance
+/// shows them (information criterion and held-out residual drop past their bars), while what
+/// they explain there stays below that balance's noise floor (`min_noise_ratio`). Such an
+/// effect is too small for its simulation drop to stand out of the other errors, or fails only
+/// the floor and the share of the structured error (checked when the simulation drop passes). A
+/// candidate refused by another check is a mimic, not a small effect, and one judged on the
+/// simulation alone has no balance to be measured in: both are left out.
+fn unresolvable(
+    ranking: &[Candidate],
+    balances: &[BalanceReport],
+    th: &Thresholds,
+) -> Vec<Unresolvable> {
+    ranking
+        .iter()
+        .filter(|c| !c.significant && !on_simulation(c.effect))
+        .filter(|c| {
+            c.bic_gain > th.min_bic_gain
+                && phrase::squared_from_rms(c.error_reduction_pct) >= th.min_eq_drop_pct
+                && c.noise_ratio < th.min_noise_ratio
+                && c.checks
+                    .iter()
+                    .all(|k| k.passed || k.name == FLOOR_CHECK || k.name == STRUCTURED_CHECK)
+        })
+        .filter_map(|c| {
+            let floor = balances
+                .iter()
+                .find(|b| b.equation == c.equation)
+                .map(|b| b.floor)?;
+            let size = c.effect.main_param().and_then(|spec| {
+                c.params
+                    .iter()
+                    .find(|p| p.effect == Some(c.effect) && p.key == spec.key)
+                    .map(|p| (p.key, p.unit, p.value))
+            });
+            Some(Unresolvable {
+                effect: c.effect,
+                equation: c.equation,
+                size,
+                explained_rms: c.noise_ratio * floor,
+                floor,
+                experiment: evidence::experiment(c.effect),
+            })
+        })
+        .collect()
 }

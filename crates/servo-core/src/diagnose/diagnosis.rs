@@ -2,6 +2,7 @@
 
 use super::checks;
 use super::structure::BalanceReport;
+use crate::effects::EffectKind;
 use crate::fit::model::Equation;
 use crate::plant::Plant;
 use crate::verdict::Candidate;
@@ -13,7 +14,8 @@ use alloc::vec::Vec;
 pub enum Status {
     /// Nothing material is left in any balance.
     Complete,
-    /// A catalogue effect passes every check: it is `ranking[0]`.
+    /// A catalogue effect passes every check: it is `ranking[0]`; or, with none, a user-defined
+    /// effect or a discovered term passes every guard ([`super::user_effects::conclude`]).
     Missing,
     /// Structured error above the noise floor that no catalogue effect explains.
     Unexplained,
@@ -43,6 +45,24 @@ pub struct BaseSummary {
     pub current_noise_a: Option<f64>,
 }
 
+/// An effect the logs show but cannot resolve: it passes the statistical guards (information
+/// criterion, held-out residual and simulation drops), yet what it explains in its balance is
+/// below that balance's noise floor, so its size cannot be told from the sensor noise.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Unresolvable {
+    pub effect: EffectKind,
+    /// The balance it was judged in.
+    pub equation: Equation,
+    /// Its main fitted parameter (key, unit, value), when it has one.
+    pub size: Option<(&'static str, &'static str, f64)>,
+    /// RMS of what it explains in its balance [unit of the balance].
+    pub explained_rms: f64,
+    /// The balance's noise floor (RMS) [unit of the balance].
+    pub floor: f64,
+    /// The experiment that would resolve it.
+    pub experiment: &'static str,
+}
+
 /// The outcome of a diagnosis.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Diagnosis {
@@ -61,6 +81,9 @@ pub struct Diagnosis {
     /// simulation, that predict the held-out motion materially better ([`neighbours`]); each is
     /// also a signature of its balance.
     pub neighbours: Vec<checks::Neighbour>,
+    /// Effects below their balance's noise floor: "not resolvable with these logs", whatever
+    /// the status ([`Unresolvable`]).
+    pub unresolvable: Vec<Unresolvable>,
 }
 
 impl Diagnosis {

@@ -3,7 +3,7 @@
 
 use super::regimes::{self, Regime};
 use super::structure::{self, BalanceReport, Thresholds};
-use super::{Candidate, Status};
+use super::{Candidate, Status, Unresolvable};
 use crate::effects::{EffectKind, Sample};
 use crate::fit::dataset::{Dataset, RecData};
 use crate::fit::model::{EqSolution, Equation};
@@ -245,11 +245,13 @@ pub fn verdict(
     status: Status,
     ranking: &[Candidate],
     unexplained: &[BalanceReport],
+    balances: &[BalanceReport],
+    unresolvable: &[Unresolvable],
     th: &Thresholds,
 ) -> String {
     let mut s = match status {
         Status::Missing => verdict_missing(ranking),
-        Status::Complete => verdict_complete(ranking),
+        Status::Complete => verdict_complete(balances),
         Status::Unexplained => {
             let mut s = String::from(
                 "The model is incomplete, and no catalogue effect explains what is missing (status: unexplained): ",
@@ -277,8 +279,33 @@ pub fn verdict(
             s
         }
     };
+    s.push_str(&unresolvable_text(unresolvable));
     s.push(' ');
     s.push_str(&thresholds_text(th));
+    s
+}
+
+/// " Not resolvable with these logs: ..." for each effect below its balance's noise floor, with
+/// its fitted size, what it explains against the floor and the experiment that would resolve
+/// it; empty when there is none.
+pub fn unresolvable_text(unresolvable: &[Unresolvable]) -> String {
+    let mut s = String::new();
+    for u in unresolvable {
+        let unit = u.equation.unit();
+        let size = u.size.map_or(String::new(), |(k, unit, v)| {
+            alloc::format!("{k} = {v:.3e} {unit}; ")
+        });
+        let _ = write!(
+            s,
+            " Not resolvable with these logs: {} ({}; {size}it explains {:.2e} {unit} RMS of the {}, below its noise floor {:.2e} {unit}); to resolve it, {}.",
+            u.effect,
+            u.effect.description(),
+            u.explained_rms,
+            u.equation.name(),
+            u.floor,
+            u.experiment
+        );
+    }
     s
 }
 
@@ -333,21 +360,22 @@ fn verdict_missing(ranking: &[Candidate]) -> String {
     }
 }
 
-fn verdict_complete(ranking: &[Candidate]) -> String {
+fn verdict_complete(balances: &[BalanceReport]) -> String {
     let mut s = String::from(
-        "No missing effect is significant and nothing material is left (status: complete): every balance's residual is near its noise floor, and no catalogue effect added to the model explains a material part of it, judged on held-out data.",
+        "No missing effect is significant and nothing material is left (status: complete): every balance's residual is near its noise floor (",
     );
-    let unres: Vec<&str> = ranking
-        .iter()
-        .filter(|c| !c.resolvable)
-        .map(|c| c.effect.name())
-        .collect();
-    if !unres.is_empty() {
+    for (i, b) in balances.iter().enumerate() {
+        let unit = b.equation.unit();
         let _ = write!(
             s,
-            " Below the noise floor and not resolvable with this data: {}.",
-            unres.join(", ")
+            "{}{} {:.2e} {unit} RMS, {:.2} times its floor {:.2e} {unit}",
+            if i > 0 { "; " } else { "" },
+            b.equation.name(),
+            b.rms,
+            b.ratio_to_noise,
+            b.floor
         );
     }
+    s.push_str("), and no catalogue effect added to the model explains a material part of it, judged on held-out data.");
     s
 }

@@ -20,6 +20,12 @@ use crate::math;
 use alloc::string::String;
 use alloc::vec::Vec;
 
+/// Name of the check that what a candidate explains stands above its balance's noise floor.
+pub(super) const FLOOR_CHECK: &str = "above the noise floor";
+/// Name of the check that a candidate explains a material share of its balance's structured
+/// (above-noise) error: an effect below the floor fails it too when little stands above it.
+pub(super) const STRUCTURED_CHECK: &str = "material share of the structured error";
+
 /// Judges every fitted candidate of `survey` (in parallel): [`judge`], then the mimic checks
 /// ([`structure_check`], [`resonance_check`]) of those that pass.
 ///
@@ -334,7 +340,7 @@ pub(super) fn judge(
         let unit = eq.unit();
         if !sim_only {
             found.push(checks::Check {
-                name: "above the noise floor",
+                name: FLOOR_CHECK,
                 passed: noise_ratio >= th.min_noise_ratio,
                 detail: alloc::format!(
                     "explains {explained:.2e} {unit} RMS, {noise_ratio:.2} times the {} noise floor {balance_floor:.2e} {unit} (needs {:.1})",
@@ -351,7 +357,7 @@ pub(super) fn judge(
                 String::new()
             };
             found.push(checks::Check {
-                name: "material share of the structured error",
+                name: STRUCTURED_CHECK,
                 passed: structured_share.max(motion_share) >= frac(th.min_structured_share_pct),
                 detail: alloc::format!(
                     "explains {:.0} % of the structured (above-noise) error of the {}{in_motion} (needs {:.0} %)",

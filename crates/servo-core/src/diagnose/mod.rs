@@ -54,7 +54,7 @@ pub mod user_effects;
 mod vetoes;
 
 pub use crate::verdict::Candidate;
-pub use diagnosis::{BaseSummary, Diagnosis, Status};
+pub use diagnosis::{BaseSummary, Diagnosis, Status, Unresolvable};
 pub use kinds::candidate_kinds;
 pub use options::DiagnoseOptions;
 pub use structure::{BalanceKind, BalanceReport, Signature};

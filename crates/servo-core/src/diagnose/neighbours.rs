@@ -74,6 +74,9 @@ pub(super) fn find(
                     share: 1.0 - (c / c0) * (c / c0),
                     explained_rms: math::sqrt((c0 * c0 - c * c).max(0.0)),
                     on_simulation: true,
+                    measured_on: alloc::string::String::from(
+                        "the held-out simulation error of the load angle (not the balance's residual)",
+                    ),
                 };
                 (n, sig)
             })
@@ -112,6 +115,7 @@ mod tests {
             share: 0.5,
             explained_rms: 1.0,
             on_simulation: kind == "compliance",
+            measured_on: String::new(),
         }
     }
 

@@ -37,6 +37,9 @@ pub struct Signature {
     /// Measured on the simulation of the motion (a mechanism outside the catalogue fitted as a
     /// model, [`super::checks::Neighbour`]), not on the balance's residual.
     pub on_simulation: bool,
+    /// On which rows and in which frequency band it was measured, in words (e.g. "4000 held-out
+    /// rows of 2 logs at 100 rows/s, 0-25 Hz (the filter's band)").
+    pub measured_on: String,
 }
 
 impl Signature {
@@ -432,6 +435,30 @@ fn pow_odd(x: &[f64], p: f64) -> Vec<f64> {
         .collect()
 }
 
+/// The rows a balance's shapes are judged on, in words: the held-out rows of the view, how many
+/// logs they come from, their rate, and the band the filter leaves them.
+fn rows_phrase(ds: &Dataset, rows: &Rows, v: &View) -> String {
+    let mut recs: Vec<usize> = v.hold.iter().map(|&j| rows.rec[v.row_idx[j]]).collect();
+    recs.sort_unstable();
+    recs.dedup();
+    let mut steps: Vec<f64> = v
+        .hold
+        .windows(2)
+        .filter(|w| w[1] == w[0] + 1 && rows.rec[v.row_idx[w[0]]] == rows.rec[v.row_idx[w[1]]])
+        .map(|w| v.time_s[w[1]] - v.time_s[w[0]])
+        .filter(|d| *d > 0.0)
+        .collect();
+    steps.sort_by(|a, b| a.total_cmp(b));
+    let rate = steps.get(steps.len() / 2).map_or(0.0, |d| 1.0 / d);
+    let logs = if recs.len() == 1 { "log" } else { "logs" };
+    alloc::format!(
+        "{} held-out rows of {} {logs} at {rate:.0} rows/s, 0-{:.0} Hz (the filter's band)",
+        v.hold.len(),
+        recs.len(),
+        ds.opts.filter_hz
+    )
+}
+
 /// Analyses the residual of one balance of the base model.
 pub fn analyse(
     ds: &Dataset,
@@ -453,6 +480,7 @@ pub fn analyse(
         f64::INFINITY
     };
     let unit = sol.equation.unit();
+    let measured_on = rows_phrase(ds, rows, &v);
     let mut sigs: Vec<Signature> = Vec::new();
     let mut push = |kind: &'static str, description: String, (share, rms_x): (f64, f64)| {
         sigs.push(Signature {
@@ -461,6 +489,7 @@ pub fn analyse(
             share,
             explained_rms: rms_x,
             on_simulation: false,
+            measured_on: measured_on.clone(),
         });
     };
     // Constant offset.
@@ -719,6 +748,15 @@ pub fn analyse(
                 share: res.share,
                 explained_rms: math::sqrt(res.band_ms),
                 on_simulation: false,
+                measured_on: alloc::format!(
+                    "{} held-out rows in {} contiguous runs at {:.0} rows/s; spectrum {:.1}-{:.1} Hz with the {:.0} Hz filter's response divided out",
+                    res.held_out_rows,
+                    res.held_out_runs,
+                    res.row_rate_hz,
+                    res.scanned_hz.0,
+                    res.scanned_hz.1,
+                    ds.opts.filter_hz
+                ),
             });
             resonance = Some(res);
         }
@@ -852,17 +890,24 @@ pub fn describe(b: &BalanceReport) -> String {
         // The shapes' descriptions are phrases of either kind ("a constant offset of ...",
         // "drifts with time ..."): listed after a colon, not as the verb of a sentence.
         s.push_str("; shapes that carry it: ");
+        let mut last_on: Option<&str> = None;
         for (i, sig) in b.signatures.iter().take(3).enumerate() {
             if i > 0 {
                 s.push_str("; ");
             }
             let _ = write!(
                 s,
-                "{} ({:.0} % of the held-out {})",
+                "{} ({:.0} % of the held-out {}",
                 sig.description,
                 100.0 * sig.share,
                 sig.share_of()
             );
+            // Where it was measured, once for the shapes that share their rows and band.
+            if !sig.measured_on.is_empty() && last_on != Some(sig.measured_on.as_str()) {
+                let _ = write!(s, "; measured on {}", sig.measured_on);
+                last_on = Some(sig.measured_on.as_str());
+            }
+            s.push(')');
         }
     }
     if let (true, None, Some((lo, hi))) = (b.above_noise, &b.resonance, b.resonance_band_hz) {

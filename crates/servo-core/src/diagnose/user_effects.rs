@@ -5,7 +5,7 @@
 //! catalogue nor a user effect explains what is left.
 
 use crate::custom::CustomActive;
-use crate::diagnose::{DiagnoseOptions, Diagnosis, Status};
+use crate::diagnose::{evidence, structure, DiagnoseOptions, Diagnosis, Status, Thresholds};
 use crate::fit::discover::{self, Discovery, Gates, Judged};
 use crate::fit::{Dataset, FitError};
 use crate::plant::Plant;
@@ -106,4 +106,77 @@ pub fn judge_user_effects(
         }
     }
     Ok(out)
+}
+
+/// What a significant user effect or discovered term removes, in words: its equation's held-out
+/// residual drop, the held-out simulation drop and its fitted parameters.
+fn figures(j: &Judged) -> String {
+    let mut s = format!(
+        "adding it removes {:.1} % of the held-out {} residual",
+        100.0 * j.eq_drop,
+        j.equation.name()
+    );
+    if let Some(d) = j.oe_drop {
+        s.push_str(&format!(
+            " and {:.1} % of the held-out simulation error",
+            100.0 * d
+        ));
+    }
+    s.push_str(&format!(" (BIC gain {:.1})", j.bic_gain));
+    if !j.params.is_empty() {
+        let p: Vec<String> = j
+            .params
+            .iter()
+            .map(|(k, u, v)| format!("{k} = {v:.4e} {u}"))
+            .collect();
+        s.push_str(&format!("; fitted {}", p.join(", ")));
+    }
+    s
+}
+
+/// The diagnosis `d` once the user effects and the discovery of `found` are judged: when no
+/// catalogue effect was named and a user effect (the first significant one) or the discovered
+/// term passes every guard, the model is missing that effect: the status becomes missing and
+/// the verdict names it, with its figures and how to add it, before what the catalogue alone
+/// leaves (`th`: the thresholds the diagnosis used). Returns whether `d` changed.
+pub fn conclude(d: &mut Diagnosis, found: &UserFindings, th: &Thresholds) -> bool {
+    if d.winner().is_some() {
+        return false;
+    }
+    let lead = if let Some(u) = found.candidates.iter().find(|c| c.significant) {
+        format!(
+            "The model is missing the user-defined effect `{}` (status: missing; from the effects file, outside the catalogue): {}. Add it with `servo compare LOG --effects FILE --add {}`.",
+            u.name,
+            figures(u),
+            u.name
+        )
+    } else if let Some((disc, name, j)) = found.discovery.as_ref().and_then(|disc| {
+        disc.proposal
+            .as_ref()
+            .filter(|(_, j)| j.significant)
+            .map(|(a, j)| (disc, a.name(), j))
+    }) {
+        format!(
+            "The model is missing a term outside the catalogue, found by --discover as the effect `{name}`: {} (status: missing): {}. Write it with --save-effect FILE and add it with `servo compare LOG --effects FILE --add {name}`.",
+            disc.words(),
+            figures(j)
+        )
+    } else {
+        return false;
+    };
+    let mut v = lead;
+    if !d.unexplained.is_empty() {
+        v.push_str(" Without it, the catalogue leaves: ");
+        for (i, b) in d.unexplained.iter().enumerate() {
+            if i > 0 {
+                v.push_str(" Also, ");
+            }
+            v.push_str(&structure::describe(b));
+        }
+    }
+    v.push(' ');
+    v.push_str(&evidence::thresholds_text(th));
+    d.status = Status::Missing;
+    d.verdict = v;
+    true
 }

@@ -15,9 +15,13 @@
 //! smallest set of physically motivated terms that does. The residual of the base model's torque
 //! balance (or of the u-driven balance without current) is regressed on the base columns (J_eq,
 //! B_eq, tau_sf: never dropped) and a library of load torques ([`LIBRARY`]: the load angle and its
-//! cube, a constant, speed * |speed| and speed^3, sin/cos of the load angle at harmonics 1-3 and of
-//! the motor angle at 1-2, time, current squared, u, and the Coulomb direction when the model has
-//! no Coulomb friction), every column through the same zero-phase filter as the fit. Sequentially
+//! cube, a constant, speed * |speed| and speed^3, |speed| and the viscous slope of one direction
+//! (beside B_eq the same column: the forward slope stands for them), sin/cos of the load angle at
+//! harmonics 1-3 and of the motor angle at 1-2, the same harmonics (load 1-2, motor 1) times the
+//! direction of motion (a friction that varies with position), a friction growing with the
+//! transmitted torque (|i_a| times the direction, with current logged), time, current squared,
+//! u, and the Coulomb direction when the model has no Coulomb friction), every column through the
+//! same zero-phase filter as the fit. Sequentially
 //! thresholded least squares (STLSQ, columns scaled to unit RMS, threshold 5 % of the residual
 //! RMS) prunes the library; then a backward elimination drops, one at a time, the term whose
 //! removal costs the least held-out residual while that cost is below the practical threshold
@@ -224,7 +228,7 @@ const fn term(
 }
 
 /// The library of physically motivated load torques.
-pub const LIBRARY: [Term; 21] = [
+pub const LIBRARY: [Term; 30] = [
     term(
         "theta_l",
         "k_theta",
@@ -340,6 +344,60 @@ pub const LIBRARY: [Term; 21] = [
         "c_abs",
         "N m s/rad",
         "proportional to |speed|",
+    ),
+    term(
+        "max(omega_l, 0)",
+        "b_fwd",
+        "N m s/rad",
+        "proportional to the load speed when it turns forwards only (beside B_eq: a viscous friction whose slope differs between the two directions)",
+    ),
+    term(
+        "min(omega_l, 0)",
+        "b_bwd",
+        "N m s/rad",
+        "proportional to the load speed when it turns backwards only (beside B_eq: a viscous friction whose slope differs between the two directions)",
+    ),
+    term(
+        "abs(i_a) * sign(omega_l)",
+        "mu_i",
+        "N m/A",
+        "opposing the motion in proportion to |i_a| (a friction growing with the transmitted torque, k_t |i_a|: a load-dependent gear loss)",
+    ),
+    term(
+        "sin(theta_l) * sign(omega_l)",
+        "f_s1",
+        "N m",
+        "opposing the motion with a size that varies once per load revolution (sin; a friction that varies with position)",
+    ),
+    term(
+        "cos(theta_l) * sign(omega_l)",
+        "f_c1",
+        "N m",
+        "opposing the motion with a size that varies once per load revolution (cos; a friction that varies with position)",
+    ),
+    term(
+        "sin(2 * theta_l) * sign(omega_l)",
+        "f_s2",
+        "N m",
+        "opposing the motion with a size that varies twice per load revolution (sin; a friction that varies with position)",
+    ),
+    term(
+        "cos(2 * theta_l) * sign(omega_l)",
+        "f_c2",
+        "N m",
+        "opposing the motion with a size that varies twice per load revolution (cos; a friction that varies with position)",
+    ),
+    term(
+        "sin(theta_m) * sign(omega_l)",
+        "fm_s1",
+        "N m",
+        "opposing the motion with a size that varies once per motor revolution (sin; a friction that varies with the motor's position)",
+    ),
+    term(
+        "cos(theta_m) * sign(omega_l)",
+        "fm_c1",
+        "N m",
+        "opposing the motion with a size that varies once per motor revolution (cos; a friction that varies with the motor's position)",
     ),
 ];
 
@@ -457,10 +515,14 @@ pub fn discover(
         .iter()
         .copied()
         .filter(|t| t.key != "tau_c" || !has_coulomb)
-        .filter(|t| t.key != "k_i2" || ds.has_current)
+        .filter(|t| (t.key != "k_i2" && t.key != "mu_i") || ds.has_current)
         .filter(|t| t.key != "k_u" || ds.has_input)
         // B_eq is a base column: a viscous load term is the same column.
         .filter(|t| t.key != "b_l_extra")
+        // Beside B_eq (omega = max(omega, 0) + min(omega, 0)), |omega| and the two one-direction
+        // slopes span one column: the forward slope stands for the three (a viscous friction
+        // whose slope differs between the directions, the more telling of their names).
+        .filter(|t| t.key != "c_abs" && t.key != "b_bwd")
         .collect();
     let lib = library_columns(ds, n, &terms)?;
     let base_cols: Vec<Vec<f64>> = alloc::vec![

@@ -210,6 +210,31 @@ impl ZeroPhase {
         self.dt_s
     }
 
+    /// Power gain |H(f)|^2 of the forward-backward pair at `f_hz` [1]: the biquad's squared
+    /// magnitude squared again (each pass filters once; the pair has no phase). A white input
+    /// comes out with this spectral shape; dividing a filtered signal's spectrum by it gives the
+    /// spectrum of what went in.
+    pub fn power_gain(&self, f_hz: f64) -> f64 {
+        let w = core::f64::consts::TAU * f_hz * self.dt_s;
+        let (c1, s1, c2, s2) = (
+            math::cos(w),
+            math::sin(w),
+            math::cos(2.0 * w),
+            math::sin(2.0 * w),
+        );
+        let [b0, b1, b2] = self.biquad.b;
+        let [a1, a2] = self.biquad.a;
+        // H(e^{jw}) = (b0 + b1 e^{-jw} + b2 e^{-2jw}) / (1 + a1 e^{-jw} + a2 e^{-2jw}).
+        let (nr, ni) = (b0 + b1 * c1 + b2 * c2, -(b1 * s1 + b2 * s2));
+        let (dr, di) = (1.0 + a1 * c1 + a2 * c2, -(a1 * s1 + a2 * s2));
+        let den = dr * dr + di * di;
+        if den.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+            return 0.0;
+        }
+        let mag2 = (nr * nr + ni * ni) / den;
+        mag2 * mag2
+    }
+
     /// Filters `x` forwards and backwards; returns a signal of the same length (a copy of `x`
     /// when it has fewer than 3 samples).
     pub fn apply(&self, x: &[f64]) -> Vec<f64> {
@@ -352,6 +377,27 @@ mod tests {
             assert!((amp - expected).abs() < 1e-9, "{f} Hz: {amp} vs {expected}");
             assert!((phase - 1.0).abs() < 1e-9, "{f} Hz: phase {phase} rad");
         }
+    }
+
+    /// The pair's power gain is the square of the amplitude a sine keeps through it, measured on
+    /// filtered sines: 1 at DC, 1/4 at the cut-off, and the digital Butterworth curve around it.
+    #[test]
+    fn power_gain_is_the_square_of_a_sines_amplitude_through_the_pair() {
+        let fc = 10.0;
+        let f = ZeroPhase::new(fc, DT).unwrap();
+        assert!((f.power_gain(0.0) - 1.0).abs() < 1e-12);
+        assert!((f.power_gain(fc) - 0.25).abs() < 1e-12);
+        for hz in [2.0, 5.0, 20.0, 40.0] {
+            let y = f.apply(&sine(hz, 1.0, 20_000));
+            let (amp, _) = amplitude_and_phase(&y, hz, 5_000, 15_000);
+            assert!(
+                (f.power_gain(hz) / (amp * amp) - 1.0).abs() < 1e-6,
+                "{hz} Hz: {} vs {}",
+                f.power_gain(hz),
+                amp * amp
+            );
+        }
+        assert_eq!(ZeroPhase::clamped(0.0, DT).power_gain(30.0), 1.0);
     }
 
     #[test]

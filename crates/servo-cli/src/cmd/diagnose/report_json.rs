@@ -67,8 +67,23 @@ pub(super) fn balance_json(b: &BalanceReport) -> Value {
             "share_of_heldout_residual": f(s.share),
             "explained_rms": f(s.explained_rms),
             "measured_on": if s.on_simulation { "simulation" } else { "balance" },
+            "rows_and_band": s.measured_on,
         })).collect::<Vec<_>>(),
         "experiment": b.experiment,
+    })
+}
+
+/// An effect below its balance's noise floor
+/// ([`servo_core::diagnose::Unresolvable`]): "not resolvable with these logs".
+pub(super) fn unresolvable_json(u: &servo_core::diagnose::Unresolvable) -> Value {
+    json!({
+        "effect": u.effect.name(),
+        "balance": u.equation.name(),
+        "unit": u.equation.unit(),
+        "size": u.size.map(|(key, unit, value)| json!({ "key": key, "unit": unit, "value": f(value) })),
+        "explained_rms": f(u.explained_rms),
+        "noise_floor": f(u.floor),
+        "experiment": u.experiment,
     })
 }
 

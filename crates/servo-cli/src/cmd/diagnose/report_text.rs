@@ -17,7 +17,12 @@ pub(super) fn headline(ladder: &[Rung], last: &Diagnosis) -> String {
         .collect();
     let status = match last.status {
         servo_core::diagnose::Status::Complete => "complete: nothing material is left",
-        servo_core::diagnose::Status::Missing => "missing: a catalogue effect is still missing",
+        servo_core::diagnose::Status::Missing if last.winner().is_some() => {
+            "missing: a catalogue effect is still missing"
+        }
+        servo_core::diagnose::Status::Missing => {
+            "missing: a user-defined or discovered effect passes every guard (no catalogue effect does)"
+        }
         servo_core::diagnose::Status::Unexplained => {
             "unexplained: structured error above the noise floor that no catalogue effect explains"
         }
@@ -101,10 +106,11 @@ pub(super) fn text_report(
             b.equation.unit(),
             b.ratio_to_noise,
             b.signatures.first().map_or(String::new(), |g| format!(
-                "; strongest shape: {} ({:.0} % of the held-out {})",
+                "; strongest shape: {} ({:.0} % of the held-out {}; measured on {})",
                 g.description,
                 100.0 * g.share,
-                g.share_of()
+                g.share_of(),
+                g.measured_on
             ))
         );
     }
