@@ -522,18 +522,20 @@ mod tests {
         assert!(s.to_string().contains("overshoot (max)"));
     }
 
-    #[test]
-    fn the_end_of_a_smooth_move_is_no_step() {
-        // Holds, then a short move of 0.5 rad (0.32 s) that stops and holds, inside one block of
-        // the detector: the move's last sample changes the reference by ~1e-5 rad after a
-        // block that mostly holds; that is no step (it gave an overshoot of 10^5 % of it).
-        let r = crate::control::Reference::parse("trap:distance=0.5,vmax=3,amax=20").unwrap();
-        let n = 6_000;
+    /// The summary of `n` samples at 1 kHz: reference 0 until `hold_s` [s], then `r` from 0;
+    /// the response a first-order lag of 10 ms.
+    fn summary_after_hold(r: &crate::control::Reference, hold_s: f64, n: usize) -> RunSummary {
         let ts = 1e-3;
         let t: Vec<f64> = (0..n).map(|k| k as f64 * ts).collect();
         let rr: Vec<f64> = t
             .iter()
-            .map(|&t| if t < 2.3 { 0.0 } else { r.at(t - 2.3).pos_rad })
+            .map(|&t| {
+                if t < hold_s {
+                    0.0
+                } else {
+                    r.at(t - hold_s).pos_rad
+                }
+            })
             .collect();
         let mut y = vec![0.0; n];
         for k in 1..n {
@@ -546,7 +548,16 @@ mod tests {
             ref_rad: Some(rr),
             ..Record::default()
         };
-        let s = RunSummary::compute(&rec, &[], 0.05);
+        RunSummary::compute(&rec, &[], 0.05)
+    }
+
+    #[test]
+    fn the_end_of_a_smooth_move_is_no_step() {
+        // Holds, then a short move of 0.5 rad (0.32 s) that stops and holds, inside one block of
+        // the detector: the move's last sample changes the reference by ~1e-5 rad after a
+        // block that mostly holds; that is no step (it gave an overshoot of 10^5 % of it).
+        let r = crate::control::Reference::parse("trap:distance=0.5,vmax=3,amax=20").unwrap();
+        let s = summary_after_hold(&r, 2.3, 6_000);
         assert!(s.steps.is_empty(), "{:?}", s.steps);
     }
 
@@ -557,25 +568,7 @@ mod tests {
         let r =
             crate::control::Reference::parse("multisine:amp=0.2,f0=0.2,f1=20,period=10,lines=40")
                 .unwrap();
-        let n = 12_000;
-        let ts = 1e-3;
-        let t: Vec<f64> = (0..n).map(|k| k as f64 * ts).collect();
-        let rr: Vec<f64> = t
-            .iter()
-            .map(|&t| if t < 1.0 { 0.0 } else { r.at(t - 1.0).pos_rad })
-            .collect();
-        let mut y = vec![0.0; n];
-        for k in 1..n {
-            y[k] = y[k - 1] + (rr[k - 1] - y[k - 1]) * ts / 0.01;
-        }
-        let rec = Record {
-            time_s: t,
-            u_v: Some(vec![0.0; n]),
-            theta_l_rad: Some(y),
-            ref_rad: Some(rr),
-            ..Record::default()
-        };
-        let s = RunSummary::compute(&rec, &[], 0.05);
+        let s = summary_after_hold(&r, 1.0, 12_000);
         assert!(s.steps.is_empty(), "{:?}", s.steps);
         let text = s.to_string();
         assert!(

@@ -75,25 +75,23 @@ impl CompensationChoice {
         let mut named: Vec<EffectKind> = Vec::new();
         for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
             match item {
-                "inertia" => {
-                    linear.inertia = true;
-                    linear.back_emf = true;
-                }
-                "friction" => {
-                    linear.viscous = true;
-                    linear.coulomb = true;
-                }
-                "viscous" => linear.viscous = true,
-                "coulomb" => linear.coulomb = true,
-                "back_emf" | "bemf" => linear.back_emf = true,
                 "all" => {
                     linear = FeedforwardConfig::FULL;
                     select = EffectSelect::All;
                 }
                 "none" => {
                     linear = FeedforwardConfig::OFF;
+                    linear.sign = FeedforwardConfig::FULL.sign;
                     select = EffectSelect::None;
                     named.clear();
+                }
+                // A linear term (`inertia`, `friction`, ...), as `parse_ff` reads it.
+                other if crate::controller::parse_ff(other).is_ok() => {
+                    let c = crate::controller::parse_ff(other)?;
+                    linear.inertia |= c.inertia;
+                    linear.viscous |= c.viscous;
+                    linear.coulomb |= c.coulomb;
+                    linear.back_emf |= c.back_emf;
                 }
                 other => {
                     let Some(kind) = EffectKind::from_name(other) else {
