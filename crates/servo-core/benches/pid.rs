@@ -67,32 +67,29 @@ fn bench(c: &mut Criterion) {
     }
     let comp = LoopCompensation::new(&plant, FeedforwardConfig::FULL, EffectSelect::All, 0.0)
         .expect("valid compensation");
-    let mut t = 0.0f64;
-    c.bench_function("compensation_step_five_effects", |b| {
-        b.iter(|| {
-            t = if t > 20.0 { 0.0 } else { t + 1e-3 };
-            let r = RefSample {
-                pos_rad: t.sin(),
-                vel_rad_s: t.cos(),
-                acc_rad_s2: -t.sin(),
-            };
-            let ff = comp.feedforward(black_box(&r), t, black_box(r.pos_rad - 1e-3), 0.9);
-            black_box(comp.command_v(black_box(ff.total_v + 0.2), t, 10.0))
-        })
-    });
+    // One control step: the compensation of a sine reference sample, then the command.
+    let step = |comp: &LoopCompensation, t: f64| {
+        let r = RefSample {
+            pos_rad: t.sin(),
+            vel_rad_s: t.cos(),
+            acc_rad_s2: -t.sin(),
+        };
+        let ff = comp.feedforward(black_box(&r), t, black_box(r.pos_rad - 1e-3), 0.9);
+        comp.command_v(black_box(ff.total_v + 0.2), t, 10.0)
+    };
     let linear = LoopCompensation::linear(ff);
-    c.bench_function("compensation_step_linear_only", |b| {
-        b.iter(|| {
-            t = if t > 20.0 { 0.0 } else { t + 1e-3 };
-            let r = RefSample {
-                pos_rad: t.sin(),
-                vel_rad_s: t.cos(),
-                acc_rad_s2: -t.sin(),
-            };
-            let ff = linear.feedforward(black_box(&r), t, black_box(r.pos_rad), 0.9);
-            black_box(linear.command_v(black_box(ff.total_v + 0.2), t, 10.0))
-        })
-    });
+    for (name, c_) in [
+        ("compensation_step_five_effects", &comp),
+        ("compensation_step_linear_only", &linear),
+    ] {
+        let mut t = 0.0f64;
+        c.bench_function(name, |b| {
+            b.iter(|| {
+                t = if t > 20.0 { 0.0 } else { t + 1e-3 };
+                black_box(step(c_, t))
+            })
+        });
+    }
     for text in [
         "trap:distance=3,vmax=10,amax=100",
         "chirp:amp=0.2,f0=0.1,f1=20,duration=10,mode=log",

@@ -46,7 +46,9 @@ pub fn how(c: Compensation, e: &servo_core::effects::Effect) -> Option<String> {
         Compensation::Torque {
             angle: AngleFrom::Reference,
         } => "its torque on the reference".into(),
-        Compensation::DryFriction => "the friction curve at the reference speed".into(),
+        Compensation::DryFriction => {
+            "the friction curve: its level at the measured speed, the reference speed's sign".into()
+        }
         Compensation::InputInverse => "the inverse of its input map on the whole command".into(),
         Compensation::Limit => "the controller's limit narrowed to its bound".into(),
         Compensation::Lead => format!(
@@ -72,7 +74,6 @@ impl CompensationChoice {
         let mut linear = FeedforwardConfig::OFF;
         linear.sign = FeedforwardConfig::FULL.sign;
         let mut select = EffectSelect::None;
-        let mut named: Vec<EffectKind> = Vec::new();
         for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
             match item {
                 "all" => {
@@ -83,17 +84,17 @@ impl CompensationChoice {
                     linear = FeedforwardConfig::OFF;
                     linear.sign = FeedforwardConfig::FULL.sign;
                     select = EffectSelect::None;
-                    named.clear();
                 }
-                // A linear term (`inertia`, `friction`, ...), as `parse_ff` reads it.
-                other if crate::controller::parse_ff(other).is_ok() => {
-                    let c = crate::controller::parse_ff(other)?;
-                    linear.inertia |= c.inertia;
-                    linear.viscous |= c.viscous;
-                    linear.coulomb |= c.coulomb;
-                    linear.back_emf |= c.back_emf;
-                }
+                // A linear term (`inertia`, `friction`, ...), as `parse_ff` reads it, else an
+                // effect of the model.
                 other => {
+                    if let Ok(c) = crate::controller::parse_ff(other) {
+                        linear.inertia |= c.inertia;
+                        linear.viscous |= c.viscous;
+                        linear.coulomb |= c.coulomb;
+                        linear.back_emf |= c.back_emf;
+                        continue;
+                    }
                     let Some(kind) = EffectKind::from_name(other) else {
                         bail!(
                             "--ff: unknown term `{other}`; use inertia, friction, viscous, coulomb, \
@@ -112,7 +113,6 @@ impl CompensationChoice {
                         bail!("--ff {other}: {other} is not compensated: {why}");
                     }
                     select = select.with(kind);
-                    named.push(kind);
                 }
             }
         }
@@ -135,12 +135,10 @@ impl CompensationChoice {
                 continue;
             }
             if let Some(doubt) = doubtful(model, e) {
-                if named.contains(&e.kind) || select == EffectSelect::All {
-                    bail!(
-                        "--ff: {name} is not compensated: {doubt}; its sign or size is doubtful \
-                         (refit it on more data, or leave it out: --ff without {name})"
-                    );
-                }
+                bail!(
+                    "--ff: {name} is not compensated: {doubt}; its sign or size is doubtful \
+                     (refit it on more data, or leave it out: --ff without {name})"
+                );
             }
             if let Some(words) = how(c, e) {
                 compensated.push((name, words));

@@ -130,9 +130,9 @@ pub struct Run {
 
     /// Feedforward and compensation, a comma list: linear terms from the reference's speed and
     /// acceleration, `inertia` (J_eq and back-EMF), `friction` (B_eq and tau_sf), `viscous`,
-    /// `coulomb`, `back_emf`; effects of the --model file by their registry names (as `servo diagnose` and the model
-    /// file name them), each compensated as its
-    /// effect file declares; `all` (every term and every effect of the model); `none`.
+    /// `coulomb`, `back_emf`; effects of the --model file by their registry names (as `servo
+    /// diagnose` and the model file name them), each compensated as its effect file declares;
+    /// `all` (every term and every effect of the model); `none`.
     #[arg(long, value_name = "TERMS")]
     pub ff: Option<String>,
 
