@@ -520,3 +520,117 @@ mod board_core {
         );
     }
 }
+
+/// Item 3 of #29: `servo design --model M --ff all` designs on the model's linear part and
+/// verifies on its whole nonlinear model without and with the compensation. An unbalanced load
+/// (0.03 N m) and a cogging torque: the margins of the linearised loop, the step cases and the
+/// tracking ladder, without and with. The ladder's last rung is what `servo run` gives on that
+/// model with the designed gains and `--ff all` (the claim checked through the command a user
+/// runs next).
+#[test]
+fn design_on_the_identified_model_is_verified_with_and_without_compensation() {
+    let _heavy = servo_e2e::cpu_heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
+    let model = d("model.toml");
+    std::fs::write(
+        &model,
+        format!(
+            "{}\n[effects.imbalance]\namplitude = 0.03\nphase = 0.4\n\
+             [effects.cogging]\namplitude = 0.0002\nharmonic = 12\nphase = 0.3\n",
+            ok(&["params"])
+        ),
+    )
+    .unwrap();
+    let gains = d("gains.toml");
+    let out = ok(&[
+        "design", "--wc", "30", "--pm", "60", "--model", &model, "--ff", "all", "--json", "-o",
+        &gains,
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let c = &v["compensation_check"];
+    assert_eq!(c["effects"].as_array().unwrap().len(), 4, "{c}");
+    // the design is on the file's linear part
+    assert_eq!(v["plant_source"].as_str().unwrap(), model, "{v}");
+    // margins: the angle torques' stiffness spans both signs without; cancelled with
+    let m = &c["margins"];
+    assert!(
+        m["without"]["stiffness_min_nm_per_rad"].as_f64().unwrap() < 0.0
+            && m["without"]["stiffness_max_nm_per_rad"].as_f64().unwrap() > 0.0,
+        "{m}"
+    );
+    assert_eq!(
+        m["with"]["stiffness_max_nm_per_rad"].as_f64().unwrap(),
+        0.0,
+        "{m}"
+    );
+    assert_eq!(m["with"]["stable"], true, "{m}");
+    let lin_pm = m["linear"]["pm_deg"].as_f64().unwrap();
+    assert!((lin_pm - 60.0).abs() < 5.0, "linear PM {lin_pm}");
+    // the tracking ladder: none, linear terms, then each effect; the effects cut the error
+    let ladder = c["tracking"]["ladder"].as_array().unwrap();
+    let rms = |i: usize| ladder[i]["err_rms_rad"].as_f64().unwrap();
+    assert_eq!(ladder[0]["rung"], "no compensation", "{ladder:?}");
+    let last = ladder.len() - 1;
+    assert_eq!(ladder[last]["rung"], "+ imbalance", "{ladder:?}");
+    assert!(
+        rms(last) < 0.3 * rms(1),
+        "the effects cut the error < 70 %: {ladder:?}"
+    );
+    // steps: without, the imbalance leaves the shaft off target longer or overshooting more
+    let sw = &c["steps_with"]["worst_settling_time_5pct_s"];
+    assert!(sw.is_number(), "the compensated steps do not settle: {c}");
+    // what `servo run` gives with the designed gains and --ff all on the same model
+    let (run_ok, run_out, run_err) = servo(&[
+        "run",
+        "--plant",
+        &model,
+        "--gains",
+        &gains,
+        "--experiment",
+        p(&tracking_experiment()),
+        "--model",
+        &model,
+        "--ff",
+        "all",
+    ]);
+    assert!(run_ok, "{run_err}");
+    let said = printed_rms_rad(&run_out);
+    assert!(
+        (said / rms(last) - 1.0).abs() < 0.02,
+        "servo run says {said:.4e} rad, the design's ladder {:.4e} rad",
+        rms(last)
+    );
+    // the text report says it
+    let text = ok(&[
+        "design",
+        "--wc",
+        "30",
+        "--pm",
+        "60",
+        "--model",
+        &model,
+        "--ff",
+        "imbalance",
+    ]);
+    assert!(
+        text.contains("verified on the nonlinear model") && text.contains("+ imbalance"),
+        "{text}"
+    );
+    // refusals: --ff without a model file; a --model that is no file
+    let (okk, _, err) = servo(&["design", "--wc", "30", "--pm", "60", "--ff", "all"]);
+    assert!(!okk && err.contains("--model FILE"), "{err}");
+    let (okk, _, err) = servo(&[
+        "design",
+        "--wc",
+        "30",
+        "--pm",
+        "60",
+        "--model",
+        "nosuch.toml",
+    ]);
+    assert!(
+        !okk && err.contains("reduced") && err.contains("nosuch.toml"),
+        "{err}"
+    );
+}

@@ -50,6 +50,28 @@ fn every_command_output_follows_its_schema() {
     // design: plain Bode, time-domain specs with the range check, and --meet-specs
     let plain = json(&["design", "--wc", "30", "--pm", "60", "--json"]);
     assert!(plain["wgc_rad_s"].as_f64().unwrap() == 30.0 && plain["ts_s"].is_number());
+    // design on a model file with effects, verified with and without their compensation
+    let with_effects = p("effects.toml");
+    let (ok, params, _) = servo(&["params"]);
+    assert!(ok);
+    std::fs::write(
+        &with_effects,
+        format!("{params}\n[effects.imbalance]\namplitude = 0.02\nphase = 0.0\n"),
+    )
+    .unwrap();
+    let c = json(&[
+        "design",
+        "--wc",
+        "30",
+        "--pm",
+        "60",
+        "--model",
+        &with_effects,
+        "--ff",
+        "all",
+        "--json",
+    ]);
+    assert!(c["compensation_check"]["tracking"]["ladder"].is_array());
     json(&[
         "design",
         "--overshoot",

@@ -61,6 +61,7 @@ pub mod safety;
 #[cfg(feature = "alloc")]
 pub mod signal;
 pub mod sim;
+pub mod stiffness;
 pub mod transmission;
 #[cfg(feature = "alloc")]
 pub mod trend;

@@ -47,6 +47,7 @@ use servo_core::metrics::{RunSummary, SummaryAccumulator};
 use servo_core::record::Record;
 use servo_io::{LoopMsg, McapLog};
 
+pub mod compensation_check;
 pub mod experiments;
 pub mod logged;
 pub mod step_cases;

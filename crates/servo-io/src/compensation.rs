@@ -165,9 +165,14 @@ impl CompensationChoice {
         let mut v = Vec::new();
         let lin = crate::controller::ff_name(&self.linear);
         if lin != "none" {
-            v.push(lin);
+            v.extend(lin.split(',').map(str::to_string));
         }
-        v.extend(self.compensated.iter().map(|(n, _)| n.to_string()));
+        // (a dry friction named both as a linear term and as the model's effect once)
+        for (n, _) in &self.compensated {
+            if !v.iter().any(|x| x == n) {
+                v.push(n.to_string());
+            }
+        }
         if v.is_empty() {
             "none".into()
         } else {

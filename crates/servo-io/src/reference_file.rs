@@ -136,6 +136,12 @@ impl Experiment {
     }
 
     /// Parses experiment TOML; `origin` names the source in errors (e.g. the path).
+    /// The standard tracking reference of compensation (issue #29, `experiments/tracking.toml`):
+    /// moves of 1.5 rad both ways (trapezoids) and a slow sine, 18 s.
+    pub fn standard_tracking() -> anyhow::Result<Experiment> {
+        Experiment::parse(STANDARD_TRACKING_TOML, "experiments/tracking.toml")
+    }
+
     pub fn parse(text: &str, origin: &str) -> anyhow::Result<Experiment> {
         Experiment::parse_on(text, origin, None)
     }
@@ -248,6 +254,9 @@ pub fn load_experiment_on(path: &Path, metres_per_rad: Option<f64>) -> anyhow::R
         .with_context(|| format!("reading experiment file {}", path.display()))?;
     Experiment::parse_on(&text, &path.display().to_string(), metres_per_rad)
 }
+
+/// The text of `experiments/tracking.toml`, the standard tracking reference of compensation.
+pub const STANDARD_TRACKING_TOML: &str = include_str!("../../../experiments/tracking.toml");
 
 #[cfg(test)]
 mod tests {

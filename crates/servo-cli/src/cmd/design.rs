@@ -2,6 +2,7 @@
 //! verified on the reduced model, the full model and the discrete loop at T_s.
 
 mod bode_plot;
+mod compensated;
 mod on_run;
 mod report_json;
 mod report_specs;
@@ -55,12 +56,27 @@ pub enum Method {
     Tustin,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum DesignModel {
     /// Eq. 29: k_m / ((T_m s + 1) N s) (the handout's choice)
     Reduced,
     /// Eq. 27: driver low-pass, armature R-L, mechanics, integrator
     Full,
+    /// An identified model file: its linear part, reduced model (as --params FILE).
+    File(PathBuf),
+}
+
+/// `--model`: `reduced`, `full` or a model file.
+fn parse_design_model(s: &str) -> Result<DesignModel, String> {
+    match s {
+        "reduced" => Ok(DesignModel::Reduced),
+        "full" => Ok(DesignModel::Full),
+        _ if std::path::Path::new(s).is_file() => Ok(DesignModel::File(PathBuf::from(s))),
+        _ => Err(format!(
+            "expected `reduced`, `full` or a model file (TOML from `servo identify -o` or \
+             `servo compare --save`); `{s}` is neither (no such file)"
+        )),
+    }
 }
 
 /// Design a position controller by Bode's method and verify what it will achieve.
@@ -117,8 +133,10 @@ pub struct Design {
     /// Discretisation of the integral and the filtered derivative (as the running PID does it).
     #[arg(long, value_enum, default_value = "backward-euler")]
     pub discretization: Method,
-    /// Model the gains are synthesised on.
-    #[arg(long, value_enum, default_value = "reduced")]
+    /// Model the gains are synthesised on: `reduced` (eq. 29, the handout's choice), `full`
+    /// (eq. 27), or an identified model FILE: its linear part (J_eq, B_eq, the drive; reduced
+    /// model), and with --ff the design verified on its whole nonlinear model.
+    #[arg(long, value_name = "reduced|full|FILE", default_value = "reduced", value_parser = parse_design_model)]
     pub model: DesignModel,
     /// Solve numerically for gains whose achieved w_gc and phase margin on the discrete loop
     /// (real derivative, ZOH, full model when known) equal the spec.
@@ -175,6 +193,8 @@ pub struct Design {
     /// Write the controller (gains TOML) for `servo run --gains`.
     #[arg(short = 'o', long = "output", value_name = "TOML")]
     pub output: Option<PathBuf>,
+    #[command(flatten)]
+    pub comp: compensated::CompensationArgs,
 }
 
 /// Where the plant came from, for the report.
@@ -207,7 +227,13 @@ impl Design {
         })
     }
 
-    pub fn run(self) -> anyhow::Result<()> {
+    pub fn run(mut self) -> anyhow::Result<()> {
+        if let DesignModel::File(p) = &self.model {
+            if self.params.is_some() {
+                bail!("--model FILE and --params both name the plant: give one");
+            }
+            self.params = Some(p.clone());
+        }
         if !(self.alpha.is_finite() && self.alpha > 0.0) {
             bail!(
                 "--alpha must be > 0 (T_I = alpha T_D; the handout uses alpha >= 4), got {}",
@@ -297,6 +323,7 @@ impl Design {
                 check,
                 meet: None,
                 run_check: None,
+                compensated: None,
             }
         };
         let mut out = out;
@@ -307,6 +334,10 @@ impl Design {
         ) {
             let gains = self.gains_file(&out, &tr);
             out.run_check = Some(self.run_check(&gains, sp)?);
+        }
+        if self.comp.ff.is_some() {
+            let gains = self.gains_file(&out, &tr);
+            out.compensated = self.compensated_check(&out, &gains)?;
         }
         let report = &out.report;
 
@@ -352,6 +383,8 @@ struct Outcome {
     meet: Option<(MeetResult, f64)>,
     /// The time-domain specs checked through `servo run`'s loop on the design's plant.
     run_check: Option<RunCheck>,
+    /// `--ff`: the design verified on the model without and with its compensation.
+    compensated: Option<compensated::CompensatedCheck>,
 }
 
 impl Outcome {

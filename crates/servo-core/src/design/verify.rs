@@ -144,6 +144,60 @@ pub fn verify_continuous(
     finish(model.name(), model.name(), m, cl, omega_gc)
 }
 
+/// The loop of `gains` on `model` with a rotor-side stiffness `k_nm_per_rad` [N m/rad] added to
+/// the mechanics (an angle-dependent torque linearised about an angle, [`crate::stiffness`]):
+/// J_eq s^2 theta_m + B s theta_m + k theta_m = c u, so P_k = P / (1 + k N P / c) with
+/// `drive_nm_per_v` = c = k_drv k_t / R_eq, the stall torque per volt [N m/V]: the plant with the
+/// static output feedback k N / c. Exact for the reduced model (eq. 29 with the spring); on the
+/// full model (eq. 27) the driver's and the armature's lags, far above w_gc, are left out of the
+/// spring's path. The phase margin is the one at the crossover nearest the design's `omega_gc`
+/// [rad/s] (within a decade: a spring adds a low-frequency crossover of its own, whose margin
+/// says nothing about stability when the spring is negative); stability from the closed loop's
+/// poles.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpringLoop {
+    /// Phase margin [deg] and crossover [rad/s] near the design's (NaN when none there).
+    pub phase_margin_deg: f64,
+    pub omega_gc: f64,
+    /// `None` with an ideal derivative (T_L = 0), which has no state-space realisation.
+    pub stability: Option<Stability>,
+}
+
+/// See [`SpringLoop`].
+pub fn loop_with_stiffness(
+    gains: &PidGains,
+    model: &PlantModel,
+    omega_gc: f64,
+    k_nm_per_rad: f64,
+    drive_nm_per_v: f64,
+) -> SpringLoop {
+    let n = match model {
+        PlantModel::Reduced { n, .. } | PlantModel::Full { n, .. } => *n,
+    };
+    let spring = k_nm_per_rad * n / drive_nm_per_v;
+    let m = margins(
+        |w| {
+            let p = model.response(w);
+            gains.response(w) * p / (Complex::new(1.0, 0.0) + p * spring)
+        },
+        &Sweep {
+            omega_lo: 0.1 * omega_gc,
+            omega_hi: 10.0 * omega_gc,
+            points: 2000,
+            loop_type: 1 + i32::from(gains.ki != 0.0),
+        },
+    );
+    let mut ss = model.state_space();
+    ss.a -= (&ss.b * ss.c.transpose()) * spring;
+    let stability = ClosedLoop::continuous(&ss, gains)
+        .map(|cl| super::closed_loop::classify(&cl.poles(), false));
+    SpringLoop {
+        phase_margin_deg: m.phase_margin_deg,
+        omega_gc: m.omega_gc,
+        stability,
+    }
+}
+
 /// Verifies `gains` on the discrete loop (ZOH plant + discrete PID).
 pub fn verify_discrete(
     gains: &PidGains,

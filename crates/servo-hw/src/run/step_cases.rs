@@ -13,7 +13,9 @@
 
 use super::{run_loop, RunConfig, RunError};
 use crate::sim::SimBackend;
-use servo_core::control::{PidConfig, PlacedSegment, Program, Reference, Segment};
+use servo_core::control::{
+    LoopCompensation, PidConfig, PlacedSegment, Program, Reference, Segment,
+};
 use servo_core::sim::SensorConfig;
 use servo_core::Plant;
 
@@ -82,6 +84,20 @@ pub fn run_step_cases(
     steps_rad: &[f64],
     hold_s: f64,
 ) -> Result<Vec<CaseOutcome>, RunError> {
+    run_step_cases_compensated(plant, sensors, pid, u_limit_v, steps_rad, hold_s, None)
+}
+
+/// [`run_step_cases`] with `feedforward` (a model's compensation, `servo run --ff`) added to the
+/// PID as `servo run` adds it.
+pub fn run_step_cases_compensated(
+    plant: &Plant,
+    sensors: SensorConfig,
+    pid: &PidConfig,
+    u_limit_v: f64,
+    steps_rad: &[f64],
+    hold_s: f64,
+    feedforward: Option<&LoopCompensation>,
+) -> Result<Vec<CaseOutcome>, RunError> {
     let mut out = Vec::new();
     for &a in steps_rad {
         for start in StepStart::ALL {
@@ -109,6 +125,7 @@ pub fn run_step_cases(
             let cfg = RunConfig {
                 u_limit_v,
                 keep_record: false,
+                feedforward: feedforward.copied(),
                 ..RunConfig::closed_loop(program, *pid, duration_s)
             };
             let run = run_loop(&mut backend, &cfg, None)?;

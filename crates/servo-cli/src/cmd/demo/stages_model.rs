@@ -192,9 +192,6 @@ pub(super) fn stage_rediagnose(ctx: &mut DemoContext) -> anyhow::Result<(String,
     Ok((headline, vec![report]))
 }
 
-/// The standard tracking reference of compensation (`experiments/tracking.toml`).
-const TRACKING: &str = include_str!("../../../../../experiments/tracking.toml");
-
 /// The story's end (issue #29): the extended model's effects compensated in the loop, on the
 /// same motor and the same reference, against the handout's friction feedforward.
 pub(super) fn stage_compensate(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
@@ -212,7 +209,7 @@ pub(super) fn stage_compensate(ctx: &mut DemoContext) -> anyhow::Result<(String,
         gains_file: Some((&gains, "the demo's gains")),
     };
     let pid = pid_config(&src, 1e-3, Some((10.0, "the demo's 10 V driver".into())))?.config;
-    let exp = servo_io::reference_file::Experiment::parse(TRACKING, "experiments/tracking.toml")?;
+    let exp = servo_io::reference_file::Experiment::standard_tracking()?;
     let program = Program::Segments(exp.segments);
     let duration_s = program.duration_s().unwrap_or(18.0);
     let run = |linear: FeedforwardConfig, select: EffectSelect| -> anyhow::Result<f64> {

@@ -232,6 +232,7 @@ impl Design {
                 check: Some(m.check.clone()),
                 meet: Some((m, 0.0)),
                 run_check: None,
+                compensated: None,
             };
             // (--km/--tm name no plant that `servo run` could simulate)
             if self.km.is_some() {

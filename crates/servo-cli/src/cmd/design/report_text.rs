@@ -228,6 +228,9 @@ impl super::Design {
         if let Some(rc) = &out.run_check {
             run_section(&mut s, rc);
         }
+        if let Some(c) = &out.compensated {
+            super::compensated::compensated_section(&mut s, c);
+        }
         s
     }
 }

@@ -83,7 +83,7 @@ impl super::Design {
     }
 
     pub(super) fn design_model(&self, r: &DesignReport) -> PlantModel {
-        match (self.model, r.request.full) {
+        match (&self.model, r.request.full) {
             (DesignModel::Full, Some(f)) => f,
             _ => r.request.reduced,
         }

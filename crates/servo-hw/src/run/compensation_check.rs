@@ -1,0 +1,110 @@
+//! A controller run with and without the compensation of a model's effects (issue #29), as
+//! `servo run` runs it: the simulator backend on the plant given, the run loop of
+//! [`super::run_loop`], the PID as run builds it, the feedforward and effect compensation of
+//! [`LoopCompensation`] built from the model.
+//!
+//! [`tracking_ladder`] runs one reference with nothing, with the linear feedforward terms, and
+//! adding the model's compensated effects one at a time: the tracking error at each rung says
+//! what each compensation is worth. `servo design --model M --ff ...` reports it on the model
+//! itself; `servo compare` on two runs (without, with) prints it beside the measured errors.
+
+use super::{run_loop, RunConfig, RunError};
+use crate::sim::SimBackend;
+use servo_core::control::{EffectSelect, FeedforwardConfig, LoopCompensation, PidConfig, Program};
+use servo_core::effects::EffectKind;
+use servo_core::sim::SensorConfig;
+use servo_core::Plant;
+
+/// The run every rung repeats.
+#[derive(Debug, Clone)]
+pub struct TrackingRun<'a> {
+    /// The plant simulated (the motor: a model file's full plant, effects included).
+    pub truth: &'a Plant,
+    pub sensors: SensorConfig,
+    /// The model the compensation is built from (often `truth` itself).
+    pub model: &'a Plant,
+    /// The PID as `servo run` builds it (limits, anti-windup, discretisation, T_s).
+    pub pid: PidConfig,
+    /// Driver input limit [V].
+    pub u_limit_v: f64,
+    /// The reference.
+    pub program: Program,
+    /// Run length [s].
+    pub duration_s: f64,
+    /// Ramp-in of the effects' compensation [s].
+    pub ramp_s: f64,
+}
+
+/// One rung of the ladder.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackingRung {
+    /// The linear feedforward terms of the rung.
+    pub linear: FeedforwardConfig,
+    /// The effects compensated at this rung (each rung adds one to the one before).
+    pub effects: Vec<EffectKind>,
+    /// RMS tracking error ref - theta_l [rad].
+    pub err_rms_rad: f64,
+    /// Largest |ref - theta_l| [rad].
+    pub err_max_rad: f64,
+    /// Time with the command at the voltage limit [s].
+    pub saturation_time_s: f64,
+}
+
+impl TrackingRung {
+    /// The effect this rung added (`None`: the rung of no compensation or of the linear terms).
+    pub fn added(&self) -> Option<EffectKind> {
+        self.effects.last().copied()
+    }
+}
+
+/// Runs `run` once with `linear` and the effects `effects` of `run.model` compensated, and
+/// returns its tracking figures.
+pub fn tracking_rung(
+    run: &TrackingRun,
+    linear: FeedforwardConfig,
+    effects: &[EffectKind],
+) -> Result<TrackingRung, RunError> {
+    let select = effects.iter().fold(EffectSelect::None, |s, &k| s.with(k));
+    let comp = LoopCompensation::new(run.model, linear, select, run.ramp_s)
+        .map_err(|e| RunError::Config(format!("compensation: {e}")))?;
+    let mut backend = SimBackend::new(run.truth, run.sensors, run.pid.ts_s)
+        .map_err(|e| RunError::Config(format!("simulator: {e}")))?;
+    let cfg = RunConfig {
+        u_limit_v: run.u_limit_v,
+        keep_record: false,
+        feedforward: Some(comp),
+        ..RunConfig::closed_loop(run.program.clone(), run.pid, run.duration_s)
+    };
+    let out = run_loop(&mut backend, &cfg, None)?;
+    let s = &out.summary;
+    let (Some(err_rms_rad), Some(err_max_rad)) = (s.err_rms_rad, s.err_max_rad) else {
+        return Err(RunError::Config(
+            "the tracking run has no position reference (a closed-loop program is needed)".into(),
+        ));
+    };
+    Ok(TrackingRung {
+        linear,
+        effects: effects.to_vec(),
+        err_rms_rad,
+        err_max_rad,
+        saturation_time_s: s.saturation_time_s,
+    })
+}
+
+/// The ladder: no compensation, then the `linear` terms (when any), then each of `effects`
+/// added in turn (in the order given).
+pub fn tracking_ladder(
+    run: &TrackingRun,
+    linear: FeedforwardConfig,
+    effects: &[EffectKind],
+) -> Result<Vec<TrackingRung>, RunError> {
+    let mut out = vec![tracking_rung(run, FeedforwardConfig::OFF, &[])?];
+    let any_linear = linear.inertia || linear.viscous || linear.coulomb || linear.back_emf;
+    if any_linear {
+        out.push(tracking_rung(run, linear, &[])?);
+    }
+    for i in 0..effects.len() {
+        out.push(tracking_rung(run, linear, &effects[..=i])?);
+    }
+    Ok(out)
+}
