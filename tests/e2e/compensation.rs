@@ -634,3 +634,81 @@ fn design_on_the_identified_model_is_verified_with_and_without_compensation() {
         "{err}"
     );
 }
+
+/// Item 4 of #29: `servo compare` on two runs of the standard tracking reference (the friction
+/// feedforward, then `--ff all`) prints each run's measured RMS tracking error and, per
+/// compensated effect, the model's ladder on the compensated run's reference and controller;
+/// the figures are the ones `servo run` printed and the ladder ends near the measured error.
+#[test]
+fn compare_on_two_runs_prints_the_tracking_ladder_per_effect() {
+    let _heavy = servo_e2e::cpu_heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
+    let model = d("model.toml");
+    std::fs::write(
+        &model,
+        format!(
+            "{}\n[effects.imbalance]\namplitude = 0.02\nphase = 0.4\n",
+            ok(&["params"])
+        ),
+    )
+    .unwrap();
+    let gains = d("gains.toml");
+    ok(&["design", "--wc", "30", "--pm", "60", "-o", &gains]);
+    let exp = tracking_experiment();
+    let run = |ff: &str, log: &str| -> f64 {
+        printed_rms_rad(&ok(&[
+            "run",
+            "--plant",
+            &model,
+            "--gains",
+            &gains,
+            "--experiment",
+            p(&exp),
+            "--model",
+            &model,
+            "--ff",
+            ff,
+            "--log",
+            log,
+        ]))
+    };
+    let (a, b) = (d("friction.mcap"), d("all.mcap"));
+    let (ea, eb) = (run("friction", &a), run("all", &b));
+    let out = ok(&["compare", &a, &b, "--model", &model]);
+    assert!(out.contains("tracking error of the runs"), "{out}");
+    let line = |name: &str| {
+        out.lines()
+            .find(|l| l.contains(name) && l.contains("--ff"))
+            .unwrap_or_else(|| panic!("no line for {name}:\n{out}"))
+            .to_string()
+    };
+    let rms_of = |l: &str| -> f64 {
+        l.split_whitespace()
+            .find_map(|w| w.parse::<f64>().ok().filter(|v| *v > 0.0 && *v < 1.0))
+            .unwrap_or_else(|| panic!("no figure in {l}"))
+    };
+    for (name, want) in [("friction.mcap", ea), ("all.mcap", eb)] {
+        let got = rms_of(&line(name));
+        assert!(
+            (got / want - 1.0).abs() < 0.01,
+            "{name}: compare {got}, run {want}\n{out}"
+        );
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&ok(&["compare", &a, &b, "--model", &model, "--json"])).unwrap();
+    let ladder = json["tracking"]["ladder"]
+        .as_array()
+        .unwrap_or_else(|| panic!("{json}"));
+    let names: Vec<&str> = ladder.iter().map(|r| r["rung"].as_str().unwrap()).collect();
+    assert_eq!(names.first(), Some(&"no compensation"), "{names:?}");
+    assert_eq!(names.last(), Some(&"+ imbalance"), "{names:?}");
+    let last = ladder.last().unwrap()["err_rms_rad"].as_f64().unwrap();
+    // the model is the plant: its ladder ends at what the compensated run measured
+    assert!((last / eb - 1.0).abs() < 0.05, "ladder {last}, run {eb}");
+    let before = ladder[ladder.len() - 2]["err_rms_rad"].as_f64().unwrap();
+    assert!(
+        last < 0.3 * before,
+        "the imbalance's rung cuts < 70 %: {ladder:?}"
+    );
+}

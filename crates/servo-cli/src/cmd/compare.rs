@@ -20,6 +20,7 @@ mod prepare;
 mod report_json;
 mod report_text;
 mod save;
+mod tracking;
 
 pub use added::{Added, ParseAdded};
 pub use plots::{compare_figures_svg, compare_figures_svg_on, stack_svg};
@@ -152,6 +153,8 @@ pub struct LogData {
     pub check: Option<ControllerCheck>,
     /// The effects the run compensated (the log's `compensated_effects`).
     pub compensated: Vec<servo_core::effects::EffectKind>,
+    /// The run's reference as its metadata records it (`--ref` text or experiment file).
+    pub reference: Option<String>,
 }
 
 impl LogData {
@@ -260,6 +263,7 @@ impl Compare {
                             .collect()
                     })
                     .unwrap_or_default(),
+                reference: meta.reference().map(str::to_string),
             };
             self.log_controller(&mut log, &meta, gains.as_ref())?;
             if !self.json {
@@ -352,6 +356,11 @@ impl Compare {
             if !checks.is_empty() {
                 v["compensation_checks"] = report_json::compensation_checks(&logs, &checks);
             }
+            if let Some(t) =
+                tracking::tracking_json(&tracking::tracking_ladders(&logs, &model_file, &plant))
+            {
+                v["tracking"] = t;
+            }
             crate::json_out::emit(&v)?;
         } else {
             out!("{}", crate::log_part::text(&parts));
@@ -371,6 +380,11 @@ impl Compare {
                 &self.model,
             );
             for line in report_text::compensation_lines(&logs, &checks, &self.model) {
+                outln!("{line}");
+            }
+            for line in
+                tracking::tracking_lines(&tracking::tracking_ladders(&logs, &model_file, &plant))
+            {
                 outln!("{line}");
             }
         }

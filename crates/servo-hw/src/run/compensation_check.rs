@@ -55,6 +55,16 @@ impl TrackingRung {
     pub fn added(&self) -> Option<EffectKind> {
         self.effects.last().copied()
     }
+
+    /// The rung in words: `no compensation`, the linear terms in `--ff` form, or `+ <effect>`.
+    pub fn label(&self) -> String {
+        let lin = servo_io::controller::ff_name(&self.linear);
+        match (self.added(), lin.as_str()) {
+            (Some(k), _) => format!("+ {}", k.name()),
+            (None, "none") => "no compensation".into(),
+            (None, l) => l.to_string(),
+        }
+    }
 }
 
 /// Runs `run` once with `linear` and the effects `effects` of `run.model` compensated, and
@@ -92,7 +102,8 @@ pub fn tracking_rung(
 }
 
 /// The ladder: no compensation, then the `linear` terms (when any), then each of `effects`
-/// added in turn (in the order given).
+/// added in turn (in the order given; the model's Coulomb friction is skipped when the linear
+/// terms compensate it already: its curve is the same level).
 pub fn tracking_ladder(
     run: &TrackingRun,
     linear: FeedforwardConfig,
@@ -103,6 +114,11 @@ pub fn tracking_ladder(
     if any_linear {
         out.push(tracking_rung(run, linear, &[])?);
     }
+    let effects: Vec<EffectKind> = effects
+        .iter()
+        .copied()
+        .filter(|k| !(linear.coulomb && *k == EffectKind::Coulomb))
+        .collect();
     for i in 0..effects.len() {
         out.push(tracking_rung(run, linear, &effects[..=i])?);
     }

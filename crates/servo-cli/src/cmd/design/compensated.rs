@@ -249,16 +249,6 @@ fn verdict_words(r: &MarginRange, linear: &SpringLoop) -> String {
     )
 }
 
-/// The rung's `--ff` form.
-pub(super) fn rung_label(r: &TrackingRung) -> String {
-    let lin = servo_io::controller::ff_name(&r.linear);
-    match (r.added(), lin.as_str()) {
-        (Some(k), _) => format!("+ {}", k.name()),
-        (None, "none") => "no compensation".into(),
-        (None, l) => l.to_string(),
-    }
-}
-
 /// The text section.
 pub(super) fn compensated_section(s: &mut String, c: &CompensatedCheck) {
     let _ = writeln!(
@@ -313,7 +303,7 @@ pub(super) fn compensated_section(s: &mut String, c: &CompensatedCheck) {
         let _ = writeln!(
             s,
             "    {:<40} {:.3e} rad ({:+.0} %), max {:.3e} rad",
-            rung_label(r),
+            r.label(),
             r.err_rms_rad,
             100.0 * (r.err_rms_rad / first - 1.0),
             r.err_max_rad
@@ -374,7 +364,7 @@ pub(super) fn compensated_json(c: &CompensatedCheck) -> Value {
             "reference": c.tracking_name,
             "duration_s": c.tracking_s,
             "ladder": c.ladder.iter().map(|r| json!({
-                "rung": rung_label(r),
+                "rung": r.label(),
                 "ff": servo_io::controller::ff_name(&r.linear),
                 "effects": r.effects.iter().map(|k| k.name()).collect::<Vec<_>>(),
                 "err_rms_rad": r.err_rms_rad,
