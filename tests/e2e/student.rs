@@ -383,6 +383,26 @@ fn a_three_log_diagnosis_report_shows_three_panels_of_points() {
         html.contains("<h2>Ranking</h2>") && html.contains("<th>held-out residual RMS drop</th>"),
         "ranking header"
     );
+    // the compensation section (#29): the found effect's compensation, predicted on the model,
+    // cuts the tracking error of the linear feedforward
+    let comp = html
+        .split("<h2>Compensation</h2>")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no compensation section"));
+    let rows: Vec<(String, f64)> = comp
+        .split("<tr><td>")
+        .skip(1)
+        .map(|r| {
+            let cells: Vec<&str> = r.split("</td><td>").collect();
+            (cells[0].to_string(), cells[1].parse::<f64>().unwrap())
+        })
+        .collect();
+    assert_eq!(rows.len(), 3, "{rows:?}");
+    assert_eq!(rows[0].0, "no compensation", "{rows:?}");
+    assert!(
+        rows[2].0.starts_with("+ ") && rows[2].1 < 0.3 * rows[1].1,
+        "{rows:?}"
+    );
     // the residual against speed is a scatter (points), the residual over time a line
     assert!(
         html.contains("<circle"),

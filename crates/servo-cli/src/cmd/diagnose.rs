@@ -4,6 +4,7 @@
 //! `servo_core::diagnose`) and ranked; `--auto` iterates diagnose, add the winner, refit, until
 //! nothing significant is left, and prints the error ladder.
 
+mod report_compensation;
 mod report_html;
 mod report_json;
 mod report_text;

@@ -206,6 +206,16 @@ pub(super) fn html_report(
             }],
         )?);
     }
+    // the model with what was found: the ladder's last (--auto), else the winner's fit
+    let found = match ladder {
+        [_, .., l] => Some(l.plant),
+        _ => last.winner().map(|c| c.plant),
+    };
+    if let Some(found) = found {
+        h.push_str(&super::report_compensation::compensation_html(
+            model, &found,
+        )?);
+    }
     h.push_str("</body></html>\n");
     Ok(h)
 }

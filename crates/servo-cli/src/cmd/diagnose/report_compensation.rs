@@ -1,0 +1,135 @@
+//! The HTML report's compensation section (issue #29): what compensating the effects the
+//! diagnosis found would do to the tracking error. The model with the found effects is the
+//! plant; a PID designed on its linear part by the handout's Bode method (w_gc = 30 rad/s,
+//! phi_m = 60 deg, the handout's example spec) runs the standard tracking reference through
+//! `servo run`'s loop with no compensation, the linear feedforward, then each found effect's
+//! compensation added in turn (servo_hw::run::compensation_check).
+
+use super::report_html::esc;
+use super::*;
+use servo_core::control::FeedforwardConfig;
+use servo_core::design::bode::DerivativeFilter;
+use servo_core::design::controller::Discretization;
+use servo_core::design::spec::LoopSpec;
+use servo_core::design::verify::{design, DesignRequest};
+use servo_core::design::{ControllerKind, PlantModel};
+use servo_core::effects::Compensation;
+use servo_hw::run::compensation_check::{tracking_ladder, TrackingRun};
+use servo_io::gains_file::{GainsFile, PidSection};
+
+/// The handout's example loop spec the section's PID is designed for.
+const WGC_RAD_S: f64 = 30.0;
+const PM_DEG: f64 = 60.0;
+/// Control period of the section's loop [s].
+const TS_S: f64 = 1e-3;
+
+/// The section (empty when the diagnosis found no effect beyond `base`).
+pub(super) fn compensation_html(base: &Plant, found: &Plant) -> anyhow::Result<String> {
+    let new: Vec<EffectKind> = found
+        .effects
+        .iter()
+        .map(|e| e.kind)
+        .filter(|k| !base.effects.contains(*k))
+        .collect();
+    if new.is_empty() {
+        return Ok(String::new());
+    }
+    let mut h = String::from("<h2>Compensation</h2>");
+    let (comp, not): (Vec<EffectKind>, Vec<EffectKind>) =
+        new.iter().partition(|k| match k.model().compensation() {
+            Compensation::Not(_) | Compensation::Linear => false,
+            _ => true,
+        });
+    for k in &not {
+        let why = match k.model().compensation() {
+            Compensation::Not(why) => why.to_string(),
+            _ => "the linear feedforward covers it".into(),
+        };
+        let _ = write!(h, "<p>{}: not compensated ({}).</p>", k.name(), esc(&why));
+    }
+    if comp.is_empty() {
+        return Ok(h);
+    }
+    let params = found.linear_params();
+    let req = DesignRequest {
+        kind: ControllerKind::Pid,
+        spec: LoopSpec {
+            omega_gc: WGC_RAD_S,
+            phase_margin: PM_DEG.to_radians(),
+        },
+        alpha: 4.0,
+        filter: DerivativeFilter::Factor(5.0),
+        ts_s: TS_S,
+        discretization: Discretization::BackwardEuler,
+        reduced: PlantModel::reduced(&params),
+        full: Some(PlantModel::full(&params)),
+        design_on_full: false,
+        exact: false,
+    };
+    let report = design(&req).map_err(|e| anyhow!("the section's PID design: {e}"))?;
+    let g = report.gains;
+    let gains = GainsFile {
+        pid: PidSection {
+            kp: g.kp,
+            ki: g.ki,
+            kd: g.kd,
+            tl_s: g.tl_s,
+            ts_s: TS_S,
+            kw: None,
+            u_limit_v: None,
+            derivative_on: None,
+        },
+        design: None,
+    };
+    let ctl = servo_io::controller::run_controller(
+        Some((&gains, "the section's gains")),
+        &servo_io::controller::PidOptions::default(),
+        None,
+        None,
+    )?;
+    let pid = ctl
+        .pid
+        .ok_or_else(|| anyhow!("the section's gains give no controller"))?;
+    let pid = servo_hw::run::effective_pid_config(&pid, ctl.u_limit_v, ctl.ts_s);
+    let exp = servo_io::reference_file::Experiment::standard_tracking()?;
+    let run = TrackingRun {
+        truth: found,
+        sensors: servo_core::sim::SensorConfig::default(),
+        model: found,
+        pid,
+        u_limit_v: ctl.u_limit_v,
+        program: servo_core::control::Program::Segments(exp.segments.clone()),
+        duration_s: exp.duration_s(),
+        ramp_s: 0.0,
+    };
+    let ladder = tracking_ladder(&run, FeedforwardConfig::FULL, &comp)
+        .map_err(|e| anyhow!("the compensation section's tracking runs: {e}"))?;
+    let _ = write!(
+        h,
+        "<p>Predicted on the model with the effects found, a PID designed on its linear part \
+         (Bode, w_gc = {WGC_RAD_S} rad/s, phi_m = {PM_DEG} deg: K_P = {:.3}, K_I = {:.3}, K_D = \
+         {:.4}) and the standard tracking reference (<code>experiments/tracking.toml</code>, \
+         {:.0} s), each compensation added in turn. To run it: <code>servo compare LOG --model M \
+         --add EFFECT --save M2</code>, then <code>servo run --model M2 --ff all --experiment \
+         experiments/tracking.toml</code>; <code>servo compare</code> on the two runs prints the \
+         measured ladder.</p><table><tr><th>compensation</th><th>RMS tracking error [rad]</th>\
+         <th>change</th><th>max error [rad]</th></tr>",
+        g.kp,
+        g.ki,
+        g.kd,
+        exp.duration_s()
+    );
+    let first = ladder.first().map_or(f64::NAN, |r| r.err_rms_rad);
+    for r in &ladder {
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{:.3e}</td><td>{:+.0} %</td><td>{:.3e}</td></tr>",
+            esc(&r.label()),
+            r.err_rms_rad,
+            100.0 * (r.err_rms_rad / first - 1.0),
+            r.err_max_rad
+        );
+    }
+    h.push_str("</table>");
+    Ok(h)
+}
