@@ -712,3 +712,106 @@ fn compare_on_two_runs_prints_the_tracking_ladder_per_effect() {
         "the imbalance's rung cuts < 70 %: {ladder:?}"
     );
 }
+
+/// Item 1 of #29 for user-defined effects: a user's torque expression (a cable pulling the arm
+/// towards 0.3 rad) is compensated on the reference state and a user's input map (a dead band
+/// written as an expression) is inverted numerically; `--ff all` cuts the tracking error of the
+/// friction feedforward by more than half, the run says how each is compensated, `servo design
+/// --ff all` shows their rungs, and a sensor map is refused with the reason.
+#[test]
+fn user_defined_torques_and_input_maps_are_compensated() {
+    let _heavy = servo_e2e::cpu_heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
+    let model = d("model.toml");
+    std::fs::write(
+        &model,
+        format!(
+            "{}\n[custom.cable]\nacts_on = \"load_torque\"\nexpr = \"k * (theta_l - theta0)\"\n\
+             [custom.cable.params]\nk = {{ value = 0.04, unit = \"N m/rad\" }}\n\
+             theta0 = {{ value = 0.3, unit = \"rad\" }}\n\
+             [custom.band]\nacts_on = \"input\"\nexpr = \"sign(u) * max(abs(u) - d, 0)\"\n\
+             [custom.band.params]\nd = {{ value = 0.6, unit = \"V\" }}\n\
+             [custom.eccentric]\nacts_on = \"sensor\"\nexpr = \"theta_l + e * sin(theta_l)\"\n\
+             [custom.eccentric.params]\ne = {{ value = 0.0, unit = \"rad\" }}\n",
+            ok(&["params"])
+        ),
+    )
+    .unwrap();
+    let gains = d("gains.toml");
+    ok(&["design", "--wc", "30", "--pm", "60", "-o", &gains]);
+    let exp = tracking_experiment();
+    let run = |ff: &str| -> (f64, String) {
+        let (okk, out, err) = servo(&[
+            "run",
+            "--plant",
+            &model,
+            "--gains",
+            &gains,
+            "--experiment",
+            p(&exp),
+            "--model",
+            &model,
+            "--ff",
+            ff,
+        ]);
+        assert!(okk, "--ff {ff}: {err}\n{out}");
+        (printed_rms_rad(&out), format!("{err}{out}"))
+    };
+    let (friction, _) = run("friction");
+    let (all, said) = run("all");
+    eprintln!("user-defined: {friction:.4e} rad with --ff friction, {all:.4e} rad with --ff all");
+    assert!(
+        all < 0.5 * friction,
+        "{friction:.4e} -> {all:.4e} rad\n{said}"
+    );
+    assert!(
+        said.contains("compensated: cable (user-defined: its torque")
+            && said.contains("compensated: band (user-defined: the numerical inverse"),
+        "{said}"
+    );
+    assert!(
+        said.contains("not compensated: eccentric (a sensor map"),
+        "{said}"
+    );
+    // each one alone helps
+    let (cable, _) = run("friction,cable");
+    let (band, _) = run("friction,band");
+    assert!(
+        cable < friction && band < friction,
+        "{friction} {cable} {band}"
+    );
+    // the design's ladder has their rungs
+    let out = ok(&[
+        "design", "--wc", "30", "--pm", "60", "--model", &model, "--ff", "all", "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let rungs: Vec<String> = v["compensation_check"]["tracking"]["ladder"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["rung"].as_str().unwrap().to_string())
+        .collect();
+    assert!(
+        rungs.contains(&"+ cable (user-defined)".to_string())
+            && rungs.contains(&"+ band (user-defined)".to_string()),
+        "{rungs:?}"
+    );
+    // a sensor map named is refused
+    let (okk, _, err) = servo(&[
+        "run",
+        "--plant",
+        &model,
+        "--gains",
+        &gains,
+        "--ref",
+        "step:1",
+        "--duration",
+        "1",
+        "--model",
+        &model,
+        "--ff",
+        "eccentric",
+    ]);
+    assert!(!okk && err.contains("a sensor map"), "{err}");
+}

@@ -34,6 +34,8 @@ pub struct CompensationChoice {
     pub left_out: Vec<(&'static str, String)>,
     /// The ramp-in time of the effects' compensation [s].
     pub ramp_s: f64,
+    /// The user-defined effects compensated (names of the model's `[custom.*]` effects).
+    pub custom: Vec<&'static str>,
 }
 
 /// How a compensation works, in words.
@@ -74,16 +76,26 @@ impl CompensationChoice {
         let mut linear = FeedforwardConfig::OFF;
         linear.sign = FeedforwardConfig::FULL.sign;
         let mut select = EffectSelect::None;
+        let mut custom: Vec<&'static str> = Vec::new();
+        let mut left_out = Vec::new();
         for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
             match item {
                 "all" => {
                     linear = FeedforwardConfig::FULL;
                     select = EffectSelect::All;
+                    for e in plant.custom.iter() {
+                        match custom_refusal(model, e) {
+                            None if !custom.contains(&e.name()) => custom.push(e.name()),
+                            None => {}
+                            Some(why) => left_out.push((e.name(), why)),
+                        }
+                    }
                 }
                 "none" => {
                     linear = FeedforwardConfig::OFF;
                     linear.sign = FeedforwardConfig::FULL.sign;
                     select = EffectSelect::None;
+                    custom.clear();
                 }
                 // A linear term (`inertia`, `friction`, ...), as `parse_ff` reads it, else an
                 // effect of the model.
@@ -93,6 +105,17 @@ impl CompensationChoice {
                         linear.viscous |= c.viscous;
                         linear.coulomb |= c.coulomb;
                         linear.back_emf |= c.back_emf;
+                        continue;
+                    }
+                    if let Some(e) = plant.custom.get(other) {
+                        if let Some(why) = custom_refusal(model, e) {
+                            bail!(
+                                "--ff {other}: the user-defined {other} is not compensated: {why}"
+                            );
+                        }
+                        if !custom.contains(&e.name()) {
+                            custom.push(e.name());
+                        }
                         continue;
                     }
                     let Some(kind) = EffectKind::from_name(other) else {
@@ -117,7 +140,6 @@ impl CompensationChoice {
             }
         }
         let mut compensated = Vec::new();
-        let mut left_out = Vec::new();
         for e in plant.effects.iter() {
             let c = e.kind.model().compensation();
             if c == Compensation::Linear {
@@ -144,19 +166,34 @@ impl CompensationChoice {
                 compensated.push((name, words));
             }
         }
+        for e in plant.custom.iter().filter(|e| custom.contains(&e.name())) {
+            let words = match e.def.acts_on() {
+                servo_core::custom::ActsOn::Input => {
+                    "the numerical inverse of its input map on the whole command"
+                }
+                _ => "its torque expression on the reference state",
+            };
+            compensated.push((e.name(), format!("user-defined: {words}")));
+        }
         Ok(CompensationChoice {
             linear,
             select,
             compensated,
             left_out,
             ramp_s,
+            custom,
         })
     }
 
     /// The compensation of `plant` this choice makes.
     pub fn build(&self, plant: &Plant) -> anyhow::Result<LoopCompensation> {
-        LoopCompensation::new(plant, self.linear, self.select, self.ramp_s)
-            .map_err(|e| crate::error::anyhow!("--ff: {e}"))
+        let c = LoopCompensation::new(plant, self.linear, self.select, self.ramp_s)
+            .map_err(|e| crate::error::anyhow!("--ff: {e}"))?;
+        Ok(if self.custom.is_empty() {
+            c
+        } else {
+            c.with_custom(plant, &|n| self.custom.contains(&n))
+        })
     }
 
     /// The `--ff` form of what runs: the linear terms, then the effects (`none` for nothing),
@@ -224,6 +261,31 @@ fn effect_names(plant: &Plant) -> String {
     } else {
         v.join(", ")
     }
+}
+
+/// Why the user-defined effect `e` is not compensated: a sensor map (it changes what is
+/// measured, not the motion), or a parameter whose 95 % interval in the model file holds zero.
+fn custom_refusal(model: &ModelFile, e: &servo_core::custom::CustomActive) -> Option<String> {
+    if e.def.acts_on() == servo_core::custom::ActsOn::Sensor {
+        return Some(
+            "a sensor map changes what is measured, not the motion (correct the measurement instead)"
+                .into(),
+        );
+    }
+    for p in e.def.params() {
+        let key = format!("{}.{}", e.name(), p.key);
+        if let Some((lo, hi)) = model.interval(&key) {
+            if lo < 0.0 && hi > 0.0 {
+                return Some(format!(
+                    "the 95 % interval of {key} [{} .. {}] {} holds zero: its sign or size is doubtful",
+                    servo_core::math::sig(lo, 3),
+                    servo_core::math::sig(hi, 3),
+                    p.unit
+                ));
+            }
+        }
+    }
+    None
 }
 
 /// Why `e` is doubtful: a parameter that sizes it (linear in the torque or voltage) whose

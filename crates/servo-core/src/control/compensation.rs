@@ -21,6 +21,7 @@
 
 use super::feedforward::SmoothSign;
 use super::reference::RefSample;
+use crate::custom::{ActsOn as CustomPlace, CustomSlots};
 use crate::effects::torque::Friction;
 use crate::effects::{ActsOn, AngleFrom, Compensation, Effect, EffectKind, Signals};
 use crate::plant::Plant;
@@ -87,6 +88,9 @@ pub struct EffectCompensator {
     sign: SmoothSign,
     /// Smoothing of the inverse maps' sign [V].
     smooth_v: f64,
+    /// The user-defined effects compensated: torques on the reference state, input maps
+    /// inverted numerically ([`Self::with_custom`]).
+    custom: CustomSlots,
 }
 
 impl EffectCompensator {
@@ -105,6 +109,7 @@ impl EffectCompensator {
             n: p.n,
             sign,
             smooth_v: 0.02,
+            custom: CustomSlots::NONE,
         };
         let (mut nt, mut ni) = (0, 0);
         let mut dry = false;
@@ -138,6 +143,30 @@ impl EffectCompensator {
         c
     }
 
+    /// Adds the user-defined effects of `plant` for which `keep` is true (by name) and that a
+    /// compensation can cancel: a torque (load or motor side) is evaluated on the reference
+    /// state (theta_l = r, omega_l = dr/dt, i_a = u = 0) and added to the torque demand; an input
+    /// map is inverted numerically (as a function of u alone, assumed non-decreasing, the
+    /// inverse smoothed over +-0.02 V around zero as the catalogue's dead band). A sensor map
+    /// changes what is measured, not the motion: never compensated.
+    pub fn with_custom(mut self, plant: &Plant, keep: &dyn Fn(&str) -> bool) -> EffectCompensator {
+        for e in plant.custom.iter().filter(|e| keep(e.name())) {
+            if matches!(
+                e.def.acts_on(),
+                CustomPlace::LoadTorque | CustomPlace::MotorTorque | CustomPlace::Input
+            ) {
+                // (at most MAX_CUSTOM: the plant's own bound)
+                let _ = self.custom.insert(*e);
+            }
+        }
+        self
+    }
+
+    /// True when a user-defined effect is compensated.
+    pub fn has_custom(&self) -> bool {
+        !self.custom.is_empty()
+    }
+
     /// How each effect of `plant` is (or is not) compensated, in registry order.
     pub fn plan(plant: &Plant) -> impl Iterator<Item = (EffectKind, Compensation)> + '_ {
         plant
@@ -149,7 +178,8 @@ impl EffectCompensator {
     /// True when anything is compensated (a torque, a friction curve, an inverted map, a
     /// limit or a lead).
     pub fn is_active(&self) -> bool {
-        self.torques.iter().any(Option::is_some)
+        self.has_custom()
+            || self.torques.iter().any(Option::is_some)
             || self.friction.is_some()
             || self.inverts_input()
             || self.limit_v.is_finite()
@@ -188,6 +218,20 @@ impl EffectCompensator {
                 _ => 0.0,
             };
         }
+        if self.custom.has(CustomPlace::LoadTorque) || self.custom.has(CustomPlace::MotorTorque) {
+            // [theta_l, theta_m, omega_l, omega_m, i_a, u, t] on the reference
+            let sig = [
+                r.pos_rad,
+                self.n * r.pos_rad,
+                r.vel_rad_s,
+                self.n * r.vel_rad_s,
+                0.0,
+                0.0,
+                t_s,
+            ];
+            tau_m += self.custom.torque(CustomPlace::LoadTorque, &sig) / self.n
+                + self.custom.torque(CustomPlace::MotorTorque, &sig);
+        }
         if tau_m.is_finite() {
             self.volts_per_nm * tau_m
         } else {
@@ -219,16 +263,66 @@ impl EffectCompensator {
     /// any).
     #[inline]
     pub fn input_inverse_v(&self, u_v: f64) -> f64 {
-        let mut u = u_v;
+        // The plant applies the catalogue's maps, then the user's: invert the user's first.
+        let mut u = if self.custom.has(CustomPlace::Input) {
+            let s = self.smooth_v;
+            if u_v.abs() >= s {
+                self.custom_inverse_v(u_v)
+            } else {
+                // across zero, where a dead band's inverse jumps: the line between +-s
+                let (a, b) = (self.custom_inverse_v(-s), self.custom_inverse_v(s));
+                a + (b - a) * (u_v + s) / (2.0 * s)
+            }
+        } else {
+            u_v
+        };
         for e in self.inverses.iter().flatten() {
             u = e.kind.model().inverse_input_v(e.values(), u, self.smooth_v);
         }
         u
     }
 
+    /// The user's input maps applied to `u_v` [V] (other signals at zero).
+    fn custom_input_v(&self, u_v: f64) -> f64 {
+        self.custom.input(&[0.0, 0.0, 0.0, 0.0, 0.0, u_v, 0.0])
+    }
+
+    /// The v with custom_input(v) = `y_v` [V], by bracketing and bisection (the map assumed
+    /// non-decreasing); `y_v` itself when no bracket is found within +-1e6 V.
+    fn custom_inverse_v(&self, y_v: f64) -> f64 {
+        let f = |v: f64| self.custom_input_v(v);
+        let (mut lo, mut hi) = (y_v - 1.0, y_v + 1.0);
+        let mut width = 1.0;
+        // (a NaN never brackets: the loops run out and give y_v back)
+        while f(lo).partial_cmp(&y_v).is_none_or(|o| o.is_gt()) {
+            width *= 2.0;
+            lo = y_v - width;
+            if width > 1e6 {
+                return y_v;
+            }
+        }
+        width = 1.0;
+        while f(hi).partial_cmp(&y_v).is_none_or(|o| o.is_lt()) {
+            width *= 2.0;
+            hi = y_v + width;
+            if width > 1e6 {
+                return y_v;
+            }
+        }
+        for _ in 0..52 {
+            let mid = 0.5 * (lo + hi);
+            if f(mid) < y_v {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    }
+
     /// True when some input map is inverted.
     pub fn inverts_input(&self) -> bool {
-        self.inverses.iter().any(Option::is_some)
+        self.inverses.iter().any(Option::is_some) || self.custom.has(CustomPlace::Input)
     }
 
     /// The bound of the input a compensated saturation puts on the command [V] (infinite

@@ -82,6 +82,19 @@ impl LoopCompensation {
         })
     }
 
+    /// Adds the compensation of the user-defined effects of `plant` whose name `keep` accepts
+    /// ([`EffectCompensator::with_custom`]: torques on the reference state, input maps
+    /// inverted), ramped in as the catalogue's.
+    pub fn with_custom(mut self, plant: &Plant, keep: &dyn Fn(&str) -> bool) -> LoopCompensation {
+        let sign = self.linear.config().sign;
+        let base = self
+            .effects
+            .unwrap_or_else(|| EffectCompensator::new(plant, EffectSelect::None, sign));
+        let c = base.with_custom(plant, keep);
+        self.effects = c.is_active().then_some(c);
+        self
+    }
+
     /// The linear feedforward in use (its Coulomb term off under a friction curve).
     pub fn linear_part(&self) -> &Feedforward {
         &self.linear

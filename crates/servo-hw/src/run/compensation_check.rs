@@ -42,6 +42,8 @@ pub struct TrackingRung {
     pub linear: FeedforwardConfig,
     /// The effects compensated at this rung (each rung adds one to the one before).
     pub effects: Vec<EffectKind>,
+    /// The user-defined effects compensated at this rung (added after the catalogue's).
+    pub custom: Vec<&'static str>,
     /// RMS tracking error ref - theta_l [rad].
     pub err_rms_rad: f64,
     /// Largest |ref - theta_l| [rad].
@@ -58,6 +60,9 @@ impl TrackingRung {
 
     /// The rung in words: `no compensation`, the linear terms in `--ff` form, or `+ <effect>`.
     pub fn label(&self) -> String {
+        if let Some(name) = self.custom.last() {
+            return format!("+ {name} (user-defined)");
+        }
         let lin = servo_io::controller::ff_name(&self.linear);
         match (self.added(), lin.as_str()) {
             (Some(k), _) => format!("+ {}", k.name()),
@@ -67,16 +72,20 @@ impl TrackingRung {
     }
 }
 
-/// Runs `run` once with `linear` and the effects `effects` of `run.model` compensated, and
-/// returns its tracking figures.
+/// Runs `run` once with `linear`, the effects `effects` and the user-defined effects `custom`
+/// of `run.model` compensated, and returns its tracking figures.
 pub fn tracking_rung(
     run: &TrackingRun,
     linear: FeedforwardConfig,
     effects: &[EffectKind],
+    custom: &[&'static str],
 ) -> Result<TrackingRung, RunError> {
     let select = effects.iter().fold(EffectSelect::None, |s, &k| s.with(k));
-    let comp = LoopCompensation::new(run.model, linear, select, run.ramp_s)
+    let mut comp = LoopCompensation::new(run.model, linear, select, run.ramp_s)
         .map_err(|e| RunError::Config(format!("compensation: {e}")))?;
+    if !custom.is_empty() {
+        comp = comp.with_custom(run.model, &|n| custom.contains(&n));
+    }
     let mut backend = SimBackend::new(run.truth, run.sensors, run.pid.ts_s)
         .map_err(|e| RunError::Config(format!("simulator: {e}")))?;
     let cfg = RunConfig {
@@ -95,6 +104,7 @@ pub fn tracking_rung(
     Ok(TrackingRung {
         linear,
         effects: effects.to_vec(),
+        custom: custom.to_vec(),
         err_rms_rad,
         err_max_rad,
         saturation_time_s: s.saturation_time_s,
@@ -103,16 +113,18 @@ pub fn tracking_rung(
 
 /// The ladder: no compensation, then the `linear` terms (when any), then each of `effects`
 /// added in turn (in the order given; the model's Coulomb friction is skipped when the linear
-/// terms compensate it already: its curve is the same level).
+/// terms compensate it already: its curve is the same level), then each of the user-defined
+/// `custom`.
 pub fn tracking_ladder(
     run: &TrackingRun,
     linear: FeedforwardConfig,
     effects: &[EffectKind],
+    custom: &[&'static str],
 ) -> Result<Vec<TrackingRung>, RunError> {
-    let mut out = vec![tracking_rung(run, FeedforwardConfig::OFF, &[])?];
+    let mut out = vec![tracking_rung(run, FeedforwardConfig::OFF, &[], &[])?];
     let any_linear = linear.inertia || linear.viscous || linear.coulomb || linear.back_emf;
     if any_linear {
-        out.push(tracking_rung(run, linear, &[])?);
+        out.push(tracking_rung(run, linear, &[], &[])?);
     }
     let effects: Vec<EffectKind> = effects
         .iter()
@@ -120,7 +132,10 @@ pub fn tracking_ladder(
         .filter(|k| !(linear.coulomb && *k == EffectKind::Coulomb))
         .collect();
     for i in 0..effects.len() {
-        out.push(tracking_rung(run, linear, &effects[..=i])?);
+        out.push(tracking_rung(run, linear, &effects[..=i], &[])?);
+    }
+    for i in 0..custom.len() {
+        out.push(tracking_rung(run, linear, &effects, &custom[..=i])?);
     }
     Ok(out)
 }

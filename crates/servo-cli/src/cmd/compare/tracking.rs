@@ -101,7 +101,7 @@ fn ladder_on(log: &LogData, mf: &ModelFile, plant: &Plant) -> Result<Vec<Trackin
         duration_s,
         ramp_s: 0.0,
     };
-    tracking_ladder(&run, choice.linear, &effects).map_err(|e| format!("{e}"))
+    tracking_ladder(&run, choice.linear, &effects, &choice.custom).map_err(|e| format!("{e}"))
 }
 
 /// The text lines.

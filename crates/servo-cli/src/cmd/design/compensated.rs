@@ -159,7 +159,7 @@ impl Design {
             .map(|e| e.kind)
             .filter(|k| choice.compensated.iter().any(|(n, _)| *n == k.name()))
             .collect();
-        let ladder = tracking_ladder(&run, choice.linear, &effects)
+        let ladder = tracking_ladder(&run, choice.linear, &effects, &choice.custom)
             .map_err(|e| anyhow!("the tracking check on {}: {e}", path.display()))?;
         Ok(Some(CompensatedCheck {
             model: path.clone(),

@@ -102,7 +102,7 @@ pub(super) fn compensation_html(base: &Plant, found: &Plant) -> anyhow::Result<S
         duration_s: exp.duration_s(),
         ramp_s: 0.0,
     };
-    let ladder = tracking_ladder(&run, FeedforwardConfig::FULL, &comp)
+    let ladder = tracking_ladder(&run, FeedforwardConfig::FULL, &comp, &[])
         .map_err(|e| anyhow!("the compensation section's tracking runs: {e}"))?;
     let _ = write!(
         h,
