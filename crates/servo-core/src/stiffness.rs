@@ -2,7 +2,7 @@
 //! identified model, verified with and without the compensation).
 //!
 //! A torque that depends on the angle alone (an unbalanced load's m g L sin(theta_l + phi), a
-//! cogging torque) acts, linearised about an angle, like a spring: d tau / d theta. Referred to
+//! motor's detent torque) acts, linearised about an angle, like a spring: d tau / d theta. Referred to
 //! the rotor it enters the mechanics of eqs. 9-10 as J_eq s^2 theta_m + B s theta_m +
 //! k theta_m, so the reduced model of eq. 29 becomes k_m / (N (T_m s^2 + s + k T_m / J_eq)) and
 //! the loop's crossover and phase margin move with the angle. A compensation that cancels the
@@ -16,7 +16,7 @@ use crate::effects::{ActsOn, EffectKind, Signals, SimRole};
 use crate::plant::Plant;
 
 /// Angles sampled over one load revolution: enough for a motor-side ripple of up to 200
-/// periods per load revolution (a 12-pole cogging behind a 14:1 gear is 168) at 40 samples each.
+/// periods per load revolution (a 12-period detent ripple behind a 14:1 gear is 168) at 40 samples each.
 pub const ANGLES_PER_REV: usize = 8192;
 
 /// The range of the rotor-side stiffness of a model's angle-dependent torques over one load

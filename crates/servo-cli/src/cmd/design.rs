@@ -15,6 +15,8 @@ mod words;
 use on_run::*;
 use report_specs::*;
 use report_text::*;
+use request::parse_design_model;
+pub use request::DesignModel;
 use step_plot::*;
 use words::*;
 
@@ -54,29 +56,6 @@ pub enum Method {
     BackwardEuler,
     /// s <- 2/T_s (z - 1)/(z + 1)
     Tustin,
-}
-
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum DesignModel {
-    /// Eq. 29: k_m / ((T_m s + 1) N s) (the handout's choice)
-    Reduced,
-    /// Eq. 27: driver low-pass, armature R-L, mechanics, integrator
-    Full,
-    /// An identified model file: its linear part, reduced model (as --params FILE).
-    File(PathBuf),
-}
-
-/// `--model`: `reduced`, `full` or a model file.
-fn parse_design_model(s: &str) -> Result<DesignModel, String> {
-    match s {
-        "reduced" => Ok(DesignModel::Reduced),
-        "full" => Ok(DesignModel::Full),
-        _ if std::path::Path::new(s).is_file() => Ok(DesignModel::File(PathBuf::from(s))),
-        _ => Err(format!(
-            "expected `reduced`, `full` or a model file (TOML from `servo identify -o` or \
-             `servo compare --save`); `{s}` is neither (no such file)"
-        )),
-    }
 }
 
 /// Design a position controller by Bode's method and verify what it will achieve.
@@ -357,7 +336,12 @@ impl Design {
                 .with_context(|| format!("--step-plot {}", path.display()))?;
         }
         if self.json {
-            crate::json_out::emit(&self.json_report(&out, &tr, &src))?;
+            let mut v = self.json_report(&out, &tr, &src);
+            v["compensation_check"] = out
+                .compensated
+                .as_ref()
+                .map_or(Value::Null, compensated::compensated_json);
+            crate::json_out::emit(&v)?;
         } else {
             let mut text = self.text_report(&out, &tr, &translation_lines, &src);
             if let Some(p) = &self.output {

@@ -3,6 +3,29 @@
 
 use super::*;
 
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum DesignModel {
+    /// Eq. 29: k_m / ((T_m s + 1) N s) (the handout's choice)
+    Reduced,
+    /// Eq. 27: driver low-pass, armature R-L, mechanics, integrator
+    Full,
+    /// An identified model file: its linear part, reduced model (as --params FILE).
+    File(PathBuf),
+}
+
+/// `--model`: `reduced`, `full` or a model file.
+pub(super) fn parse_design_model(s: &str) -> Result<DesignModel, String> {
+    match s {
+        "reduced" => Ok(DesignModel::Reduced),
+        "full" => Ok(DesignModel::Full),
+        _ if std::path::Path::new(s).is_file() => Ok(DesignModel::File(PathBuf::from(s))),
+        _ => Err(format!(
+            "expected `reduced`, `full` or a model file (TOML from `servo identify -o` or \
+             `servo compare --save`); `{s}` is neither (no such file)"
+        )),
+    }
+}
+
 impl super::Design {
     pub(super) fn translation(&self) -> anyhow::Result<(Translation, Vec<String>)> {
         let damping = match (self.pm, self.overshoot) {

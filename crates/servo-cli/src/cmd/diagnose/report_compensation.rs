@@ -5,7 +5,6 @@
 //! `servo run`'s loop with no compensation, the linear feedforward, then each found effect's
 //! compensation added in turn (servo_hw::run::compensation_check).
 
-use super::report_html::esc;
 use super::*;
 use servo_core::control::FeedforwardConfig;
 use servo_core::design::bode::DerivativeFilter;

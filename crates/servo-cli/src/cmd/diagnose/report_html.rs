@@ -2,12 +2,6 @@
 
 use super::*;
 
-pub(super) fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-}
-
 /// Residual of the torque (or u-driven) balance over time and against speed, before and after
 /// the winner: one panel (`<div class="panel">`) per log.
 pub(super) fn residual_charts(
