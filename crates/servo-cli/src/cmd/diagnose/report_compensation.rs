@@ -34,11 +34,12 @@ pub(super) fn compensation_html(base: &Plant, found: &Plant) -> anyhow::Result<S
         return Ok(String::new());
     }
     let mut h = String::from("<h2>Compensation</h2>");
-    let (comp, not): (Vec<EffectKind>, Vec<EffectKind>) =
-        new.iter().partition(|k| match k.model().compensation() {
-            Compensation::Not(_) | Compensation::Linear => false,
-            _ => true,
-        });
+    let (comp, not): (Vec<EffectKind>, Vec<EffectKind>) = new.iter().partition(|k| {
+        !matches!(
+            k.model().compensation(),
+            Compensation::Not(_) | Compensation::Linear
+        )
+    });
     for k in &not {
         let why = match k.model().compensation() {
             Compensation::Not(why) => why.to_string(),
