@@ -581,3 +581,29 @@ pub fn attach(b: &mut super::structure::BalanceReport, sig: Signature) {
         "run a friction staircase (constant speeds in both directions, slow to fast, at two loads if you can) and log the current: the torque at each speed gives the friction curve's shape directly, and a friction that grows with the transmitted torque changes with the load at equal speed",
     );
 }
+
+/// Why the joint search need not run: the curve shows a shape no catalogue friction has (not a
+/// hump) carrying at least `joint_skip_friction_share_pct` of the held-out residual of the
+/// sliding rows, and no balance but the curve's own is above its floor. `None`: it must run.
+pub fn outside_catalogue(
+    curve: Option<&FrictionCurve>,
+    balances: &[super::structure::BalanceReport],
+    th: &Thresholds,
+) -> Option<String> {
+    let c = curve?;
+    let s = c.shape.as_ref()?;
+    if matches!(s.shape, CurveShape::Hump(_))
+        || s.share < frac(th.joint_skip_friction_share_pct)
+        || balances
+            .iter()
+            .any(|b| b.above_noise && b.equation != c.equation)
+    {
+        return None;
+    }
+    Some(alloc::format!(
+        " No set of catalogue effects was searched jointly: the measured friction curve shows a shape no catalogue friction has ({}), which carries {:.0} % of the held-out residual of the sliding rows (at least {:.0} %), and no other balance is above its noise floor.",
+        s.shape.name().replace('_', " "),
+        100.0 * s.share,
+        th.joint_skip_friction_share_pct
+    ))
+}

@@ -168,6 +168,9 @@ pub fn diagnose_dataset(
     rank::sort(&mut ranking, th);
     // 8. Effects that hide each other: the joint search, when nothing passes alone.
     opts.cancel.check()?;
+    let searched_first = !ranking.first().is_some_and(|c| c.significant);
+    let outside = friction_curve::outside_catalogue(curve.as_ref(), &survey.balances, th)
+        .filter(|_| searched_first);
     search::run(
         ds,
         model,
@@ -177,11 +180,15 @@ pub fn diagnose_dataset(
         electrical_broken,
         &mut ranking,
         opts,
+        outside.is_some(),
     );
     opts.cancel.check()?;
     // 9. Status, leads beyond the catalogue, the verdict.
     let mut d = conclude::run(ds, model, base, survey, &labels, &kinds, ranking, opts);
     d.friction_curve = curve;
+    if let (Some(why), Status::Unexplained) = (&outside, d.status) {
+        d.verdict.push_str(why);
+    }
     Ok(d)
 }
 

@@ -78,6 +78,11 @@ pub struct Thresholds {
     /// A shape of the measured friction curve is named at this |t| of its coefficient
     /// (effective number of rows) [-].
     pub friction_shape_min_t: f64,
+    /// The joint search (catalogue effects hiding each other) is not run when the measured
+    /// friction curve shows a shape no catalogue friction has (not a hump) that carries at least
+    /// this share of the held-out residual of the sliding rows, and no other balance is above
+    /// its floor [%].
+    pub joint_skip_friction_share_pct: f64,
 }
 
 impl Default for Thresholds {
@@ -107,6 +112,7 @@ impl Default for Thresholds {
             friction_curve_min_rows: 40.0,
             friction_curve_left_pct: 50.0,
             friction_shape_min_t: 5.0,
+            joint_skip_friction_share_pct: 50.0,
         }
     }
 }
@@ -171,6 +177,8 @@ impl Thresholds {
                 why: "a friction candidate must take away most of what the measured friction curve shows beyond the base model (a drag its rise, a breakaway its hump)" },
             Bar { name: "friction_shape_min_t", value: t.friction_shape_min_t, unit: "|t|", rule: ">=",
                 why: "a shape of the measured friction curve is named only when its coefficient stands out of the noise (effective rows)" },
+            Bar { name: "joint_skip_friction_share_pct", value: t.joint_skip_friction_share_pct, unit: "% of the sliding rows' residual", rule: ">=",
+                why: "a friction shape outside the catalogue that carries this much of the residual is what is missing: no set of catalogue effects is searched for it (the joint search costs most of a diagnosis)" },
         ]
     }
 }
@@ -184,7 +192,7 @@ mod tests {
         let t = Thresholds::default();
         let table = t.table();
         // One row per field: a field added without a row (or a row twice) fails here.
-        assert_eq!(table.len(), 24);
+        assert_eq!(table.len(), 25);
         for (i, a) in table.iter().enumerate() {
             assert!(
                 table[i + 1..].iter().all(|b| b.name != a.name),
