@@ -495,8 +495,8 @@ impl FrictionCurve {
 /// Judges a friction candidate against the measured curve: `base` is the residual of the model
 /// without it, `cand` its own residual and `cand_plant` its fitted model (same balance). It
 /// fails when the part of the curve the base misses (beyond the intervals) is mostly still
-/// there with it (`friction_curve_left_pct`), or when its own curve falls with speed where the
-/// measured curve does not.
+/// there with it (`friction_curve_left_pct`), or when its own dry friction falls with speed
+/// where the measured curve rises.
 pub fn check(
     curve: &FrictionCurve,
     base: &EqSolution,
@@ -510,9 +510,10 @@ pub fn check(
     let e1 = curve.excess(&curve.binned(&cand.resid, n));
     let left = if e0 > 0.0 { e1 / e0 } else { 0.0 };
     let left_ok = left < frac(th.friction_curve_left_pct);
-    // A fall with speed in the candidate's own dry friction, beyond the base's (a breakaway
-    // above the kinetic level): the measured curve must show one (a fall between two bins of one
-    // direction beyond both intervals).
+    // A fall with speed in the candidate's own dry friction beyond the base's (a breakaway
+    // above the kinetic level, its hump): from the slowest bin of a direction to the first bin
+    // where that fall is 90 % complete, the measured friction must not rise beyond both
+    // intervals (a drag bent into a breakaway has a curve that rises there).
     let fr0 = Friction::from_effects(&base_plant.effects);
     let fr1 = Friction::from_effects(&cand_plant.effects);
     let dry = |fr: &Friction, b: &FrictionBin| {
@@ -520,22 +521,28 @@ pub fn check(
         s * fr.torque_l(s * b.speed_rad_s, s)
     };
     let mut cand_falls = false;
-    let mut measured_falls = false;
-    for (a, ba) in curve.bins.iter().enumerate() {
-        for bb in curve.bins.iter().skip(a + 1) {
-            if bb.direction != ba.direction || bb.speed_rad_s <= ba.speed_rad_s {
-                continue;
-            }
-            let f1 = dry(&fr1, ba) - dry(&fr1, bb);
-            let f0 = dry(&fr0, ba) - dry(&fr0, bb);
-            if f1 - f0.max(0.0) > ba.ci_nm + bb.ci_nm {
-                cand_falls = true;
-            }
-            if ba.torque_nm - bb.torque_nm > ba.ci_nm + bb.ci_nm {
-                measured_falls = true;
+    let mut measured_rises = false;
+    for dir in [1i8, -1] {
+        let bins: Vec<&FrictionBin> = curve.bins.iter().filter(|b| b.direction == dir).collect();
+        let Some(first) = bins.first() else {
+            continue;
+        };
+        let fall = |b: &FrictionBin| {
+            (dry(&fr1, first) - dry(&fr1, b)) - (dry(&fr0, first) - dry(&fr0, b)).max(0.0)
+        };
+        let max_fall = bins.iter().map(|b| fall(b)).fold(0.0f64, f64::max);
+        let Some(to) = bins.iter().skip(1).find(|b| fall(b) >= 0.9 * max_fall) else {
+            continue;
+        };
+        let ci = first.ci_nm + to.ci_nm;
+        if max_fall > ci {
+            cand_falls = true;
+            if to.torque_nm - first.torque_nm > ci {
+                measured_rises = true;
             }
         }
     }
+    let measured_falls = !measured_rises;
     let fall_ok = !cand_falls || measured_falls;
     Check {
         name: "matches the measured friction curve",
@@ -550,9 +557,9 @@ pub fn check(
             th.friction_curve_left_pct,
             if cand_falls {
                 if measured_falls {
-                    "; its curve falls with speed, and so does the measured one"
+                    "; its dry friction falls with speed, and the measured curve does not rise there"
                 } else {
-                    "; its curve falls with speed but the measured one does not fall anywhere beyond its intervals (no hump)"
+                    "; its dry friction falls with speed where the measured curve rises beyond its intervals (no hump)"
                 }
             } else {
                 ""
