@@ -421,7 +421,18 @@ fn shape(
                 coef_m * n,
                 "N m",
                 alloc::format!(
-                    "falls with speed below about {ws:.3} rad/s at the load (a hump no catalogue friction fits)"
+                    "falls with speed below about {ws:.3} rad/s at the load (a hump no catalogue friction fits){}",
+                    hump_range(ds)
+                        .map(|(lo, hi)| if ws < lo || ws > hi {
+                            alloc::format!(
+                                ", outside the catalogue's search range of a breakaway's speed scale ({lo:.3}-{hi:.3} rad/s)"
+                            )
+                        } else {
+                            alloc::format!(
+                                ", inside the catalogue's search range of a breakaway's speed scale ({lo:.3}-{hi:.3} rad/s): see why the breakaway candidate was refused"
+                            )
+                        })
+                        .unwrap_or_default()
                 ),
             ),
         };
@@ -438,6 +449,27 @@ fn shape(
         });
     }
     found
+}
+
+/// The range the catalogue searches a breakaway friction's speed scale over on `ds` [rad/s]
+/// (the dry frictions of the registry with a nonlinear parameter in rad/s).
+fn hump_range(ds: &Dataset) -> Option<(f64, f64)> {
+    let ctx = ds.grid_context();
+    let mut range: Option<(f64, f64)> = None;
+    for k in crate::effects::EffectKind::registered()
+        .filter(|k| k.sim_role() == crate::effects::SimRole::DryFriction)
+    {
+        for p in k
+            .params()
+            .iter()
+            .filter(|p| p.nonlinear && p.unit == "rad/s")
+        {
+            for v in k.model().search_grid(p.key, &ctx).unwrap_or_default() {
+                range = Some(range.map_or((v, v), |(lo, hi)| (lo.min(v), hi.max(v))));
+            }
+        }
+    }
+    range
 }
 
 impl FrictionCurve {
@@ -613,4 +645,45 @@ pub fn outside_catalogue(
         100.0 * s.share,
         th.joint_skip_friction_share_pct
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::diagnose::{diagnose, DiagnoseOptions};
+    use crate::fit::tests::{open_loop_log, truth};
+    use crate::params::PlantParams;
+    use crate::plant::Plant;
+
+    /// The curve measures the plant's friction whatever the model lacks: Coulomb 0.01 N m plus
+    /// B_eq N^2 w at the load, within its intervals (plus 10 %), both directions; on the complete
+    /// model no shape is named.
+    #[test]
+    fn the_curve_is_the_plants_friction_whatever_the_model() {
+        let truth = truth();
+        let logs = [open_loop_log(&truth, 12.0, 5, true)];
+        let lacking = Plant::from_params(PlantParams {
+            j_eq: Some(7.0e-7),
+            b_eq: Some(1.0e-6),
+            ..PlantParams::TABLE2
+        })
+        .unwrap();
+        let n = truth.params.n;
+        for (model, complete) in [(truth, true), (lacking, false)] {
+            let d = diagnose(&logs, &model, &DiagnoseOptions::default()).unwrap();
+            let c = d.friction_curve.expect("a friction curve");
+            assert!(
+                c.bins.iter().any(|b| b.direction > 0) && c.bins.iter().any(|b| b.direction < 0)
+            );
+            for b in &c.bins {
+                let want = 0.01 + 1.0e-6 * n * n * b.speed_rad_s;
+                assert!(
+                    (b.torque_nm - want).abs() <= 3.0 * b.ci_nm + 0.1 * want,
+                    "complete {complete}: bin {b:?} against {want:.4e} N m"
+                );
+            }
+            if complete {
+                assert!(c.shape.is_none(), "{:?}", c.shape);
+            }
+        }
+    }
 }
