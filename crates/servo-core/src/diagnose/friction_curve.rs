@@ -607,18 +607,25 @@ pub fn is_friction(kind: crate::effects::EffectKind) -> bool {
     matches!(kind.sim_role(), SimRole::DryFriction | SimRole::Linear)
 }
 
-/// Adds the curve's signature `sig` to balance `b` (the balance it was measured in): first among
-/// its signatures, as the shape of the friction measured on its own rows, when the balance is
-/// structured above its floor. The balance's broader `speed` shape stays (the mimic checks
-/// re-measure it after a candidate).
+/// Adds the curve's signature `sig` to balance `b` (the balance it was measured in), among its
+/// signatures by share (its share is of the sliding rows' held-out residual), when the balance
+/// is structured above its floor; first, it brings the friction staircase as the experiment.
+/// The balance's broader `speed` shape stays (the mimic checks re-measure it after a candidate).
 pub fn attach(b: &mut super::structure::BalanceReport, sig: Signature) {
     if !b.above_noise {
         return;
     }
-    b.signatures.insert(0, sig);
-    b.experiment = String::from(
-        "run a friction staircase (constant speeds in both directions, slow to fast, at two loads if you can) and log the current: the torque at each speed gives the friction curve's shape directly, and a friction that grows with the transmitted torque changes with the load at equal speed",
-    );
+    let at = b
+        .signatures
+        .iter()
+        .position(|s| s.share < sig.share)
+        .unwrap_or(b.signatures.len());
+    b.signatures.insert(at, sig);
+    if at == 0 {
+        b.experiment = String::from(
+            "run a friction staircase (constant speeds in both directions, slow to fast, at two loads if you can) and log the current: the torque at each speed gives the friction curve's shape directly, and a friction that grows with the transmitted torque changes with the load at equal speed",
+        );
+    }
 }
 
 /// Why the joint search need not run: the curve shows a shape no catalogue friction has (not a

@@ -379,8 +379,14 @@ pub(super) fn judge(
             &cand.plant,
             &base.plant,
         ));
-        // A friction is judged against the friction curve the logs show (sliding rows).
-        if !sim_only && super::friction_curve::is_friction(kind) && eq != Equation::Electrical {
+        // A friction is judged against the friction curve the logs show (sliding rows). Not a
+        // member of a joint model: the curve is the base's, which the other members (a play's
+        // impacts, a delay's lag) bend where they act.
+        if !sim_only
+            && !given_others
+            && super::friction_curve::is_friction(kind)
+            && eq != Equation::Electrical
+        {
             if let Some(curve) =
                 super::friction_curve::measure(ds, b, &base.plant, labels.of(eq), th, false)
             {

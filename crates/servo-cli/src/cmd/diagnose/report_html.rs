@@ -115,7 +115,7 @@ pub(super) fn residual_charts(
     Ok(html)
 }
 
-/// The Stribeck plot of the measured friction curve: friction torque against log |speed| at the
+/// The plot of the measured friction curve (the classic friction-speed plot): friction torque against log |speed| at the
 /// load, both directions, each bin's mean with its 95 % interval, beside the base model's curve.
 pub(super) fn friction_chart(d: &Diagnosis) -> anyhow::Result<String> {
     let Some(c) = &d.friction_curve else {
