@@ -383,8 +383,9 @@ fn shape(
         let share = (gain / ss_hold).min(1.0);
         // A hump must fall with speed (a positive excess at low speed).
         let physical = match shape {
-            CurveShape::Hump(_) | CurveShape::FasterThanLinear | CurveShape::TransmittedTorque => {
-                coef_m > 0.0
+            CurveShape::Hump(_) | CurveShape::FasterThanLinear => coef_m > 0.0,
+            CurveShape::TransmittedTorque => {
+                coef_m > 0.0 && coef_m < frac(th.max_torque_friction_share_pct)
             }
             CurveShape::DirectionSlopes => true,
         };

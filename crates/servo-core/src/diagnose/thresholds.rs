@@ -83,6 +83,10 @@ pub struct Thresholds {
     /// this share of the held-out residual of the sliding rows, and no other balance is above
     /// its floor [%].
     pub joint_skip_friction_share_pct: f64,
+    /// A friction growing with the transmitted torque is named only below this share of
+    /// |k_t i_a| (a gear that loses more of the torque it transmits is self-locking; a fit above
+    /// it says the balance itself is inconsistent, e.g. the current) [%].
+    pub max_torque_friction_share_pct: f64,
 }
 
 impl Default for Thresholds {
@@ -113,6 +117,7 @@ impl Default for Thresholds {
             friction_curve_left_pct: 50.0,
             friction_shape_min_t: 5.0,
             joint_skip_friction_share_pct: 50.0,
+            max_torque_friction_share_pct: 50.0,
         }
     }
 }
@@ -179,6 +184,8 @@ impl Thresholds {
                 why: "a shape of the measured friction curve is named only when its coefficient stands out of the noise (effective rows)" },
             Bar { name: "joint_skip_friction_share_pct", value: t.joint_skip_friction_share_pct, unit: "% of the sliding rows' residual", rule: ">=",
                 why: "a friction shape outside the catalogue that carries this much of the residual is what is missing: no set of catalogue effects is searched for it (the joint search costs most of a diagnosis)" },
+            Bar { name: "max_torque_friction_share_pct", value: t.max_torque_friction_share_pct, unit: "% of |k_t i_a|", rule: "<",
+                why: "a friction growing with the transmitted torque beyond this share would make the gears self-locking: the balance, not the friction, is then inconsistent" },
         ]
     }
 }
@@ -192,7 +199,7 @@ mod tests {
         let t = Thresholds::default();
         let table = t.table();
         // One row per field: a field added without a row (or a row twice) fails here.
-        assert_eq!(table.len(), 25);
+        assert_eq!(table.len(), 26);
         for (i, a) in table.iter().enumerate() {
             assert!(
                 table[i + 1..].iter().all(|b| b.name != a.name),
