@@ -833,47 +833,170 @@ fn check_outside(tag: &str, m: &Mechanism, balance: &str, signature: &str, seeds
     }
 }
 
+/// A friction outside the catalogue in the other simulator: the verdict is "unexplained", the
+/// torque balance's first signature is the measured friction curve's shape `shape`, and
+/// `--discover` proposes the library term `key` within 25 % of `truth` (its coefficient at the
+/// load side, as the library's terms are load torques).
+fn check_friction_shape(tag: &str, m: &Mechanism, shape: &str, key: &str, truth: f64, seed: u64) {
+    let tag = format!("{tag} {seed}");
+    let logs = other_simulator_with(m, seed);
+    let model = identified(&logs);
+    let opts = DiagnoseOptions::default();
+    let d = diagnose::diagnose(&logs, &model, &opts).unwrap();
+    print_ranking(&tag, &d, 4);
+    if let Some(c) = &d.friction_curve {
+        for b in &c.bins {
+            eprintln!(
+                "[{tag}] bin dir {:+} {:.3} rad/s: {:.4e} +/- {:.1e} N m (model {:.4e}, {} rows)",
+                b.direction, b.speed_rad_s, b.torque_nm, b.ci_nm, b.model_nm, b.rows
+            );
+        }
+        eprintln!("[{tag}] shape {:?}", c.shape);
+    }
+    for b in &d.balances {
+        eprintln!(
+            "[{tag}] {} ratio {:.2} above={} sigs {:?}",
+            b.balance.name(),
+            b.ratio_to_noise,
+            b.above_noise,
+            b.signatures
+                .iter()
+                .map(|s| (s.kind, (100.0 * s.share).round()))
+                .collect::<Vec<_>>()
+        );
+    }
+    assert_no_resonance(&tag, &d);
+    assert!(
+        d.winner().is_none(),
+        "[{tag}] a catalogue effect was named: {}",
+        d.verdict
+    );
+    assert_eq!(
+        d.status,
+        diagnose::Status::Unexplained,
+        "[{tag}] {}",
+        d.verdict
+    );
+    let first = d
+        .unexplained
+        .iter()
+        .find(|b| b.balance.name() == "torque")
+        .and_then(|b| b.signatures.first());
+    assert_eq!(
+        first.map(|s| s.kind),
+        Some(diagnose::friction_curve::KIND),
+        "[{tag}] the torque balance's first signature: {}",
+        d.verdict
+    );
+    let named = d
+        .friction_curve
+        .as_ref()
+        .and_then(|c| c.shape.as_ref())
+        .map(|s| s.shape.name());
+    assert_eq!(named, Some(shape), "[{tag}] {}", d.verdict);
+    let found =
+        diagnose::user_effects::judge_user_effects(&logs, &model, &opts, &[], &d, Some("found"))
+            .unwrap();
+    let disc = found.discovery.unwrap_or_else(|| {
+        panic!(
+            "[{tag}] discovery did not run: {:?}",
+            found.discovery_skipped
+        )
+    });
+    eprintln!(
+        "[{tag}] discovery: {} rejected {:?}",
+        disc.words(),
+        disc.rejected
+    );
+    let (_, judged) = disc
+        .proposal
+        .as_ref()
+        .unwrap_or_else(|| panic!("[{tag}] nothing proposed: {:?}", disc.rejected));
+    let v = judged
+        .params
+        .iter()
+        .find(|p| p.0 == key)
+        .unwrap_or_else(|| panic!("[{tag}] no `{key}` term proposed: {}", disc.words()))
+        .2;
+    assert!(
+        (v / truth - 1.0).abs() <= 0.25,
+        "[{tag}] {key} = {v:.4e}, truth {truth:.4e}: {}",
+        disc.words()
+    );
+}
+
+/// Load friction growing with the square of speed (a fluid drag), 5e-5 N m s^2/rad^2 at the
+/// load (0.005 N m at 10 rad/s): no catalogue friction fits it (a breakaway friction bent to it
+/// has no hump to show in the measured curve); the curve rises faster than linearly, and
+/// `--discover` proposes c_drag w_l |w_l| within 25 %.
 #[test]
 fn friction_rising_faster_than_linear_is_unexplained() {
     let _cpu = servo_e2e::cpu_heavy();
-    // Load friction growing with the square of speed (a fluid drag), 5e-5 N m s^2/rad^2 at the
-    // load: 0.005 N m at 10 rad/s.
     let drag = |_th: f64, w_m: f64| {
         let w_l = w_m / 14.0;
         5e-5 * w_l * w_l.abs() / 14.0
     };
-    check_outside(
-        "quadratic drag",
-        &Mechanism {
-            motor_torque: &drag,
-            ..Mechanism::NONE
-        },
-        "torque",
-        "speed",
-        &[41, 42],
-    );
+    for seed in [41, 42] {
+        check_friction_shape(
+            "quadratic drag",
+            &Mechanism {
+                motor_torque: &drag,
+                ..Mechanism::NONE
+            },
+            "faster_than_linear",
+            "c_drag",
+            5e-5,
+            seed,
+        );
+    }
 }
 
 /// A friction that grows with the transmitted torque (25 % of |k_t i_a| opposing the motion,
 /// a load-dependent gear loss; outside the catalogue) in the other simulator, on a rigid shaft:
-/// whatever the diagnosis makes of it, no balance may name a resonance. Before the filter's
-/// response was divided out of the residual's spectrum, the torque balance of this plant "rang"
-/// near 25.9 Hz: the corner of servo's own 25 Hz filter.
+/// no balance names a resonance (before the filter's response was divided out of the residual's
+/// spectrum, the torque balance of this plant "rang" near 25.9 Hz: the corner of servo's own
+/// 25 Hz filter); the verdict is "unexplained" with the friction curve's shape "grows with the
+/// transmitted torque" first, and `--discover` proposes mu_i |i_a| sign(w) within 25 % of
+/// 0.25 k_t N (load side: the simulator's motor-side 0.25 k_t |i_a| times N = 14).
 #[test]
 fn friction_growing_with_transmitted_torque_names_no_resonance() {
     let _cpu = servo_e2e::cpu_heavy();
+    let k_t = PlantParams::TABLE2.k_t;
     for seed in [55, 56] {
-        let tag = format!("torque friction {seed}");
-        let d = diagnose_other(
+        check_friction_shape(
+            "torque friction",
             &Mechanism {
                 torque_friction: 0.25,
                 ..Mechanism::NONE
             },
-            &tag,
+            "transmitted_torque",
+            "mu_i",
+            0.25 * k_t * 14.0,
             seed,
         );
-        eprintln!("[{tag}] {:?}: {}", d.status, d.verdict);
-        assert_no_resonance(&tag, &d);
+    }
+}
+
+/// A viscous friction whose slope differs between the directions: 5e-4 N m s/rad more at the
+/// load when turning forwards (2.5 times the base B_eq N^2): "unexplained" with the friction
+/// curve's "direction slopes" shape first, and `--discover` proposes b_fwd max(w_l, 0) within
+/// 25 % (load side).
+#[test]
+fn direction_dependent_viscous_friction_is_unexplained() {
+    let _cpu = servo_e2e::cpu_heavy();
+    let fwd = |_th: f64, w_m: f64| 5e-4 * (w_m / 14.0).max(0.0) / 14.0;
+    for seed in [57, 58] {
+        check_friction_shape(
+            "direction viscous",
+            &Mechanism {
+                motor_torque: &fwd,
+                ..Mechanism::NONE
+            },
+            "direction_slopes",
+            "b_fwd",
+            5e-4,
+            seed,
+        );
     }
 }
 

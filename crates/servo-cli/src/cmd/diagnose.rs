@@ -215,6 +215,7 @@ impl Diagnose {
                 "ranking": last.ranking.iter().map(|c| candidate_json(c, &opts)).collect::<Vec<_>>(),
                 "verdict": last.verdict,
                 "not_resolvable": last.unresolvable.iter().map(unresolvable_json).collect::<Vec<_>>(),
+                "friction_curve": first.friction_curve.as_ref().map(friction_curve_json),
                 "base": base_json(first),
                 "log_parts": crate::log_part::json(&parts),
             });

@@ -103,6 +103,7 @@ pub(super) fn run(
         unexplained,
         neighbours: leads,
         unresolvable,
+        friction_curve: None,
     }
 }
 

@@ -84,6 +84,9 @@ pub struct Diagnosis {
     /// Effects below their balance's noise floor: "not resolvable with these logs", whatever
     /// the status ([`Unresolvable`]).
     pub unresolvable: Vec<Unresolvable>,
+    /// The friction curve measured on the sliding rows of the torque (or u-driven) balance, with
+    /// the shape it shows beyond the base model ([`super::friction_curve`]).
+    pub friction_curve: Option<super::friction_curve::FrictionCurve>,
 }
 
 impl Diagnosis {

@@ -114,7 +114,12 @@ pub(super) fn structure_check(
 ) -> Option<checks::Check> {
     let b = before;
     let eq = after.equation;
-    let top = b.signatures.first().filter(|_| b.above_noise)?;
+    // The first shape the analysis re-measures (the friction curve's is measured apart).
+    let top = b
+        .signatures
+        .iter()
+        .find(|s| s.kind != super::friction_curve::KIND)
+        .filter(|_| b.above_noise)?;
     let after = structure::analyse(ds, after, floor, th, ds.gear_ratio);
     let left = after.signatures.iter().find(|s| s.kind == top.kind);
     // Still there: above the noise floor and at least half its size before (a true effect
@@ -374,6 +379,27 @@ pub(super) fn judge(
             &cand.plant,
             &base.plant,
         ));
+        // A friction is judged against the friction curve the logs show (sliding rows). Not a
+        // member of a joint model: the curve is the base's, which the other members (a play's
+        // impacts, a delay's lag) bend where they act.
+        if !sim_only
+            && !given_others
+            && super::friction_curve::is_friction(kind)
+            && eq != Equation::Electrical
+        {
+            if let Some(curve) =
+                super::friction_curve::measure(ds, b, &base.plant, labels.of(eq), th, false)
+            {
+                found.push(super::friction_curve::check(
+                    &curve,
+                    b,
+                    c,
+                    &base.plant,
+                    &cand.plant,
+                    th,
+                ));
+            }
+        }
     }
     let significant = statistically && found.iter().all(|c| c.passed);
     let ev = evidence::describe(

@@ -35,6 +35,7 @@ mod conclude;
 mod consistent;
 mod diagnosis;
 pub mod evidence;
+pub mod friction_curve;
 pub mod joint;
 mod judge;
 pub mod kinds;
@@ -121,10 +122,34 @@ pub fn diagnose_dataset(
     // 2. The candidates worth trying on these data.
     let kinds = kinds::for_dataset(ds, model, opts);
     // 3. Every candidate fitted, the simulation reference, every balance analysed (in parallel).
-    let survey = survey::run(ds, model, &base, &kinds, opts);
+    let mut survey = survey::run(ds, model, &base, &kinds, opts);
     opts.cancel.check()?;
-    // 4. Each candidate judged: statistical guards, practical checks, constraints, mimic checks.
+    // 4. Each candidate judged: statistical guards, practical checks, constraints, mimic checks
+    //    (a friction against the measured friction curve of the sliding rows, whose shape is a
+    //    signature of the torque balance).
     let labels = regimes::Labels::new(ds);
+    let curve = timing::timed(
+        || "measured friction curve".into(),
+        || {
+            friction_curve::measure(
+                ds,
+                &base.solved.mech,
+                &base.solved.plant,
+                labels.of(base.solved.mech.equation),
+                th,
+                true,
+            )
+        },
+    );
+    if let Some(sig) = curve.as_ref().and_then(|c| c.signature()) {
+        if let Some(b) = survey
+            .balances
+            .iter_mut()
+            .find(|b| b.equation == base.solved.mech.equation)
+        {
+            friction_curve::attach(b, sig);
+        }
+    }
     let mut ranking = judge::all(
         ds,
         &labels,
@@ -143,6 +168,9 @@ pub fn diagnose_dataset(
     rank::sort(&mut ranking, th);
     // 8. Effects that hide each other: the joint search, when nothing passes alone.
     opts.cancel.check()?;
+    let searched_first = !ranking.first().is_some_and(|c| c.significant);
+    let outside = friction_curve::outside_catalogue(curve.as_ref(), &survey.balances, th)
+        .filter(|_| searched_first);
     search::run(
         ds,
         model,
@@ -152,12 +180,16 @@ pub fn diagnose_dataset(
         electrical_broken,
         &mut ranking,
         opts,
+        outside.is_some(),
     );
     opts.cancel.check()?;
     // 9. Status, leads beyond the catalogue, the verdict.
-    Ok(conclude::run(
-        ds, model, base, survey, &labels, &kinds, ranking, opts,
-    ))
+    let mut d = conclude::run(ds, model, base, survey, &labels, &kinds, ranking, opts);
+    d.friction_curve = curve;
+    if let (Some(why), Status::Unexplained) = (&outside, d.status) {
+        d.verdict.push_str(why);
+    }
+    Ok(d)
 }
 
 pub struct Rung {

@@ -87,12 +87,17 @@ pub(super) fn find(
 }
 
 /// Adds each neighbour's signature to the report of its balance in `reports` (where present):
-/// after a resonance the balance itself shows (the direct evidence stays first), otherwise
+/// after a resonance or a friction-curve shape the balance itself shows (the direct evidence
+/// stays first), otherwise
 /// first, and then its experiment becomes the balance's.
 pub(super) fn attach(reports: &mut [BalanceReport], found: &[(Neighbour, Signature)]) {
     for (n, sig) in found.iter().rev() {
         for b in reports.iter_mut().filter(|b| b.balance == n.balance) {
-            let at = usize::from(b.signatures.first().is_some_and(|s| s.kind == "resonance"));
+            let at = b
+                .signatures
+                .iter()
+                .take_while(|s| s.kind == "resonance" || s.kind == super::friction_curve::KIND)
+                .count();
             b.signatures.insert(at, sig.clone());
             if at == 0 {
                 b.experiment = n.experiment.clone();

@@ -12,7 +12,8 @@ use crate::plant::Plant;
 use alloc::vec::Vec;
 
 /// Runs the search when it is asked for ([`DiagnoseOptions::joint_candidates`] of at least 2)
-/// and needed (no significant candidate, a balance above its floor); `electrical_broken`: the
+/// and needed (no significant candidate, a balance above its floor, and not `outside`: a
+/// friction shape outside the catalogue carries the residual); `electrical_broken`: the
 /// electrical veto of stage 5 holds (no torque may be named).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run(
@@ -24,10 +25,13 @@ pub(super) fn run(
     electrical_broken: bool,
     ranking: &mut Vec<Candidate>,
     opts: &DiagnoseOptions,
+    outside: bool,
 ) {
     let needed = !ranking.first().is_some_and(|c| c.significant)
         && survey.balances.iter().any(|b| b.above_noise);
-    if opts.joint_candidates < 2 || !needed {
+    // A friction shape outside the catalogue carries the residual: what is missing is not a set
+    // of catalogue effects ([`super::friction_curve::outside_catalogue`]).
+    if opts.joint_candidates < 2 || !needed || outside {
         return;
     }
     let cx = joint::Context {

@@ -67,6 +67,26 @@ pub struct Thresholds {
     pub structured_without_shape: f64,
     /// A residual shape is named when it explains this share of the held-out residual [%].
     pub min_signature_share_pct: f64,
+    /// Bins per direction of the measured friction curve (log-spaced in |speed|) [-].
+    pub friction_curve_bins: f64,
+    /// Fewest sliding rows in a bin of the measured friction curve [rows].
+    pub friction_curve_min_rows: f64,
+    /// A friction candidate is refused when the part of the measured friction curve that the
+    /// base model misses (beyond the bins' 95 % intervals, RMS over the bins) is still there
+    /// with it, at least this share [%].
+    pub friction_curve_left_pct: f64,
+    /// A shape of the measured friction curve is named at this |t| of its coefficient
+    /// (effective number of rows) [-].
+    pub friction_shape_min_t: f64,
+    /// The joint search (catalogue effects hiding each other) is not run when the measured
+    /// friction curve shows a shape no catalogue friction has (not a hump) that carries at least
+    /// this share of the held-out residual of the sliding rows, and no other balance is above
+    /// its floor [%].
+    pub joint_skip_friction_share_pct: f64,
+    /// A friction growing with the transmitted torque is named only below this share of
+    /// |k_t i_a| (a gear that loses more of the torque it transmits is self-locking; a fit above
+    /// it says the balance itself is inconsistent, e.g. the current) [%].
+    pub max_torque_friction_share_pct: f64,
 }
 
 impl Default for Thresholds {
@@ -92,6 +112,12 @@ impl Default for Thresholds {
             unexplained_ratio: 2.0,
             structured_without_shape: 2.0,
             min_signature_share_pct: 15.0,
+            friction_curve_bins: 8.0,
+            friction_curve_min_rows: 40.0,
+            friction_curve_left_pct: 50.0,
+            friction_shape_min_t: 5.0,
+            joint_skip_friction_share_pct: 50.0,
+            max_torque_friction_share_pct: 50.0,
         }
     }
 }
@@ -148,6 +174,18 @@ impl Thresholds {
                 why: "a residual this far above its floor is structured even when no shape is named" },
             Bar { name: "min_signature_share_pct", value: t.min_signature_share_pct, unit: "%", rule: ">=",
                 why: "a residual shape is named when it explains this share of the held-out residual" },
+            Bar { name: "friction_curve_bins", value: t.friction_curve_bins, unit: "bins per direction", rule: "log-spaced",
+                why: "the measured friction curve: enough bins to see a hump or a rise, few enough for tight intervals" },
+            Bar { name: "friction_curve_min_rows", value: t.friction_curve_min_rows, unit: "rows", rule: ">=",
+                why: "a bin of the friction curve with fewer sliding rows has no usable interval" },
+            Bar { name: "friction_curve_left_pct", value: t.friction_curve_left_pct, unit: "% of the curve's excess (RMS)", rule: "<",
+                why: "a friction candidate must take away most of what the measured friction curve shows beyond the base model (a drag its rise, a breakaway its hump)" },
+            Bar { name: "friction_shape_min_t", value: t.friction_shape_min_t, unit: "|t|", rule: ">=",
+                why: "a shape of the measured friction curve is named only when its coefficient stands out of the noise (effective rows)" },
+            Bar { name: "joint_skip_friction_share_pct", value: t.joint_skip_friction_share_pct, unit: "% of the sliding rows' residual", rule: ">=",
+                why: "a friction shape outside the catalogue that carries this much of the residual is what is missing: no set of catalogue effects is searched for it (the joint search costs most of a diagnosis)" },
+            Bar { name: "max_torque_friction_share_pct", value: t.max_torque_friction_share_pct, unit: "% of |k_t i_a|", rule: "<",
+                why: "a friction growing with the transmitted torque beyond this share would make the gears self-locking: the balance, not the friction, is then inconsistent" },
         ]
     }
 }
@@ -161,7 +199,7 @@ mod tests {
         let t = Thresholds::default();
         let table = t.table();
         // One row per field: a field added without a row (or a row twice) fails here.
-        assert_eq!(table.len(), 20);
+        assert_eq!(table.len(), 26);
         for (i, a) in table.iter().enumerate() {
             assert!(
                 table[i + 1..].iter().all(|b| b.name != a.name),

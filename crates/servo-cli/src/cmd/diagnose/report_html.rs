@@ -109,6 +109,67 @@ pub(super) fn residual_charts(
     Ok(html)
 }
 
+/// The plot of the measured friction curve (the classic friction-speed plot): friction torque against log |speed| at the
+/// load, both directions, each bin's mean with its 95 % interval, beside the base model's curve.
+pub(super) fn friction_chart(d: &Diagnosis) -> anyhow::Result<String> {
+    let Some(c) = &d.friction_curve else {
+        return Ok(String::new());
+    };
+    let pick = |dir: i8,
+                v: &dyn Fn(&servo_core::diagnose::friction_curve::FrictionBin) -> f64|
+     -> (Vec<f64>, Vec<f64>) {
+        c.bins
+            .iter()
+            .filter(|b| b.direction == dir)
+            .map(|b| (b.speed_rad_s, v(b)))
+            .unzip()
+    };
+    let mut cols: Vec<(String, Vec<f64>, Vec<f64>)> = Vec::new();
+    for (dir, name) in [(1i8, "forwards"), (-1, "backwards")] {
+        let (x, y) = pick(dir, &|b| b.torque_nm);
+        cols.push((format!("{name}, measured"), x, y));
+        let (x, y) = pick(dir, &|b| b.torque_nm - b.ci_nm);
+        cols.push((format!("{name}, 95 % low"), x, y));
+        let (x, y) = pick(dir, &|b| b.torque_nm + b.ci_nm);
+        cols.push((format!("{name}, 95 % high"), x, y));
+        let (x, y) = pick(dir, &|b| b.model_nm);
+        cols.push((format!("{name}, model"), x, y));
+    }
+    let series: Vec<Series> = cols
+        .iter()
+        .filter(|(_, x, _)| !x.is_empty())
+        .map(|(l, x, y)| Series { label: l, x, y })
+        .collect();
+    let title = format!(
+        "measured friction curve ({} sliding rows, {})",
+        c.sliding_rows,
+        c.shape
+            .as_ref()
+            .map_or("no shape beyond the model".to_string(), |s| s
+                .shape
+                .name()
+                .replace('_', " "))
+    );
+    let mut h = String::from("<h2>Measured friction curve</h2>");
+    if let Some(s) = &c.shape {
+        let _ = write!(h, "<p>{}</p>", esc(&s.description));
+    }
+    h.push_str(&line_chart_svg(
+        &Chart {
+            title: &title,
+            x_label: "|speed| at the load [rad/s] (log)",
+            y_label: "friction torque at the load [N m]",
+            log_x: true,
+            join_gaps: true,
+            width: 700,
+            height: 400,
+            ..Chart::default()
+        },
+        &series,
+    )?);
+    Ok(h)
+}
+
 pub(super) fn html_report(
     records: &[Record],
     model: &Plant,
@@ -154,6 +215,7 @@ pub(super) fn html_report(
         esc(&where_it_fails(first))
     );
     h.push_str(&residual_charts(records, model, first, opts)?);
+    h.push_str(&friction_chart(first)?);
     for (step, d) in diags.iter().enumerate() {
         let _ = write!(h, "<h2>Ranking{}</h2><table><tr><th>effect</th><th>significant</th><th>{}</th><th>{}</th><th>BIC gain</th><th>evidence</th></tr>", if diags.len() > 1 { format!(", step {}", step + 1) } else { String::new() }, servo_core::diagnose::phrase::RMS_DROP, servo_core::diagnose::phrase::SIM_DROP);
         for c in &d.ranking {

@@ -87,6 +87,36 @@ pub(super) fn unresolvable_json(u: &servo_core::diagnose::Unresolvable) -> Value
     })
 }
 
+/// The measured friction curve ([`servo_core::diagnose::friction_curve::FrictionCurve`]): bins
+/// of both directions, load side, and the shape it shows beyond the base model.
+pub(super) fn friction_curve_json(
+    c: &servo_core::diagnose::friction_curve::FrictionCurve,
+) -> Value {
+    json!({
+        "balance": c.equation.name(),
+        "side": "load",
+        "sliding_rows": c.sliding_rows,
+        "bins": c.bins.iter().map(|b| json!({
+            "direction": b.direction,
+            "speed_lo_rad_s": f(b.speed_lo_rad_s),
+            "speed_hi_rad_s": f(b.speed_hi_rad_s),
+            "speed_rad_s": f(b.speed_rad_s),
+            "torque_nm": f(b.torque_nm),
+            "ci95_nm": f(b.ci_nm),
+            "model_nm": f(b.model_nm),
+            "rows": b.rows,
+        })).collect::<Vec<_>>(),
+        "shape": c.shape.as_ref().map(|s| json!({
+            "shape": s.shape.name(),
+            "coefficient": f(s.coef),
+            "unit": s.unit,
+            "t": f(s.t),
+            "share_of_heldout_residual": f(s.share),
+            "description": s.description,
+        })),
+    })
+}
+
 /// A lead beyond the catalogue ([`servo_core::diagnose::checks::Neighbour`]); `reference_rad`:
 /// the reference's held-out simulation error.
 pub(super) fn neighbour_json(n: &Neighbour, reference_rad: Option<f64>) -> Value {

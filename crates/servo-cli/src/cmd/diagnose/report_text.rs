@@ -114,6 +114,7 @@ pub(super) fn text_report(
             ))
         );
     }
+    s.push_str(&friction_text(first));
     for (step, d) in diags.iter().enumerate() {
         if auto {
             let _ = writeln!(s, "\nStep {}:", step + 1);
@@ -230,6 +231,51 @@ pub(super) fn linear_text(axis: &crate::axis::Axis, last: &Diagnosis, ladder: &[
                 .added
                 .map_or("starting model".to_string(), |k| format!("+ {k}"));
             let _ = writeln!(s, "  {name:<16} prediction error {:.4} mm", c * m * 1e3);
+        }
+    }
+    s
+}
+
+/// The measured friction curve as a table (load side, both directions), and its shape.
+pub(super) fn friction_text(d: &Diagnosis) -> String {
+    let mut s = String::new();
+    let Some(c) = &d.friction_curve else {
+        return s;
+    };
+    let _ = writeln!(
+        s,
+        "\nMeasured friction curve ({}, {} sliding rows away from standstill and reversals; load side):",
+        c.equation.name(),
+        c.sliding_rows
+    );
+    let _ = writeln!(
+        s,
+        "  {:>4} {:>19} {:>11} {:>13} {:>11} {:>11} {:>6}",
+        "dir", "|speed| bin [rad/s]", "mean rad/s", "friction N m", "95 % +/-", "model N m", "rows"
+    );
+    for b in &c.bins {
+        let _ = writeln!(
+            s,
+            "  {:>4} {:>9.3}-{:<9.3} {:>11.3} {:>13.4e} {:>11.1e} {:>11.4e} {:>6}",
+            if b.direction > 0 { "fwd" } else { "bwd" },
+            b.speed_lo_rad_s,
+            b.speed_hi_rad_s,
+            b.speed_rad_s,
+            b.torque_nm,
+            b.ci_nm,
+            b.model_nm,
+            b.rows
+        );
+    }
+    match &c.shape {
+        Some(sh) => {
+            let _ = writeln!(s, "  Shape beyond the model: {}.", sh.description);
+        }
+        None => {
+            let _ = writeln!(
+                s,
+                "  No shape beyond the model's Coulomb and viscous friction stands out."
+            );
         }
     }
     s
