@@ -84,6 +84,9 @@ pub struct Diagnosis {
     /// Effects below their balance's noise floor: "not resolvable with these logs", whatever
     /// the status ([`Unresolvable`]).
     pub unresolvable: Vec<Unresolvable>,
+    /// Changes of the plant during a log ([`super::change`]): each is also the first signature
+    /// of its balance, and makes the status "unexplained" when no candidate passes.
+    pub changes: Vec<super::change::Change>,
 }
 
 impl Diagnosis {

@@ -19,7 +19,7 @@
 //! with the experiment that would resolve it.
 //!
 //! The diagnosis is a pipeline of named stages, one file each, read top to bottom in
-//! [`diagnose_dataset`]: [`base`] (the base fit and the noise floors), [`kinds`] (what to try),
+//! [`diagnose_dataset`]: [`base`] (the base fit and the noise floors), [`change`] (a plant that changes during a log), [`kinds`] (what to try),
 //! [`survey`] (every candidate fitted, the simulation reference, the balances analysed),
 //! [`judge`] (the guards and the mimic checks), [`vetoes`] (the electrical veto),
 //! [`consistent`] (agreement across halves of the data), [`rank`], [`search`] (the joint search
@@ -30,6 +30,7 @@ mod backward;
 pub mod bars;
 mod base;
 pub mod cancel;
+pub mod change;
 pub mod checks;
 mod conclude;
 mod consistent;
@@ -118,6 +119,19 @@ pub fn diagnose_dataset(
     opts.cancel.check()?;
     // 1. The base model refitted, the current noise, every balance's noise floor.
     let base = base::fit(ds, model)?;
+    // 1b. A plant that changes during a log: the base refitted on each side of a change point.
+    let changes = timing::timed(
+        || "change points".into(),
+        || {
+            change::find(
+                ds,
+                &base.solved.plant,
+                &base.solved.mech,
+                base.floor_of(base.solved.mech.equation),
+                th,
+            )
+        },
+    );
     // 2. The candidates worth trying on these data.
     let kinds = kinds::for_dataset(ds, model, opts);
     // 3. Every candidate fitted, the simulation reference, every balance analysed (in parallel).
@@ -143,20 +157,23 @@ pub fn diagnose_dataset(
     rank::sort(&mut ranking, th);
     // 8. Effects that hide each other: the joint search, when nothing passes alone.
     opts.cancel.check()?;
-    search::run(
-        ds,
-        model,
-        &base,
-        &survey,
-        &labels,
-        electrical_broken,
-        &mut ranking,
-        opts,
-    );
+    // (Not on a plant that changed: no model of the catalogue holds on both sides of the change.)
+    if changes.is_empty() {
+        search::run(
+            ds,
+            model,
+            &base,
+            &survey,
+            &labels,
+            electrical_broken,
+            &mut ranking,
+            opts,
+        );
+    }
     opts.cancel.check()?;
     // 9. Status, leads beyond the catalogue, the verdict.
     Ok(conclude::run(
-        ds, model, base, survey, &labels, &kinds, ranking, opts,
+        ds, model, base, survey, &labels, &kinds, ranking, changes, opts,
     ))
 }
 

@@ -67,6 +67,18 @@ pub struct Thresholds {
     pub structured_without_shape: f64,
     /// A residual shape is named when it explains this share of the held-out residual [%].
     pub min_signature_share_pct: f64,
+    /// A change of the plant during a log must explain at least this multiple of its balance's
+    /// noise floor (RMS over the log's rows) [x].
+    pub change_min_noise_ratio: f64,
+    /// ... and this share of the log's structured (above-floor) squared error [%].
+    pub change_min_share_pct: f64,
+    /// ... and move the base parameter that carries it by at least this much [%].
+    pub change_min_relative_pct: f64,
+    /// ... and be a step: the best further split inside either side gains less than this share
+    /// of the step's gain (a linear drift leaves about 25 %) [%].
+    pub change_max_further_pct: f64,
+    /// Each side of a change spans at least this share of its log [%].
+    pub change_margin_pct: f64,
 }
 
 impl Default for Thresholds {
@@ -92,6 +104,11 @@ impl Default for Thresholds {
             unexplained_ratio: 2.0,
             structured_without_shape: 2.0,
             min_signature_share_pct: 15.0,
+            change_min_noise_ratio: 1.0,
+            change_min_share_pct: 50.0,
+            change_min_relative_pct: 5.0,
+            change_max_further_pct: 15.0,
+            change_margin_pct: 10.0,
         }
     }
 }
@@ -148,6 +165,16 @@ impl Thresholds {
                 why: "a residual this far above its floor is structured even when no shape is named" },
             Bar { name: "min_signature_share_pct", value: t.min_signature_share_pct, unit: "%", rule: ">=",
                 why: "a residual shape is named when it explains this share of the held-out residual" },
+            Bar { name: "change_min_noise_ratio", value: t.change_min_noise_ratio, unit: "x noise floor", rule: ">=",
+                why: "a change of the base parameters during a log must explain this much of its balance (RMS over the log) to be reported" },
+            Bar { name: "change_min_share_pct", value: t.change_min_share_pct, unit: "%", rule: ">=",
+                why: "a change must explain this share of the log's structured (above-floor) error: a missing effect is not a change" },
+            Bar { name: "change_min_relative_pct", value: t.change_min_relative_pct, unit: "%", rule: ">=",
+                why: "the base parameter that carries a change must move this much (smaller changes are immaterial)" },
+            Bar { name: "change_max_further_pct", value: t.change_max_further_pct, unit: "% of the step's gain", rule: "<",
+                why: "a change is a step: a further split inside either side must gain less than this (a drift leaves about 25 %)" },
+            Bar { name: "change_margin_pct", value: t.change_margin_pct, unit: "% of the log", rule: ">=",
+                why: "each side of a change must be this long for its parameters to be refitted" },
         ]
     }
 }
@@ -161,7 +188,7 @@ mod tests {
         let t = Thresholds::default();
         let table = t.table();
         // One row per field: a field added without a row (or a row twice) fails here.
-        assert_eq!(table.len(), 20);
+        assert_eq!(table.len(), 25);
         for (i, a) in table.iter().enumerate() {
             assert!(
                 table[i + 1..].iter().all(|b| b.name != a.name),
