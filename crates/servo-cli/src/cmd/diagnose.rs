@@ -214,6 +214,7 @@ impl Diagnose {
                 "ranking": last.ranking.iter().map(|c| candidate_json(c, &opts)).collect::<Vec<_>>(),
                 "verdict": last.verdict,
                 "not_resolvable": last.unresolvable.iter().map(unresolvable_json).collect::<Vec<_>>(),
+                "changes": last.changes.iter().map(change_json).collect::<Vec<_>>(),
                 "base": base_json(first),
                 "log_parts": crate::log_part::json(&parts),
             });

@@ -107,6 +107,7 @@ pub(super) fn run(
         neighbours: leads,
         unresolvable,
         changes,
+        presliding: None,
     }
 }
 

@@ -87,6 +87,9 @@ pub struct Diagnosis {
     /// Changes of the plant during a log ([`super::change`]): each is also the first signature
     /// of its balance, and makes the status "unexplained" when no candidate passes.
     pub changes: Vec<super::change::Change>,
+    /// The pre-sliding regime left out of the torque balance, when the candidates were judged
+    /// on the sliding rows ([`super::presliding`]).
+    pub presliding: Option<super::presliding::Extent>,
 }
 
 impl Diagnosis {

@@ -19,10 +19,11 @@
 //! with the experiment that would resolve it.
 //!
 //! The diagnosis is a pipeline of named stages, one file each, read top to bottom in
-//! [`diagnose_dataset`]: [`base`] (the base fit and the noise floors), [`change`] (a plant that changes during a log), [`kinds`] (what to try),
+//! [`diagnose_dataset`]: [`base`] (the base fit and the noise floors), [`kinds`] (what to try),
 //! [`survey`] (every candidate fitted, the simulation reference, the balances analysed),
 //! [`judge`] (the guards and the mimic checks), [`vetoes`] (the electrical veto),
-//! [`consistent`] (agreement across halves of the data), [`rank`], [`search`] (the joint search
+//! [`consistent`] (agreement across halves of the data), [`rank`], [`change`] (a plant
+//! that changes during a log), [`presliding`] (the regime near reversals, judged apart), [`search`] (the joint search
 //! when nothing passes alone) and [`conclude`] (status, leads and verdict). Every threshold is in
 //! one table, [`thresholds::Thresholds`], printed with every verdict ([`bars`]).
 
@@ -42,6 +43,7 @@ pub mod kinds;
 pub mod neighbours;
 mod options;
 pub mod phrase;
+pub mod presliding;
 mod rank;
 pub mod regimes;
 pub mod resonance;
@@ -109,29 +111,20 @@ pub fn diagnose(
     diagnose_dataset(&ds, model, opts)
 }
 
-/// Diagnoses on a prepared dataset (reuse it across the loop): the stages in order.
-pub fn diagnose_dataset(
-    ds: &Dataset,
-    model: &Plant,
-    opts: &DiagnoseOptions,
-) -> Result<Diagnosis, FitError> {
+/// Stages 1-7 of a diagnosis on `ds`: the base, the candidates fitted and judged, best first.
+struct Screened {
+    base: base::Base,
+    kinds: Vec<EffectKind>,
+    survey: survey::Survey,
+    labels: regimes::Labels,
+    ranking: Vec<Candidate>,
+    electrical_broken: bool,
+}
+
+fn screen(ds: &Dataset, model: &Plant, opts: &DiagnoseOptions) -> Result<Screened, FitError> {
     let th = &opts.thresholds;
-    opts.cancel.check()?;
     // 1. The base model refitted, the current noise, every balance's noise floor.
     let base = base::fit(ds, model)?;
-    // 1b. A plant that changes during a log: the base refitted on each side of a change point.
-    let changes = timing::timed(
-        || "change points".into(),
-        || {
-            change::find(
-                ds,
-                &base.solved.plant,
-                &base.solved.mech,
-                base.floor_of(base.solved.mech.equation),
-                th,
-            )
-        },
-    );
     // 2. The candidates worth trying on these data.
     let kinds = kinds::for_dataset(ds, model, opts);
     // 3. Every candidate fitted, the simulation reference, every balance analysed (in parallel).
@@ -155,26 +148,106 @@ pub fn diagnose_dataset(
     consistent::check(ds, model, &mut ranking, th);
     // 7. Best first.
     rank::sort(&mut ranking, th);
-    // 8. Effects that hide each other: the joint search, when nothing passes alone.
+    Ok(Screened {
+        base,
+        kinds,
+        survey,
+        labels,
+        ranking,
+        electrical_broken,
+    })
+}
+
+/// Diagnoses on a prepared dataset (reuse it across the loop): the stages in order.
+pub fn diagnose_dataset(
+    ds: &Dataset,
+    model: &Plant,
+    opts: &DiagnoseOptions,
+) -> Result<Diagnosis, FitError> {
+    let th = &opts.thresholds;
     opts.cancel.check()?;
-    // (Not on a plant that changed: no model of the catalogue holds on both sides of the change.)
+    // 1-7. The base, every candidate fitted and judged, best first.
+    let mut s = screen(ds, model, opts)?;
+    // A plant that changes during a log: the base refitted on each side of a change point.
+    let changes = timing::timed(
+        || "change points".into(),
+        || {
+            let mech = &s.base.solved.mech;
+            change::find(
+                ds,
+                &s.base.solved.plant,
+                mech,
+                s.base.floor_of(mech.equation),
+                th,
+            )
+        },
+    );
+    // The pre-sliding regime: when nothing passes and the torque balance's residual lives in
+    // the rows near reversals (a dynamic friction's bristles), the candidates are judged again
+    // on the sliding rows, and that judgement is kept when a candidate passes there.
+    let mut sliding: Option<(Dataset, presliding::Extent)> = None;
+    let passed = |s: &Screened| s.ranking.first().is_some_and(|c| c.significant);
+    if changes.is_empty() && !passed(&s) && s.survey.balances.iter().any(|b| b.above_noise) {
+        let mech = &s.base.solved.mech;
+        if let Some(ext) = presliding::extent(ds, mech, s.base.floor_of(mech.equation), th) {
+            if let Some(ds2) = ds.without_presliding(ext.counts) {
+                opts.cancel.check()?;
+                let s2 = timing::timed(
+                    || "judged on the sliding rows".into(),
+                    || screen(&ds2, model, opts),
+                )?;
+                #[cfg(feature = "std")]
+                for c in s2.ranking.iter().take(2) {
+                    std::eprintln!("DEBUG retry {} counts {}: {} sig={} red={:.1} oe={:?} bic={:.1} {:?}", ext.counts, ext.rows, c.effect, c.significant, c.error_reduction_pct, c.oe_reduction_pct, c.bic_gain, c.checks.iter().filter(|k| !k.passed).map(|k| k.detail.clone()).collect::<Vec<_>>());
+                }
+                if passed(&s2) {
+                    s = s2;
+                    sliding = Some((ds2, ext));
+                }
+            }
+        }
+    }
+    let ds = sliding.as_ref().map_or(ds, |(d, _)| d);
+    // 8. Effects that hide each other: the joint search, when nothing passes alone (not on a
+    // plant that changed: no model of the catalogue holds on both sides of the change).
+    opts.cancel.check()?;
     if changes.is_empty() {
         search::run(
             ds,
             model,
-            &base,
-            &survey,
-            &labels,
-            electrical_broken,
-            &mut ranking,
+            &s.base,
+            &s.survey,
+            &s.labels,
+            s.electrical_broken,
+            &mut s.ranking,
             opts,
         );
     }
     opts.cancel.check()?;
     // 9. Status, leads beyond the catalogue, the verdict.
-    Ok(conclude::run(
+    let Screened {
+        base,
+        kinds,
+        survey,
+        labels,
+        ranking,
+        ..
+    } = s;
+    let mut d = conclude::run(
         ds, model, base, survey, &labels, &kinds, ranking, changes, opts,
-    ))
+    );
+    if let Some((_, ext)) = sliding {
+        d.verdict.push_str(&alloc::format!(
+            " Judged on the sliding rows: the {} torque-balance rows within {:.0} encoder counts of travel since a reversal of the motion carry {:.1} times the residual of the sliding rows ({:.2e} {} RMS), a pre-sliding regime of their own (a dynamic friction's bristles winding up like a spring, outside the catalogue), and were left out.",
+            ext.rows,
+            ext.counts,
+            ext.ratio,
+            ext.rms,
+            d.base.equations.first().map_or("", |e| e.0.unit())
+        ));
+        d.presliding = Some(ext);
+    }
+    Ok(d)
 }
 
 pub struct Rung {

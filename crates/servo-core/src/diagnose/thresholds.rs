@@ -79,6 +79,10 @@ pub struct Thresholds {
     pub change_max_further_pct: f64,
     /// Each side of a change spans at least this share of its log [%].
     pub change_margin_pct: f64,
+    /// The pre-sliding regime (rows within a few encoder counts of travel since a reversal) is
+    /// its own regime when its torque-balance residual is this many times the sliding rows'
+    /// (RMS); the candidates are then judged again on the sliding rows [x].
+    pub presliding_min_ratio: f64,
 }
 
 impl Default for Thresholds {
@@ -109,6 +113,7 @@ impl Default for Thresholds {
             change_min_relative_pct: 5.0,
             change_max_further_pct: 15.0,
             change_margin_pct: 10.0,
+            presliding_min_ratio: 2.0,
         }
     }
 }
@@ -175,6 +180,8 @@ impl Thresholds {
                 why: "a change is a step: a further split inside either side must gain less than this (a drift leaves about 25 %)" },
             Bar { name: "change_margin_pct", value: t.change_margin_pct, unit: "% of the log", rule: ">=",
                 why: "each side of a change must be this long for its parameters to be refitted" },
+            Bar { name: "presliding_min_ratio", value: t.presliding_min_ratio, unit: "x the sliding rows' RMS", rule: ">=",
+                why: "rows near reversals (few counts of travel) carrying this much more residual are a pre-sliding regime of their own (a dynamic friction's bristles): friction shapes are then judged on the sliding rows" },
         ]
     }
 }
@@ -188,7 +195,7 @@ mod tests {
         let t = Thresholds::default();
         let table = t.table();
         // One row per field: a field added without a row (or a row twice) fails here.
-        assert_eq!(table.len(), 25);
+        assert_eq!(table.len(), 26);
         for (i, a) in table.iter().enumerate() {
             assert!(
                 table[i + 1..].iter().all(|b| b.name != a.name),
