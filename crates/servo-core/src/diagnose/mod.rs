@@ -185,9 +185,26 @@ pub fn diagnose_dataset(
     // The pre-sliding regime: when nothing passes and the torque balance's residual lives in
     // the rows near reversals (a dynamic friction's bristles), the candidates are judged again
     // on the sliding rows, and that judgement is kept when a candidate passes there.
+    // Only a friction shape is named this way (the regime hides the sliding curve, nothing
+    // else), and not where a gear play shows: its crossings of the gap live at the same
+    // reversals, and the joint search sizes it with what hides it.
     let mut sliding: Option<(Dataset, presliding::Extent)> = None;
     let passed = |s: &Screened| s.ranking.first().is_some_and(|c| c.significant);
-    if changes.is_empty() && !passed(&s) && s.survey.balances.iter().any(|b| b.above_noise) {
+    let friction_passed = |s: &Screened| {
+        s.ranking.first().is_some_and(|c| {
+            c.significant
+                && c.joint_with.is_none()
+                && c.effect.sim_role() == crate::effects::SimRole::DryFriction
+        })
+    };
+    let play = model.effects.iter().any(|e| on_simulation(e.kind))
+        || s.ranking.iter().any(|c| {
+            on_simulation(c.effect)
+                && c.oe_reduction_pct
+                    .is_some_and(|d| d >= th.min_simulation_oe_drop_pct)
+        });
+    if changes.is_empty() && !passed(&s) && !play && s.survey.balances.iter().any(|b| b.above_noise)
+    {
         let mech = &s.base.solved.mech;
         if let Some(ext) = presliding::extent(ds, mech, s.base.floor_of(mech.equation), th) {
             if let Some(ds2) = ds.without_presliding(ext.counts) {
@@ -196,11 +213,7 @@ pub fn diagnose_dataset(
                     || "judged on the sliding rows".into(),
                     || screen(&ds2, model, opts),
                 )?;
-                #[cfg(feature = "std")]
-                for c in s2.ranking.iter().take(2) {
-                    std::eprintln!("DEBUG retry {} counts {}: {} sig={} red={:.1} oe={:?} bic={:.1} {:?}", ext.counts, ext.rows, c.effect, c.significant, c.error_reduction_pct, c.oe_reduction_pct, c.bic_gain, c.checks.iter().filter(|k| !k.passed).map(|k| k.detail.clone()).collect::<Vec<_>>());
-                }
-                if passed(&s2) {
+                if friction_passed(&s2) {
                     s = s2;
                     sliding = Some((ds2, ext));
                 }

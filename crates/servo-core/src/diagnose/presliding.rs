@@ -96,14 +96,6 @@ pub fn extent(ds: &Dataset, sol: &EqSolution, floor: f64, th: &Thresholds) -> Op
         }
         (c >= MIN_ROWS).then(|| (s / c as f64, r / c as f64, c))
     };
-    #[cfg(feature = "std")]
-    {
-        let mut lo = 0.0;
-        for hi in [2.0, 4.0, 8.0, 16.0, 32.0, f64::INFINITY] {
-            std::eprintln!("DEBUG band {lo}-{hi}: {:?} floor {floor:.3e}", ms(lo, hi));
-            lo = hi;
-        }
-    }
     let ratio2 = th.presliding_min_ratio * th.presliding_min_ratio;
     // The first band above the regime: not elevated (or too few rows to say).
     let mut counts = EDGES[EDGES.len() - 1];
