@@ -207,10 +207,11 @@ impl Sums {
             }
             a.swap(c, piv);
             b.swap(c, piv);
+            let pivot = a[c];
             for r in c + 1..m {
-                let f = a[r][c] / a[c][c];
-                for k in c..m {
-                    a[r][k] -= f * a[c][k];
+                let f = a[r][c] / pivot[c];
+                for (x, p) in a[r][c..m].iter_mut().zip(&pivot[c..m]) {
+                    *x -= f * p;
                 }
                 b[r] -= f * b[c];
             }

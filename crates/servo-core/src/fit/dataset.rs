@@ -852,22 +852,6 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn shift_hold_follows_the_log_convention() {
-        let u = [0.0, 1.0, 2.0, 3.0, 4.0];
-        let s = shift_hold(&u, 0.0);
-        assert!((s[2] - 1.5).abs() < 1e-12);
-        let s = shift_hold(&u, 1.0);
-        assert!((s[3] - 1.5).abs() < 1e-12);
-        let s = shift_hold(&u, 0.25);
-        assert!((s[2] - 1.25).abs() < 1e-12);
-    }
-}
-
 /// Travel of the motor angle since the last reversal of the motion of record `r`, in encoder
 /// counts, at every sample (infinite before the first reversal, and when the angle is not
 /// quantised). A reversal is a sign change of the filtered speed between two samples moving
@@ -883,7 +867,7 @@ pub fn travel_counts(r: &RecData, stuck_rad_s: f64) -> Vec<f64> {
     let mut last_sign = 0.0;
     let mut turn: Option<f64> = None;
     let mut extreme = r.theta_m_rad.first().copied().unwrap_or(0.0);
-    for k in 0..n {
+    for (k, o) in out.iter_mut().enumerate() {
         let w = r.omega_f[k];
         let th = r.theta_m_rad[k];
         if w.abs() > stuck_rad_s {
@@ -899,7 +883,7 @@ pub fn travel_counts(r: &RecData, stuck_rad_s: f64) -> Vec<f64> {
             extreme = th;
         }
         if let Some(t0) = turn {
-            out[k] = (th - t0).abs() / q;
+            *o = (th - t0).abs() / q;
         }
     }
     out
@@ -918,4 +902,20 @@ pub fn presliding(r: &RecData, counts: f64, stuck_rad_s: f64) -> Vec<bool> {
         .into_iter()
         .map(|t| t < counts)
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shift_hold_follows_the_log_convention() {
+        let u = [0.0, 1.0, 2.0, 3.0, 4.0];
+        let s = shift_hold(&u, 0.0);
+        assert!((s[2] - 1.5).abs() < 1e-12);
+        let s = shift_hold(&u, 1.0);
+        assert!((s[3] - 1.5).abs() < 1e-12);
+        let s = shift_hold(&u, 0.25);
+        assert!((s[2] - 1.25).abs() < 1e-12);
+    }
 }
