@@ -12,7 +12,7 @@ use servo_core::sim::sensors::SplitMix64;
 use servo_core::sim::{PlantSim, SensorConfig, Sensors};
 use servo_core::{Plant, PlantParams};
 
-const DT: f64 = 1e-3;
+pub(crate) const DT: f64 = 1e-3;
 
 fn truth(hidden: &[Effect]) -> Plant {
     let params = PlantParams {
@@ -28,7 +28,7 @@ fn truth(hidden: &[Effect]) -> Plant {
     p
 }
 
-fn record(
+pub(crate) fn record(
     t: Vec<f64>,
     th: Vec<f64>,
     ia: Vec<f64>,
@@ -90,7 +90,7 @@ fn open_loop(plant: &Plant, seconds: f64, seed: u64) -> Record {
 /// Closed-loop PID (Bode gains of the handout's lab) following position steps of random size
 /// (drawn from `rng`), on any plant: `measure(rng)` gives the (load angle [rad], current [A]) the
 /// controller sees, `step(u)` advances the plant one period with input u [V].
-fn pid_log(
+pub(crate) fn pid_log(
     n: usize,
     rng: &mut SplitMix64,
     mut measure: impl FnMut(&mut SplitMix64) -> (f64, f64),
@@ -152,7 +152,7 @@ fn logs(plant: &Plant, seed: u64) -> Vec<Record> {
 }
 
 /// The identified base model (viscous + Coulomb) from the open-loop log.
-fn identified(logs: &[Record]) -> Plant {
+pub(crate) fn identified(logs: &[Record]) -> Plant {
     let start = Plant::from_params(PlantParams {
         tau_sf: Some(0.005),
         ..PlantParams::TABLE2
@@ -177,7 +177,7 @@ fn main_param(kind: EffectKind) -> &'static [&'static str] {
 }
 
 /// Prints the first `take` candidates of a diagnosis, tagged (shown when a test fails).
-fn print_ranking(tag: &str, d: &diagnose::Diagnosis, take: usize) {
+pub(crate) fn print_ranking(tag: &str, d: &diagnose::Diagnosis, take: usize) {
     for c in d.ranking.iter().take(take) {
         eprintln!(
             "[{tag}] {:<10} sig={} red={:.1}% oe={:?} bic={:.1}",
@@ -322,7 +322,7 @@ fn complete_model_has_nothing_significant() {
 /// No balance of `d` names a resonance: the plant behind these logs has none (a rigid shaft),
 /// so a resonance named would be the diagnosis's own making (e.g. the corner of the filter every
 /// regressor goes through, 25 Hz by default).
-fn assert_no_resonance(tag: &str, d: &diagnose::Diagnosis) {
+pub(crate) fn assert_no_resonance(tag: &str, d: &diagnose::Diagnosis) {
     for b in &d.balances {
         let named: Vec<&str> = b
             .signatures

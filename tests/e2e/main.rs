@@ -28,5 +28,6 @@ mod sim;
 mod student;
 mod transmission;
 mod trend;
+mod two_mass;
 mod util;
 mod window;

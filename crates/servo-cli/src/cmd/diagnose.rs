@@ -216,6 +216,13 @@ impl Diagnose {
                 "verdict": last.verdict,
                 "not_resolvable": last.unresolvable.iter().map(unresolvable_json).collect::<Vec<_>>(),
                 "friction_curve": first.friction_curve.as_ref().map(friction_curve_json),
+                "changes": last.changes.iter().map(change_json).collect::<Vec<_>>(),
+                "presliding": last.presliding.map(|e| json!({
+                    "counts": f(e.counts),
+                    "ratio_to_sliding": f(e.ratio),
+                    "rows": e.rows,
+                    "rms": f(e.rms),
+                })),
                 "base": base_json(first),
                 "log_parts": crate::log_part::json(&parts),
             });

@@ -4,6 +4,7 @@
 //! ([`super::neighbours`]), and the verdict in words ([`super::evidence::verdict`]).
 
 use super::base::Base;
+use super::change::Change;
 use super::judge::{FLOOR_CHECK, STRUCTURED_CHECK};
 use super::structure::BalanceReport;
 use super::survey::Survey;
@@ -25,6 +26,7 @@ pub(super) fn run(
     labels: &regimes::Labels,
     kinds: &[EffectKind],
     ranking: Vec<Candidate>,
+    changes: Vec<Change>,
     opts: &DiagnoseOptions,
 ) -> Diagnosis {
     let mut equations = Vec::new();
@@ -50,6 +52,7 @@ pub(super) fn run(
         current_noise_a: base.noise_a,
     };
     let winner = ranking.first().filter(|c| c.significant).is_some();
+    attach_changes(&mut balances, &changes);
     let mut unexplained: Vec<BalanceReport> = if winner {
         Vec::new()
     } else {
@@ -104,6 +107,26 @@ pub(super) fn run(
         neighbours: leads,
         unresolvable,
         friction_curve: None,
+        changes,
+        presliding: None,
+    }
+}
+
+/// A change of the plant is the first signature of its balance, which it makes incomplete,
+/// with the experiment that confirms it (the first change's).
+fn attach_changes(balances: &mut [BalanceReport], changes: &[Change]) {
+    for b in balances.iter_mut() {
+        let here: Vec<&Change> = changes
+            .iter()
+            .filter(|c| c.equation == b.equation)
+            .collect();
+        let Some(first) = here.first() else {
+            continue;
+        };
+        let sigs: Vec<_> = here.iter().map(|c| c.signature()).collect();
+        b.signatures.splice(0..0, sigs);
+        b.above_noise = true;
+        b.experiment = first.experiment();
     }
 }
 

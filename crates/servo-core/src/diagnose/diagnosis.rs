@@ -87,6 +87,12 @@ pub struct Diagnosis {
     /// The friction curve measured on the sliding rows of the torque (or u-driven) balance, with
     /// the shape it shows beyond the base model ([`super::friction_curve`]).
     pub friction_curve: Option<super::friction_curve::FrictionCurve>,
+    /// Changes of the plant during a log ([`super::change`]): each is also the first signature
+    /// of its balance, and makes the status "unexplained" when no candidate passes.
+    pub changes: Vec<super::change::Change>,
+    /// The pre-sliding regime left out of the torque balance, when the candidates were judged
+    /// on the sliding rows ([`super::presliding`]).
+    pub presliding: Option<super::presliding::Extent>,
 }
 
 impl Diagnosis {

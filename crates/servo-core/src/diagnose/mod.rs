@@ -22,7 +22,8 @@
 //! [`diagnose_dataset`]: [`base`] (the base fit and the noise floors), [`kinds`] (what to try),
 //! [`survey`] (every candidate fitted, the simulation reference, the balances analysed),
 //! [`judge`] (the guards and the mimic checks), [`vetoes`] (the electrical veto),
-//! [`consistent`] (agreement across halves of the data), [`rank`], [`search`] (the joint search
+//! [`consistent`] (agreement across halves of the data), [`rank`], [`change`] (a plant
+//! that changes during a log), [`presliding`] (the regime near reversals, judged apart), [`search`] (the joint search
 //! when nothing passes alone) and [`conclude`] (status, leads and verdict). Every threshold is in
 //! one table, [`thresholds::Thresholds`], printed with every verdict ([`bars`]).
 
@@ -30,6 +31,7 @@ mod backward;
 pub mod bars;
 mod base;
 pub mod cancel;
+pub mod change;
 pub mod checks;
 mod conclude;
 mod consistent;
@@ -42,6 +44,7 @@ pub mod kinds;
 pub mod neighbours;
 mod options;
 pub mod phrase;
+pub mod presliding;
 mod rank;
 pub mod regimes;
 pub mod resonance;
@@ -109,14 +112,20 @@ pub fn diagnose(
     diagnose_dataset(&ds, model, opts)
 }
 
-/// Diagnoses on a prepared dataset (reuse it across the loop): the stages in order.
-pub fn diagnose_dataset(
-    ds: &Dataset,
-    model: &Plant,
-    opts: &DiagnoseOptions,
-) -> Result<Diagnosis, FitError> {
+/// Stages 1-7 of a diagnosis on `ds`: the base, the candidates fitted and judged, best first.
+struct Screened {
+    base: base::Base,
+    kinds: Vec<EffectKind>,
+    survey: survey::Survey,
+    labels: regimes::Labels,
+    ranking: Vec<Candidate>,
+    electrical_broken: bool,
+    /// The measured friction curve of the torque (or u-driven) balance's sliding rows.
+    curve: Option<friction_curve::FrictionCurve>,
+}
+
+fn screen(ds: &Dataset, model: &Plant, opts: &DiagnoseOptions) -> Result<Screened, FitError> {
     let th = &opts.thresholds;
-    opts.cancel.check()?;
     // 1. The base model refitted, the current noise, every balance's noise floor.
     let base = base::fit(ds, model)?;
     // 2. The candidates worth trying on these data.
@@ -166,28 +175,127 @@ pub fn diagnose_dataset(
     consistent::check(ds, model, &mut ranking, th);
     // 7. Best first.
     rank::sort(&mut ranking, th);
-    // 8. Effects that hide each other: the joint search, when nothing passes alone.
-    opts.cancel.check()?;
-    let searched_first = !ranking.first().is_some_and(|c| c.significant);
-    let outside = friction_curve::outside_catalogue(curve.as_ref(), &survey.balances, th)
-        .filter(|_| searched_first);
-    search::run(
-        ds,
-        model,
-        &base,
-        &survey,
-        &labels,
+    Ok(Screened {
+        base,
+        kinds,
+        survey,
+        labels,
+        ranking,
         electrical_broken,
-        &mut ranking,
-        opts,
-        outside.is_some(),
+        curve,
+    })
+}
+
+/// Diagnoses on a prepared dataset (reuse it across the loop): the stages in order.
+pub fn diagnose_dataset(
+    ds: &Dataset,
+    model: &Plant,
+    opts: &DiagnoseOptions,
+) -> Result<Diagnosis, FitError> {
+    let th = &opts.thresholds;
+    opts.cancel.check()?;
+    // 1-7. The base, every candidate fitted and judged, best first.
+    let mut s = screen(ds, model, opts)?;
+    // A plant that changes during a log: the base refitted on each side of a change point.
+    let changes = timing::timed(
+        || "change points".into(),
+        || {
+            let mech = &s.base.solved.mech;
+            change::find(
+                ds,
+                &s.base.solved.plant,
+                mech,
+                s.base.floor_of(mech.equation),
+                th,
+            )
+        },
     );
+    // The pre-sliding regime: when nothing passes and the torque balance's residual lives in
+    // the rows near reversals (a dynamic friction's bristles), the candidates are judged again
+    // on the sliding rows, and that judgement is kept when a candidate passes there.
+    // Only a friction shape is named this way (the regime hides the sliding curve, nothing
+    // else), and not where a gear play shows: its crossings of the gap live at the same
+    // reversals, and the joint search sizes it with what hides it.
+    let mut sliding: Option<(Dataset, presliding::Extent)> = None;
+    let passed = |s: &Screened| s.ranking.first().is_some_and(|c| c.significant);
+    let friction_passed = |s: &Screened| {
+        s.ranking.first().is_some_and(|c| {
+            c.significant
+                && c.joint_with.is_none()
+                && c.effect.sim_role() == crate::effects::SimRole::DryFriction
+        })
+    };
+    let play = model.effects.iter().any(|e| on_simulation(e.kind))
+        || s.ranking.iter().any(|c| {
+            on_simulation(c.effect)
+                && c.oe_reduction_pct
+                    .is_some_and(|d| d >= th.min_simulation_oe_drop_pct)
+        });
+    if changes.is_empty() && !passed(&s) && !play && s.survey.balances.iter().any(|b| b.above_noise)
+    {
+        let mech = &s.base.solved.mech;
+        if let Some(ext) = presliding::extent(ds, mech, s.base.floor_of(mech.equation), th) {
+            if let Some(ds2) = ds.without_presliding(ext.counts) {
+                opts.cancel.check()?;
+                let s2 = timing::timed(
+                    || "judged on the sliding rows".into(),
+                    || screen(&ds2, model, opts),
+                )?;
+                if friction_passed(&s2) {
+                    s = s2;
+                    sliding = Some((ds2, ext));
+                }
+            }
+        }
+    }
+    let ds = sliding.as_ref().map_or(ds, |(d, _)| d);
+    // 8. Effects that hide each other: the joint search, when nothing passes alone (not on a
+    // plant that changed: no model of the catalogue holds on both sides of the change).
+    opts.cancel.check()?;
+    let searched_first = !passed(&s);
+    let outside = friction_curve::outside_catalogue(s.curve.as_ref(), &s.survey.balances, th)
+        .filter(|_| searched_first);
+    if changes.is_empty() {
+        search::run(
+            ds,
+            model,
+            &s.base,
+            &s.survey,
+            &s.labels,
+            s.electrical_broken,
+            &mut s.ranking,
+            opts,
+            outside.is_some(),
+        );
+    }
     opts.cancel.check()?;
     // 9. Status, leads beyond the catalogue, the verdict.
-    let mut d = conclude::run(ds, model, base, survey, &labels, &kinds, ranking, opts);
+    let Screened {
+        base,
+        kinds,
+        survey,
+        labels,
+        ranking,
+        curve,
+        ..
+    } = s;
+    let mut d = conclude::run(
+        ds, model, base, survey, &labels, &kinds, ranking, changes, opts,
+    );
     d.friction_curve = curve;
     if let (Some(why), Status::Unexplained) = (&outside, d.status) {
         d.verdict.push_str(why);
+    }
+    if let Some((_, ext)) = sliding {
+        d.verdict.push_str(&alloc::format!(
+            " Judged on the sliding rows: the {} torque-balance rows within {:.0} encoder counts of travel since a reversal of the motion carry {:.1} times the residual of the sliding rows ({:.2e} {} RMS), a pre-sliding regime of their own (a dynamic friction's bristles winding up like a spring, outside the catalogue), and were left out.",
+            ext.rows,
+            ext.counts,
+            ext.ratio,
+            ext.rms,
+            d.base.equations.first().map_or("", |e| e.0.unit())
+        ));
+        d.presliding = Some(ext);
     }
     Ok(d)
 }

@@ -87,6 +87,22 @@ pub struct Thresholds {
     /// |k_t i_a| (a gear that loses more of the torque it transmits is self-locking; a fit above
     /// it says the balance itself is inconsistent, e.g. the current) [%].
     pub max_torque_friction_share_pct: f64,
+    /// A change of the plant during a log must explain at least this multiple of its balance's
+    /// noise floor (RMS over the log's rows) [x].
+    pub change_min_noise_ratio: f64,
+    /// ... and this share of the log's structured (above-floor) squared error [%].
+    pub change_min_share_pct: f64,
+    /// ... and move the base parameter that carries it by at least this much [%].
+    pub change_min_relative_pct: f64,
+    /// ... and be a step: the best further split inside either side gains less than this share
+    /// of the step's gain (a linear drift leaves about 25 %) [%].
+    pub change_max_further_pct: f64,
+    /// Each side of a change spans at least this share of its log [%].
+    pub change_margin_pct: f64,
+    /// The pre-sliding regime (rows within a few encoder counts of travel since a reversal) is
+    /// its own regime when its torque-balance residual is this many times the sliding rows'
+    /// (RMS); the candidates are then judged again on the sliding rows [x].
+    pub presliding_min_ratio: f64,
 }
 
 impl Default for Thresholds {
@@ -118,6 +134,12 @@ impl Default for Thresholds {
             friction_shape_min_t: 5.0,
             joint_skip_friction_share_pct: 50.0,
             max_torque_friction_share_pct: 50.0,
+            change_min_noise_ratio: 1.0,
+            change_min_share_pct: 50.0,
+            change_min_relative_pct: 5.0,
+            change_max_further_pct: 15.0,
+            change_margin_pct: 10.0,
+            presliding_min_ratio: 2.0,
         }
     }
 }
@@ -186,6 +208,18 @@ impl Thresholds {
                 why: "a friction shape outside the catalogue that carries this much of the residual is what is missing: no set of catalogue effects is searched for it (the joint search costs most of a diagnosis)" },
             Bar { name: "max_torque_friction_share_pct", value: t.max_torque_friction_share_pct, unit: "% of |k_t i_a|", rule: "<",
                 why: "a friction growing with the transmitted torque beyond this share would make the gears self-locking: the balance, not the friction, is then inconsistent" },
+            Bar { name: "change_min_noise_ratio", value: t.change_min_noise_ratio, unit: "x noise floor", rule: ">=",
+                why: "a change of the base parameters during a log must explain this much of its balance (RMS over the log) to be reported" },
+            Bar { name: "change_min_share_pct", value: t.change_min_share_pct, unit: "%", rule: ">=",
+                why: "a change must explain this share of the log's structured (above-floor) error: a missing effect is not a change" },
+            Bar { name: "change_min_relative_pct", value: t.change_min_relative_pct, unit: "%", rule: ">=",
+                why: "the base parameter that carries a change must move this much (smaller changes are immaterial)" },
+            Bar { name: "change_max_further_pct", value: t.change_max_further_pct, unit: "% of the step's gain", rule: "<",
+                why: "a change is a step: a further split inside either side must gain less than this (a drift leaves about 25 %)" },
+            Bar { name: "change_margin_pct", value: t.change_margin_pct, unit: "% of the log", rule: ">=",
+                why: "each side of a change must be this long for its parameters to be refitted" },
+            Bar { name: "presliding_min_ratio", value: t.presliding_min_ratio, unit: "x the sliding rows' RMS", rule: ">=",
+                why: "rows near reversals (few counts of travel) carrying this much more residual are a pre-sliding regime of their own (a dynamic friction's bristles): friction shapes are then judged on the sliding rows" },
         ]
     }
 }
@@ -199,7 +233,7 @@ mod tests {
         let t = Thresholds::default();
         let table = t.table();
         // One row per field: a field added without a row (or a row twice) fails here.
-        assert_eq!(table.len(), 26);
+        assert_eq!(table.len(), 32);
         for (i, a) in table.iter().enumerate() {
             assert!(
                 table[i + 1..].iter().all(|b| b.name != a.name),

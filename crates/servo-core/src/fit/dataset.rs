@@ -159,6 +159,24 @@ pub struct Rows {
 }
 
 impl Rows {
+    /// The rows for which `keep(i)` holds, in order.
+    pub fn filtered(&self, keep: impl Fn(usize) -> bool) -> Rows {
+        let pick = |v: &[bool]| -> Vec<bool> {
+            v.iter()
+                .enumerate()
+                .filter(|(i, _)| keep(*i))
+                .map(|(_, b)| *b)
+                .collect()
+        };
+        let idx: Vec<usize> = (0..self.len()).filter(|&i| keep(i)).collect();
+        Rows {
+            rec: idx.iter().map(|&i| self.rec[i]).collect(),
+            k: idx.iter().map(|&i| self.k[i]).collect(),
+            fit: idx.iter().map(|&i| self.fit[i]).collect(),
+            torque_reversal: pick(&self.torque_reversal),
+            gap_crossing: pick(&self.gap_crossing),
+        }
+    }
     pub fn len(&self) -> usize {
         self.k.len()
     }
@@ -297,6 +315,41 @@ impl Dataset {
                 .collect()
         });
         Ok(ds)
+    }
+
+    /// This data set with the torque balance's pre-sliding rows left out (travel since the last
+    /// reversal below `counts` encoder counts, [`presliding`]), its search windows alike; `None`
+    /// when too few rows would be left.
+    pub fn without_presliding(&self, counts: f64) -> Option<Dataset> {
+        let flags: Vec<Vec<bool>> = self
+            .recs
+            .iter()
+            .map(|r| presliding(r, counts, self.opts.min_speed_rad_s))
+            .collect();
+        let rows = &self.mech_rows;
+        let keep = |i: usize| !flags[rows.rec[i]][rows.k[i]];
+        let mech_rows = rows.filtered(keep);
+        if mech_rows.len() < 20 {
+            return None;
+        }
+        let coulomb_col = (0..rows.len())
+            .filter(|&i| keep(i))
+            .map(|i| self.coulomb_col[i])
+            .collect();
+        let search = match &self.search {
+            Some(s) => Some(alloc::boxed::Box::new(s.without_presliding(counts)?)),
+            None => None,
+        };
+        Some(Dataset {
+            mech_rows,
+            coulomb_col,
+            search,
+            opts: FitOptions {
+                presliding_counts: counts,
+                ..self.opts.clone()
+            },
+            ..self.clone()
+        })
     }
 
     /// The same records prepared again with the motor angle of each record replaced by
@@ -775,6 +828,7 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
             }
         }
     }
+    let presliding = presliding(r, opts.presliding_counts, opts.min_speed_rad_s);
     // Fit / held-out blocks: the record is cut in blocks of `holdout_block_s`; every
     // `holdout_every`-th block is held out.
     let block = ((opts.holdout_block_s * fs) as usize).max(1);
@@ -782,7 +836,7 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
     while k + edge < n {
         let b = k / block;
         let fit = opts.holdout_every == 0 || b % opts.holdout_every != opts.holdout_every - 1;
-        if !near_stuck[k] {
+        if !near_stuck[k] && !presliding[k] {
             mech.rec.push(ri);
             mech.k.push(k);
             mech.fit.push(fit);
@@ -796,6 +850,58 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
         }
         k += dec;
     }
+}
+
+/// Travel of the motor angle since the last reversal of the motion of record `r`, in encoder
+/// counts, at every sample (infinite before the first reversal, and when the angle is not
+/// quantised). A reversal is a sign change of the filtered speed between two samples moving
+/// faster than the stuck threshold `stuck_rad_s` [rad/s]; the turning point is the extreme angle
+/// reached before it.
+pub fn travel_counts(r: &RecData, stuck_rad_s: f64) -> Vec<f64> {
+    let n = r.omega_f.len();
+    let mut out = alloc::vec![f64::INFINITY; n];
+    let Some(q) = crate::signal::quantum::encoder_quantum(&r.theta_m_rad).filter(|q| *q > 0.0)
+    else {
+        return out;
+    };
+    let mut last_sign = 0.0;
+    let mut turn: Option<f64> = None;
+    let mut extreme = r.theta_m_rad.first().copied().unwrap_or(0.0);
+    for (k, o) in out.iter_mut().enumerate() {
+        let w = r.omega_f[k];
+        let th = r.theta_m_rad[k];
+        if w.abs() > stuck_rad_s {
+            let s = math::sign(w);
+            if last_sign != 0.0 && s != last_sign {
+                turn = Some(extreme);
+            }
+            last_sign = s;
+        }
+        // The extreme reached in the current direction so far (the turning point once the
+        // direction changes).
+        if last_sign == 0.0 || (th - extreme) * last_sign > 0.0 {
+            extreme = th;
+        }
+        if let Some(t0) = turn {
+            *o = (th - t0).abs() / q;
+        }
+    }
+    out
+}
+
+/// The pre-sliding rows of record `r`: the travel since the last reversal of the motion is below
+/// `counts` encoder counts ([`travel_counts`]). After a reversal a dynamic friction's bristles
+/// wind up from one side's level to the other's over a travel of about twice the breakaway
+/// torque over their stiffness: the friction there is a spring torque, not the sliding curve.
+/// All false when `counts` is 0 or the angle is not quantised.
+pub fn presliding(r: &RecData, counts: f64, stuck_rad_s: f64) -> Vec<bool> {
+    if counts.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+        return alloc::vec![false; r.omega_f.len()];
+    }
+    travel_counts(r, stuck_rad_s)
+        .into_iter()
+        .map(|t| t < counts)
+        .collect()
 }
 
 #[cfg(test)]

@@ -66,6 +66,12 @@ pub struct FitOptions {
     pub oe_horizon_s: f64,
     /// Most output-error segments simulated (bounds the cost on long logs).
     pub oe_max_segments: usize,
+    /// Pre-sliding regime: the torque balance leaves out the rows whose travel since the last
+    /// reversal of the motion is below this many encoder counts [counts]. There a dynamic
+    /// friction (bristles, a Dahl or LuGre friction) acts as a spring that winds up to the
+    /// breakaway level, not as the steady-state (sliding) curve the catalogue's friction shapes
+    /// describe ([`dataset::presliding`]). 0: keep them.
+    pub presliding_counts: f64,
 }
 
 impl Default for FitOptions {
@@ -81,6 +87,7 @@ impl Default for FitOptions {
             holdout_every: 0,
             oe_horizon_s: 0.25,
             oe_max_segments: 60,
+            presliding_counts: 0.0,
         }
     }
 }

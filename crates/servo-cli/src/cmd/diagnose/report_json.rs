@@ -117,6 +117,33 @@ pub(super) fn friction_curve_json(
     })
 }
 
+/// A change of the plant during a log ([`servo_core::diagnose::change::Change`]).
+pub(super) fn change_json(c: &servo_core::diagnose::change::Change) -> Value {
+    json!({
+        "log": c.log + 1,
+        "source": c.source,
+        "time_s": f(c.time_s),
+        "log_s": f(c.log_s),
+        "balance": c.equation.name(),
+        "unit": c.equation.unit(),
+        "params": c.params.iter().map(|p| json!({
+            "name": p.name,
+            "unit": p.unit,
+            "before": f(p.before),
+            "after": f(p.after),
+            "relative_pct": f(100.0 * p.relative()),
+            "share_of_change": f(p.share),
+        })).collect::<Vec<_>>(),
+        "explained_rms": f(c.explained_rms),
+        "noise_floor": f(c.floor),
+        "structured_share": f(c.structured_share),
+        "further_split_share": f(c.further_share),
+        "rows": c.rows,
+        "description": c.phrase(),
+        "experiment": c.experiment(),
+    })
+}
+
 /// A lead beyond the catalogue ([`servo_core::diagnose::checks::Neighbour`]); `reference_rad`:
 /// the reference's held-out simulation error.
 pub(super) fn neighbour_json(n: &Neighbour, reference_rad: Option<f64>) -> Value {
