@@ -341,11 +341,23 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
             // Labels on the powers of ten alone: plotters' in-between key points repeat the
             // next decade's (two `10` labels on one spot), and 2 and 5 crowd a wide band.
             let decades = (x1 / x0).log10().ceil().max(1.0) as usize;
+            // plotters may also give one power of ten twice (two key points a rounding apart):
+            // within one ascending pass over the key points, a decade is labelled once (a key
+            // point below the previous one starts a new pass).
+            let seen = std::cell::Cell::new((f64::NEG_INFINITY, f64::NAN));
             let x_fmt = move |v: &f64| {
+                let (prev_v, prev_dec) = seen.get();
+                let prev_dec = if *v < prev_v { f64::NAN } else { prev_dec };
                 let m = v / 10f64.powf(v.log10().floor());
-                if (m - 1.0).abs() < 1e-6 {
+                if (m - 1.0).abs() < 1e-6 || (m - 10.0).abs() < 1e-5 {
+                    let dec = v.log10().round();
+                    seen.set((*v, dec));
+                    if dec == prev_dec {
+                        return String::new();
+                    }
                     log_tick_label(*v)
                 } else {
+                    seen.set((*v, prev_dec));
                     String::new()
                 }
             };

@@ -327,6 +327,29 @@ pub fn effective_pid_config(pid: &PidConfig, u_limit_v: f64, ts_s: f64) -> PidCo
     c
 }
 
+/// The PID `servo run --gains` runs from the gains file `gains` (named `label` in messages),
+/// with the file's defaults (T_s, limit, anti-windup, discretisation) and its limits as in
+/// force ([`effective_pid_config`]); and the voltage limit [V].
+pub fn pid_from_gains(
+    gains: &servo_io::gains_file::GainsFile,
+    label: &str,
+) -> Result<(PidConfig, f64), RunError> {
+    let ctl = servo_io::controller::run_controller(
+        Some((gains, label)),
+        &servo_io::controller::PidOptions::default(),
+        None,
+        None,
+    )
+    .map_err(|e| RunError::Config(format!("{label}: {e:#}")))?;
+    let pid = ctl
+        .pid
+        .ok_or_else(|| RunError::Config(format!("{label} give no controller")))?;
+    Ok((
+        effective_pid_config(&pid, ctl.u_limit_v, ctl.ts_s),
+        ctl.u_limit_v,
+    ))
+}
+
 /// Runs the loop on `backend` to its end, streaming samples to `sink`.
 pub fn run_loop(
     backend: &mut dyn Backend,

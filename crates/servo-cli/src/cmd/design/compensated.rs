@@ -92,16 +92,7 @@ impl Design {
         let choice = CompensationChoice::parse(terms, &mf, &plant, self.comp.ff_ramp_s)?;
         let comp = choice.build(&plant)?;
         let r = &out.report;
-        let ctl = servo_io::controller::run_controller(
-            Some((gains, "the designed gains")),
-            &servo_io::controller::PidOptions::default(),
-            None,
-            None,
-        )?;
-        let pid = ctl
-            .pid
-            .ok_or_else(|| anyhow!("the designed gains give no controller"))?;
-        let pid = servo_hw::run::effective_pid_config(&pid, ctl.u_limit_v, ctl.ts_s);
+        let (pid, u_limit_v) = servo_hw::run::pid_from_gains(gains, "the designed gains")?;
         let (_, sensors) = self.run_plant().load()?;
 
         // Margins: the linear part, then the angle-dependent torques linearised.
@@ -131,7 +122,7 @@ impl Design {
             })
             .collect();
         let cases = |ff: Option<&servo_core::control::LoopCompensation>| {
-            run_step_cases_compensated(&plant, sensors, &pid, ctl.u_limit_v, &steps, HOLD_S, ff)
+            run_step_cases_compensated(&plant, sensors, &pid, u_limit_v, &steps, HOLD_S, ff)
                 .map_err(|e| anyhow!("checking the design on {}: {e}", path.display()))
         };
         let steps_without = cases(None)?;
@@ -148,7 +139,7 @@ impl Design {
             sensors,
             model: &plant,
             pid,
-            u_limit_v: ctl.u_limit_v,
+            u_limit_v,
             program: servo_core::control::Program::Segments(exp.segments.clone()),
             duration_s,
             ramp_s: self.comp.ff_ramp_s,

@@ -51,16 +51,7 @@ impl Design {
         gains: &GainsFile,
         specs: &TimeSpecs,
     ) -> anyhow::Result<RunCheck> {
-        let ctl = servo_io::controller::run_controller(
-            Some((gains, "the designed gains")),
-            &servo_io::controller::PidOptions::default(),
-            None,
-            None,
-        )?;
-        let pid = ctl
-            .pid
-            .ok_or_else(|| anyhow!("the designed gains give no controller"))?;
-        let pid = servo_hw::run::effective_pid_config(&pid, ctl.u_limit_v, ctl.ts_s);
+        let (pid, u_limit_v) = servo_hw::run::pid_from_gains(gains, "the designed gains")?;
         let (plant, sensors) = self.run_plant().load()?;
         let (settling_max_s, unchecked, hold_s) = match specs.speed {
             Some(SpeedTarget::Settling { band, time_s }) if (band - 0.05).abs() < 1e-12 => {
@@ -76,7 +67,7 @@ impl Design {
             ),
         };
         let steps = specs.grid(RUN_CHECK_STEPS);
-        let cases = run_step_cases(&plant, sensors, &pid, ctl.u_limit_v, &steps, hold_s)
+        let cases = run_step_cases(&plant, sensors, &pid, u_limit_v, &steps, hold_s)
             .map_err(|e| anyhow!("checking the design through servo run's loop: {e}"))?;
         Ok(RunCheck {
             plant: self.plant_words(),

@@ -81,23 +81,14 @@ pub(super) fn compensation_html(base: &Plant, found: &Plant) -> anyhow::Result<S
         },
         design: None,
     };
-    let ctl = servo_io::controller::run_controller(
-        Some((&gains, "the section's gains")),
-        &servo_io::controller::PidOptions::default(),
-        None,
-        None,
-    )?;
-    let pid = ctl
-        .pid
-        .ok_or_else(|| anyhow!("the section's gains give no controller"))?;
-    let pid = servo_hw::run::effective_pid_config(&pid, ctl.u_limit_v, ctl.ts_s);
+    let (pid, u_limit_v) = servo_hw::run::pid_from_gains(&gains, "the section's gains")?;
     let exp = servo_io::reference_file::Experiment::standard_tracking()?;
     let run = TrackingRun {
         truth: found,
         sensors: servo_core::sim::SensorConfig::default(),
         model: found,
         pid,
-        u_limit_v: ctl.u_limit_v,
+        u_limit_v,
         program: servo_core::control::Program::Segments(exp.segments.clone()),
         duration_s: exp.duration_s(),
         ramp_s: 0.0,
