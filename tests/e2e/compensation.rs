@@ -521,6 +521,14 @@ mod board_core {
     }
 }
 
+/// `servo params` (the lab plant) with `extra` (effect tables) appended, as `model.toml` in
+/// `dir`; its path.
+fn model_with(dir: &Path, extra: &str) -> String {
+    let path = dir.join("model.toml");
+    std::fs::write(&path, format!("{}\n{extra}", ok(&["params"]))).unwrap();
+    path.to_string_lossy().into_owned()
+}
+
 /// Item 3 of #29: `servo design --model M --ff all` designs on the model's linear part and
 /// verifies on its whole nonlinear model without and with the compensation. An unbalanced load
 /// (0.03 N m) and a cogging torque: the margins of the linearised loop, the step cases and the
@@ -532,16 +540,11 @@ fn design_on_the_identified_model_is_verified_with_and_without_compensation() {
     let _heavy = servo_e2e::cpu_heavy();
     let dir = tempfile::tempdir().unwrap();
     let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
-    let model = d("model.toml");
-    std::fs::write(
-        &model,
-        format!(
-            "{}\n[effects.imbalance]\namplitude = 0.03\nphase = 0.4\n\
+    let model = model_with(
+        dir.path(),
+        "[effects.imbalance]\namplitude = 0.03\nphase = 0.4\n\
              [effects.cogging]\namplitude = 0.0002\nharmonic = 12\nphase = 0.3\n",
-            ok(&["params"])
-        ),
-    )
-    .unwrap();
+    );
     let gains = d("gains.toml");
     let out = ok(&[
         "design", "--wc", "30", "--pm", "60", "--model", &model, "--ff", "all", "--json", "-o",
@@ -644,15 +647,10 @@ fn compare_on_two_runs_prints_the_tracking_ladder_per_effect() {
     let _heavy = servo_e2e::cpu_heavy();
     let dir = tempfile::tempdir().unwrap();
     let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
-    let model = d("model.toml");
-    std::fs::write(
-        &model,
-        format!(
-            "{}\n[effects.imbalance]\namplitude = 0.02\nphase = 0.4\n",
-            ok(&["params"])
-        ),
-    )
-    .unwrap();
+    let model = model_with(
+        dir.path(),
+        "[effects.imbalance]\namplitude = 0.02\nphase = 0.4\n",
+    );
     let gains = d("gains.toml");
     ok(&["design", "--wc", "30", "--pm", "60", "-o", &gains]);
     let exp = tracking_experiment();
@@ -723,21 +721,16 @@ fn user_defined_torques_and_input_maps_are_compensated() {
     let _heavy = servo_e2e::cpu_heavy();
     let dir = tempfile::tempdir().unwrap();
     let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
-    let model = d("model.toml");
-    std::fs::write(
-        &model,
-        format!(
-            "{}\n[custom.cable]\nacts_on = \"load_torque\"\nexpr = \"k * (theta_l - theta0)\"\n\
-             [custom.cable.params]\nk = {{ value = 0.04, unit = \"N m/rad\" }}\n\
-             theta0 = {{ value = 0.3, unit = \"rad\" }}\n\
+    let model = model_with(
+        dir.path(),
+        "[custom.cable]\nacts_on = \"load_torque\"\nexpr = \"k * (theta_l - theta0)\"\n\
+             [custom.cable.params]\nk = { value = 0.04, unit = \"N m/rad\" }\n\
+             theta0 = { value = 0.3, unit = \"rad\" }\n\
              [custom.band]\nacts_on = \"input\"\nexpr = \"sign(u) * max(abs(u) - d, 0)\"\n\
-             [custom.band.params]\nd = {{ value = 0.6, unit = \"V\" }}\n\
+             [custom.band.params]\nd = { value = 0.6, unit = \"V\" }\n\
              [custom.eccentric]\nacts_on = \"sensor\"\nexpr = \"theta_l + e * sin(theta_l)\"\n\
-             [custom.eccentric.params]\ne = {{ value = 0.0, unit = \"rad\" }}\n",
-            ok(&["params"])
-        ),
-    )
-    .unwrap();
+             [custom.eccentric.params]\ne = { value = 0.0, unit = \"rad\" }\n",
+    );
     let gains = d("gains.toml");
     ok(&["design", "--wc", "30", "--pm", "60", "-o", &gains]);
     let exp = tracking_experiment();
