@@ -10,7 +10,7 @@
 //! (feedforward) leaves it in.
 //!
 //! This module finds the range of that stiffness over one load revolution; the margins of the
-//! loop with a given stiffness are [`crate::design::verify::margins_with_stiffness`].
+//! loop with a given stiffness are [`crate::design::verify::loop_with_stiffness`].
 
 use crate::effects::{ActsOn, EffectKind, Signals, SimRole};
 use crate::plant::Plant;

@@ -45,6 +45,23 @@ pub struct PidSection {
     pub derivative_on: Option<servo_core::control::DerivativeOn>,
 }
 
+impl PidSection {
+    /// The section of designed gains `g` at the period `ts_s` [s]: no anti-windup gain, no
+    /// limit, the derivative on the error (each the run's default).
+    pub fn of(g: &servo_core::design::PidGains, ts_s: f64) -> PidSection {
+        PidSection {
+            kp: g.kp,
+            ki: g.ki,
+            kd: g.kd,
+            tl_s: g.tl_s,
+            ts_s,
+            kw: None,
+            u_limit_v: None,
+            derivative_on: None,
+        }
+    }
+}
+
 fn default_ts() -> f64 {
     1e-3
 }

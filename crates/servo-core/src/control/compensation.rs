@@ -291,24 +291,23 @@ impl EffectCompensator {
     /// non-decreasing); `y_v` itself when no bracket is found within +-1e6 V.
     fn custom_inverse_v(&self, y_v: f64) -> f64 {
         let f = |v: f64| self.custom_input_v(v);
-        let (mut lo, mut hi) = (y_v - 1.0, y_v + 1.0);
-        let mut width = 1.0;
-        // (a NaN never brackets: the loops run out and give y_v back)
-        while f(lo).partial_cmp(&y_v).is_none_or(|o| o.is_gt()) {
-            width *= 2.0;
-            lo = y_v - width;
-            if width > 1e6 {
-                return y_v;
+        // the first of y_v + side {1, 2, 4, ...} V where `ok` holds (a NaN never does)
+        let bracket = |side: f64, ok: &dyn Fn(f64) -> bool| -> Option<f64> {
+            let mut width = 1.0;
+            while width <= 1e6 {
+                let v = y_v + side * width;
+                if ok(f(v)) {
+                    return Some(v);
+                }
+                width *= 2.0;
             }
-        }
-        width = 1.0;
-        while f(hi).partial_cmp(&y_v).is_none_or(|o| o.is_lt()) {
-            width *= 2.0;
-            hi = y_v + width;
-            if width > 1e6 {
-                return y_v;
-            }
-        }
+            None
+        };
+        let (Some(mut lo), Some(mut hi)) =
+            (bracket(-1.0, &|x| x <= y_v), bracket(1.0, &|x| x >= y_v))
+        else {
+            return y_v;
+        };
         for _ in 0..52 {
             let mid = 0.5 * (lo + hi);
             if f(mid) < y_v {

@@ -33,6 +33,33 @@ pub struct DesignRequest {
     pub exact: bool,
 }
 
+impl DesignRequest {
+    /// The handout's example design (eqs. 44-53): a PID for w_gc = 30 rad/s and phi_m = 60 deg,
+    /// alpha = T_I / T_D = 4, 1 / T_L = 5 w_gc, on the reduced model of `params`, verified on
+    /// the full one, discretised by `discretization` at `ts_s` [s].
+    pub fn handout(
+        params: &crate::params::PlantParams,
+        ts_s: f64,
+        discretization: Discretization,
+    ) -> DesignRequest {
+        DesignRequest {
+            kind: ControllerKind::Pid,
+            spec: LoopSpec {
+                omega_gc: 30.0,
+                phase_margin: 60f64.to_radians(),
+            },
+            alpha: 4.0,
+            filter: DerivativeFilter::Factor(5.0),
+            ts_s,
+            discretization,
+            reduced: PlantModel::reduced(params),
+            full: Some(PlantModel::full(params)),
+            design_on_full: false,
+            exact: false,
+        }
+    }
+}
+
 /// Achieved figures of one loop.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Achieved {

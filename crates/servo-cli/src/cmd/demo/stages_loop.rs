@@ -4,26 +4,9 @@
 use super::*;
 
 pub(super) fn stage_design(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec<PathBuf>)> {
-    use servo_core::design::bode::DerivativeFilter;
     use servo_core::design::controller::Discretization;
     use servo_core::design::verify::{design, DesignRequest};
-    use servo_core::design::{ControllerKind, LoopSpec, PlantModel};
-    let params = PlantParams::TABLE2;
-    let req = DesignRequest {
-        kind: ControllerKind::Pid,
-        spec: LoopSpec {
-            omega_gc: 30.0,
-            phase_margin: 60f64.to_radians(),
-        },
-        alpha: 4.0,
-        filter: DerivativeFilter::Factor(5.0),
-        ts_s: 1e-3,
-        discretization: Discretization::Tustin,
-        reduced: PlantModel::reduced(&params),
-        full: Some(PlantModel::full(&params)),
-        design_on_full: false,
-        exact: false,
-    };
+    let req = DesignRequest::handout(&PlantParams::TABLE2, 1e-3, Discretization::Tustin);
     let r = design(&req).map_err(|e| anyhow!("design: {e}"))?;
     let g = r.gains;
     let mut d = toml::Table::new();
@@ -36,16 +19,7 @@ pub(super) fn stage_design(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec
     d.insert("alpha".into(), 4.0.into());
     d.insert("discretization".into(), "tustin".into());
     let gains = GainsFile {
-        pid: PidSection {
-            kp: g.kp,
-            ki: g.ki,
-            kd: g.kd,
-            tl_s: g.tl_s,
-            ts_s: 1e-3,
-            kw: None,
-            u_limit_v: None,
-            derivative_on: None,
-        },
+        pid: PidSection::of(&g, 1e-3),
         design: Some(d),
     };
     let path = ctx.out.join("gains.toml");

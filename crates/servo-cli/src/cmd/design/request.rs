@@ -159,14 +159,10 @@ impl super::Design {
         }
         GainsFile {
             pid: PidSection {
-                kp: g.kp,
-                ki: g.ki,
-                kd: g.kd,
-                tl_s: g.tl_s,
-                ts_s: r.request.ts_s,
                 kw: out.structure.kw_per_s,
                 u_limit_v: Some(out.structure.u_limit_v),
                 derivative_on: Some(out.structure.derivative_on),
+                ..PidSection::of(g, r.request.ts_s)
             },
             design: Some(d),
         }

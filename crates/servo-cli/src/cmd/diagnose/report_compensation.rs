@@ -7,18 +7,12 @@
 
 use super::*;
 use servo_core::control::FeedforwardConfig;
-use servo_core::design::bode::DerivativeFilter;
 use servo_core::design::controller::Discretization;
-use servo_core::design::spec::LoopSpec;
 use servo_core::design::verify::{design, DesignRequest};
-use servo_core::design::{ControllerKind, PlantModel};
 use servo_core::effects::Compensation;
 use servo_hw::run::compensation_check::{tracking_ladder, TrackingRun};
 use servo_io::gains_file::{GainsFile, PidSection};
 
-/// The handout's example loop spec the section's PID is designed for.
-const WGC_RAD_S: f64 = 30.0;
-const PM_DEG: f64 = 60.0;
 /// Control period of the section's loop [s].
 const TS_S: f64 = 1e-3;
 
@@ -51,34 +45,11 @@ pub(super) fn compensation_html(base: &Plant, found: &Plant) -> anyhow::Result<S
         return Ok(h);
     }
     let params = found.linear_params();
-    let req = DesignRequest {
-        kind: ControllerKind::Pid,
-        spec: LoopSpec {
-            omega_gc: WGC_RAD_S,
-            phase_margin: PM_DEG.to_radians(),
-        },
-        alpha: 4.0,
-        filter: DerivativeFilter::Factor(5.0),
-        ts_s: TS_S,
-        discretization: Discretization::BackwardEuler,
-        reduced: PlantModel::reduced(&params),
-        full: Some(PlantModel::full(&params)),
-        design_on_full: false,
-        exact: false,
-    };
+    let req = DesignRequest::handout(&params, TS_S, Discretization::BackwardEuler);
     let report = design(&req).map_err(|e| anyhow!("the section's PID design: {e}"))?;
     let g = report.gains;
     let gains = GainsFile {
-        pid: PidSection {
-            kp: g.kp,
-            ki: g.ki,
-            kd: g.kd,
-            tl_s: g.tl_s,
-            ts_s: TS_S,
-            kw: None,
-            u_limit_v: None,
-            derivative_on: None,
-        },
+        pid: PidSection::of(&g, TS_S),
         design: None,
     };
     let (pid, u_limit_v) = servo_hw::run::pid_from_gains(&gains, "the section's gains")?;
@@ -98,13 +69,15 @@ pub(super) fn compensation_html(base: &Plant, found: &Plant) -> anyhow::Result<S
     let _ = write!(
         h,
         "<p>Predicted on the model with the effects found, a PID designed on its linear part \
-         (Bode, w_gc = {WGC_RAD_S} rad/s, phi_m = {PM_DEG} deg: K_P = {:.3}, K_I = {:.3}, K_D = \
+         (Bode, w_gc = {:.0} rad/s, phi_m = {:.0} deg: K_P = {:.3}, K_I = {:.3}, K_D = \
          {:.4}) and the standard tracking reference (<code>experiments/tracking.toml</code>, \
          {:.0} s), each compensation added in turn. To run it: <code>servo compare LOG --model M \
          --add EFFECT --save M2</code>, then <code>servo run --model M2 --ff all --experiment \
          experiments/tracking.toml</code>; <code>servo compare</code> on the two runs prints the \
          measured ladder.</p><table><tr><th>compensation</th><th>RMS tracking error [rad]</th>\
          <th>change</th><th>max error [rad]</th></tr>",
+        req.spec.omega_gc,
+        req.spec.phase_margin.to_degrees(),
         g.kp,
         g.ki,
         g.kd,
