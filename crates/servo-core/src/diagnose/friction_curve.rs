@@ -155,15 +155,14 @@ fn sliding_rows(ds: &Dataset, sol: &EqSolution, plant: &Plant, labels: &RowRegim
 
 /// Measures the friction curve of the base model `sol` (its refitted plant `plant`) on the
 /// sliding rows of `ds` (`labels`: the regimes of the torque balance's rows), with the shape it
-/// shows beyond the base model when `with_shape`. `None` when the logs hold too few sliding rows
-/// for one bin per direction.
+/// shows beyond the base model. `None` when the logs hold too few sliding rows for one bin per
+/// direction.
 pub fn measure(
     ds: &Dataset,
     sol: &EqSolution,
     plant: &Plant,
     labels: &RowRegimes,
     th: &Thresholds,
-    with_shape: bool,
 ) -> Option<FrictionCurve> {
     if sol.equation == Equation::Electrical {
         return None;
@@ -233,11 +232,7 @@ pub fn measure(
     if bins.is_empty() {
         return None;
     }
-    let shape = if with_shape {
-        shape(ds, sol, plant, &rows, rho, th)
-    } else {
-        None
-    };
+    let shape = shape(ds, sol, plant, &rows, rho, th);
     Some(FrictionCurve {
         equation: sol.equation,
         bins,

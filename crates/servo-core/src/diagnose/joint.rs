@@ -219,7 +219,7 @@ pub(super) fn judge_given(
     let floor = cx.floor_of(eq);
     let before = structure::analyse(ds, o_alone.equation(eq)?, floor, th, ds.gear_ratio);
     let mut c = judge(
-        ds, cx.labels, o_alone, o_ref, cx.noise_a, floor, before.rms, m, joint, cx.opts, true,
+        ds, cx.labels, o_alone, o_ref, cx.noise_a, floor, before.rms, m, joint, cx.opts, true, None,
     );
     if c.significant && !on_simulation(m) && m != EffectKind::Coulomb {
         if let Some(k) = structure_check(ds, &before, joint.equation(eq)?, floor, th) {

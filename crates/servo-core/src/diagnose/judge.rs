@@ -39,6 +39,7 @@ pub(super) fn all(
     noise_a: Option<f64>,
     floors: &[(Equation, f64)],
     survey: &Survey,
+    curve: Option<&super::friction_curve::FrictionCurve>,
     opts: &DiagnoseOptions,
 ) -> Vec<Candidate> {
     let th = &opts.thresholds;
@@ -66,6 +67,7 @@ pub(super) fn all(
             solved,
             opts,
             false,
+            curve,
         );
         // A mimic leaves the structure it was meant to explain: the shape that carried the
         // balance's residual is still there, above the noise floor, after adding it.
@@ -223,6 +225,7 @@ pub(super) fn judge(
     cand: &Solved,
     opts: &DiagnoseOptions,
     given_others: bool,
+    curve: Option<&super::friction_curve::FrictionCurve>,
 ) -> Candidate {
     let eq = fit::model::Config::equation_of(kind, ds.has_current);
     let params: Vec<ParamEstimate> = ds
@@ -387,11 +390,9 @@ pub(super) fn judge(
             && super::friction_curve::is_friction(kind)
             && eq != Equation::Electrical
         {
-            if let Some(curve) =
-                super::friction_curve::measure(ds, b, &base.plant, labels.of(eq), th, false)
-            {
+            if let Some(curve) = curve.filter(|c| c.equation == eq) {
                 found.push(super::friction_curve::check(
-                    &curve,
+                    curve,
                     b,
                     c,
                     &base.plant,

@@ -146,7 +146,6 @@ fn screen(ds: &Dataset, model: &Plant, opts: &DiagnoseOptions) -> Result<Screene
                 &base.solved.plant,
                 labels.of(base.solved.mech.equation),
                 th,
-                true,
             )
         },
     );
@@ -166,6 +165,7 @@ fn screen(ds: &Dataset, model: &Plant, opts: &DiagnoseOptions) -> Result<Screene
         base.noise_a,
         &base.floors,
         &survey,
+        curve.as_ref(),
         opts,
     );
     opts.cancel.check()?;
