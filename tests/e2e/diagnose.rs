@@ -977,6 +977,112 @@ fn friction_growing_with_transmitted_torque_names_no_resonance() {
     }
 }
 
+/// servo's own simulator with a fluid drag c w_l |w_l| (a user effect of the plant file, outside
+/// the catalogue; the benchmark's plant), open loop on a PRBS voltage and closed loop on a square
+/// reference, diagnosed through `servo diagnose --json` against the lab model. The PRBS holds the
+/// shaft at the drag's terminal speed, where the encoder's quantisation ripple, aliased by the
+/// 1 kHz sampling, puts a peak in the electrical balance (28.5 Hz at 5 V, 34.5 Hz at 4.5 V: it
+/// moves with the speed) while that balance stays below its noise floor: it was named "rings as a
+/// resonance". No balance names a resonance; the status is "unexplained" with the torque
+/// balance's friction-curve shape first.
+#[test]
+fn a_drag_at_terminal_speed_names_no_resonance() {
+    let _cpu = servo_e2e::cpu_heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let (ok, params, err) = servo_e2e::servo(&["params"]);
+    assert!(ok, "servo params failed: {err}");
+    std::fs::write(p("model.toml"), &params).unwrap();
+    let truth = format!(
+        "{params}\n[custom.drag]\nacts_on = \"load_torque\"\nexpr = \"c * omega_l * abs(omega_l)\"\n\
+         description = \"a fluid drag\"\n[custom.drag.params]\nc = {{ value = 5e-5, unit = \"N m s^2/rad^2\" }}\n"
+    );
+    std::fs::write(p("truth.toml"), truth).unwrap();
+    let (ok, _, err) =
+        servo_e2e::servo(&["design", "--wc", "30", "--pm", "60", "-o", &p("gains.toml")]);
+    assert!(ok, "design failed: {err}");
+    for (amp, seed) in [("5", 3u64), ("4.5", 5)] {
+        let tag = format!("drag PRBS {amp} V seed {seed}");
+        let (open, closed) = (
+            p(&format!("open{seed}.mcap")),
+            p(&format!("closed{seed}.mcap")),
+        );
+        let prbs = format!("prbs:amp={amp},bit=0.2");
+        let seed_open = seed.to_string();
+        let seed_closed = (seed + 1).to_string();
+        let (ok, _, err) = servo_e2e::servo(&[
+            "run",
+            "--plant",
+            &p("truth.toml"),
+            "--voltage",
+            &prbs,
+            "--duration",
+            "30",
+            "--seed",
+            &seed_open,
+            "--log",
+            &open,
+        ]);
+        assert!(ok, "[{tag}] open-loop run failed: {err}");
+        let (ok, _, err) = servo_e2e::servo(&[
+            "run",
+            "--plant",
+            &p("truth.toml"),
+            "--gains",
+            &p("gains.toml"),
+            "--ref",
+            "square:amp=2,period=3",
+            "--duration",
+            "30",
+            "--seed",
+            &seed_closed,
+            "--log",
+            &closed,
+        ]);
+        assert!(ok, "[{tag}] closed-loop run failed: {err}");
+        let (ok, out, err) = servo_e2e::servo(&[
+            "diagnose",
+            &open,
+            &closed,
+            "--model",
+            &p("model.toml"),
+            "--json",
+        ]);
+        assert!(ok, "[{tag}] diagnose failed: {err}");
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        for b in v["balances"].as_array().unwrap() {
+            let kinds: Vec<&str> = b["signatures"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|s| s["kind"].as_str().unwrap())
+                .collect();
+            eprintln!(
+                "[{tag}] {} ratio {} {kinds:?}",
+                b["balance"], b["ratio_to_noise"]
+            );
+            assert!(
+                !kinds.contains(&"resonance"),
+                "[{tag}] the {} balance names a resonance the plant does not have: {}",
+                b["balance"],
+                b["signatures"]
+            );
+        }
+        assert_eq!(v["status"], "unexplained", "[{tag}] {}", v["verdict"]);
+        let torque = v["balances"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|b| b["balance"] == "torque")
+            .unwrap();
+        assert_eq!(
+            torque["signatures"][0]["kind"], "friction_curve",
+            "[{tag}] {}",
+            torque["signatures"]
+        );
+    }
+}
+
 /// A viscous friction whose slope differs between the directions: 5e-4 N m s/rad more at the
 /// load when turning forwards (2.5 times the base B_eq N^2): "unexplained" with the friction
 /// curve's "direction slopes" shape first, and `--discover` proposes b_fwd max(w_l, 0) within

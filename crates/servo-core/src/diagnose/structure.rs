@@ -732,8 +732,16 @@ pub fn analyse(
             .iter()
             .find(|s| s.kind == "oscillation")
             .map_or(0.0, |s| s.share);
-        if let Some(res) = super::resonance::find(ds, rows, &v.row_idx, &v.r, &v.omega_m)
-            .filter(|res| res.prominence >= res.prominence_needed && res.share >= 2.0 * steady)
+        // Below its noise floor a balance holds nothing material: a peak there is the sensors'
+        // (a quantisation ripple at the speed a log dwells at moves with that speed).
+        let material = ratio >= th.resonance_min_ratio;
+        let found = if material {
+            super::resonance::find(ds, rows, &v.row_idx, &v.r, &v.omega_m)
+        } else {
+            None
+        };
+        if let Some(res) =
+            found.filter(|res| res.prominence >= res.prominence_needed && res.share >= 2.0 * steady)
         {
             sigs.push(Signature {
                 kind: "resonance",

@@ -43,6 +43,10 @@ pub struct Thresholds {
     pub max_resonance_kept_pct: f64,
     /// A resonance refuses candidates only at this prominence over the spectrum's median [x].
     pub resonance_refuse_prominence: f64,
+    /// A resonance is named only in a balance whose residual (RMS) is at least this multiple of
+    /// its noise floor [x]: below it, a spectral peak is the sensors' own (an encoder's
+    /// quantisation ripple, aliased at a speed the log dwells at), no mode a user can act on.
+    pub resonance_min_ratio: f64,
     /// Parameters fitted on the two halves of the data agree within this relative difference [%]
     /// (or within `consistency_std_errors` combined standard errors).
     pub consistency_tol_pct: f64,
@@ -119,6 +123,7 @@ impl Default for Thresholds {
             structure_left_pct: 50.0,
             max_resonance_kept_pct: 50.0,
             resonance_refuse_prominence: super::resonance::REFUSE_PROMINENCE,
+            resonance_min_ratio: 1.0,
             consistency_tol_pct: 35.0,
             consistency_std_errors: 3.0,
             electrical_block_ratio: 6.0,
@@ -178,6 +183,8 @@ impl Thresholds {
                 why: "a candidate that leaves a resonance ringing is a mimic (no effect of the rigid model rings)" },
             Bar { name: "resonance_refuse_prominence", value: t.resonance_refuse_prominence, unit: "x spectrum median", rule: ">=",
                 why: "only a clear resonance refuses candidates" },
+            Bar { name: "resonance_min_ratio", value: t.resonance_min_ratio, unit: "x noise floor", rule: ">=",
+                why: "a resonance is named only in a balance above its noise floor: below it a spectral peak is the sensors' own (an encoder's quantisation ripple aliased at a speed the log dwells at)" },
             Bar { name: "consistency_tol_pct", value: t.consistency_tol_pct, unit: "%", rule: "<=",
                 why: "parameters fitted on the two halves of the data must agree (or within consistency_std_errors standard errors)" },
             Bar { name: "consistency_std_errors", value: t.consistency_std_errors, unit: "standard errors", rule: "<=",
@@ -233,7 +240,7 @@ mod tests {
         let t = Thresholds::default();
         let table = t.table();
         // One row per field: a field added without a row (or a row twice) fails here.
-        assert_eq!(table.len(), 32);
+        assert_eq!(table.len(), 33);
         for (i, a) in table.iter().enumerate() {
             assert!(
                 table[i + 1..].iter().all(|b| b.name != a.name),
