@@ -595,3 +595,171 @@ fn run_plant_simulates_user_effects_and_compare_save_round_trips() {
         assert!((u1 - u0).abs() < 0.15 * u0.abs(), "{u1} vs {u0}");
     }
 }
+
+/// The user effect `effect`'s entry of `diagnose --json`'s `custom_candidates`: whether it is
+/// significant and its check "matches the measured friction curve" (passed, detail).
+fn curve_check(v: &Value, effect: &str) -> (bool, bool, String) {
+    let c = v["custom_candidates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["effect"] == effect)
+        .unwrap_or_else(|| panic!("no user effect {effect}: {}", v["custom_candidates"]));
+    let k = c["checks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|k| k["check"] == "matches the measured friction curve")
+        .unwrap_or_else(|| panic!("{effect} was not judged against the friction curve: {c}"));
+    (
+        c["significant"].as_bool().unwrap(),
+        k["passed"].as_bool().unwrap(),
+        k["detail"].as_str().unwrap().to_string(),
+    )
+}
+
+/// A user's friction is judged against the measured friction curve like the catalogue's: on a
+/// plant with a breakaway (Stribeck tau_s 0.02 N m, omega_s 2 rad/s; servo's simulator, 30 s
+/// open loop on a PRBS voltage and 30 s closed loop on a square), a user breakaway
+/// k sign(w) exp(-(w/2)^2) takes the curve's hump away (passes, significant) while a user drag
+/// c w |w| leaves at least half of it (fails, not significant); on a plant with that drag
+/// (c = 5e-5 N m s^2/rad^2), the user drag passes. A user effect that reads an angle is no
+/// friction and is not judged on the curve.
+#[test]
+fn a_user_friction_is_judged_against_the_measured_friction_curve() {
+    let _cpu = servo_e2e::cpu_heavy();
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let (ok, params, err) = servo(&["params"]);
+    assert!(ok, "servo params failed: {err}");
+    std::fs::write(p("model.toml"), &params).unwrap();
+    std::fs::write(
+        p("drag.toml"),
+        format!(
+            "{params}\n[custom.drag]\nacts_on = \"load_torque\"\nexpr = \"c * omega_l * abs(omega_l)\"\n\
+             [custom.drag.params]\nc = {{ value = 5e-5, unit = \"N m s^2/rad^2\" }}\n"
+        ),
+    )
+    .unwrap();
+    std::fs::write(
+        p("effects.toml"),
+        r#"
+[custom.drag]
+acts_on = "load_torque"
+expr = "c * omega_l * abs(omega_l)"
+[custom.drag.params]
+c = { value = 0.0, unit = "N m s^2/rad^2" }
+
+[custom.hump]
+acts_on = "load_torque"
+expr = "k * sign(omega_l) * exp(-(omega_l / 2)^2)"
+[custom.hump.params]
+k = { value = 0.0, unit = "N m" }
+
+[custom.ripple]
+acts_on = "load_torque"
+expr = "a * sin(theta_l) * sign(omega_l)"
+[custom.ripple.params]
+a = { value = 0.0, unit = "N m" }
+"#,
+    )
+    .unwrap();
+    let (ok, _, err) = servo(&["design", "--wc", "30", "--pm", "60", "-o", &p("gains.toml")]);
+    assert!(ok, "design failed: {err}");
+    let logs = |tag: &str, plant: &[&str], seed: u64| -> Value {
+        let (open, closed) = (
+            p(&format!("{tag}_open.mcap")),
+            p(&format!("{tag}_closed.mcap")),
+        );
+        let (s1, s2) = (seed.to_string(), (seed + 1).to_string());
+        let mut a = vec!["run"];
+        a.extend_from_slice(plant);
+        a.extend_from_slice(&[
+            "--voltage",
+            "prbs:amp=5,bit=0.2",
+            "--duration",
+            "30",
+            "--seed",
+            &s1,
+            "--log",
+            &open,
+        ]);
+        let (ok, _, err) = servo(&a);
+        assert!(ok, "[{tag}] open-loop run failed: {err}");
+        let mut a = vec!["run"];
+        a.extend_from_slice(plant);
+        let gains = p("gains.toml");
+        a.extend_from_slice(&[
+            "--gains",
+            &gains,
+            "--ref",
+            "square:amp=2,period=3",
+            "--duration",
+            "30",
+            "--seed",
+            &s2,
+            "--log",
+            &closed,
+        ]);
+        let (ok, _, err) = servo(&a);
+        assert!(ok, "[{tag}] closed-loop run failed: {err}");
+        let (model, effects) = (p("model.toml"), p("effects.toml"));
+        run_json(&[
+            "diagnose",
+            &open,
+            &closed,
+            "--model",
+            &model,
+            "--effects",
+            &effects,
+            "--json",
+        ])
+    };
+    let model = p("model.toml");
+    let v = logs(
+        "stribeck",
+        &[
+            "--plant",
+            &model,
+            "--plant-effect",
+            "stribeck:tau_s=0.02,omega_s=2",
+        ],
+        11,
+    );
+    let (sig, passed, detail) = curve_check(&v, "hump");
+    eprintln!("[stribeck plant] user hump: significant {sig}, {detail}");
+    assert!(passed && sig, "the user breakaway: {detail}");
+    let (sig, passed, detail) = curve_check(&v, "drag");
+    eprintln!("[stribeck plant] user drag: significant {sig}, {detail}");
+    assert!(
+        !passed && !sig,
+        "the user drag on a breakaway's curve: {detail}"
+    );
+    let left: f64 = detail
+        .split(" % left")
+        .next()
+        .and_then(|s| s.rsplit('(').next())
+        .and_then(|s| s.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no share left in: {detail}"));
+    assert!(left >= 50.0, "{detail}");
+    let ripple = v["custom_candidates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["effect"] == "ripple")
+        .unwrap();
+    assert!(
+        !ripple["checks"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|k| k["check"] == "matches the measured friction curve"),
+        "an angle-dependent user effect was judged as a friction: {ripple}"
+    );
+    let drag = p("drag.toml");
+    let v = logs("drag", &["--plant", &drag], 3);
+    let (sig, passed, detail) = curve_check(&v, "drag");
+    eprintln!("[drag plant] user drag: significant {sig}, {detail}");
+    assert!(passed && sig, "the user drag on a drag's curve: {detail}");
+    assert_eq!(v["status"], "missing", "{}", v["verdict"]);
+}

@@ -302,6 +302,22 @@ impl CustomDef {
     pub fn program(&self) -> &'static [Op] {
         self.program
     }
+    /// Whether the expression reads the signal `name` (one of [`SIGNALS`]).
+    pub fn reads(&self, name: &str) -> bool {
+        SIGNALS
+            .iter()
+            .position(|s| *s == name)
+            .is_some_and(|i| self.program.contains(&Op::Signal(i as u8)))
+    }
+    /// Whether the effect is a friction: a torque (load or motor side) that reads a speed and
+    /// neither an angle nor the time, so that it is a curve of friction against speed (possibly
+    /// growing with the current or the command as well) that the measured friction curve can
+    /// judge.
+    pub fn is_friction(&self) -> bool {
+        self.acts_on.is_torque()
+            && (self.reads("omega_l") || self.reads("omega_m"))
+            && !["theta_l", "theta_m", "t"].iter().any(|s| self.reads(s))
+    }
     /// Evaluates the expression at `signals` ([`SIGNALS`] order) with parameter values `values`.
     #[inline]
     pub fn eval(&self, signals: &[f64; 7], values: &[f64]) -> f64 {

@@ -67,13 +67,31 @@ pub fn judge_user_effects(
     let ds = Dataset::new(records, &model.params, &opts.fit).map_err(UserEffectsError::Prepare)?;
     let base = ds.fit_config(model, &[]).map_err(UserEffectsError::Base)?;
     let base_oe = discover::reference_oe(&ds, &base);
+    // The measured friction curve of the base model's sliding rows, which every user friction
+    // must match as the catalogue's frictions do (a breakaway its hump, a drag its rise).
+    let labels = super::regimes::Labels::new(&ds);
+    let curve = super::friction_curve::measure(
+        &ds,
+        &base.mech,
+        &base.plant,
+        labels.of(base.mech.equation),
+        &opts.thresholds,
+    );
     for a in todo {
-        let j = discover::judge(&ds, model, &base, base_oe, *a, &gates).map_err(|source| {
+        let mut j = discover::judge(&ds, model, &base, base_oe, *a, &gates).map_err(|source| {
             UserEffectsError::Judge {
                 effect: a.name(),
                 source,
             }
         })?;
+        if let Some(c) = curve.as_ref().filter(|_| a.def.is_friction()) {
+            against_curve(&ds, &base, &mut j, c, &opts.thresholds).map_err(|source| {
+                UserEffectsError::Judge {
+                    effect: a.name(),
+                    source,
+                }
+            })?;
+        }
         out.candidates.push(j);
     }
     out.candidates.sort_by(|a, b| {
@@ -106,6 +124,28 @@ pub fn judge_user_effects(
         }
     }
     Ok(out)
+}
+
+/// Judges the user friction `j` against the measured friction curve `curve` of the base model
+/// `base` ([`super::friction_curve::check`], the check of the catalogue's frictions): it must
+/// take away most of what the curve shows beyond the base model. A user friction that passes
+/// the statistical guards while the curve's shape stays (a drag bent into a breakaway) is not
+/// significant.
+fn against_curve(
+    ds: &Dataset,
+    base: &crate::fit::Solved,
+    j: &mut Judged,
+    curve: &super::friction_curve::FrictionCurve,
+    th: &Thresholds,
+) -> Result<(), FitError> {
+    let cand = ds.fit_config(&j.plant, &[])?;
+    let (Some(b), Some(c)) = (base.equation(curve.equation), cand.equation(curve.equation)) else {
+        return Ok(());
+    };
+    let k = super::friction_curve::check(curve, b, c, &base.plant, &cand.plant, th);
+    j.significant &= k.passed;
+    j.checks.push((k.name, k.passed, k.detail));
+    Ok(())
 }
 
 /// What a significant user effect or discovered term removes, in words: its equation's held-out
