@@ -201,3 +201,50 @@ pub fn lag1(r: &[f64]) -> f64 {
         0.0
     }
 }
+
+/// Solves the small symmetric normal equations `a x = b` of `p` unknowns (`a` row-major, p x p,
+/// and `b` overwritten) by Gaussian elimination with partial pivoting, after adding `ridge_rel`
+/// times the largest diagonal element to the diagonal; writes `x` (length p). False when the
+/// matrix is zero or singular, or a coefficient is not finite.
+pub fn solve_normal(a: &mut [f64], b: &mut [f64], x: &mut [f64], p: usize, ridge_rel: f64) -> bool {
+    if a.len() < p * p || b.len() < p || x.len() < p {
+        return false;
+    }
+    let scale = (0..p).map(|u| a[u * p + u]).fold(0.0f64, f64::max);
+    if scale.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+        return false;
+    }
+    for u in 0..p {
+        a[u * p + u] += ridge_rel * scale;
+    }
+    for c in 0..p {
+        let Some(piv) = (c..p).max_by(|&r, &s| a[r * p + c].abs().total_cmp(&a[s * p + c].abs()))
+        else {
+            return false;
+        };
+        if a[piv * p + c].abs() < 1e-300 {
+            return false;
+        }
+        if piv != c {
+            for k in 0..p {
+                a.swap(c * p + k, piv * p + k);
+            }
+            b.swap(c, piv);
+        }
+        for r in c + 1..p {
+            let f = a[r * p + c] / a[c * p + c];
+            for k in c..p {
+                a[r * p + k] -= f * a[c * p + k];
+            }
+            b[r] -= f * b[c];
+        }
+    }
+    for c in (0..p).rev() {
+        let mut s = b[c];
+        for k in c + 1..p {
+            s -= a[c * p + k] * x[k];
+        }
+        x[c] = s / a[c * p + c];
+    }
+    x[..p].iter().all(|v| v.is_finite())
+}

@@ -184,48 +184,21 @@ impl Sums {
     }
     /// Least-squares coefficients of the regressors in `cols` (the others held at zero).
     fn solve(&self, cols: &[usize]) -> Option<[f64; P]> {
-        let m = cols.len();
-        let mut a = [[0.0; P]; P];
+        let m = cols.len().min(P);
+        let mut a = [0.0; P * P];
         let mut b = [0.0; P];
-        for (i, &u) in cols.iter().enumerate() {
-            for (j, &v) in cols.iter().enumerate() {
-                a[i][j] = self.a[u][v];
+        for (i, &u) in cols.iter().take(m).enumerate() {
+            for (j, &v) in cols.iter().take(m).enumerate() {
+                a[i * m + j] = self.a[u][v];
             }
             b[i] = self.b[u];
         }
-        let scale = (0..m).map(|i| a[i][i]).fold(0.0f64, f64::max);
-        if scale.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+        let mut x = [0.0; P];
+        if !math::solve_normal(&mut a, &mut b, &mut x, m, 1e-10) {
             return None;
         }
-        for (i, row) in a.iter_mut().enumerate().take(m) {
-            row[i] += 1e-10 * scale;
-        }
-        for c in 0..m {
-            let piv = (c..m).max_by(|&x, &y| a[x][c].abs().total_cmp(&a[y][c].abs()))?;
-            if a[piv][c].abs() < 1e-300 {
-                return None;
-            }
-            a.swap(c, piv);
-            b.swap(c, piv);
-            let pivot = a[c];
-            for r in c + 1..m {
-                let f = a[r][c] / pivot[c];
-                for (x, p) in a[r][c..m].iter_mut().zip(&pivot[c..m]) {
-                    *x -= f * p;
-                }
-                b[r] -= f * b[c];
-            }
-        }
-        let mut x = [0.0; P];
-        for c in (0..m).rev() {
-            let mut s = b[c];
-            for k in c + 1..m {
-                s -= a[c][k] * x[k];
-            }
-            x[c] = s / a[c][c];
-        }
         let mut out = [0.0; P];
-        for (i, &u) in cols.iter().enumerate() {
+        for (i, &u) in cols.iter().take(m).enumerate() {
             out[u] = x[i];
         }
         out.iter().all(|v| v.is_finite()).then_some(out)

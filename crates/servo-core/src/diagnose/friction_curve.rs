@@ -292,24 +292,8 @@ fn shape(
     // Held-out residual sum of squares and the last column's (coefficient, |t|) after fitting
     // `cols` on the fit rows.
     let judge = |cols: &[&Vec<f64>]| -> Option<(f64, f64, f64)> {
-        let c: Vec<Vec<f64>> = cols
-            .iter()
-            .map(|c| fit.iter().map(|&j| c[j]).collect())
-            .collect();
-        let yy: Vec<f64> = fit.iter().map(|&j| y[j]).collect();
-        let s = lsq::solve(&c, &yy, &alloc::vec![lsq::Sign::Free; c.len()])?;
-        let rss: f64 = hold
-            .iter()
-            .map(|&j| {
-                let e = y[j]
-                    - cols
-                        .iter()
-                        .zip(&s.theta)
-                        .map(|(c, t)| c[j] * t)
-                        .sum::<f64>();
-                e * e
-            })
-            .sum();
+        let s = lsq::solve_on(cols, &y, &fit)?;
+        let rss = lsq::rss_on(cols, &s.theta, &y, &hold);
         let last = s.theta.len().checked_sub(1)?;
         let t = s.theta[last].abs() / (s.std_err[last] * infl).max(1e-300);
         Some((rss, s.theta[last], t))

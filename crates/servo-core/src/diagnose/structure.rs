@@ -158,41 +158,8 @@ fn small_lsq(cols: &[Vec<f64>], r: &[f64], sel: &[usize]) -> Option<Vec<f64>> {
             a[u * p + v] = a[v * p + u];
         }
     }
-    let scale = (0..p).map(|u| a[u * p + u]).fold(0.0f64, f64::max);
-    if scale.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
-        return None;
-    }
-    for u in 0..p {
-        a[u * p + u] += 1e-12 * scale;
-    }
-    for c in 0..p {
-        let piv = (c..p).max_by(|&x, &y| a[x * p + c].abs().total_cmp(&a[y * p + c].abs()))?;
-        if a[piv * p + c].abs() < 1e-300 {
-            return None;
-        }
-        if piv != c {
-            for k in 0..p {
-                a.swap(c * p + k, piv * p + k);
-            }
-            b.swap(c, piv);
-        }
-        for rr in c + 1..p {
-            let f = a[rr * p + c] / a[c * p + c];
-            for k in c..p {
-                a[rr * p + k] -= f * a[c * p + k];
-            }
-            b[rr] -= f * b[c];
-        }
-    }
     let mut x = alloc::vec![0.0; p];
-    for c in (0..p).rev() {
-        let mut s = b[c];
-        for k in c + 1..p {
-            s -= a[c * p + k] * x[k];
-        }
-        x[c] = s / a[c * p + c];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
+    math::solve_normal(&mut a, &mut b, &mut x, p, 1e-12).then_some(x)
 }
 
 /// Rows (subsampled) and the signals at them.

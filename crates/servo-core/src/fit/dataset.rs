@@ -318,7 +318,8 @@ impl Dataset {
     }
 
     /// This data set with the torque balance's pre-sliding rows left out (travel since the last
-    /// reversal below `counts` encoder counts, [`presliding`]), its search windows alike; `None`
+    /// reversal below `counts` encoder counts, [`presliding`]), its search windows alike (none,
+    /// the searches then running on every row, when too few of theirs would be left); `None`
     /// when too few rows would be left.
     pub fn without_presliding(&self, counts: f64) -> Option<Dataset> {
         let flags: Vec<Vec<bool>> = self
@@ -336,10 +337,13 @@ impl Dataset {
             .filter(|&i| keep(i))
             .map(|i| self.coulomb_col[i])
             .collect();
-        let search = match &self.search {
-            Some(s) => Some(alloc::boxed::Box::new(s.without_presliding(counts)?)),
-            None => None,
-        };
+        // Search windows left with too few sliding rows: the searches then run on every
+        // sliding row (slower, never wrong), rather than losing the sliding regime.
+        let search = self
+            .search
+            .as_ref()
+            .and_then(|s| s.without_presliding(counts))
+            .map(alloc::boxed::Box::new);
         Some(Dataset {
             mech_rows,
             coulomb_col,

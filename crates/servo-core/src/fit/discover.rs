@@ -477,25 +477,6 @@ fn library_columns(ds: &Dataset, n: f64, terms: &[Term]) -> Result<Vec<Vec<f64>>
     Ok(cols)
 }
 
-fn lsq_on(cols: &[&Vec<f64>], y: &[f64], rows: &[usize]) -> Option<lsq::LsSolution> {
-    let c: Vec<Vec<f64>> = cols
-        .iter()
-        .map(|c| rows.iter().map(|&i| c[i]).collect())
-        .collect();
-    let yy: Vec<f64> = rows.iter().map(|&i| y[i]).collect();
-    let signs = alloc::vec![lsq::Sign::Free; c.len()];
-    lsq::solve(&c, &yy, &signs)
-}
-
-fn rss_on(cols: &[&Vec<f64>], theta: &[f64], y: &[f64], rows: &[usize]) -> f64 {
-    rows.iter()
-        .map(|&i| {
-            let r = y[i] - cols.iter().zip(theta).map(|(c, t)| c[i] * t).sum::<f64>();
-            r * r
-        })
-        .sum()
-}
-
 /// Searches the library for the smallest set of terms that explains the residual of `base` (the
 /// model's own fit on `ds`), and proposes it as a user-defined load torque named `name`, fitted
 /// and judged on top of `model`.
@@ -560,7 +541,7 @@ pub fn discover(
             .iter()
             .chain(act.iter().map(|&j| &lib[j]))
             .collect();
-        lsq_on(&cols, resid, on)
+        lsq::solve_on(&cols, resid, on)
     };
     let hold_rss = |act: &[usize]| -> f64 {
         match solve(act, &fit_rows) {
@@ -569,7 +550,7 @@ pub fn discover(
                     .iter()
                     .chain(act.iter().map(|&j| &lib[j]))
                     .collect();
-                rss_on(&cols, &s.theta, resid, &hold_rows)
+                lsq::rss_on(&cols, &s.theta, resid, &hold_rows)
             }
             None => f64::INFINITY,
         }

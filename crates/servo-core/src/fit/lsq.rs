@@ -31,6 +31,27 @@ pub struct LsSolution {
     pub p: usize,
 }
 
+/// [`solve`] on the rows `rows` of full-length columns `cols` and `y`, every coefficient free.
+pub fn solve_on(cols: &[&Vec<f64>], y: &[f64], rows: &[usize]) -> Option<LsSolution> {
+    let c: Vec<Vec<f64>> = cols
+        .iter()
+        .map(|c| rows.iter().map(|&i| c[i]).collect())
+        .collect();
+    let yy: Vec<f64> = rows.iter().map(|&i| y[i]).collect();
+    solve(&c, &yy, &alloc::vec![Sign::Free; c.len()])
+}
+
+/// Residual sum of squares of coefficients `theta` on the rows `rows` of full-length columns
+/// `cols` and `y` (e.g. held-out rows of a [`solve_on`] fit).
+pub fn rss_on(cols: &[&Vec<f64>], theta: &[f64], y: &[f64], rows: &[usize]) -> f64 {
+    rows.iter()
+        .map(|&i| {
+            let r = y[i] - cols.iter().zip(theta).map(|(c, t)| c[i] * t).sum::<f64>();
+            r * r
+        })
+        .sum()
+}
+
 /// Solves min |y - X theta|^2 with `x` given column-major as `cols` (each of length `y.len()`).
 ///
 /// Returns `None` when the problem is empty or singular.
