@@ -133,12 +133,10 @@ impl<'a> Tuner<'a> {
         }
     }
 
-    /// The trimmed simulation cost of `p` ([`trimmed`], [`TRIM`]), exact when it is below
-    /// `bound` [rad]; otherwise possibly a lower bound of it that exceeds `bound`, found before
-    /// every segment was simulated ([`trimmed`]): the searches only compare a value
-    /// with the bound they passed.
-    pub(super) fn cost(&self, p: &Plant, bound: f64) -> f64 {
-        trimmed(self.ds, p, &self.segs, self.horizon_s, TRIM, bound).unwrap_or(f64::INFINITY)
+    /// The trimmed simulation cost of `p` ([`trimmed`], [`TRIM`]); `bound` is not used (a
+    /// trimmed sum cannot stop early), kept for the searches' signature.
+    pub(super) fn cost(&self, p: &Plant, _bound: f64) -> f64 {
+        trimmed(self.ds, p, &self.segs, self.horizon_s, TRIM).unwrap_or(f64::INFINITY)
     }
 
     /// How many segments the trimmed cost keeps.
@@ -203,37 +201,16 @@ impl<'a> Tuner<'a> {
 /// held-out cost on short segments 0.06 rad): those few segments carry most of it, and a wrong
 /// model (gap 0.049 rad, breakaway speed 1.3 rad/s for 0.03 and 0.5) scores lower (0.32-0.38).
 /// Without the worst fifth, the true model scores 0.086 rad against 0.148 for the wrong one.
-///
-/// It stops as soon as the cost is known to exceed `bound` [rad] (infinite: never) and then
-/// returns a lower bound of it (above `bound`). The trimmed sum keeps the `keep` smallest of the `n` segment
-/// costs; after `j` segments, the `n - j` still to come could all be zero and push out the
-/// largest ones, so at least the smallest `j - (n - keep)` of those simulated stay in it.
 pub(super) fn trimmed(
     ds: &Dataset,
     p: &Plant,
     segs: &[(usize, usize)],
     horizon_s: f64,
     trim: f64,
-    bound: f64,
 ) -> Option<f64> {
-    let n = segs.len();
-    let keep = kept(n, trim);
-    let limit = bound * bound * keep as f64;
-    let mut lower = 0.0;
-    let (c, done) = oe::segment_costs_while(ds, p, segs, horizon_s, |c| {
-        if !limit.is_finite() || c.len() + keep <= n {
-            return true;
-        }
-        let mut sq: Vec<f64> = c.iter().map(|x| x * x).collect();
-        sq.sort_by(|a, b| a.total_cmp(b));
-        lower = sq.iter().take(c.len() + keep - n).sum::<f64>();
-        lower <= limit
-    })?;
-    if !done {
-        return Some(math::sqrt(lower / keep.max(1) as f64));
-    }
-    let mut c = c;
+    let mut c = oe::segment_costs(ds, p, segs, horizon_s)?;
     c.sort_by(|a, b| a.total_cmp(b));
+    let keep = kept(c.len(), trim);
     let s: f64 = c.iter().take(keep).map(|x| x * x).sum();
     Some(math::sqrt(s / keep.max(1) as f64))
 }

@@ -226,41 +226,29 @@ pub fn segment_costs(
     segs: &[(usize, usize)],
     horizon_s: f64,
 ) -> Option<Vec<f64>> {
-    segment_costs_while(ds, plant, segs, horizon_s, |_| true).map(|(c, _)| c)
-}
-
-/// [`segment_costs`], asking `go_on` after each segment with the costs so far whether to
-/// simulate the next one: `Some((costs, true))` when every segment ran, `Some((costs so far,
-/// false))` when `go_on` stopped it (a robust cost that already knows it exceeds its bound).
-pub fn segment_costs_while(
-    ds: &Dataset,
-    plant: &Plant,
-    segs: &[(usize, usize)],
-    horizon_s: f64,
-    mut go_on: impl FnMut(&[f64]) -> bool,
-) -> Option<(Vec<f64>, bool)> {
     let mut out = Vec::with_capacity(segs.len());
     let (mut sum, mut count) = (0.0, 0usize);
-    let done = simulate_segments(
+    simulate_segments(
         ds,
         plant,
         segs,
         horizon_s,
         crate::sim::MAX_SUBSTEP_S,
-        |ev| match ev {
-            Sample::Error(e) => {
-                sum += e * e;
-                count += 1;
-                true
+        |ev| {
+            match ev {
+                Sample::Error(e) => {
+                    sum += e * e;
+                    count += 1;
+                }
+                Sample::SegmentEnd => {
+                    out.push(math::sqrt(sum / count.max(1) as f64));
+                    (sum, count) = (0.0, 0);
+                }
             }
-            Sample::SegmentEnd => {
-                out.push(math::sqrt(sum / count.max(1) as f64));
-                (sum, count) = (0.0, 0);
-                go_on(&out)
-            }
+            true
         },
     )?;
-    Some((out, done))
+    Some(out)
 }
 
 /// [`prediction_cost_stepped`] on one thread.
