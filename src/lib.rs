@@ -170,3 +170,40 @@ pub fn realtime() -> std::sync::RwLockWriteGuard<'static, ()> {
 pub fn cpu_heavy() -> std::sync::RwLockReadGuard<'static, ()> {
     MACHINE.read().unwrap_or_else(|e| e.into_inner())
 }
+
+/// One minute of simulated logs as the diagnose benchmark takes them: `servo run` of the plant
+/// `plant` (its flags, e.g. `["--plant", "truth.toml"]`) for 30 s open loop on a PRBS voltage of
+/// `amp_v` volts (0.2 s bits, seed `seed`) written to `open`, and for 30 s closed loop with the
+/// gains file `gains` on a square reference (2 rad, period 3 s, seed `seed + 1`) written to
+/// `closed` (MCAP). Panics with servo's message when a run fails.
+pub fn prbs_and_square_logs(
+    plant: &[&str],
+    gains: &str,
+    amp_v: &str,
+    seed: u64,
+    (open, closed): (&str, &str),
+) {
+    let prbs = format!("prbs:amp={amp_v},bit=0.2");
+    let (s_open, s_closed) = (seed.to_string(), (seed + 1).to_string());
+    let runs: [Vec<&str>; 2] = [
+        ["--voltage", &prbs, "--seed", &s_open, "--log", open].to_vec(),
+        [
+            "--gains",
+            gains,
+            "--ref",
+            "square:amp=2,period=3",
+            "--seed",
+            &s_closed,
+            "--log",
+            closed,
+        ]
+        .to_vec(),
+    ];
+    for extra in runs {
+        let mut args = vec!["run", "--duration", "30"];
+        args.extend_from_slice(plant);
+        args.extend_from_slice(&extra);
+        let (ok, _, err) = servo(&args);
+        assert!(ok, "servo {args:?} failed: {err}");
+    }
+}

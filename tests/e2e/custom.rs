@@ -671,38 +671,7 @@ a = { value = 0.0, unit = "N m" }
             p(&format!("{tag}_open.mcap")),
             p(&format!("{tag}_closed.mcap")),
         );
-        let (s1, s2) = (seed.to_string(), (seed + 1).to_string());
-        let mut a = vec!["run"];
-        a.extend_from_slice(plant);
-        a.extend_from_slice(&[
-            "--voltage",
-            "prbs:amp=5,bit=0.2",
-            "--duration",
-            "30",
-            "--seed",
-            &s1,
-            "--log",
-            &open,
-        ]);
-        let (ok, _, err) = servo(&a);
-        assert!(ok, "[{tag}] open-loop run failed: {err}");
-        let mut a = vec!["run"];
-        a.extend_from_slice(plant);
-        let gains = p("gains.toml");
-        a.extend_from_slice(&[
-            "--gains",
-            &gains,
-            "--ref",
-            "square:amp=2,period=3",
-            "--duration",
-            "30",
-            "--seed",
-            &s2,
-            "--log",
-            &closed,
-        ]);
-        let (ok, _, err) = servo(&a);
-        assert!(ok, "[{tag}] closed-loop run failed: {err}");
+        servo_e2e::prbs_and_square_logs(plant, &p("gains.toml"), "5", seed, (&open, &closed));
         let (model, effects) = (p("model.toml"), p("effects.toml"));
         run_json(&[
             "diagnose",

@@ -1007,39 +1007,14 @@ fn a_drag_at_terminal_speed_names_no_resonance() {
             p(&format!("open{seed}.mcap")),
             p(&format!("closed{seed}.mcap")),
         );
-        let prbs = format!("prbs:amp={amp},bit=0.2");
-        let seed_open = seed.to_string();
-        let seed_closed = (seed + 1).to_string();
-        let (ok, _, err) = servo_e2e::servo(&[
-            "run",
-            "--plant",
-            &p("truth.toml"),
-            "--voltage",
-            &prbs,
-            "--duration",
-            "30",
-            "--seed",
-            &seed_open,
-            "--log",
-            &open,
-        ]);
-        assert!(ok, "[{tag}] open-loop run failed: {err}");
-        let (ok, _, err) = servo_e2e::servo(&[
-            "run",
-            "--plant",
-            &p("truth.toml"),
-            "--gains",
+        let truth = p("truth.toml");
+        servo_e2e::prbs_and_square_logs(
+            &["--plant", &truth],
             &p("gains.toml"),
-            "--ref",
-            "square:amp=2,period=3",
-            "--duration",
-            "30",
-            "--seed",
-            &seed_closed,
-            "--log",
-            &closed,
-        ]);
-        assert!(ok, "[{tag}] closed-loop run failed: {err}");
+            amp,
+            seed,
+            (&open, &closed),
+        );
         let (ok, out, err) = servo_e2e::servo(&[
             "diagnose",
             &open,

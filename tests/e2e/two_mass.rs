@@ -228,15 +228,17 @@ fn diagnose_drive(logs: &[Record], tag: &str) -> Diagnosis {
 
 /// Null case: LuGre without a hump (Fs = Fc: Coulomb, viscous and bristle dynamics), 24 s of
 /// logs (12 s open loop, 12 s closed loop), stiff and soft bristles: the viscous + Coulomb model
-/// is complete.
+/// is complete, and no balance names a resonance (the shaft's mode, 150 Hz, is above every band
+/// scanned). Seed 66 with stiff bristles rang at 14 Hz in a torque balance 1.3 times its floor
+/// (a pre-sliding ringing), named a resonance before a complete balance could name none.
 #[test]
 fn two_mass_lugre_without_hump_is_complete() {
     let _cpu = servo_e2e::cpu_heavy();
-    for sigma0 in [10.0, 2.0] {
-        let tag = format!("two-mass null sigma0 {sigma0}");
+    for (sigma0, seed) in [(10.0, 61), (2.0, 61), (10.0, 66)] {
+        let tag = format!("two-mass null sigma0 {sigma0} seed {seed}");
         let mut drive = DriveTrain::null();
         drive.friction.sigma0 = sigma0;
-        let logs = drive.logs(12.0, 12.0, 61);
+        let logs = drive.logs(12.0, 12.0, seed);
         let d = diagnose_drive(&logs, &tag);
         assert_no_resonance(&tag, &d);
         assert_eq!(d.status, Status::Complete, "[{tag}] {}", d.verdict);

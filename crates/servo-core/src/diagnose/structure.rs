@@ -699,8 +699,9 @@ pub fn analyse(
             .iter()
             .find(|s| s.kind == "oscillation")
             .map_or(0.0, |s| s.share);
-        // Below its noise floor a balance holds nothing material: a peak there is the sensors'
-        // (a quantisation ripple at the speed a log dwells at moves with that speed).
+        // A complete balance holds nothing material: a peak there is the sensors' (a
+        // quantisation ripple at the speed a log dwells at moves with that speed) or a
+        // friction's pre-sliding ringing, no structural mode.
         let material = ratio >= th.resonance_min_ratio;
         let found = if material {
             super::resonance::find(ds, rows, &v.row_idx, &v.r, &v.omega_m)

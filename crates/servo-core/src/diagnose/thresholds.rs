@@ -44,8 +44,11 @@ pub struct Thresholds {
     /// A resonance refuses candidates only at this prominence over the spectrum's median [x].
     pub resonance_refuse_prominence: f64,
     /// A resonance is named only in a balance whose residual (RMS) is at least this multiple of
-    /// its noise floor [x]: below it, a spectral peak is the sensors' own (an encoder's
-    /// quantisation ripple, aliased at a speed the log dwells at), no mode a user can act on.
+    /// its noise floor [x], the multiple that makes a balance incomplete
+    /// ([`Thresholds::unexplained_ratio`]): in a complete balance, a spectral peak is nothing
+    /// material (an encoder's quantisation ripple aliased at a speed the log dwells at, at 0.8
+    /// times the floor; a friction's pre-sliding ringing at 1.3 times), no mode a user must act
+    /// on.
     pub resonance_min_ratio: f64,
     /// Parameters fitted on the two halves of the data agree within this relative difference [%]
     /// (or within `consistency_std_errors` combined standard errors).
@@ -123,7 +126,7 @@ impl Default for Thresholds {
             structure_left_pct: 50.0,
             max_resonance_kept_pct: 50.0,
             resonance_refuse_prominence: super::resonance::REFUSE_PROMINENCE,
-            resonance_min_ratio: 1.0,
+            resonance_min_ratio: 2.0,
             consistency_tol_pct: 35.0,
             consistency_std_errors: 3.0,
             electrical_block_ratio: 6.0,
@@ -184,7 +187,7 @@ impl Thresholds {
             Bar { name: "resonance_refuse_prominence", value: t.resonance_refuse_prominence, unit: "x spectrum median", rule: ">=",
                 why: "only a clear resonance refuses candidates" },
             Bar { name: "resonance_min_ratio", value: t.resonance_min_ratio, unit: "x noise floor", rule: ">=",
-                why: "a resonance is named only in a balance above its noise floor: below it a spectral peak is the sensors' own (an encoder's quantisation ripple aliased at a speed the log dwells at)" },
+                why: "a resonance is named only in an incomplete balance (unexplained_ratio): in a complete one a spectral peak is nothing material (an encoder's quantisation ripple aliased at a speed the log dwells at, a friction's pre-sliding ringing)" },
             Bar { name: "consistency_tol_pct", value: t.consistency_tol_pct, unit: "%", rule: "<=",
                 why: "parameters fitted on the two halves of the data must agree (or within consistency_std_errors standard errors)" },
             Bar { name: "consistency_std_errors", value: t.consistency_std_errors, unit: "standard errors", rule: "<=",
