@@ -25,10 +25,10 @@ use cortex_m::peripheral::{syst::SystClkSource, SYST};
 use cortex_m_rt::entry;
 use panic_halt as _;
 use servo_core::board::{BoardConfig, BoardCore, BoardHal, SimDrive};
+use servo_core::effects::{Effect, EffectKind};
 use servo_core::protocol::{fixed_text, FaultCode};
 use servo_core::safety::SafetyLimits;
 use servo_core::sim::SensorConfig;
-use servo_core::effects::{Effect, EffectKind};
 use servo_core::Plant;
 
 /// Core clock of the AN386 image [Hz].
