@@ -731,4 +731,25 @@ a = { value = 0.0, unit = "N m" }
     eprintln!("[drag plant] user drag: significant {sig}, {detail}");
     assert!(passed && sig, "the user drag on a drag's curve: {detail}");
     assert_eq!(v["status"], "missing", "{}", v["verdict"]);
+    // What the verdict says to do next: `servo compare LOG --effects FILE --add drag` fits it
+    // on a log and the fit rises.
+    let (closed, effects, model) = (p("drag_closed.mcap"), p("effects.toml"), p("model.toml"));
+    let w = run_json(&[
+        "compare",
+        &closed,
+        "--model",
+        &model,
+        "--effects",
+        &effects,
+        "--add",
+        "drag",
+        "--json",
+    ]);
+    let fits = ladder_fit(&w);
+    let c = custom_param(&w, "drag", "c");
+    eprintln!(
+        "[drag plant] compare --add drag: fit {fits:?}, c = {c:.4e} N m s^2/rad^2 (true 5e-5)"
+    );
+    assert!((c / 5e-5 - 1.0).abs() < 0.25, "c {c}");
+    assert!(fits[1] > fits[0], "fit {fits:?}");
 }
