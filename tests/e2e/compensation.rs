@@ -529,6 +529,32 @@ fn model_with(dir: &Path, extra: &str) -> String {
     path.to_string_lossy().into_owned()
 }
 
+/// `servo run` of the model file `model` as the plant, with `gains`, on the standard tracking
+/// reference, compensated by `ff` from the same model (and `--log log` when given): the RMS
+/// tracking error it printed [rad] and all it said. Fails the test when the run fails.
+fn tracking_on_model(model: &str, gains: &str, ff: &str, log: Option<&str>) -> (f64, String) {
+    let exp = tracking_experiment();
+    let mut args = vec![
+        "run",
+        "--plant",
+        model,
+        "--gains",
+        gains,
+        "--experiment",
+        p(&exp),
+        "--model",
+        model,
+        "--ff",
+        ff,
+    ];
+    if let Some(l) = log {
+        args.extend_from_slice(&["--log", l]);
+    }
+    let (okk, out, err) = servo(&args);
+    assert!(okk, "--ff {ff}: {err}\n{out}");
+    (printed_rms_rad(&out), format!("{err}{out}"))
+}
+
 /// Item 3 of #29: `servo design --model M --ff all` designs on the model's linear part and
 /// verifies on its whole nonlinear model without and with the compensation. An unbalanced load
 /// (0.03 N m) and a cogging torque: the margins of the linearised loop, the step cases and the
@@ -584,21 +610,7 @@ fn design_on_the_identified_model_is_verified_with_and_without_compensation() {
     let sw = &c["steps_with"]["worst_settling_time_5pct_s"];
     assert!(sw.is_number(), "the compensated steps do not settle: {c}");
     // what `servo run` gives with the designed gains and --ff all on the same model
-    let (run_ok, run_out, run_err) = servo(&[
-        "run",
-        "--plant",
-        &model,
-        "--gains",
-        &gains,
-        "--experiment",
-        p(&tracking_experiment()),
-        "--model",
-        &model,
-        "--ff",
-        "all",
-    ]);
-    assert!(run_ok, "{run_err}");
-    let said = printed_rms_rad(&run_out);
+    let (said, _) = tracking_on_model(&model, &gains, "all", None);
     assert!(
         (said / rms(last) - 1.0).abs() < 0.02,
         "servo run says {said:.4e} rad, the design's ladder {:.4e} rad",
@@ -653,24 +665,7 @@ fn compare_on_two_runs_prints_the_tracking_ladder_per_effect() {
     );
     let gains = d("gains.toml");
     ok(&["design", "--wc", "30", "--pm", "60", "-o", &gains]);
-    let exp = tracking_experiment();
-    let run = |ff: &str, log: &str| -> f64 {
-        printed_rms_rad(&ok(&[
-            "run",
-            "--plant",
-            &model,
-            "--gains",
-            &gains,
-            "--experiment",
-            p(&exp),
-            "--model",
-            &model,
-            "--ff",
-            ff,
-            "--log",
-            log,
-        ]))
-    };
+    let run = |ff: &str, log: &str| -> f64 { tracking_on_model(&model, &gains, ff, Some(log)).0 };
     let (a, b) = (d("friction.mcap"), d("all.mcap"));
     let (ea, eb) = (run("friction", &a), run("all", &b));
     let out = ok(&["compare", &a, &b, "--model", &model]);
@@ -733,24 +728,7 @@ fn user_defined_torques_and_input_maps_are_compensated() {
     );
     let gains = d("gains.toml");
     ok(&["design", "--wc", "30", "--pm", "60", "-o", &gains]);
-    let exp = tracking_experiment();
-    let run = |ff: &str| -> (f64, String) {
-        let (okk, out, err) = servo(&[
-            "run",
-            "--plant",
-            &model,
-            "--gains",
-            &gains,
-            "--experiment",
-            p(&exp),
-            "--model",
-            &model,
-            "--ff",
-            ff,
-        ]);
-        assert!(okk, "--ff {ff}: {err}\n{out}");
-        (printed_rms_rad(&out), format!("{err}{out}"))
-    };
+    let run = |ff: &str| tracking_on_model(&model, &gains, ff, None);
     let (friction, _) = run("friction");
     let (all, said) = run("all");
     eprintln!("user-defined: {friction:.4e} rad with --ff friction, {all:.4e} rad with --ff all");

@@ -790,6 +790,13 @@ fn diagnose_other(m: &Mechanism, tag: &str, seed: u64) -> diagnose::Diagnosis {
     let model = identified(&logs);
     let d = diagnose::diagnose(&logs, &model, &DiagnoseOptions::default()).unwrap();
     print_ranking(tag, &d, 4);
+    print_balances(tag, &d);
+    d
+}
+
+/// Prints every balance of `d`, tagged: its ratio to the noise floor, whether it is above it,
+/// and its signatures (kind, share of the held-out residual [%], description).
+pub(crate) fn print_balances(tag: &str, d: &diagnose::Diagnosis) {
     for b in &d.balances {
         eprintln!(
             "[{tag}] {} ratio {:.2} above={} sigs {:?}",
@@ -802,7 +809,21 @@ fn diagnose_other(m: &Mechanism, tag: &str, seed: u64) -> diagnose::Diagnosis {
                 .collect::<Vec<_>>()
         );
     }
-    d
+}
+
+/// `d` is "unexplained" with no catalogue effect named (`tag` in the messages).
+fn assert_unexplained_nothing_named(tag: &str, d: &diagnose::Diagnosis) {
+    assert!(
+        d.winner().is_none(),
+        "[{tag}] a catalogue effect was named: {}",
+        d.verdict
+    );
+    assert_eq!(
+        d.status,
+        diagnose::Status::Unexplained,
+        "[{tag}] {}",
+        d.verdict
+    );
 }
 
 /// Mechanisms outside the catalogue, in the other simulator: the verdict is "unexplained", no
@@ -811,17 +832,7 @@ fn check_outside(tag: &str, m: &Mechanism, balance: &str, signature: &str, seeds
     for &seed in seeds {
         let d = diagnose_other(m, &format!("{tag} {seed}"), seed);
         assert_no_resonance(&format!("{tag} {seed}"), &d);
-        assert!(
-            d.winner().is_none(),
-            "[{tag} seed {seed}] a catalogue effect was named: {}",
-            d.verdict
-        );
-        assert_eq!(
-            d.status,
-            diagnose::Status::Unexplained,
-            "[{tag} seed {seed}] {}",
-            d.verdict
-        );
+        assert_unexplained_nothing_named(&format!("{tag} seed {seed}"), &d);
         let hit = d.unexplained.iter().any(|b| {
             b.balance.name() == balance && b.signatures.first().is_some_and(|s| s.kind == signature)
         });
@@ -853,30 +864,9 @@ fn check_friction_shape(tag: &str, m: &Mechanism, shape: &str, key: &str, truth:
         }
         eprintln!("[{tag}] shape {:?}", c.shape);
     }
-    for b in &d.balances {
-        eprintln!(
-            "[{tag}] {} ratio {:.2} above={} sigs {:?}",
-            b.balance.name(),
-            b.ratio_to_noise,
-            b.above_noise,
-            b.signatures
-                .iter()
-                .map(|s| (s.kind, (100.0 * s.share).round()))
-                .collect::<Vec<_>>()
-        );
-    }
+    print_balances(&tag, &d);
     assert_no_resonance(&tag, &d);
-    assert!(
-        d.winner().is_none(),
-        "[{tag}] a catalogue effect was named: {}",
-        d.verdict
-    );
-    assert_eq!(
-        d.status,
-        diagnose::Status::Unexplained,
-        "[{tag}] {}",
-        d.verdict
-    );
+    assert_unexplained_nothing_named(&tag, &d);
     let first = d
         .unexplained
         .iter()
@@ -1559,13 +1549,7 @@ fn check_compliant_shaft(k: f64, frac: f64, n: f64, j: f64, seed: u64) {
     let f_hz = ((k / (n * n)) * (1.0 / (j * (1.0 - frac)) + 1.0 / (j * frac))).sqrt()
         / std::f64::consts::TAU;
     let d = diagnose_other(&shaft, &format!("compliant shaft {tag}"), seed);
-    assert!(d.winner().is_none(), "[{tag}] named: {}", d.verdict);
-    assert_eq!(
-        d.status,
-        diagnose::Status::Unexplained,
-        "[{tag}] {}",
-        d.verdict
-    );
+    assert_unexplained_nothing_named(&tag, &d);
     let torque = d
         .unexplained
         .iter()

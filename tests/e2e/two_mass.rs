@@ -20,7 +20,9 @@
 //! stiffness sigma0 below breakaway, a micro-displacement of Fs / sigma0) and the lag of the
 //! friction behind the speed.
 
-use crate::diagnose::{assert_no_resonance, identified, pid_log, print_ranking, record, DT};
+use crate::diagnose::{
+    assert_no_resonance, identified, pid_log, print_balances, print_ranking, record, DT,
+};
 use servo_core::diagnose::{self, DiagnoseOptions, Diagnosis, Status};
 use servo_core::effects::EffectKind;
 use servo_core::record::Record;
@@ -205,18 +207,7 @@ fn diagnose_drive(logs: &[Record], tag: &str) -> Diagnosis {
     let model = identified(logs);
     let d = diagnose::diagnose(logs, &model, &DiagnoseOptions::default()).unwrap();
     print_ranking(tag, &d, 4);
-    for b in &d.balances {
-        eprintln!(
-            "[{tag}] {} ratio {:.2} above={} sigs {:?}",
-            b.balance.name(),
-            b.ratio_to_noise,
-            b.above_noise,
-            b.signatures
-                .iter()
-                .map(|s| (s.kind, (100.0 * s.share).round(), s.description.clone()))
-                .collect::<Vec<_>>()
-        );
-    }
+    print_balances(tag, &d);
     eprintln!(
         "[{tag}] {:?} in {:.1} s: {}",
         d.status,

@@ -6,6 +6,7 @@
 use super::base::Base;
 use super::change::Change;
 use super::judge::{FLOOR_CHECK, STRUCTURED_CHECK};
+use super::presliding::Extent;
 use super::structure::BalanceReport;
 use super::survey::Survey;
 use super::{evidence, neighbours, regimes, timing, BaseSummary, Candidate, DiagnoseOptions};
@@ -15,6 +16,27 @@ use crate::fit::Dataset;
 use crate::math;
 use crate::plant::Plant;
 use alloc::vec::Vec;
+
+/// What the verdict of `d` adds on the regimes the diagnosis judged apart: `outside`, why no
+/// set of catalogue effects was searched (a friction shape outside the catalogue), when the
+/// status is "unexplained"; `presliding`, the pre-sliding rows left out (the candidates were
+/// judged on the sliding rows), kept in `d.presliding`.
+pub(super) fn regimes(d: &mut Diagnosis, outside: Option<&str>, presliding: Option<Extent>) {
+    if let (Some(why), Status::Unexplained) = (outside, d.status) {
+        d.verdict.push_str(why);
+    }
+    if let Some(ext) = presliding {
+        d.verdict.push_str(&alloc::format!(
+            " Judged on the sliding rows: the {} torque-balance rows within {:.0} encoder counts of travel since a reversal of the motion carry {:.1} times the residual of the sliding rows ({:.2e} {} RMS), a pre-sliding regime of their own (a dynamic friction's bristles winding up like a spring, outside the catalogue), and were left out.",
+            ext.rows,
+            ext.counts,
+            ext.ratio,
+            ext.rms,
+            d.base.equations.first().map_or("", |e| e.0.unit())
+        ));
+        d.presliding = Some(ext);
+    }
+}
 
 /// Concludes the diagnosis of `model` on `ds` from the stages before.
 #[allow(clippy::too_many_arguments)]

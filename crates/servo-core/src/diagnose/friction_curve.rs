@@ -637,9 +637,7 @@ pub fn outside_catalogue(
 #[cfg(test)]
 mod tests {
     use crate::diagnose::{diagnose, DiagnoseOptions};
-    use crate::fit::tests::{open_loop_log, truth};
-    use crate::params::PlantParams;
-    use crate::plant::Plant;
+    use crate::fit::tests::{open_loop_log, truth, without_coulomb};
 
     /// The curve measures the plant's friction whatever the model lacks: Coulomb 0.01 N m plus
     /// B_eq N^2 w at the load, within its intervals (plus 10 %), both directions; on the complete
@@ -648,12 +646,7 @@ mod tests {
     fn the_curve_is_the_plants_friction_whatever_the_model() {
         let truth = truth();
         let logs = [open_loop_log(&truth, 12.0, 5, true)];
-        let lacking = Plant::from_params(PlantParams {
-            j_eq: Some(7.0e-7),
-            b_eq: Some(1.0e-6),
-            ..PlantParams::TABLE2
-        })
-        .unwrap();
+        let lacking = without_coulomb();
         let n = truth.params.n;
         for (model, complete) in [(truth, true), (lacking, false)] {
             let d = diagnose(&logs, &model, &DiagnoseOptions::default()).unwrap();

@@ -283,20 +283,7 @@ pub fn diagnose_dataset(
         ds, model, base, survey, &labels, &kinds, ranking, changes, opts,
     );
     d.friction_curve = curve;
-    if let (Some(why), Status::Unexplained) = (&outside, d.status) {
-        d.verdict.push_str(why);
-    }
-    if let Some((_, ext)) = sliding {
-        d.verdict.push_str(&alloc::format!(
-            " Judged on the sliding rows: the {} torque-balance rows within {:.0} encoder counts of travel since a reversal of the motion carry {:.1} times the residual of the sliding rows ({:.2e} {} RMS), a pre-sliding regime of their own (a dynamic friction's bristles winding up like a spring, outside the catalogue), and were left out.",
-            ext.rows,
-            ext.counts,
-            ext.ratio,
-            ext.rms,
-            d.base.equations.first().map_or("", |e| e.0.unit())
-        ));
-        d.presliding = Some(ext);
-    }
+    conclude::regimes(&mut d, outside.as_deref(), sliding.map(|(_, ext)| ext));
     Ok(d)
 }
 
@@ -380,8 +367,7 @@ pub fn diagnose_loop(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::tests::{open_loop_log, truth};
-    use crate::params::PlantParams;
+    use crate::fit::tests::{open_loop_log, truth, without_coulomb};
 
     fn print_ranking(d: &Diagnosis) {
         for c in &d.ranking {
@@ -406,12 +392,7 @@ mod tests {
         let truth = truth();
         let mut log = open_loop_log(&truth, 12.0, 5, true);
         log.u_v = None;
-        let lacking = Plant::from_params(PlantParams {
-            j_eq: Some(7.0e-7),
-            b_eq: Some(1.0e-6),
-            ..PlantParams::TABLE2
-        })
-        .unwrap();
+        let lacking = without_coulomb();
         let d = diagnose(&[log.clone()], &lacking, &DiagnoseOptions::default()).unwrap();
         print_ranking(&d);
         let w = d.winner().expect("a significant candidate");
@@ -442,12 +423,7 @@ mod tests {
         let truth = truth();
         let logs = [open_loop_log(&truth, 12.0, 5, true)];
         // Model without Coulomb friction.
-        let lacking = Plant::from_params(PlantParams {
-            j_eq: Some(7.0e-7),
-            b_eq: Some(1.0e-6),
-            ..PlantParams::TABLE2
-        })
-        .unwrap();
+        let lacking = without_coulomb();
         let d = diagnose(&logs, &lacking, &DiagnoseOptions::default()).unwrap();
         print_ranking(&d);
         let w = d.winner().expect("a significant candidate");

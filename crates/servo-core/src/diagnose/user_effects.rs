@@ -68,7 +68,9 @@ pub fn judge_user_effects(
     let base = ds.fit_config(model, &[]).map_err(UserEffectsError::Base)?;
     let base_oe = discover::reference_oe(&ds, &base);
     // The measured friction curve of the base model's sliding rows, which every user friction
-    // must match as the catalogue's frictions do (a breakaway its hump, a drag its rise).
+    // must match as the catalogue's frictions do (a breakaway its hump, a drag its rise). It is
+    // measured again on this fit (a few milliseconds): the diagnosis's curve may come from its
+    // sliding rows alone, and its bins index that data set's rows.
     let labels = super::regimes::Labels::new(&ds);
     let curve = super::friction_curve::measure(
         &ds,

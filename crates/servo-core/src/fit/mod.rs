@@ -1135,6 +1135,17 @@ pub(crate) mod tests {
         Plant::from_params(params).unwrap()
     }
 
+    /// [`truth`] without its Coulomb friction (tau_sf unset): the model the tests' diagnoses
+    /// find lacking.
+    pub(crate) fn without_coulomb() -> Plant {
+        Plant::from_params(PlantParams {
+            j_eq: Some(7.0e-7),
+            b_eq: Some(1.0e-6),
+            ..PlantParams::TABLE2
+        })
+        .expect("the Table 2 plant without Coulomb friction")
+    }
+
     #[test]
     fn refits_the_base_parameters_with_and_without_current() {
         let truth = truth();
