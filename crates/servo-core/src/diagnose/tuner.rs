@@ -25,13 +25,6 @@ pub(super) const STARTS: usize = 3;
 /// refinement uses 90; each evaluation here is one of several hundred).
 pub(super) const MAX_SEGMENTS: usize = 45;
 
-/// Largest simulation sub-step of the tuning cost [s]: the search's ([`oe::SEARCH_SUBSTEP_S`],
-/// 2.5 times the full-fidelity one and as much faster). The joint model is tuned on it and
-/// judged on the full-fidelity simulation (the held-out costs of the drop-one tests and of the
-/// guard): a joint search that ends with nothing, on one minute of the real Padova friction
-/// logs, took 28 s at 100 us and 17 s here, with the same verdict.
-pub(super) const TUNE_SUBSTEP_S: f64 = oe::SEARCH_SUBSTEP_S;
-
 /// A parameter tuned on the simulation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) enum Target {
@@ -215,7 +208,7 @@ pub(super) fn trimmed(
     horizon_s: f64,
     trim: f64,
 ) -> Option<f64> {
-    let mut c = oe::segment_costs_stepped(ds, p, segs, horizon_s, TUNE_SUBSTEP_S)?;
+    let mut c = oe::segment_costs(ds, p, segs, horizon_s)?;
     c.sort_by(|a, b| a.total_cmp(b));
     let keep = kept(c.len(), trim);
     let s: f64 = c.iter().take(keep).map(|x| x * x).sum();

@@ -226,18 +226,7 @@ pub fn segment_costs(
     segs: &[(usize, usize)],
     horizon_s: f64,
 ) -> Option<Vec<f64>> {
-    segment_costs_stepped(ds, plant, segs, horizon_s, crate::sim::MAX_SUBSTEP_S)
-}
-
-/// As [`segment_costs`] with the simulator's largest internal sub-step `max_substep_s` [s] (see
-/// [`crate::sim::PlantSim::with_max_substep`]).
-pub fn segment_costs_stepped(
-    ds: &Dataset,
-    plant: &Plant,
-    segs: &[(usize, usize)],
-    horizon_s: f64,
-    max_substep_s: f64,
-) -> Option<Vec<f64>> {
+    let max_substep_s = crate::sim::MAX_SUBSTEP_S;
     // Independent simulations: in two halves on two threads when a core is idle (the serial
     // refinements of the joint search), the same values either way.
     if segs.len() >= 2 && simulated_samples(ds, segs, horizon_s) >= SPLIT_MIN_SAMPLES {
