@@ -48,7 +48,12 @@ pub(super) fn run(
         || "backward elimination".into(),
         || backward::search(&cx, &survey.fits, ranking),
     )
-    .or_else(|| joint::best_pair(&cx, &survey.fits, ranking).map(Vec::from));
+    .or_else(|| {
+        timing::timed(
+            || "pairs".into(),
+            || joint::best_pair(&cx, &survey.fits, ranking).map(Vec::from),
+        )
+    });
     if let Some(set) = found {
         ranking.retain(|c| !set.iter().any(|m| m.effect == c.effect));
         ranking.splice(0..0, set);
