@@ -269,6 +269,50 @@ fn two_mass_lugre_stribeck_hump_is_named() {
     }
 }
 
+/// The hump with soft bristles at seeds 67 and 68 (not tuned on: found at stop 40 ending
+/// "unexplained" without a word on the hump): on the sliding rows a Stribeck fits the measured
+/// curve within 25 % of the true breakaway level, but the static stick-slip simulation with it
+/// predicts the reversals worse than without (the bristles creep through the pre-sliding travel).
+/// The verdict stays "unexplained" and says so, with the fitted steady-state curve; the joint
+/// search is not run (no catalogue effect simulates bristles).
+#[test]
+fn two_mass_lugre_soft_hump_the_simulation_cannot_carry_is_reported() {
+    let _cpu = servo_e2e::cpu_heavy();
+    for seed in [67, 68] {
+        let tag = format!("two-mass soft hump seed {seed}");
+        let mut drive = DriveTrain::null();
+        drive.friction.fs = 0.02;
+        drive.friction.sigma0 = 2.0;
+        let logs = drive.logs(12.0, 12.0, seed);
+        let d = diagnose_drive(&logs, &tag);
+        assert_eq!(d.status, Status::Unexplained, "[{tag}] {}", d.verdict);
+        let lead = d
+            .sliding_fit
+            .as_ref()
+            .unwrap_or_else(|| panic!("[{tag}] no sliding-rows lead: {}", d.verdict));
+        assert_eq!(lead.candidate.effect, EffectKind::Stribeck, "[{tag}]");
+        let tau_s = lead
+            .candidate
+            .params
+            .iter()
+            .find(|p| p.key == "tau_s")
+            .unwrap()
+            .value;
+        eprintln!("[{tag}] tau_s {tau_s:.4} N m (true {})", drive.friction.fs);
+        assert!(
+            (tau_s / drive.friction.fs - 1.0).abs() < 0.25,
+            "[{tag}] tau_s {tau_s}"
+        );
+        assert!(
+            d.verdict.contains("fits the measured friction curve")
+                && d.verdict
+                    .contains("simulating it makes the held-out prediction"),
+            "[{tag}] {}",
+            d.verdict
+        );
+    }
+}
+
 /// Null case on 10 minutes of logs (5 min open loop, 5 min closed loop, one seed): complete;
 /// the plant does not change, so no change of the base parameters is reported.
 #[test]

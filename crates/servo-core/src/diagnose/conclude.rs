@@ -131,6 +131,7 @@ pub(super) fn run(
         friction_curve: None,
         changes,
         presliding: None,
+        sliding_fit: None,
     }
 }
 

@@ -93,6 +93,9 @@ pub struct Diagnosis {
     /// The pre-sliding regime left out of the torque balance, when the candidates were judged
     /// on the sliding rows ([`super::presliding`]).
     pub presliding: Option<super::presliding::Extent>,
+    /// A friction the sliding rows show that only the held-out simulation refuses (status
+    /// `Unexplained`: a dynamic friction, [`super::sliding_lead`]).
+    pub sliding_fit: Option<super::sliding_lead::SlidingFit>,
 }
 
 impl Diagnosis {

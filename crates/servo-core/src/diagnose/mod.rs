@@ -49,6 +49,7 @@ mod rank;
 pub mod regimes;
 pub mod resonance;
 mod search;
+pub mod sliding_lead;
 pub mod structure;
 mod survey;
 pub mod thresholds;
@@ -217,6 +218,9 @@ pub fn diagnose_dataset(
     // else), and not where a gear play shows: its crossings of the gap live at the same
     // reversals, and the joint search sizes it with what hides it.
     let mut sliding: Option<(Dataset, presliding::Extent)> = None;
+    // A friction the sliding rows show that only the simulation refuses (the pre-sliding
+    // regime's dynamics): reported, not named ([`sliding_lead`]).
+    let mut lead: Option<sliding_lead::SlidingFit> = None;
     let passed = |s: &Screened| s.ranking.first().is_some_and(|c| c.significant);
     let friction_passed = |s: &Screened| {
         s.ranking.first().is_some_and(|c| {
@@ -244,6 +248,8 @@ pub fn diagnose_dataset(
                 if friction_passed(&s2) {
                     s = s2;
                     sliding = Some((ds2, ext));
+                } else {
+                    lead = sliding_lead::find(&ds2, &s2, ext, th);
                 }
             }
         }
@@ -255,7 +261,9 @@ pub fn diagnose_dataset(
     let searched_first = !passed(&s);
     let outside = friction_curve::outside_catalogue(s.curve.as_ref(), &s.survey.balances, th)
         .filter(|_| searched_first);
-    if changes.is_empty() {
+    // A dynamic friction carries the residual (the lead above): what is missing is not a set of
+    // catalogue effects, whose simulation has no bristles either.
+    if changes.is_empty() && lead.is_none() {
         search::run(
             ds,
             model,
@@ -284,6 +292,10 @@ pub fn diagnose_dataset(
     );
     d.friction_curve = curve;
     conclude::regimes(&mut d, outside.as_deref(), sliding.map(|(_, ext)| ext));
+    if let (Some(l), Status::Unexplained) = (lead, d.status) {
+        d.verdict.push_str(&l.sentence());
+        d.sliding_fit = Some(l);
+    }
     Ok(d)
 }
 
