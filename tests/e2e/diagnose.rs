@@ -1648,7 +1648,7 @@ fn check_compliant_shaft(k: f64, frac: f64, n: f64, j: f64, seed: u64) {
 }
 
 /// Writes `r` as a servo CSV: time, u and the load angle, and the current when it has one.
-fn write_csv(path: &std::path::Path, r: &Record) {
+pub(crate) fn write_csv(path: &std::path::Path, r: &Record) {
     let i = r.i_a_a.as_ref();
     let mut text = String::from(if i.is_some() {
         "time_s,u_V,theta_l_rad,i_a_A\n"

@@ -310,6 +310,35 @@ fn two_mass_lugre_soft_hump_the_simulation_cannot_carry_is_reported() {
             "[{tag}] {}",
             d.verdict
         );
+        // Through the command, on CSV logs and the handout's nominal model: the same lead
+        // under `sliding_fit` in --json (validated against docs/schemas/diagnose.json).
+        let dir = tempfile::tempdir().unwrap();
+        let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+        let (ok, params, err) = servo_e2e::servo(&["params"]);
+        assert!(ok, "{err}");
+        std::fs::write(p("model.toml"), params).unwrap();
+        for (k, r) in logs.iter().enumerate() {
+            crate::diagnose::write_csv(std::path::Path::new(&p(&format!("log{k}.csv"))), r);
+        }
+        let (ok, out, err) = servo_e2e::servo(&[
+            "diagnose",
+            &p("log0.csv"),
+            &p("log1.csv"),
+            "--model",
+            &p("model.toml"),
+            "--json",
+        ]);
+        assert!(ok, "[{tag}] servo diagnose failed: {err}");
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        assert_eq!(v["status"], "unexplained", "[{tag}] {}", v["verdict"]);
+        let s = &v["sliding_fit"];
+        assert_eq!(s["effect"], "stribeck", "[{tag}] {}", v["verdict"]);
+        let tau_s = s["params"]["tau_s"]["value"].as_f64().unwrap();
+        assert!(
+            (tau_s / drive.friction.fs - 1.0).abs() < 0.25,
+            "[{tag}] servo diagnose: tau_s {tau_s}"
+        );
+        assert!(s["held_out_simulation_drop_pct"].as_f64().unwrap() < 1.0);
     }
 }
 

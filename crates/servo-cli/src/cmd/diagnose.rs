@@ -223,6 +223,7 @@ impl Diagnose {
                     "rows": e.rows,
                     "rms": f(e.rms),
                 })),
+                "sliding_fit": last.sliding_fit.as_ref().map(sliding_fit_json),
                 "base": base_json(first),
                 "log_parts": crate::log_part::json(&parts),
             });

@@ -265,3 +265,26 @@ pub(super) fn linear_json(
         }
     }
 }
+
+/// A friction the sliding rows show that only the simulation refuses (`sliding_fit`).
+pub(super) fn sliding_fit_json(s: &servo_core::diagnose::sliding_lead::SlidingFit) -> Value {
+    let c = &s.candidate;
+    let mut params = serde_json::Map::new();
+    for p in c.params.iter().filter(|p| p.effect == Some(c.effect)) {
+        params.insert(
+            p.key.to_string(),
+            json!({ "value": f(p.value), "unit": p.unit }),
+        );
+    }
+    json!({
+        "effect": c.effect.name(),
+        "params": params,
+        "held_out_residual_drop_pct": f(c.error_reduction_pct),
+        "held_out_simulation_drop_pct": c.oe_reduction_pct.map(f),
+        "bic_gain": f(c.bic_gain),
+        "presliding_counts": f(s.extent.counts),
+        "presliding_ratio_to_sliding": f(s.extent.ratio),
+        "presliding_rows": s.extent.rows,
+        "description": s.sentence().trim(),
+    })
+}
