@@ -2,11 +2,11 @@
 //!
 //! When the torque balance holds a pre-sliding regime ([`super::presliding`]) and nothing passes,
 //! the candidates are judged again on the sliding rows. A friction of the catalogue can fit the
-//! measured friction curve there (a Stribeck hump: its balance, information criterion, physical
+//! measured friction curve there (a breakaway hump: its balance, information criterion, physical
 //! constraints and the curve all agree) and still fail the held-out simulation: the simulation
 //! runs through every reversal, where a dynamic friction's bristles creep through the
 //! pre-sliding travel while the catalogue's static friction sticks until breakaway (on the
-//! two-mass LuGre test family with soft bristles, a Stribeck fitted within 6 % of the true
+//! two-mass LuGre test family with soft bristles, a breakaway fitted within 6 % of the true
 //! breakaway level made the held-out simulation 58-66 % worse). The diagnosis does not name it
 //! (adding it would predict the motion worse), and does not call it unexplained without a word:
 //! it reports the shape, its parameters and why it cannot be added, a lead on a dynamic friction.
