@@ -31,8 +31,9 @@
 //!    the smallest held-out simulation contribution among those that fail is removed, the
 //!    others are re-tuned, and the test is repeated, until every survivor passes (or none is
 //!    left). When several fail, they are first removed together if together they are
-//!    immaterial too ([`drop_group`], a group test: one round instead of one per member). A lone survivor (no effect named earlier either) is left to the single
-//!    candidates' verdict: it hid nothing.
+//!    immaterial too ([`drop_group`], a group test: one round instead of one per member). A
+//!    lone survivor (no effect named earlier either) is left to the single candidates'
+//!    verdict: it hid nothing.
 //! 3. **Guard.** The survivors together must cut the held-out simulation error materially
 //!    against the model holding none of them.
 //!
@@ -69,7 +70,7 @@ pub(super) fn search(
     // simulation (an input delay whose motion another missing effect spoils): the information
     // criterion, the held-out residual drop and the noise floor of their balance pass.
     let th = &cx.opts.thresholds;
-    let min_red = 100.0 * (1.0 - math::sqrt(1.0 - frac(th.min_eq_drop_pct)));
+    let min_red = th.min_eq_rms_drop_pct();
     join_from(
         ranking,
         fits,
@@ -128,20 +129,14 @@ pub(super) fn search(
         alloc::format!(
             "named {named:?} fresh {fresh:?}; start {} cost {:.4e}",
             show(&start.plant, &all),
-            tuner.cost(&start.plant, f64::INFINITY)
+            tuner.cost(&start.plant)
         )
     });
     let (full, c_full) = super::timing::timed(
         || "backward: joint refinement".into(),
         || {
             par_map(&gridded, cx.opts.parallel, |g| {
-                trace(|| {
-                    alloc::format!(
-                        "grid start {} cost {:.4e}",
-                        show(g, &all),
-                        tuner.cost(g, f64::INFINITY)
-                    )
-                });
+                trace(|| alloc::format!("grid start {} cost {:.4e}", show(g, &all), tuner.cost(g)));
                 tuner.refine(g, &targets(g, &all), &[1.0, 0.5])
             })
             .into_iter()
@@ -172,7 +167,10 @@ pub(super) fn search(
             return None;
         }
         if named.is_empty() && survivors.len() == 1 {
-            // Whether it passes or not, a lone survivor is left to the single candidates (below).
+            // A lone survivor hid nothing and was hidden by nothing: whether it passes given
+            // nothing or not, it is judged as a single candidate (a delay re-tuned on the motion
+            // soaked up a compliant shaft's lag there, passing where the single candidate had
+            // failed).
             trace(|| {
                 alloc::format!("a lone survivor {survivors:?}: left to the single candidates")
             });
@@ -223,17 +221,6 @@ pub(super) fn search(
                 }
             }
             None => {
-                // A lone survivor hid nothing and was hidden by nothing: it is judged as a
-                // single candidate (a delay re-tuned on the motion soaked up a compliant
-                // shaft's lag there, passing where the single candidate had failed).
-                if named.len() + survivors.len() < 2 {
-                    trace(|| {
-                        alloc::format!(
-                            "a lone survivor {survivors:?}: left to the single candidates"
-                        )
-                    });
-                    return None;
-                }
                 let total = 1.0
                     - oe::prediction_cost(ds, &full, Part::Holdout)?
                         / cx.reference.oe_holdout?.max(1e-300);
@@ -448,7 +435,7 @@ fn grid_stage(
             axes.push((i, p.key));
         }
     }
-    let c_start = tuner.cost(&start.plant, f64::INFINITY);
+    let c_start = tuner.cost(&start.plant);
     if axes.len() < 2 {
         return alloc::vec![start.plant];
     }
@@ -511,7 +498,7 @@ fn grid_stage(
         // The least-squares amplitude of a member beside a play still mis-sized is no guide
         // (a breakaway fitted as a narrow spike at low speed): the amplitudes the motion is
         // sensitive to are searched at each point, from a quarter to one and a half times it.
-        let mut c = tuner.cost(&p, c_start);
+        let mut c = tuner.cost(&p);
         for &t in &amplitudes {
             let Some(x0) = get(&p, t).filter(|x| *x > 0.0) else {
                 continue;
@@ -521,9 +508,7 @@ fn grid_stage(
             let from = p;
             if let Some((l, cl)) = search::grid_then_golden_bounded(
                 &grid,
-                |l, bound| {
-                    with(&from, t, math::exp(l)).map_or(f64::INFINITY, |q| tuner.cost(&q, bound))
-                },
+                |l, _| with(&from, t, math::exp(l)).map_or(f64::INFINITY, |q| tuner.cost(&q)),
                 3,
             ) {
                 if cl < c {
@@ -575,7 +560,7 @@ fn drop_one(
         plant: reduced,
     };
     trace(|| {
-        alloc::format!("drop {m}: reduced {} | costs fit short {:?} vs {:?}, hold short {:?} vs {:?}, long fit {:.4e} vs {:.4e}", show(&reduced, &others), oe::prediction_cost(ds, &reduced, Part::Fit), oe::prediction_cost(ds, full, Part::Fit), oe::prediction_cost(ds, &reduced, Part::Holdout), oe::prediction_cost(ds, full, Part::Holdout), tuner.cost(&reduced, f64::INFINITY), tuner.cost(full, f64::INFINITY))
+        alloc::format!("drop {m}: reduced {} | costs fit short {:?} vs {:?}, hold short {:?} vs {:?}, long fit {:.4e} vs {:.4e}", show(&reduced, &others), oe::prediction_cost(ds, &reduced, Part::Fit), oe::prediction_cost(ds, full, Part::Fit), oe::prediction_cost(ds, &reduced, Part::Holdout), oe::prediction_cost(ds, full, Part::Holdout), tuner.cost(&reduced), tuner.cost(full))
     });
     let o_solved = solved_at(ds, &reduced)?;
     let j_solved = solved_at(ds, full)?;
@@ -623,10 +608,7 @@ fn on_tuned_cost(
             .min_simulation_oe_drop_pct
             .max(opts.thresholds.min_oe_drop_pct)
     });
-    let (x, y) = (
-        tuner.cost(reduced, f64::INFINITY),
-        tuner.cost(full, f64::INFINITY),
-    );
+    let (x, y) = (tuner.cost(reduced), tuner.cost(full));
     if !(held_out && x.is_finite() && y > 0.0) {
         return;
     }

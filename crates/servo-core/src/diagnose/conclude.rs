@@ -7,6 +7,7 @@ use super::base::Base;
 use super::change::Change;
 use super::judge::{FLOOR_CHECK, STRUCTURED_CHECK};
 use super::presliding::Extent;
+use super::sliding_lead::SlidingFit;
 use super::structure::BalanceReport;
 use super::survey::Survey;
 use super::{evidence, neighbours, regimes, timing, BaseSummary, Candidate, DiagnoseOptions};
@@ -20,8 +21,15 @@ use alloc::vec::Vec;
 /// What the verdict of `d` adds on the regimes the diagnosis judged apart: `outside`, why no
 /// set of catalogue effects was searched (a friction shape outside the catalogue), when the
 /// status is "unexplained"; `presliding`, the pre-sliding rows left out (the candidates were
-/// judged on the sliding rows), kept in `d.presliding`.
-pub(super) fn regimes(d: &mut Diagnosis, outside: Option<&str>, presliding: Option<Extent>) {
+/// judged on the sliding rows), kept in `d.presliding`; `lead`, a friction the sliding rows
+/// show that only the simulation refuses, when the status is "unexplained", kept in
+/// `d.sliding_fit`.
+pub(super) fn regimes(
+    d: &mut Diagnosis,
+    outside: Option<&str>,
+    presliding: Option<Extent>,
+    lead: Option<SlidingFit>,
+) {
     if let (Some(why), Status::Unexplained) = (outside, d.status) {
         d.verdict.push_str(why);
     }
@@ -35,6 +43,10 @@ pub(super) fn regimes(d: &mut Diagnosis, outside: Option<&str>, presliding: Opti
             d.base.equations.first().map_or("", |e| e.0.unit())
         ));
         d.presliding = Some(ext);
+    }
+    if let (Some(l), Status::Unexplained) = (lead, d.status) {
+        d.verdict.push_str(&l.sentence());
+        d.sliding_fit = Some(l);
     }
 }
 

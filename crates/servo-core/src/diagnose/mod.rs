@@ -291,11 +291,12 @@ pub fn diagnose_dataset(
         ds, model, base, survey, &labels, &kinds, ranking, changes, opts,
     );
     d.friction_curve = curve;
-    conclude::regimes(&mut d, outside.as_deref(), sliding.map(|(_, ext)| ext));
-    if let (Some(l), Status::Unexplained) = (lead, d.status) {
-        d.verdict.push_str(&l.sentence());
-        d.sliding_fit = Some(l);
-    }
+    conclude::regimes(
+        &mut d,
+        outside.as_deref(),
+        sliding.map(|(_, ext)| ext),
+        lead,
+    );
     Ok(d)
 }
 

@@ -12,13 +12,11 @@
 //! it reports the shape, its parameters and why it cannot be added, a lead on a dynamic friction.
 
 use super::presliding::Extent;
-use super::thresholds::frac;
-use super::thresholds::Thresholds;
+use super::thresholds::{frac, Thresholds};
 use super::{checks, friction_curve, Screened};
 use crate::effects::SimRole;
 use crate::fit::model::Config;
 use crate::fit::Dataset;
-use crate::math;
 use crate::verdict::Candidate;
 use alloc::string::String;
 use alloc::vec::Vec;
@@ -66,7 +64,6 @@ pub(super) fn find(
     extent: Extent,
     th: &Thresholds,
 ) -> Option<SlidingFit> {
-    let min_red = 100.0 * (1.0 - math::sqrt(1.0 - frac(th.min_eq_drop_pct)));
     let curve = s2.curve.as_ref()?;
     let base = &s2.base.solved;
     s2.ranking
@@ -75,7 +72,7 @@ pub(super) fn find(
             !c.significant
                 && c.effect.sim_role() == SimRole::DryFriction
                 && c.bic_gain > th.min_bic_gain
-                && c.error_reduction_pct >= min_red
+                && c.error_reduction_pct >= th.min_eq_rms_drop_pct()
                 && c.noise_ratio >= th.min_noise_ratio
                 && c.structured_share >= frac(th.min_structured_share_pct)
                 && c.oe_reduction_pct.is_some_and(|d| d < th.min_oe_drop_pct)

@@ -8,6 +8,7 @@
 //! a noise floor are plain multiples.
 
 use crate::compare::gate::Bar;
+use crate::math;
 use alloc::vec::Vec;
 
 /// Every threshold of a diagnosis (see the module documentation).
@@ -158,6 +159,12 @@ pub(crate) fn frac(pct: f64) -> f64 {
 }
 
 impl Thresholds {
+    /// The held-out RMS drop [%] that [`Thresholds::min_eq_drop_pct`] (a drop of the squared
+    /// residual) asks for: the scale of a candidate's `error_reduction_pct`.
+    pub fn min_eq_rms_drop_pct(&self) -> f64 {
+        100.0 * (1.0 - math::sqrt(1.0 - frac(self.min_eq_drop_pct)))
+    }
+
     /// Every threshold, in the order the pipeline applies them (the statistical guards, the
     /// practical checks, the mimic checks, the ranking, the verdict), each with its unit, the rule
     /// a figure must meet and why.

@@ -133,9 +133,8 @@ impl<'a> Tuner<'a> {
         }
     }
 
-    /// The trimmed simulation cost of `p` ([`trimmed`], [`TRIM`]); `bound` is not used (a
-    /// trimmed sum cannot stop early), kept for the searches' signature.
-    pub(super) fn cost(&self, p: &Plant, _bound: f64) -> f64 {
+    /// The trimmed simulation cost of `p` ([`trimmed`], [`TRIM`]) [rad].
+    pub(super) fn cost(&self, p: &Plant) -> f64 {
         trimmed(self.ds, p, &self.segs, self.horizon_s, TRIM).unwrap_or(f64::INFINITY)
     }
 
@@ -149,7 +148,7 @@ impl<'a> Tuner<'a> {
     /// search, a change kept only when it lowers the cost.
     pub(super) fn refine(&self, p: &Plant, ts: &[(Target, Span)], passes: &[f64]) -> (Plant, f64) {
         let mut best = *p;
-        let mut c_best = self.cost(&best, f64::INFINITY);
+        let mut c_best = self.cost(&best);
         for &shrink in passes {
             for &(t, span) in ts {
                 let Some(x0) = get(&best, t) else { continue };
@@ -172,9 +171,7 @@ impl<'a> Tuner<'a> {
                 let from = best;
                 let r = search::grid_then_golden_bounded(
                     &grid,
-                    |l, bound| {
-                        with(&from, t, to_x(l)).map_or(f64::INFINITY, |q| self.cost(&q, bound))
-                    },
+                    |l, _| with(&from, t, to_x(l)).map_or(f64::INFINITY, |q| self.cost(&q)),
                     8,
                 );
                 if let Some((l, c)) = r {
@@ -224,5 +221,5 @@ pub(super) fn kept(n: usize, trim: f64) -> usize {
 /// error [rad] over the long fit segments of `ds`. `None` when nothing could be simulated.
 pub(super) fn motion_costs<const N: usize>(ds: &Dataset, plants: [&Plant; N]) -> [Option<f64>; N] {
     let tuner = Tuner::new(ds);
-    plants.map(|p| Some(tuner.cost(p, f64::INFINITY)).filter(|c| c.is_finite()))
+    plants.map(|p| Some(tuner.cost(p)).filter(|c| c.is_finite()))
 }
