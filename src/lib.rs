@@ -53,16 +53,21 @@ pub fn servo_bin() -> PathBuf {
     bin
 }
 
-/// Runs `servo` with `args`, returning (exit success, stdout, stderr).
+/// Runs `servo` with `args`, returning (exit success, stdout, stderr). The process holds the
+/// machine shared ([`cpu_heavy`]) unless the calling thread already holds it.
 ///
 /// When `args` hold `--json` and servo succeeds, the output is validated against the schema it
 /// names (`"schema": "servo.<command>/1"`, docs/schemas/<command>.json): every `--json` output
 /// that a test produces is checked, and a test fails on an output its schema does not describe.
 pub fn servo(args: &[&str]) -> (bool, String, String) {
-    let out = std::process::Command::new(servo_bin())
-        .args(args)
-        .output()
-        .expect("spawn servo");
+    let bin = servo_bin();
+    let out = {
+        let _machine = cpu_heavy();
+        std::process::Command::new(bin)
+            .args(args)
+            .output()
+            .expect("spawn servo")
+    };
     let (ok, stdout, stderr) = (
         out.status.success(),
         String::from_utf8_lossy(&out.stdout).into_owned(),
@@ -155,20 +160,65 @@ pub fn qemu_image() -> Option<PathBuf> {
 
 /// The machine as the tests share it: real-time tests (a board, QEMU or a pseudo-terminal
 /// paced by the wall clock) hold it alone through [`realtime`]; tests that load every core
-/// (a diagnosis runs its candidates on all of them) hold it shared through [`cpu_heavy`]. On a
-/// 2-core CI machine a diagnosis beside a QEMU board starves the emulated board's loop into
-/// missed deadlines that say nothing about servo.
+/// (a diagnosis runs its candidates on all of them) hold it shared through [`cpu_heavy`], and
+/// so does every `servo` process a test spawns through [`servo`] when its thread holds nothing
+/// (a command's simulation or diagnosis loads a core whatever the test it serves). On a 2-core
+/// CI machine a diagnosis beside a QEMU board starves the host's loop into missed deadlines
+/// that say nothing about servo (stop 41's CI: 3873 of 5904 samples missed beside a report
+/// test's `servo diagnose`, and the board tripped on over-current).
 static MACHINE: std::sync::RwLock<()> = std::sync::RwLock::new(());
 
-/// Exclusive use of the machine for a real-time test (waits for the CPU-heavy tests to end).
-pub fn realtime() -> std::sync::RwLockWriteGuard<'static, ()> {
-    MACHINE.write().unwrap_or_else(|e| e.into_inner())
+thread_local! {
+    /// Whether this thread holds [`MACHINE`] (either way): a thread never takes it twice.
+    static HOLDS_MACHINE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// A hold on the machine ([`realtime`], [`cpu_heavy`]); released when dropped.
+pub struct MachineGuard {
+    _guard: Option<MachineLock>,
+}
+
+enum MachineLock {
+    Alone(#[allow(dead_code)] std::sync::RwLockWriteGuard<'static, ()>),
+    Shared(#[allow(dead_code)] std::sync::RwLockReadGuard<'static, ()>),
+}
+
+impl Drop for MachineGuard {
+    fn drop(&mut self) {
+        if self._guard.take().is_some() {
+            HOLDS_MACHINE.with(|h| h.set(false));
+        }
+    }
+}
+
+fn hold(alone: bool) -> MachineGuard {
+    if HOLDS_MACHINE.with(|h| h.get()) {
+        // Already held by this thread (a CPU-heavy test spawning servo): nothing more to take.
+        assert!(
+            !alone,
+            "a test asked for the machine alone while its thread already held it shared"
+        );
+        return MachineGuard { _guard: None };
+    }
+    let lock = if alone {
+        MachineLock::Alone(MACHINE.write().unwrap_or_else(|e| e.into_inner()))
+    } else {
+        MachineLock::Shared(MACHINE.read().unwrap_or_else(|e| e.into_inner()))
+    };
+    HOLDS_MACHINE.with(|h| h.set(true));
+    MachineGuard { _guard: Some(lock) }
+}
+
+/// Exclusive use of the machine for a real-time test (waits for the CPU-heavy tests and the
+/// spawned `servo` processes of other tests to end).
+pub fn realtime() -> MachineGuard {
+    hold(true)
 }
 
 /// Shared use of the machine for a test that loads every core (waits while a real-time test
 /// runs).
-pub fn cpu_heavy() -> std::sync::RwLockReadGuard<'static, ()> {
-    MACHINE.read().unwrap_or_else(|e| e.into_inner())
+pub fn cpu_heavy() -> MachineGuard {
+    hold(false)
 }
 
 /// One minute of simulated logs as the diagnose benchmark takes them: `servo run` of the plant

@@ -349,7 +349,7 @@ fn diff(sim: &[(f64, f64)], run: &[(f64, f64)]) -> (f64, f64) {
 
 /// The real-time tests run one at a time and never beside a test that loads every core (a
 /// diagnosis): either would steal the board's CPU (see `servo_e2e::realtime`).
-fn realtime() -> std::sync::RwLockWriteGuard<'static, ()> {
+fn realtime() -> servo_e2e::MachineGuard {
     servo_e2e::realtime()
 }
 
@@ -1198,10 +1198,12 @@ mod qemu_cli {
         assert!(stats.contains("runs 1 "), "{stats}");
     }
 
-    /// True when the QEMU statistics line shows the emulated board overran its `period_us`
-    /// (a tick served late, or a period's work longer than the period): QEMU's TCG on a loaded
-    /// host, not the firmware.
-    fn emulator_overran(stats: &str, period_us: u64) -> bool {
+    /// True when the QEMU statistics line shows the run was starved of time: the emulated board
+    /// overran its `period_us` (a tick served late, or a period's work longer than the period:
+    /// QEMU's TCG on a loaded host), or the host missed more than a tenth of the board's sample
+    /// deadlines (the host process starved: stop 41's CI saw 3873 of 5904), not the firmware's
+    /// or servo's logic.
+    fn run_starved(stats: &str, period_us: u64) -> bool {
         let after = |key: &str| -> Option<u64> {
             stats
                 .split(key)
@@ -1211,16 +1213,22 @@ mod qemu_cli {
                 .parse()
                 .ok()
         };
-        after("late ticks ").is_some_and(|n| n > 0)
+        let host_missed = match (after(" samples "), after(" missed ")) {
+            (Some(n), Some(missed)) => n > 0 && missed * 10 > n,
+            _ => false,
+        };
+        host_missed
+            || after("late ticks ").is_some_and(|n| n > 0)
             || after("busy/period max ").is_some_and(|us| us > period_us)
     }
 
     #[test]
     fn identify_ramp_over_serial_recovers_the_lab_plant_within_5_percent() {
         let _rt = realtime();
-        // One retry on a fresh board when a run stopped on a board fault while the emulated
-        // board overran its 2 ms period (QEMU's timing, said in the output); any other failure,
-        // or a second one, fails the test.
+        // One retry on a fresh board when a run stopped on a board fault while the run was
+        // starved of time (the emulated board overran its 2 ms period, or the host missed more
+        // than a tenth of its deadlines: said in the output); any other failure, or a second
+        // one, fails the test.
         let mut tries = 0;
         let (dir, out, err) = loop {
             tries += 1;
@@ -1228,10 +1236,8 @@ mod qemu_cli {
                 return;
             };
             let (dir, ok, out, err, stats) = r;
-            if !ok && tries == 1 && err.contains("board fault") && emulator_overran(&stats, 2000) {
-                eprintln!(
-                    "retrying on a fresh board: the emulated board overran its period ({stats})"
-                );
+            if !ok && tries == 1 && err.contains("board fault") && run_starved(&stats, 2000) {
+                eprintln!("retrying on a fresh board: the run was starved of time ({stats})");
                 continue;
             }
             assert!(ok, "{out}\n{err}");

@@ -279,6 +279,8 @@ fn chromium() -> Option<PathBuf> {
 /// Renders `html` in headless Chromium: the PNG of the page and the DOM after layout.
 fn render_html(html: &Path, png: &Path) -> Option<String> {
     let bin = chromium()?;
+    // Chromium loads every core while it lays the page out: not beside a real-time test.
+    let _machine = servo_e2e::cpu_heavy();
     let url = format!("file://{}", html.canonicalize().unwrap().display());
     let profile = tmp(&format!(
         "chromium-profile-{}",
