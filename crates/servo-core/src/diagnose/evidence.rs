@@ -251,7 +251,7 @@ pub fn verdict(
 ) -> String {
     let mut s = match status {
         Status::Missing => verdict_missing(ranking),
-        Status::Complete => verdict_complete(balances),
+        Status::Complete => verdict_complete(balances, th),
         Status::Unexplained => {
             let mut s = String::from(
                 "The model is incomplete, and no catalogue effect explains what is missing (status: unexplained): ",
@@ -360,9 +360,9 @@ fn verdict_missing(ranking: &[Candidate]) -> String {
     }
 }
 
-fn verdict_complete(balances: &[BalanceReport]) -> String {
+fn verdict_complete(balances: &[BalanceReport], th: &Thresholds) -> String {
     let mut s = String::from(
-        "No missing effect is significant and nothing material is left (status: complete): every balance's residual is near its noise floor (",
+        "No missing effect is significant and nothing material is left (status: complete): every balance's residual is near its noise floor or holds no structure (",
     );
     for (i, b) in balances.iter().enumerate() {
         let unit = b.equation.unit();
@@ -375,6 +375,14 @@ fn verdict_complete(balances: &[BalanceReport]) -> String {
             b.ratio_to_noise,
             b.floor
         );
+        if b.ratio_to_noise > th.unexplained_ratio {
+            let _ = write!(
+                s,
+                ", above the {:.1} times that makes a balance incomplete but with no shape that predicts its held-out residual (an unshaped residual counts from {:.1} times)",
+                th.unexplained_ratio,
+                th.structured_without_shape * th.unexplained_ratio
+            );
+        }
     }
     s.push_str("), and no catalogue effect added to the model explains a material part of it, judged on held-out data.");
     s

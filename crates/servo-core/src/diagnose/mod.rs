@@ -156,7 +156,7 @@ fn screen(ds: &Dataset, model: &Plant, opts: &DiagnoseOptions) -> Result<Screene
             .iter_mut()
             .find(|b| b.equation == base.solved.mech.equation)
         {
-            friction_curve::attach(b, sig);
+            friction_curve::attach(b, sig, th);
         }
     }
     let mut ranking = judge::all(

@@ -784,54 +784,7 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
             }
         }
     }
-    // With the load angle measured, the motor speed is not observable near velocity reversals
-    // when the gears have play: keep the electrical balance (which uses it) away from them.
-    let rev_win = libm::ceil(0.05 * fs) as usize;
-    let mut near_rev = alloc::vec![false; n];
-    if r.angle_is_load {
-        let mut last: Option<(usize, f64)> = None;
-        for k in 0..n {
-            let w = r.omega_f[k];
-            if w.abs() > opts.min_speed_rad_s {
-                let s = math::sign(w);
-                if let Some((k0, s0)) = last {
-                    if s0 != s {
-                        for f in near_rev
-                            .iter_mut()
-                            .take((k + rev_win).min(n))
-                            .skip(k0.saturating_sub(rev_win))
-                        {
-                            *f = true;
-                        }
-                    }
-                }
-                last = Some((k, s));
-            }
-        }
-    }
-    // The same around reversals of the motor torque (sign of the filtered current), where the
-    // motor leaves one flank of the gear play for the other while the load coasts on.
-    let mut near_irev = alloc::vec![false; n];
-    if let (true, Some(i)) = (r.angle_is_load, r.i_f.as_ref()) {
-        let mut last: Option<(usize, f64)> = None;
-        for (k, &v) in i.iter().enumerate() {
-            if v != 0.0 {
-                let s = math::sign(v);
-                if let Some((k0, s0)) = last {
-                    if s0 != s {
-                        for f in near_irev
-                            .iter_mut()
-                            .take((k + rev_win).min(n))
-                            .skip(k0.saturating_sub(rev_win))
-                        {
-                            *f = true;
-                        }
-                    }
-                }
-                last = Some((k, s));
-            }
-        }
-    }
+    let (near_rev, near_irev) = reversal_windows(r, opts);
     let presliding = presliding(r, opts.presliding_counts, opts.min_speed_rad_s);
     // Fit / held-out blocks: the record is cut in blocks of `holdout_block_s`; every
     // `holdout_every`-th block is held out.
@@ -854,6 +807,55 @@ fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec:
         }
         k += dec;
     }
+}
+
+/// Windows of 50 ms either side of the reversals of record `r` while the angle measured is the
+/// load's (all false otherwise): (velocity reversals: sign changes of the filtered speed between
+/// samples moving faster than `opts.min_speed_rad_s`; torque reversals: sign changes of the
+/// filtered current, when logged). With a gear play the motor leaves one flank for the other
+/// there while the load coasts on, so its speed is not the measured one: the electrical balance
+/// (which uses it) keeps away from the velocity reversals, and a play's rows are flagged at the
+/// torque reversals.
+pub fn reversal_windows(r: &RecData, opts: &FitOptions) -> (Vec<bool>, Vec<bool>) {
+    let n = r.omega_f.len();
+    let win = libm::ceil(0.05 * (1.0 / r.dt_s)) as usize;
+    let velocity = if r.angle_is_load {
+        sign_change_windows(&r.omega_f, opts.min_speed_rad_s, win)
+    } else {
+        alloc::vec![false; n]
+    };
+    let torque = match (r.angle_is_load, r.i_f.as_ref()) {
+        (true, Some(i)) => sign_change_windows(i, 0.0, win),
+        _ => alloc::vec![false; n],
+    };
+    (velocity, torque)
+}
+
+/// True within `win` samples of every sign change of `x` between two samples with |x| >
+/// `min_abs` (from `win` before the last sample of the old sign to `win` after the first of the
+/// new one).
+fn sign_change_windows(x: &[f64], min_abs: f64, win: usize) -> Vec<bool> {
+    let n = x.len();
+    let mut out = alloc::vec![false; n];
+    let mut last: Option<(usize, f64)> = None;
+    for (k, &v) in x.iter().enumerate() {
+        if v.abs() > min_abs {
+            let s = math::sign(v);
+            if let Some((k0, s0)) = last {
+                if s0 != s {
+                    for f in out
+                        .iter_mut()
+                        .take((k + win).min(n))
+                        .skip(k0.saturating_sub(win))
+                    {
+                        *f = true;
+                    }
+                }
+            }
+            last = Some((k, s));
+        }
+    }
+    out
 }
 
 /// Travel of the motor angle since the last reversal of the motion of record `r`, in encoder

@@ -475,6 +475,29 @@ fn cfg_tau_sf(cfg: &Config) -> f64 {
         .unwrap_or(cfg.base.tau_sf())
 }
 
+/// The electrical balance's residual at every sample of record `r` [V, at the amplifier input]:
+/// the input through `cfg`'s input maps, delay and lags, filtered (as [`solve_elec`] takes it) less
+/// (R / k_drv) i_a and (k_e / k_drv) omega_m with the parameters `p` and the motor speed as
+/// measured (from the load angle when that is what the encoder reads). `None` without the
+/// current or the input in `r`.
+pub fn electrical_residual(
+    cfg: &Config,
+    p: &crate::params::PlantParams,
+    r: &RecData,
+) -> Option<Vec<f64>> {
+    let i = r.i_f.as_ref().filter(|_| r.has_u)?;
+    let (delay, lag) = (cfg.delay_s(), p.t_drv() + p.l_a / p.r_eq());
+    let y = r.filt(&r.input_point(cfg.input_transform(), delay, lag));
+    let (r_k, ke_k) = (p.r_eq() / p.k_drv, p.k_e / p.k_drv);
+    Some(
+        y.iter()
+            .zip(i)
+            .zip(&r.omega_f)
+            .map(|((y, i), w)| y - r_k * i - ke_k * w)
+            .collect(),
+    )
+}
+
 /// Solves the electrical equation of `cfg` (current logged).
 pub fn solve_elec(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
     if !ds.has_current {
