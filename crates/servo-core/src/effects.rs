@@ -607,6 +607,20 @@ pub trait FitHooks: Sync + Send {
         let _ = (ds, solved, i, fit_main, fit_j);
         Ok(())
     }
+    /// A check of [`FitHooks::constraints`] that reads a balance no other effect of the model
+    /// acts in, failed: the data contradict the effect with `params` whatever else `base` (the
+    /// model without it) holds (a gear play the motor never crosses, in the electrical
+    /// balance). `None` when it holds or cannot be judged. A joint search drops such a member
+    /// first, before those that merely add too little.
+    fn refuted(
+        &self,
+        ds: &crate::fit::Dataset,
+        params: &[crate::fit::ParamEstimate],
+        base: &crate::plant::Plant,
+    ) -> Option<crate::verdict::Check> {
+        let _ = (ds, params, base);
+        None
+    }
     /// For a significant candidate: its main parameter against another one the fit assumed
     /// (e.g. a gap against the contact stiffness), refitted over a plausible range of it, with a
     /// sentence for the evidence. `None`: nothing to report.

@@ -204,11 +204,16 @@ pub(super) fn search(
                 continue;
             }
         }
+        // A member its own data refute (a play the motor never crosses) goes first, whatever
+        // it adds to the simulation: it adds it as a mimic (on seed 65 of the two-mass drive
+        // train with soft LuGre bristles and a hump, such a play contributed 78 % and outlived
+        // the breakaway friction it stood in for). Then the one that adds least.
         let weakest = judged
             .iter()
             .filter(|(c, _)| !c.significant)
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|(c, _)| c.effect);
+            .map(|(c, d)| (c.effect, *d, refuted(cx, c, &full)))
+            .min_by(|a, b| b.2.cmp(&a.2).then(a.1.total_cmp(&b.1)))
+            .map(|(k, _, _)| k);
         match weakest {
             Some(w) => {
                 survivors.retain(|k| *k != w);
@@ -383,6 +388,23 @@ fn join_from(
 fn partners(a: EffectKind, b: EffectKind) -> bool {
     let rb = b.model().regimes();
     a.model().regimes().iter().any(|r| rb.contains(r))
+}
+
+/// Whether member `c` of the joint model `full` is refuted by data no other member acts in
+/// ([`crate::effects::FitHooks::refuted`]).
+fn refuted(cx: &joint::Context, c: &Candidate, full: &Plant) -> bool {
+    let Some(base) = without(full, c.effect) else {
+        return false;
+    };
+    let found = c
+        .effect
+        .model()
+        .fit_hooks()
+        .and_then(|h| h.refuted(cx.ds, &c.params, &base));
+    if let Some(k) = &found {
+        trace(|| alloc::format!("{} refuted: {}", c.effect, k.detail));
+    }
+    found.is_some()
 }
 
 /// `p` without `kind`.

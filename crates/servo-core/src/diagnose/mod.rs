@@ -229,11 +229,17 @@ pub fn diagnose_dataset(
                 && c.effect.sim_role() == crate::effects::SimRole::DryFriction
         })
     };
+    // A play the data refute (the motor never crosses its gap) shows nowhere but as a mimic.
     let play = model.effects.iter().any(|e| on_simulation(e.kind))
         || s.ranking.iter().any(|c| {
             on_simulation(c.effect)
                 && c.oe_reduction_pct
                     .is_some_and(|d| d >= th.min_simulation_oe_drop_pct)
+                && !c
+                    .effect
+                    .model()
+                    .fit_hooks()
+                    .is_some_and(|h| h.refuted(ds, &c.params, model).is_some())
         });
     if changes.is_empty() && !passed(&s) && !play && s.survey.balances.iter().any(|b| b.above_noise)
     {

@@ -202,6 +202,10 @@ mod fit {
             }
             out
         }
+        fn refuted(&self, ds: &Dataset, params: &[ParamEstimate], base: &Plant) -> Option<Check> {
+            let g = get(params, "gap")?;
+            motor_crosses_gap(ds, g, base).filter(|c| !c.passed)
+        }
         fn judged_on_simulation(&self) -> bool {
             true
         }
