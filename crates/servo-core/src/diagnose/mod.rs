@@ -235,11 +235,10 @@ pub fn diagnose_dataset(
             on_simulation(c.effect)
                 && c.oe_reduction_pct
                     .is_some_and(|d| d >= th.min_simulation_oe_drop_pct)
-                && !c
-                    .effect
+                && c.effect
                     .model()
                     .fit_hooks()
-                    .is_some_and(|h| h.refuted(ds, &c.params, model).is_some())
+                    .is_none_or(|h| h.refuted(ds, &c.params, model).is_none())
         });
     if changes.is_empty() && !passed(&s) && !play && s.survey.balances.iter().any(|b| b.above_noise)
     {
