@@ -702,9 +702,15 @@ mod fit {
         for k in &delays {
             undelayed.effects.remove(*k);
         }
+        // Where the crossings are does not depend on the fit: without enough of them (logs
+        // whose motion never reverses) nothing is fitted.
+        let runs = crossing_runs(ds);
+        if runs.len() < CROSSING_MIN_REVERSALS {
+            return None;
+        }
         let readings = core::iter::once(base)
             .chain((!delays.is_empty()).then_some(&undelayed))
-            .filter_map(|b| crossing_advances(ds, b));
+            .filter_map(|b| crossing_advances(ds, b, &runs));
         let advances = readings.max_by(|a, b| mean(a).total_cmp(&mean(b)))?;
         let n = advances.len();
         if n < CROSSING_MIN_REVERSALS {
@@ -724,13 +730,50 @@ mod fit {
         })
     }
 
-    /// The motor's advance over N times the load [rad, motor side] at each reversal of the
-    /// motion under a reversed current in `ds`, read in the electrical balance of `base` refitted
+    /// The reversals of the motion under a reversed current in `ds` (with the load angle
+    /// measured): runs of the union of the windows of [`reversal_windows`] holding a velocity
+    /// and a current reversal that the motion leaves the other way round, as (record, first
+    /// sample, end sample (excluded), sign of the new direction).
+    ///
+    /// [`reversal_windows`]: crate::fit::dataset::reversal_windows
+    fn crossing_runs(ds: &Dataset) -> Vec<(usize, usize, usize, f64)> {
+        let mut runs = Vec::new();
+        for (ri, r) in ds.recs.iter().enumerate() {
+            let (vel, tor) = crate::fit::dataset::reversal_windows(r, &ds.opts);
+            let edge = libm::ceil((2.0 / ds.opts.filter_hz) * (1.0 / r.dt_s)) as usize + 2;
+            let end = r.omega_f.len().saturating_sub(edge);
+            let mut k = edge;
+            while k < end {
+                if !(vel[k] || tor[k]) {
+                    k += 1;
+                    continue;
+                }
+                let k0 = k;
+                let (mut v, mut i) = (false, false);
+                while k < end && (vel[k] || tor[k]) {
+                    v |= vel[k];
+                    i |= tor[k];
+                    k += 1;
+                }
+                let (before, after) = (r.omega_f[k0], r.omega_f[k - 1]);
+                if v && i && math::sign(before) != math::sign(after) && after != 0.0 {
+                    runs.push((ri, k0, k, math::sign(after)));
+                }
+            }
+        }
+        runs
+    }
+
+    /// The motor's advance over N times the load [rad, motor side] at each crossing of `runs`
+    /// ([`crossing_runs`]), read in the electrical balance of `base` refitted on `ds`
     /// ([`motor_crosses_gap`]), signed by the new direction. `None` when the balance cannot be
     /// formed or the back-EMF hardly shows in it (below [`CROSSING_MIN_EMF_RATIO`] times its
     /// residual: a current drive's loop rejects it, its equivalent chain's k_e is negligible).
-    fn crossing_advances(ds: &Dataset, base: &Plant) -> Option<Vec<f64>> {
-        use crate::fit::dataset::reversal_windows;
+    fn crossing_advances(
+        ds: &Dataset,
+        base: &Plant,
+        runs: &[(usize, usize, usize, f64)],
+    ) -> Option<Vec<f64>> {
         use crate::fit::model::electrical_residual;
         let solved = ds.fit_config(base, &[]).ok()?;
         let p = &solved.plant.params;
@@ -751,34 +794,15 @@ mod fit {
         if !visible {
             return None;
         }
-        let mut advances = Vec::new();
-        for (r, e) in ds.recs.iter().zip(&residuals) {
-            let (vel, tor) = reversal_windows(r, &ds.opts);
-            let edge = libm::ceil((2.0 / ds.opts.filter_hz) * (1.0 / r.dt_s)) as usize + 2;
-            let end = e.len().saturating_sub(edge);
-            let mut k = edge;
-            while k < end {
-                if !(vel[k] || tor[k]) {
-                    k += 1;
-                    continue;
-                }
-                // A run of the union of the windows: a crossing when it holds a velocity and
-                // a current reversal and the motion leaves it the other way round.
-                let k0 = k;
-                let (mut integral_vs, mut v, mut i) = (0.0, false, false);
-                while k < end && (vel[k] || tor[k]) {
-                    integral_vs += e[k] * r.dt_s;
-                    v |= vel[k];
-                    i |= tor[k];
-                    k += 1;
-                }
-                let (before, after) = (r.omega_f[k0], r.omega_f[k - 1]);
-                if v && i && math::sign(before) != math::sign(after) && after != 0.0 {
-                    advances.push(math::sign(after) * integral_vs / emf);
-                }
-            }
-        }
-        Some(advances)
+        Some(
+            runs.iter()
+                .map(|&(ri, k0, k1, sign)| {
+                    let dt = ds.recs[ri].dt_s;
+                    let integral_vs: f64 = residuals[ri][k0..k1].iter().map(|x| x * dt).sum();
+                    sign * integral_vs / emf
+                })
+                .collect(),
+        )
     }
 
     fn mean(x: &[f64]) -> f64 {
