@@ -713,9 +713,6 @@ mod fit {
             .filter_map(|b| crossing_advances(ds, b, &runs));
         let advances = readings.max_by(|a, b| mean(a).total_cmp(&mean(b)))?;
         let n = advances.len();
-        if n < CROSSING_MIN_REVERSALS {
-            return None;
-        }
         let ahead = mean(&advances);
         let var = advances.iter().map(|a| (a - ahead) * (a - ahead)).sum::<f64>() / (n - 1) as f64;
         let se = math::sqrt(var / n as f64);
@@ -740,7 +737,7 @@ mod fit {
         let mut runs = Vec::new();
         for (ri, r) in ds.recs.iter().enumerate() {
             let (vel, tor) = crate::fit::dataset::reversal_windows(r, &ds.opts);
-            let edge = libm::ceil((2.0 / ds.opts.filter_hz) * (1.0 / r.dt_s)) as usize + 2;
+            let edge = crate::fit::dataset::edge_samples(r, &ds.opts);
             let end = r.omega_f.len().saturating_sub(edge);
             let mut k = edge;
             while k < end {

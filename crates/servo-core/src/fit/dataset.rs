@@ -750,10 +750,16 @@ pub fn rig_stuck_speed_rad_s(recs: &[RecData], opts: &FitOptions) -> f64 {
     }
 }
 
+/// Samples at either end of record `r` that no balance uses (the zero-phase filter's edge:
+/// two periods of its cut-off, and two more).
+pub fn edge_samples(r: &RecData, opts: &FitOptions) -> usize {
+    libm::ceil((2.0 / opts.filter_hz) * (1.0 / r.dt_s)) as usize + 2
+}
+
 fn select_rows(ri: usize, r: &RecData, opts: &FitOptions, mech: &mut Rows, elec: &mut Rows) {
     let n = r.omega_f.len();
     let fs = 1.0 / r.dt_s;
-    let edge = libm::ceil((2.0 / opts.filter_hz) * fs) as usize + 2;
+    let edge = edge_samples(r, opts);
     let dec = (math::floor(fs / (4.0 * opts.filter_hz)) as usize).max(1);
     let margin = libm::ceil(opts.margin_s * fs) as usize;
     // Stuck samples, dilated by the margin.
