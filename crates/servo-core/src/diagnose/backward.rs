@@ -177,9 +177,14 @@ pub(super) fn search(
             return None;
         }
         let members: Vec<EffectKind> = named.iter().chain(&survivors).copied().collect();
-        let judged: Vec<(Candidate, f64)> = par_map(&survivors, cx.opts.parallel, |&m| {
-            drop_one(cx, &tuner, &full, &members, m)
-        })
+        let judged: Vec<(Candidate, f64)> = super::timing::timed(
+            || alloc::format!("backward: drop-one tests of {survivors:?}"),
+            || {
+                par_map(&survivors, cx.opts.parallel, |&m| {
+                    drop_one(cx, &tuner, &full, &members, m)
+                })
+            },
+        )
         .into_iter()
         .flatten()
         .collect();
@@ -198,7 +203,11 @@ pub(super) fn search(
             .map(|(c, _)| c.effect)
             .collect();
         if failing.len() >= 2 {
-            if let Some(reduced) = drop_group(cx, &tuner, &full, &named, &survivors, &failing) {
+            let group = super::timing::timed(
+                || alloc::format!("backward: group drop of {failing:?}"),
+                || drop_group(cx, &tuner, &full, &named, &survivors, &failing),
+            );
+            if let Some(reduced) = group {
                 survivors.retain(|k| !failing.contains(k));
                 full = reduced;
                 continue;
@@ -551,8 +560,17 @@ fn grid_stage(
     best.push((c_start, start.plant));
     best.sort_by(|a, b| a.0.total_cmp(&b.0));
     best.truncate(STARTS);
+    // Starts of the same cost (to [`SAME_COST`]) are one start: the parameter they differ in
+    // changed nothing the simulation shows (a gap the motor never crosses: on the Padova
+    // friction ramps the three best grid points differ only in the gap, at one cost to 1e-12).
+    best.dedup_by(|a, b| (a.0 - b.0).abs() <= SAME_COST * b.0.abs());
     best.into_iter().map(|(_, p)| p).collect()
 }
+
+/// Relative difference below which two starts of the joint refinement have the same cost [-]:
+/// far below any change a parameter makes when the simulation shows it, above the rounding of
+/// simulations that step whole periods where the other's sub-steps ([`crate::sim::PlantSim::with_coarse_periods`]).
+const SAME_COST: f64 = 1e-9;
 
 /// The equation-error solution of `plant`'s configuration (its nonlinear parameters fixed, the
 /// linear ones and the base re-solved) carrying `plant` itself as the model the simulation judges.

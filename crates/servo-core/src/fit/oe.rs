@@ -352,7 +352,9 @@ fn simulate_segments(
     while let Some(&first) = segs.get(next) {
         let dt_s = ds.recs[first.0].dt_s;
         if sims.as_ref().is_none_or(|(s, _)| s.dt_s() != dt_s) {
-            let sim = PlantSim::with_max_substep(plant, dt_s, max_substep_s).ok()?;
+            let sim = PlantSim::with_max_substep(plant, dt_s, max_substep_s)
+                .ok()?
+                .with_coarse_periods();
             sims = Some((sim.clone(), sim));
         }
         let (a, b) = sims.as_mut()?;

@@ -1,0 +1,313 @@
+//! Whole-period steps away from events ([`PlantSim::with_coarse_periods`]).
+//!
+//! The sub-steps of [`PlantSim::step`] exist for the events (a stop, a breakaway, a flank met or
+//! left) and for nonlinear torques that change fast. Between events, with only dry friction
+//! nonlinear (no angle-dependent or user torque), the linear part is discretised exactly over any
+//! length and the friction torque of a body sliding one way changes only with its speed: the
+//! first-order hold over a whole period then gives what ten sub-steps give, to the torque's
+//! curvature. A coarse period is one exact step (a fractional delay's switch inside it is exact
+//! too: the linear part superposes the responses to the two inputs), **accepted only when
+//! nothing could have happened inside it**:
+//!
+//! - the friction body slides at both ends in its direction, with a speed larger than the
+//!   period's speed change (it cannot have stopped and restarted in between);
+//! - the contact state (free or pressed on a flank) is the same at both ends; pressed, the
+//!   contact force keeps its sign with a margin larger than its change; free, the motor stays
+//!   clear of both flanks with a margin larger than the period's travel across the gap;
+//! - the nonlinear torques change by at most [`COARSE_MAX_TORQUE_CHANGE`] of the friction's
+//!   breakaway level over the period (a Stribeck curve is crossed in fine sub-steps).
+//!
+//! Otherwise the state is left as it was and the period runs in sub-steps as always. The torques
+//! at a coarse period's end start the next one (as a sub-step's start the next sub-step). Every event is
+//! therefore still resolved at sub-step resolution; only the stretches between events are
+//! stepped whole. Used by the simulations the diagnosis tunes and judges models on
+//! ([`crate::fit::oe`]), thousands per diagnosis, where the logs are mostly sliding motion.
+
+use super::{advance, discretise, Disc, Period, PlantSim, CONTACT, NI, NS, ZERO_DISC};
+use crate::math;
+
+/// Largest change of the nonlinear torques over a coarse period, as a share of the friction's
+/// breakaway level [-]. The first-order hold is exact for a torque linear in time; its error
+/// grows with the curvature, bounded by the change: at 1 % of the level the error of a period
+/// is below 0.1 % of the level.
+pub const COARSE_MAX_TORQUE_CHANGE: f64 = 0.01;
+
+/// The discretisation of a whole period per mode, with the delayed input split exactly: the
+/// input of the last period acts over the first part (up to the switch), this period's over the
+/// rest.
+#[derive(Debug, Clone)]
+pub(super) struct CoarseTables {
+    /// The whole period [mode], its input column the response to this period's input (acting
+    /// after the switch).
+    disc: [Disc; 4],
+    /// The response to the last period's input (acting before the switch) [mode]; zero without
+    /// a fractional delay.
+    g_old: [[f64; NS]; 4],
+    /// Whether a period in contact may be stepped whole: the contact's own oscillation is slow
+    /// against the period ([`COARSE_MAX_CONTACT_PHASE`]), so that the force cannot swing to
+    /// zero and back between the ends.
+    contact_whole: bool,
+}
+
+/// Largest phase the contact's natural oscillation turns in one period for a period in contact
+/// to be stepped whole [rad]: at most a sixth of its cycle, so that a force positive at both ends
+/// with a margin above its change cannot have crossed zero in between.
+pub const COARSE_MAX_CONTACT_PHASE: f64 = 1.5;
+
+/// Margin the distance to the flanks must keep everywhere inside a free coarse period, as a
+/// share of the half gap [-].
+pub const COARSE_EVENT_MARGIN: f64 = 0.05;
+
+impl PlantSim {
+    /// This simulator taking each control period in one exact step whenever no event can happen
+    /// inside it (see the module docs of `sim::coarse`), and in sub-steps otherwise. Unchanged
+    /// when the plant has an angle-dependent or a user torque (they change along the travel,
+    /// not with a slowly varying speed) or takes one step per period anyway.
+    pub fn with_coarse_periods(mut self) -> Self {
+        let smooth = self.smooth_m.is_active() || self.smooth_l.is_active() || self.custom_torque;
+        if self.substeps <= 1 || smooth || self.coarse.is_some() {
+            return self;
+        }
+        // Where the delayed input switches inside the period [share of the period].
+        let f = match self.switch_at {
+            None => 0.0,
+            Some((j, split)) => {
+                let r = if split {
+                    self.sub_len[1] / self.sub_len[0]
+                } else {
+                    0.0
+                };
+                (j as f64 + r) / self.substeps as f64
+            }
+        };
+        let frac = self.play.map_or(0.3, |b| b.contact.load_inertia_fraction);
+        let mut t = CoarseTables {
+            disc: [ZERO_DISC; 4],
+            g_old: [[0.0; NS]; 4],
+            contact_whole: false,
+        };
+        if let Some(b) = &self.play {
+            // The contact's natural frequency: the spring between the motor (J_eq (1 - f),
+            // seen at the load) and the load (J_eq f N^2).
+            let (n, j_eq) = (self.n, self.plant.params.j_eq());
+            let (j1, j2) = (n * n * j_eq * (1.0 - frac), n * n * j_eq * frac);
+            let omega_c = math::sqrt(b.stiffness * (1.0 / j1 + 1.0 / j2));
+            t.contact_whole = omega_c * self.dt_s <= COARSE_MAX_CONTACT_PHASE;
+        }
+        let modes: &[usize] = if self.play.is_some() {
+            &[0, CONTACT]
+        } else {
+            &[0]
+        };
+        let play = self.play;
+        let disc = |mode: usize, len: f64| discretise(&self.plant, frac, play.as_ref(), mode, len);
+        for &mode in modes {
+            let mut whole = disc(mode, self.dt_s);
+            if f > 0.0 {
+                // x(dt) = Phi(dt) x0 + Phi((1-f) dt) g_u(f dt) u_old + g_u((1-f) dt) u_new + the
+                // torques over the whole period: the linear part is exact for any split.
+                let (before, after) =
+                    (disc(mode, f * self.dt_s), disc(mode, (1.0 - f) * self.dt_s));
+                for i in 0..NS {
+                    let mut acc = 0.0;
+                    for j in 0..NS {
+                        acc += after.phi[i][j] * before.g0[j][0];
+                    }
+                    t.g_old[mode][i] = acc;
+                    whole.g0[i][0] = after.g0[i][0];
+                }
+            }
+            t.disc[mode] = whole;
+        }
+        self.coarse = Some(t);
+        self
+    }
+
+    /// Steps the period in one piece when nothing can happen inside it; false (state untouched)
+    /// otherwise, or when coarse periods are off.
+    #[inline]
+    pub(super) fn coarse_period(&mut self, period: &Period) -> bool {
+        // The torques at the end of the last coarse period, when it was the last thing done.
+        let carry = self.coarse_carry.take();
+        if self.coarse.is_none() || self.stuck {
+            return false;
+        }
+        let u_old = if self.switch_at.is_some() {
+            period.old
+        } else {
+            0.0
+        };
+        match self.coarse_step(period.new, u_old, carry) {
+            Some(end) => {
+                self.coarse_carry = Some(end);
+                self.whole_periods += 1;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// One exact step over the period with the inputs `u_new` (after the switch) and `u_old`
+    /// (before it) [V], kept in `self.x` and returning the nonlinear torques at its end when no
+    /// event can have happened inside it; `None` (state untouched) otherwise.
+    fn coarse_step(
+        &mut self,
+        u_new: f64,
+        u_old: f64,
+        carry: Option<(f64, f64)>,
+    ) -> Option<(f64, f64)> {
+        let x0 = self.x;
+        let (mode, tau_offset) = self.contact_mode(&x0);
+        let (tm0, tl0) = match carry {
+            Some(t) => t,
+            None => self.nonlinear_torques(&x0),
+        };
+        let t = self.coarse.as_ref()?;
+        let d = &t.disc[mode];
+        let inp: [f64; NI] = [u_new, tm0, tl0, tau_offset];
+        let mut xp = if self.ns == 4 {
+            advance::<4>(d, &x0, &inp)
+        } else {
+            advance::<6>(d, &x0, &inp)
+        };
+        for i in 0..self.ns {
+            xp[i] += t.g_old[mode][i] * u_old;
+        }
+        let (tm1, tl1) = self.nonlinear_torques(&xp);
+        let (dm, dl) = (tm1 - tm0, tl1 - tl0);
+        if self.dry {
+            let level = self.friction.breakaway_l(self.dir).abs();
+            if (dm * self.n).abs() + dl.abs() > COARSE_MAX_TORQUE_CHANGE * level {
+                return None;
+            }
+        } else if dm != 0.0 || dl != 0.0 {
+            return None;
+        }
+        let d = &self.coarse.as_ref()?.disc[mode];
+        let mut x1 = xp;
+        for i in 0..self.ns {
+            x1[i] += d.g1[i][0] * dm + d.g1[i][1] * dl;
+        }
+        if self.dry {
+            let w = self.fb_w();
+            let (w0, w1) = (x0[w] * self.dir, x1[w] * self.dir);
+            if !(w0 > 0.0 && w1 > 0.0 && w0.min(w1) > (w1 - w0).abs()) {
+                return None;
+            }
+        }
+        if !self.contact_unchanged(&x0, &x1, mode) {
+            return None;
+        }
+        self.x = x1;
+        Some((tm1, tl1))
+    }
+
+    /// The contact mode at `x` (free or [`CONTACT`]) and the spring's offset torque [N m], as a
+    /// sub-step decides them (never stuck here).
+    #[inline]
+    fn contact_mode(&self, x: &[f64; NS]) -> (usize, f64) {
+        let Some(b) = &self.play else {
+            return (0, 0.0);
+        };
+        let delta = x[3] / self.n - x[5];
+        let rate = x[2] / self.n - x[4];
+        let side = if delta > 0.0 { 1.0 } else { -1.0 };
+        let p = side * (side * delta - 0.5 * b.gap);
+        if b.gap <= 0.0
+            || (side * p >= -1e-12 * b.gap.max(1e-9)
+                && side * (b.stiffness * p + b.damping * rate) > 0.0)
+        {
+            (CONTACT, side * b.stiffness * 0.5 * b.gap)
+        } else {
+            (0, 0.0)
+        }
+    }
+
+    /// Whether the contact can have kept mode `mode` over a period from `x0` to `x1`: always
+    /// without a gap (the contact never opens); pressed, on a contact slow against the period,
+    /// the force stays positive at both ends by more than its change; free, the motor stays
+    /// clear of both flanks by [`COARSE_EVENT_MARGIN`] of the half gap everywhere in between
+    /// (the cubic through its place in the gap and its rate at both ends).
+    fn contact_unchanged(&self, x0: &[f64; NS], x1: &[f64; NS], mode: usize) -> bool {
+        let (Some(b), Some(t)) = (&self.play, &self.coarse) else {
+            return true;
+        };
+        if b.gap <= 0.0 {
+            return true;
+        }
+        if self.contact_mode(x1).0 != mode {
+            return false;
+        }
+        let n = self.n;
+        // The motor's place in the gap [rad, load side] and its rate [rad/s].
+        let delta = |x: &[f64; NS]| x[3] / n - x[5];
+        let rate = |x: &[f64; NS]| x[2] / n - x[4];
+        let (d0, d1) = (delta(x0), delta(x1));
+        let h = self.dt_s;
+        if mode & CONTACT != 0 {
+            if !t.contact_whole || math::sign(d0) != math::sign(d1) {
+                return false;
+            }
+            let side = math::sign(d0);
+            let force = |x: &[f64; NS], d: f64| {
+                side * (b.stiffness * (d - side * 0.5 * b.gap) + b.damping * rate(x))
+            };
+            let (f0, f1) = (force(x0, d0), force(x1, d1));
+            // The penetration: the cubic through its values and rates at both ends (the
+            // contact's oscillation is slow against the period) keeps it positive.
+            let (p0, p1) = (side * d0 - 0.5 * b.gap, side * d1 - 0.5 * b.gap);
+            let cubic = [p0, side * rate(x0) * h, p1, side * rate(x1) * h];
+            let above = |(lo, _): (f64, f64)| lo > COARSE_EVENT_MARGIN * p0.max(p1);
+            f0.min(f1) > (f1 - f0).abs()
+                && (above(hermite_bounds(cubic)) || above(hermite_range(cubic)))
+        } else {
+            let cubic = [d0, rate(x0) * h, d1, rate(x1) * h];
+            let inside = |(lo, hi): (f64, f64)| {
+                lo.abs().max(hi.abs()) < (1.0 - COARSE_EVENT_MARGIN) * 0.5 * b.gap
+            };
+            inside(hermite_bounds(cubic)) || inside(hermite_range(cubic))
+        }
+    }
+}
+
+/// Bounds on the values on [0, 1] of the cubic through `y0` (slope `s0`) at 0 and `y1` (slope
+/// `s1`) at 1 (Hermite), without solving for its extremes: it is the chord plus
+/// (s0 - dy) h10(t) + (s1 - dy) h11(t), and |h10|, |h11| <= 4/27 on [0, 1].
+#[inline]
+fn hermite_bounds([y0, s0, y1, s1]: [f64; 4]) -> (f64, f64) {
+    let dy = y1 - y0;
+    let dev = 4.0 / 27.0 * ((s0 - dy).abs() + (s1 - dy).abs());
+    (y0.min(y1) - dev, y0.max(y1) + dev)
+}
+
+/// The smallest and largest values on [0, 1] of the cubic through `y0` (slope `s0`) at 0 and
+/// `y1` (slope `s1`) at 1 (Hermite).
+fn hermite_range([y0, s0, y1, s1]: [f64; 4]) -> (f64, f64) {
+    // H(t) = y0 + s0 t + c2 t^2 + c3 t^3.
+    let c2 = 3.0 * (y1 - y0) - 2.0 * s0 - s1;
+    let c3 = 2.0 * (y0 - y1) + s0 + s1;
+    let at = |t: f64| y0 + t * (s0 + t * (c2 + t * c3));
+    let (mut lo, mut hi) = (y0.min(y1), y0.max(y1));
+    let mut visit = |t: f64| {
+        if t > 0.0 && t < 1.0 {
+            let v = at(t);
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+    };
+    // H'(t) = s0 + 2 c2 t + 3 c3 t^2 = 0.
+    let (qa, qb, qc) = (3.0 * c3, 2.0 * c2, s0);
+    if qa.abs() <= 1e-12 * (qb.abs() + qc.abs()) {
+        if qb != 0.0 {
+            visit(-qc / qb);
+        }
+    } else {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc >= 0.0 {
+            let r = math::sqrt(disc);
+            visit((-qb + r) / (2.0 * qa));
+            visit((-qb - r) / (2.0 * qa));
+        }
+    }
+    (lo, hi)
+}
