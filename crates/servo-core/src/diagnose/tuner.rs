@@ -169,9 +169,16 @@ impl<'a> Tuner<'a> {
                     Span::Scale(_) => continue,
                 };
                 let from = best;
+                // The middle of the grid is the current value, whose cost is known.
+                let here = grid[grid.len() / 2];
                 let r = search::grid_then_golden_bounded(
                     &grid,
-                    |l, _| with(&from, t, to_x(l)).map_or(f64::INFINITY, |q| self.cost(&q)),
+                    |l, _| {
+                        if l == here {
+                            return c_best;
+                        }
+                        with(&from, t, to_x(l)).map_or(f64::INFINITY, |q| self.cost(&q))
+                    },
                     8,
                 );
                 if let Some((l, c)) = r {

@@ -15,21 +15,29 @@ pub fn grid_then_golden(
 /// its value exceeds `bound`, it may return any value above `bound` (e.g. infinity). Every
 /// comparison the search makes is against such a bound (the best grid value so far; in the
 /// golden section, the other interior point), so the result is the one of the full evaluations.
+///
+/// When every grid value is the same (a parameter `f` does not see there), the first grid point
+/// is returned without a golden section: it could only find that value again.
 pub fn grid_then_golden_bounded(
     grid: &[f64],
     mut f: impl FnMut(f64, f64) -> f64,
     iters: usize,
 ) -> Option<(f64, f64)> {
     let mut best: Option<(usize, f64)> = None;
+    let mut flat = true;
     for (i, &x) in grid.iter().enumerate() {
         let bound = best.map_or(f64::INFINITY, |b| b.1);
         let v = f(x, bound);
+        flat &= v.is_finite() && best.is_none_or(|b| v == b.1);
         // Strictly lower: the first of equal values wins, as a scan of every value would.
         if v.is_finite() && best.is_none_or(|b| v < b.1) {
             best = Some((i, v));
         }
     }
     let (ib, fb) = best?;
+    if flat && grid.len() > 1 {
+        return Some((grid[ib], fb));
+    }
     let lo = grid[ib.saturating_sub(1)];
     let hi = grid[(ib + 1).min(grid.len() - 1)];
     let (mut best_x, mut best_f) = (grid[ib], fb);
@@ -72,6 +80,21 @@ pub use crate::math::{linspace, logspace};
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_flat_grid_is_not_refined() {
+        let mut calls = 0;
+        let r = grid_then_golden(
+            &[1.0, 2.0, 3.0],
+            |_| {
+                calls += 1;
+                5.0
+            },
+            8,
+        );
+        assert_eq!(r, Some((1.0, 5.0)));
+        assert_eq!(calls, 3);
+    }
 
     #[test]
     fn finds_a_minimum_between_grid_points() {

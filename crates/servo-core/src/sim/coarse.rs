@@ -11,11 +11,13 @@
 //!
 //! - the friction body slides at both ends in its direction, with a speed larger than the
 //!   period's speed change (it cannot have stopped and restarted in between);
-//! - the contact state (free or pressed on a flank) is the same at both ends; pressed, the
-//!   contact force keeps its sign with a margin larger than its change; free, the motor stays
-//!   clear of both flanks with a margin larger than the period's travel across the gap;
+//! - the contact state (free or pressed on a flank) is the same at both ends and, along the cubic
+//!   through the motor's place in the gap and its rate at both ends, in between: pressed, the
+//!   contact force stays positive with a margin ([`COARSE_EVENT_MARGIN`]), on a contact whose
+//!   own oscillation is slow against the period ([`COARSE_MAX_CONTACT_PHASE`]); free, the motor
+//!   stays clear of both flanks with that margin;
 //! - the nonlinear torques change by at most [`COARSE_MAX_TORQUE_CHANGE`] of the friction's
-//!   breakaway level over the period (a Stribeck curve is crossed in fine sub-steps).
+//!   breakaway level over the period (the steep part of a friction curve is crossed in sub-steps).
 //!
 //! Otherwise the state is left as it was and the period runs in sub-steps as always. The torques
 //! at a coarse period's end start the next one (as a sub-step's start the next sub-step). Every event is
@@ -44,18 +46,19 @@ pub(super) struct CoarseTables {
     /// a fractional delay.
     g_old: [[f64; NS]; 4],
     /// Whether a period in contact may be stepped whole: the contact's own oscillation is slow
-    /// against the period ([`COARSE_MAX_CONTACT_PHASE`]), so that the force cannot swing to
-    /// zero and back between the ends.
+    /// against the period ([`COARSE_MAX_CONTACT_PHASE`]), so that the cubic through the ends
+    /// follows the motion in between.
     contact_whole: bool,
 }
 
 /// Largest phase the contact's natural oscillation turns in one period for a period in contact
-/// to be stepped whole [rad]: at most a sixth of its cycle, so that a force positive at both ends
-/// with a margin above its change cannot have crossed zero in between.
+/// to be stepped whole [rad]: a quarter of its cycle, where the cubic through the values and
+/// rates at both ends of a sine is within 2 % of its amplitude (less than the margin).
 pub const COARSE_MAX_CONTACT_PHASE: f64 = 1.5;
 
-/// Margin the distance to the flanks must keep everywhere inside a free coarse period, as a
-/// share of the half gap [-].
+/// Margin a contact force (pressed) or the distance to the flanks (free) must keep everywhere
+/// inside a coarse period, as a share of the force's larger value at the ends (of the half gap)
+/// [-].
 pub const COARSE_EVENT_MARGIN: f64 = 0.05;
 
 impl PlantSim {
@@ -225,9 +228,9 @@ impl PlantSim {
 
     /// Whether the contact can have kept mode `mode` over a period from `x0` to `x1`: always
     /// without a gap (the contact never opens); pressed, on a contact slow against the period,
-    /// the force stays positive at both ends by more than its change; free, the motor stays
-    /// clear of both flanks by [`COARSE_EVENT_MARGIN`] of the half gap everywhere in between
-    /// (the cubic through its place in the gap and its rate at both ends).
+    /// the force stays above [`COARSE_EVENT_MARGIN`] of its value at the ends everywhere in
+    /// between; free, the motor stays clear of both flanks by that share of the half gap. Both
+    /// read along the cubic through the motor's place in the gap and its rate at both ends.
     fn contact_unchanged(&self, x0: &[f64; NS], x1: &[f64; NS], mode: usize) -> bool {
         let (Some(b), Some(t)) = (&self.play, &self.coarse) else {
             return true;
@@ -248,45 +251,62 @@ impl PlantSim {
             if !t.contact_whole || math::sign(d0) != math::sign(d1) {
                 return false;
             }
+            // The penetration [rad] along the cubic through its values and rates at both ends
+            // (close to the motion for a contact slow against the period), and the force along
+            // it: k p + c dp/dt, a cubic too, equal to the force at both ends.
             let side = math::sign(d0);
-            let force = |x: &[f64; NS], d: f64| {
-                side * (b.stiffness * (d - side * 0.5 * b.gap) + b.damping * rate(x))
-            };
-            let (f0, f1) = (force(x0, d0), force(x1, d1));
-            // The penetration: the cubic through its values and rates at both ends (the
-            // contact's oscillation is slow against the period) keeps it positive.
             let (p0, p1) = (side * d0 - 0.5 * b.gap, side * d1 - 0.5 * b.gap);
-            let cubic = [p0, side * rate(x0) * h, p1, side * rate(x1) * h];
-            let above = |(lo, _): (f64, f64)| lo > COARSE_EVENT_MARGIN * p0.max(p1);
-            f0.min(f1) > (f1 - f0).abs()
-                && (above(hermite_bounds(cubic)) || above(hermite_range(cubic)))
+            let pen = hermite_coefficients([p0, side * rate(x0) * h, p1, side * rate(x1) * h]);
+            let [a0, a1, a2, a3] = pen;
+            let (k, c) = (b.stiffness, b.damping / h);
+            let force = [
+                k * a0 + c * a1,
+                k * a1 + 2.0 * c * a2,
+                k * a2 + 3.0 * c * a3,
+                k * a3,
+            ];
+            // Both stay positive: the penetration (the motor on the flank) and the force.
+            let above = |a: [f64; 4], ends: f64| {
+                let ok = |(lo, _): (f64, f64)| lo > COARSE_EVENT_MARGIN * ends;
+                ok(cubic_bounds(a)) || ok(cubic_range(a))
+            };
+            above(pen, p0.max(p1)) && above(force, force[0].max(force.iter().sum()))
         } else {
-            let cubic = [d0, rate(x0) * h, d1, rate(x1) * h];
+            let place = hermite_coefficients([d0, rate(x0) * h, d1, rate(x1) * h]);
             let inside = |(lo, hi): (f64, f64)| {
                 lo.abs().max(hi.abs()) < (1.0 - COARSE_EVENT_MARGIN) * 0.5 * b.gap
             };
-            inside(hermite_bounds(cubic)) || inside(hermite_range(cubic))
+            inside(cubic_bounds(place)) || inside(cubic_range(place))
         }
     }
 }
 
-/// Bounds on the values on [0, 1] of the cubic through `y0` (slope `s0`) at 0 and `y1` (slope
-/// `s1`) at 1 (Hermite), without solving for its extremes: it is the chord plus
-/// (s0 - dy) h10(t) + (s1 - dy) h11(t), and |h10|, |h11| <= 4/27 on [0, 1].
+/// The coefficients [a0, a1, a2, a3] (a0 + a1 t + a2 t^2 + a3 t^3) of the cubic through `y0`
+/// (slope `s0`) at t = 0 and `y1` (slope `s1`) at t = 1 (Hermite).
 #[inline]
-fn hermite_bounds([y0, s0, y1, s1]: [f64; 4]) -> (f64, f64) {
-    let dy = y1 - y0;
-    let dev = 4.0 / 27.0 * ((s0 - dy).abs() + (s1 - dy).abs());
-    (y0.min(y1) - dev, y0.max(y1) + dev)
+fn hermite_coefficients([y0, s0, y1, s1]: [f64; 4]) -> [f64; 4] {
+    [
+        y0,
+        s0,
+        3.0 * (y1 - y0) - 2.0 * s0 - s1,
+        2.0 * (y0 - y1) + s0 + s1,
+    ]
 }
 
-/// The smallest and largest values on [0, 1] of the cubic through `y0` (slope `s0`) at 0 and
-/// `y1` (slope `s1`) at 1 (Hermite).
-fn hermite_range([y0, s0, y1, s1]: [f64; 4]) -> (f64, f64) {
-    // H(t) = y0 + s0 t + c2 t^2 + c3 t^3.
-    let c2 = 3.0 * (y1 - y0) - 2.0 * s0 - s1;
-    let c3 = 2.0 * (y0 - y1) + s0 + s1;
-    let at = |t: f64| y0 + t * (s0 + t * (c2 + t * c3));
+/// Bounds on the values of the cubic `a` ([`hermite_coefficients`]) on [0, 1] without solving
+/// for its extremes: the cubic minus its chord is -(a2 + a3)(t - t^2) - a3 (t^2 - t^3), and on
+/// [0, 1] t - t^2 <= 1/4, t^2 - t^3 <= 4/27 (taken as 1/4).
+#[inline]
+fn cubic_bounds([a0, a1, a2, a3]: [f64; 4]) -> (f64, f64) {
+    let y1 = a0 + a1 + a2 + a3;
+    let dev = 0.25 * ((a2 + a3).abs() + a3.abs());
+    (a0.min(y1) - dev, a0.max(y1) + dev)
+}
+
+/// The smallest and largest values of the cubic `a` ([`hermite_coefficients`]) on [0, 1].
+fn cubic_range([a0, a1, a2, a3]: [f64; 4]) -> (f64, f64) {
+    let at = |t: f64| a0 + t * (a1 + t * (a2 + t * a3));
+    let (y0, y1) = (a0, at(1.0));
     let (mut lo, mut hi) = (y0.min(y1), y0.max(y1));
     let mut visit = |t: f64| {
         if t > 0.0 && t < 1.0 {
@@ -295,8 +315,8 @@ fn hermite_range([y0, s0, y1, s1]: [f64; 4]) -> (f64, f64) {
             hi = hi.max(v);
         }
     };
-    // H'(t) = s0 + 2 c2 t + 3 c3 t^2 = 0.
-    let (qa, qb, qc) = (3.0 * c3, 2.0 * c2, s0);
+    // The derivative a1 + 2 a2 t + 3 a3 t^2 = 0.
+    let (qa, qb, qc) = (3.0 * a3, 2.0 * a2, a1);
     if qa.abs() <= 1e-12 * (qb.abs() + qc.abs()) {
         if qb != 0.0 {
             visit(-qc / qb);
