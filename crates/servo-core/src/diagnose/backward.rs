@@ -118,7 +118,11 @@ pub(super) fn search(
         .chain(&fresh)
         .map(|&k| EffectToFit::all(k))
         .collect();
-    let start = ds.fit_config(cx.model, &to_fit).ok()?;
+    let start = super::timing::timed(
+        || "backward: equation-error start".into(),
+        || ds.fit_config(cx.model, &to_fit),
+    )
+    .ok()?;
     let tuner = Tuner::new(ds);
     let gridded = super::timing::timed(
         || "backward: grid".into(),

@@ -49,6 +49,11 @@ pub(super) struct CoarseTables {
     /// against the period ([`COARSE_MAX_CONTACT_PHASE`]), so that the cubic through the ends
     /// follows the motion in between.
     contact_whole: bool,
+    /// 1 / N [-].
+    inv_n: f64,
+    /// The largest change of the nonlinear torques over a period [N m, load side], sliding
+    /// backwards and forwards ([`COARSE_MAX_TORQUE_CHANGE`] of the breakaway level).
+    torque_tol: [f64; 2],
 }
 
 /// Largest phase the contact's natural oscillation turns in one period for a period in contact
@@ -88,6 +93,9 @@ impl PlantSim {
             disc: [ZERO_DISC; 4],
             g_old: [[0.0; NS]; 4],
             contact_whole: false,
+            inv_n: 1.0 / self.n,
+            torque_tol: [-1.0, 1.0]
+                .map(|dir| COARSE_MAX_TORQUE_CHANGE * self.friction.breakaway_l(dir).abs()),
         };
         if let Some(b) = &self.play {
             // The contact's natural frequency: the spring between the motor (J_eq (1 - f),
@@ -160,7 +168,12 @@ impl PlantSim {
         carry: Option<(f64, f64)>,
     ) -> Option<(f64, f64)> {
         let x0 = self.x;
-        let (mode, tau_offset) = self.contact_mode(&x0);
+        let (inv_n, tol) = {
+            let t = self.coarse.as_ref()?;
+            (t.inv_n, t.torque_tol[usize::from(self.dir > 0.0)])
+        };
+        let g0 = gap_state(&x0, inv_n);
+        let (mode, tau_offset) = self.contact_mode_at(g0);
         let (tm0, tl0) = match carry {
             Some(t) => t,
             None => self.nonlinear_torques(&x0),
@@ -179,8 +192,7 @@ impl PlantSim {
         let (tm1, tl1) = self.nonlinear_torques(&xp);
         let (dm, dl) = (tm1 - tm0, tl1 - tl0);
         if self.dry {
-            let level = self.friction.breakaway_l(self.dir).abs();
-            if (dm * self.n).abs() + dl.abs() > COARSE_MAX_TORQUE_CHANGE * level {
+            if (dm * self.n).abs() + dl.abs() > tol {
                 return None;
             }
         } else if dm != 0.0 || dl != 0.0 {
@@ -198,22 +210,20 @@ impl PlantSim {
                 return None;
             }
         }
-        if !self.contact_unchanged(&x0, &x1, mode) {
+        if !self.contact_unchanged(g0, gap_state(&x1, inv_n), mode) {
             return None;
         }
         self.x = x1;
         Some((tm1, tl1))
     }
 
-    /// The contact mode at `x` (free or [`CONTACT`]) and the spring's offset torque [N m], as a
-    /// sub-step decides them (never stuck here).
+    /// The contact mode (free or [`CONTACT`]) and the spring's offset torque [N m] at the gap
+    /// state `(delta, rate)` ([`gap_state`]), as a sub-step decides them (never stuck here).
     #[inline]
-    fn contact_mode(&self, x: &[f64; NS]) -> (usize, f64) {
+    fn contact_mode_at(&self, (delta, rate): (f64, f64)) -> (usize, f64) {
         let Some(b) = &self.play else {
             return (0, 0.0);
         };
-        let delta = x[3] / self.n - x[5];
-        let rate = x[2] / self.n - x[4];
         let side = if delta > 0.0 { 1.0 } else { -1.0 };
         let p = side * (side * delta - 0.5 * b.gap);
         if b.gap <= 0.0
@@ -226,26 +236,22 @@ impl PlantSim {
         }
     }
 
-    /// Whether the contact can have kept mode `mode` over a period from `x0` to `x1`: always
-    /// without a gap (the contact never opens); pressed, on a contact slow against the period,
-    /// the force stays above [`COARSE_EVENT_MARGIN`] of its value at the ends everywhere in
-    /// between; free, the motor stays clear of both flanks by that share of the half gap. Both
-    /// read along the cubic through the motor's place in the gap and its rate at both ends.
-    fn contact_unchanged(&self, x0: &[f64; NS], x1: &[f64; NS], mode: usize) -> bool {
+    /// Whether the contact can have kept mode `mode` over a period between the gap states
+    /// `(d0, r0)` and `(d1, r1)` ([`gap_state`]): always without a gap (the contact never opens);
+    /// pressed, on a contact slow against the period, the force stays above
+    /// [`COARSE_EVENT_MARGIN`] of its value at the ends everywhere in between; free, the motor
+    /// stays clear of both flanks by that share of the half gap. Both read along the cubic
+    /// through the motor's place in the gap and its rate at both ends.
+    fn contact_unchanged(&self, (d0, r0): (f64, f64), (d1, r1): (f64, f64), mode: usize) -> bool {
         let (Some(b), Some(t)) = (&self.play, &self.coarse) else {
             return true;
         };
         if b.gap <= 0.0 {
             return true;
         }
-        if self.contact_mode(x1).0 != mode {
+        if self.contact_mode_at((d1, r1)).0 != mode {
             return false;
         }
-        let n = self.n;
-        // The motor's place in the gap [rad, load side] and its rate [rad/s].
-        let delta = |x: &[f64; NS]| x[3] / n - x[5];
-        let rate = |x: &[f64; NS]| x[2] / n - x[4];
-        let (d0, d1) = (delta(x0), delta(x1));
         let h = self.dt_s;
         if mode & CONTACT != 0 {
             if !t.contact_whole || math::sign(d0) != math::sign(d1) {
@@ -256,7 +262,7 @@ impl PlantSim {
             // it: k p + c dp/dt, a cubic too, equal to the force at both ends.
             let side = math::sign(d0);
             let (p0, p1) = (side * d0 - 0.5 * b.gap, side * d1 - 0.5 * b.gap);
-            let pen = hermite_coefficients([p0, side * rate(x0) * h, p1, side * rate(x1) * h]);
+            let pen = hermite_coefficients([p0, side * r0 * h, p1, side * r1 * h]);
             let [a0, a1, a2, a3] = pen;
             let (k, c) = (b.stiffness, b.damping / h);
             let force = [
@@ -272,13 +278,20 @@ impl PlantSim {
             };
             above(pen, p0.max(p1)) && above(force, force[0].max(force.iter().sum()))
         } else {
-            let place = hermite_coefficients([d0, rate(x0) * h, d1, rate(x1) * h]);
+            let place = hermite_coefficients([d0, r0 * h, d1, r1 * h]);
             let inside = |(lo, hi): (f64, f64)| {
                 lo.abs().max(hi.abs()) < (1.0 - COARSE_EVENT_MARGIN) * 0.5 * b.gap
             };
             inside(cubic_bounds(place)) || inside(cubic_range(place))
         }
     }
+}
+
+/// The motor's place in the gap [rad, load side] and its rate [rad/s] at state `x` (with play;
+/// `inv_n` = 1 / N).
+#[inline]
+fn gap_state(x: &[f64; NS], inv_n: f64) -> (f64, f64) {
+    (x[3] * inv_n - x[5], x[2] * inv_n - x[4])
 }
 
 /// The coefficients [a0, a1, a2, a3] (a0 + a1 t + a2 t^2 + a3 t^3) of the cubic through `y0`
