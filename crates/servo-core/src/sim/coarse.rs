@@ -173,7 +173,7 @@ impl PlantSim {
             (t.inv_n, t.torque_tol[usize::from(self.dir > 0.0)])
         };
         let g0 = gap_state(&x0, inv_n);
-        let (mode, tau_offset) = self.contact_mode_at(g0);
+        let (mode, tau_offset) = self.contact_mode(g0);
         let (tm0, tl0) = match carry {
             Some(t) => t,
             None => self.nonlinear_torques(&x0),
@@ -217,25 +217,6 @@ impl PlantSim {
         Some((tm1, tl1))
     }
 
-    /// The contact mode (free or [`CONTACT`]) and the spring's offset torque [N m] at the gap
-    /// state `(delta, rate)` ([`gap_state`]), as a sub-step decides them (never stuck here).
-    #[inline]
-    fn contact_mode_at(&self, (delta, rate): (f64, f64)) -> (usize, f64) {
-        let Some(b) = &self.play else {
-            return (0, 0.0);
-        };
-        let side = if delta > 0.0 { 1.0 } else { -1.0 };
-        let p = side * (side * delta - 0.5 * b.gap);
-        if b.gap <= 0.0
-            || (side * p >= -1e-12 * b.gap.max(1e-9)
-                && side * (b.stiffness * p + b.damping * rate) > 0.0)
-        {
-            (CONTACT, side * b.stiffness * 0.5 * b.gap)
-        } else {
-            (0, 0.0)
-        }
-    }
-
     /// Whether the contact can have kept mode `mode` over a period between the gap states
     /// `(d0, r0)` and `(d1, r1)` ([`gap_state`]): always without a gap (the contact never opens);
     /// pressed, on a contact slow against the period, the force stays above
@@ -249,7 +230,7 @@ impl PlantSim {
         if b.gap <= 0.0 {
             return true;
         }
-        if self.contact_mode_at((d1, r1)).0 != mode {
+        if self.contact_mode((d1, r1)).0 != mode {
             return false;
         }
         let h = self.dt_s;

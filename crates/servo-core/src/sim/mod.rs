@@ -927,6 +927,30 @@ impl PlantSim {
         (tau_m, tau_l)
     }
 
+    /// The contact mode (free or [`CONTACT`]) and the spring's offset torque [N m] for the motor
+    /// at `delta` [rad, load side] from the middle of the gap, moving at `rate` [rad/s] against
+    /// the load (free without play).
+    #[inline]
+    fn contact_mode(&self, (delta, rate): (f64, f64)) -> (usize, f64) {
+        let Some(b) = &self.play else {
+            return (0, 0.0);
+        };
+        let side = if delta > 0.0 { 1.0 } else { -1.0 };
+        // Penetration beyond the flank (tiny negative values: on the flank after a projection,
+        // up to rounding).
+        let p = side * (side * delta - 0.5 * b.gap);
+        // Without play the contact never opens: a compliance (shaft, coupling) is a linear
+        // spring-damper that pulls as well as pushes.
+        if b.gap <= 0.0
+            || (side * p >= -1e-12 * b.gap.max(1e-9)
+                && side * (b.stiffness * p + b.damping * rate) > 0.0)
+        {
+            (CONTACT, side * b.stiffness * 0.5 * b.gap)
+        } else {
+            (0, 0.0)
+        }
+    }
+
     /// One internal sub-step of length index `li` with driver input `u` held. `carry`: the
     /// nonlinear torques at the start, when known from the previous sub-step's prediction.
     fn substep(&mut self, li: usize, u: f64, carry: Option<(f64, f64)>) -> Option<(f64, f64)> {
@@ -944,25 +968,10 @@ impl PlantSim {
             }
         }
         // Contact mode.
-        let mut mode = if self.stuck { STUCK } else { 0 };
-        let mut tau_offset = 0.0;
-        if let Some(b) = &self.play {
-            let delta = self.x[3] / self.n - self.x[5];
-            let rate = self.x[2] / self.n - self.x[4];
-            let side = if delta > 0.0 { 1.0 } else { -1.0 };
-            // Penetration beyond the flank (tiny negative values: on the flank after a
-            // projection, up to rounding).
-            let p = side * (side * delta - 0.5 * b.gap);
-            // Without play the contact never opens: a compliance (shaft, coupling) is a
-            // linear spring-damper that pulls as well as pushes.
-            if b.gap <= 0.0
-                || (side * p >= -1e-12 * b.gap.max(1e-9)
-                    && side * (b.stiffness * p + b.damping * rate) > 0.0)
-            {
-                mode |= CONTACT;
-                tau_offset = side * b.stiffness * 0.5 * b.gap;
-            }
-        }
+        let delta = self.x[3] / self.n - self.x[5];
+        let rate = self.x[2] / self.n - self.x[4];
+        let (contact, tau_offset) = self.contact_mode((delta, rate));
+        let mode = contact | if self.stuck { STUCK } else { 0 };
         let (tm0, tl0) = match carry {
             Some(t) => t,
             None => {
@@ -1068,41 +1077,6 @@ fn advance<const N: usize>(d: &Disc, x0: &[f64; NS], inp: &[f64; NI]) -> [f64; N
 /// Exact discretisation of mode `mode` over a sub-step `h` [s] (zero-order hold of u_in and of
 /// the torques, plus the first-order-hold correction of the torques).
 fn discretise(plant: &Plant, frac: f64, play: Option<&Play>, mode: usize, h: f64) -> Disc {
-    let (a, b) = continuous(plant, frac, play, mode);
-    // Augmented matrix (Van Loan): exp([[A h, B h, 0], [0, 0, E], [0, 0, 0]]) with E feeding the
-    // ramp generators of the torque inputs.
-    let mut m = SMatrix::<f64, NA, NA>::zeros();
-    for i in 0..NS {
-        for j in 0..NS {
-            m[(i, j)] = a[i][j] * h;
-        }
-        for j in 0..NI {
-            m[(i, NS + j)] = b[i][j] * h;
-        }
-    }
-    m[(NS + 1, NS + NI)] = 1.0;
-    m[(NS + 2, NS + NI + 1)] = 1.0;
-    let e = expm(&m);
-    let mut d = ZERO_DISC;
-    for i in 0..NS {
-        for j in 0..NS {
-            d.phi[i][j] = e[(i, j)];
-        }
-        for j in 0..NI {
-            d.g0[i][j] = e[(i, NS + j)];
-        }
-        for j in 0..NR {
-            d.g1[i][j] = e[(i, NS + NI + j)];
-        }
-    }
-    d
-}
-
-/// The continuous-time model of mode `mode`: dx/dt = A x + B (u_in, tau_m, tau_l, tau_offset).
-type Continuous = ([[f64; NS]; NS], [[f64; NI]; NS]);
-
-/// [`Continuous`] of mode `mode` (with play: `frac` the load's share of the inertia).
-fn continuous(plant: &Plant, frac: f64, play: Option<&Play>, mode: usize) -> Continuous {
     let p = &plant.params;
     let (n, k_t, k_e) = (p.n, p.k_t, p.k_e);
     let (t_drv, l_a, r_eq) = (p.t_drv(), p.l_a, p.r_eq());
@@ -1150,7 +1124,33 @@ fn continuous(plant: &Plant, frac: f64, play: Option<&Play>, mode: usize) -> Con
         a[w] = [0.0; NS];
         b[w] = [0.0; NI];
     }
-    (a, b)
+    // Augmented matrix (Van Loan): exp([[A h, B h, 0], [0, 0, E], [0, 0, 0]]) with E feeding the
+    // ramp generators of the torque inputs.
+    let mut m = SMatrix::<f64, NA, NA>::zeros();
+    for i in 0..NS {
+        for j in 0..NS {
+            m[(i, j)] = a[i][j] * h;
+        }
+        for j in 0..NI {
+            m[(i, NS + j)] = b[i][j] * h;
+        }
+    }
+    m[(NS + 1, NS + NI)] = 1.0;
+    m[(NS + 2, NS + NI + 1)] = 1.0;
+    let e = expm(&m);
+    let mut d = ZERO_DISC;
+    for i in 0..NS {
+        for j in 0..NS {
+            d.phi[i][j] = e[(i, j)];
+        }
+        for j in 0..NI {
+            d.g0[i][j] = e[(i, NS + j)];
+        }
+        for j in 0..NR {
+            d.g1[i][j] = e[(i, NS + NI + j)];
+        }
+    }
+    d
 }
 
 #[cfg(test)]
