@@ -99,26 +99,67 @@ pub(super) fn best_pair(
     if top.len() < 2 {
         return None;
     }
-    // Each member is judged against the model holding the other alone, tuned on the simulation
-    // as the single candidates' reference is.
-    let refs: Vec<Reference> = par_map(&top, cx.opts.parallel, |(_, s)| {
-        let plant = cx.ds.refine_rigid_on_simulation(&s.plant);
-        Reference {
-            oe_holdout: oe::prediction_cost(cx.ds, &plant, Part::Holdout),
-            plant,
-        }
-    });
     let mut pairs = Vec::new();
     for i in 0..top.len() {
         for j in i + 1..top.len() {
             pairs.push((i, j));
         }
     }
-    let judged = par_map(&pairs, cx.opts.parallel, |&(i, j)| {
+    // The independent work first, as one even load on the cores: each member judged against the
+    // model holding the other alone, tuned on the simulation as the single candidates' reference
+    // is; and every start of every pair's joint fit ([`joint_start`]).
+    enum Task {
+        Reference(usize),
+        Start(usize, usize),
+    }
+    enum Done {
+        Reference(Reference),
+        Start(Option<(f64, Solved)>),
+    }
+    let tasks: Vec<Task> = (0..top.len())
+        .map(Task::Reference)
+        .chain((0..pairs.len()).flat_map(|p| (0..START_COUNT).map(move |k| Task::Start(p, k))))
+        .collect();
+    let done = par_map(&tasks, cx.opts.parallel, |t| match *t {
+        Task::Reference(i) => {
+            let plant = cx.ds.refine_rigid_on_simulation(&top[i].1.plant);
+            Done::Reference(Reference {
+                oe_holdout: oe::prediction_cost(cx.ds, &plant, Part::Holdout),
+                plant,
+            })
+        }
+        Task::Start(p, k) => {
+            let (i, j) = pairs[p];
+            Done::Start(joint_start(cx, top[i], top[j], k))
+        }
+    });
+    let mut refs = Vec::new();
+    let mut starts: Vec<Vec<Option<(f64, Solved)>>> = pairs.iter().map(|_| Vec::new()).collect();
+    for (t, d) in tasks.iter().zip(done) {
+        match (t, d) {
+            (Task::Reference(_), Done::Reference(r)) => refs.push(r),
+            (Task::Start(p, _), Done::Start(s)) => starts[*p].push(s),
+            _ => return None,
+        }
+    }
+    // Each pair's joint fit: the start with the lowest cost (the first of equal ones).
+    let joints: Vec<(usize, usize, Solved)> = pairs
+        .iter()
+        .zip(starts)
+        .filter_map(|(&(i, j), s)| {
+            let best = s
+                .into_iter()
+                .flatten()
+                .min_by(|x, y| x.0.total_cmp(&y.0))?;
+            Some((i, j, best.1))
+        })
+        .collect();
+    let judged = par_map(&joints, cx.opts.parallel, |(i, j, joint)| {
         judge_pair(
             cx,
-            (top[i].0, top[i].1, &refs[i]),
-            (top[j].0, top[j].1, &refs[j]),
+            (top[*i].0, top[*i].1, &refs[*i]),
+            (top[*j].0, top[*j].1, &refs[*j]),
+            joint,
         )
     });
     judged
@@ -128,43 +169,43 @@ pub(super) fn best_pair(
         .map(|(_, pair)| pair)
 }
 
-/// The joint fit of `a` and `b`, from three starts: both searched together, and each searched
-/// with the other held at its own single fit (its nonlinear parameters kept, its linear ones
+/// Starts of a pair's joint fit ([`joint_start`]).
+const START_COUNT: usize = 3;
+
+/// Start `k` (< [`START_COUNT`]) of the joint fit of `a` and `b`, with its simulation cost on the
+/// fit blocks: both searched together (0), and each searched with the other held at its own
+/// single fit (1: `a` held, 2: `b` held; its nonlinear parameters kept, its linear ones
 /// refitted). The joint problem is not convex: a breakaway friction fitted beside a play whose
 /// gap is still unknown can settle on a narrow spike at low speed that the play then
 /// compensates with a wide gap. The start with the lowest simulation cost on the fit blocks
 /// (never the held-out ones) is kept.
-fn joint_fit(
+fn joint_start(
     cx: &Context,
     (a, a_alone): (EffectKind, &Solved),
     (b, b_alone): (EffectKind, &Solved),
-) -> Option<Solved> {
-    let starts = [
-        (*cx.model, &[EffectToFit::all(a), EffectToFit::all(b)][..]),
-        (a_alone.plant, &[EffectToFit::all(b)][..]),
-        (b_alone.plant, &[EffectToFit::all(a)][..]),
-    ];
-    starts
-        .iter()
-        .filter_map(|(from, fit)| {
-            let s = cx.ds.fit_config(from, fit).ok()?;
-            let cost = oe::prediction_cost(cx.ds, &s.plant, Part::Fit)?;
-            Some((cost, s))
-        })
-        .min_by(|x, y| x.0.total_cmp(&y.0))
-        .map(|(_, s)| s)
+    k: usize,
+) -> Option<(f64, Solved)> {
+    let both = [EffectToFit::all(a), EffectToFit::all(b)];
+    let (from, fit) = match k {
+        0 => (*cx.model, &both[..]),
+        1 => (a_alone.plant, &both[1..]),
+        _ => (b_alone.plant, &both[..1]),
+    };
+    let s = cx.ds.fit_config(&from, fit).ok()?;
+    let cost = oe::prediction_cost(cx.ds, &s.plant, Part::Fit)?;
+    Some((cost, s))
 }
 
-/// Fits `a` and `b` jointly and judges each given the other. `Some((joint held-out simulation
+/// Judges each of `a` and `b` given the other in their joint fit `joint`. `Some((joint held-out simulation
 /// drop against the model holding neither, [members]))` when both pass.
 fn judge_pair(
     cx: &Context,
     a: (EffectKind, &Solved, &Reference),
     b: (EffectKind, &Solved, &Reference),
+    joint: &Solved,
 ) -> Option<(f64, [Candidate; 2])> {
-    let joint = joint_fit(cx, (a.0, a.1), (b.0, b.1))?;
-    let ca = judge_member(cx, a.0, (b.0, b.1, b.2), &joint);
-    let cb = judge_member(cx, b.0, (a.0, a.1, a.2), &joint);
+    let ca = judge_member(cx, a.0, (b.0, b.1, b.2), joint);
+    let cb = judge_member(cx, b.0, (a.0, a.1, a.2), joint);
     let (mut ca, mut cb) = (ca.filter(|c| c.significant)?, cb.filter(|c| c.significant)?);
     // The pair against the model holding neither.
     let joint_oe = oe::prediction_cost(cx.ds, &joint.plant, Part::Holdout)?;
@@ -173,7 +214,7 @@ fn judge_pair(
     if total < frac(cx.opts.thresholds.min_oe_drop_pct) {
         return None;
     }
-    if !(confirm_member(cx, &mut ca, &joint) && confirm_member(cx, &mut cb, &joint)) {
+    if !(confirm_member(cx, &mut ca, joint) && confirm_member(cx, &mut cb, joint)) {
         return None;
     }
     let drop = |c: &Candidate| c.oe_reduction_pct.unwrap_or(f64::NEG_INFINITY);

@@ -14,7 +14,7 @@
 //! shaft and are seen at the motor as tau_l / N. Speeds and angles follow the same suffixes
 //! (omega_l = omega_m / N without play).
 
-use crate::effects::{Effect, Effects, SimRole};
+use crate::effects::{Effect, EffectModel, Effects, SimRole};
 use crate::math;
 
 /// Most memoryless input maps of one plant.
@@ -27,6 +27,9 @@ pub const MAX_INPUT_MAPS: usize = 8;
 #[derive(Clone, Copy, Default)]
 pub struct InputNonlinearity {
     maps: [Option<Effect>; MAX_INPUT_MAPS],
+    /// Each map's model and parameter count, looked up once: the simulator applies the maps
+    /// every control period.
+    models: [Option<(&'static dyn EffectModel, usize)>; MAX_INPUT_MAPS],
 }
 
 impl core::fmt::Debug for InputNonlinearity {
@@ -58,7 +61,8 @@ impl InputNonlinearity {
                 j -= 1;
             }
         }
-        InputNonlinearity { maps }
+        let models = maps.map(|m| m.map(|e| (e.kind.model(), e.kind.params().len())));
+        InputNonlinearity { maps, models }
     }
     /// True when no input map is active.
     pub fn is_identity(&self) -> bool {
@@ -68,8 +72,11 @@ impl InputNonlinearity {
     #[inline]
     pub fn apply(&self, u_v: f64) -> f64 {
         let mut u = u_v;
-        for e in self.maps.iter().flatten() {
-            u = e.kind.model().input_v(e.values(), u);
+        for (e, m) in self.maps.iter().zip(&self.models) {
+            let (Some(e), Some((model, len))) = (e, m) else {
+                break;
+            };
+            u = model.input_v(&e.values[..*len], u);
         }
         u
     }

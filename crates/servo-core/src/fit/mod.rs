@@ -646,19 +646,32 @@ impl Dataset {
                 let search = kind.model().search(key);
                 let integer = search.scale == SearchScale::Integer;
                 let log_scale = search.scale == SearchScale::Log;
-                let mut trial = cfg.clone();
                 let on = self.search_set();
-                let mut f = |x: f64| {
+                let at = |trial: &mut model::Config, x: f64| {
                     let x = if log_scale { math::exp(x) } else { x };
                     trial.slots[i].set(key, x);
-                    on.cost(&trial, kind)
+                    on.cost(trial, kind)
                 };
+                let mut trial = cfg.clone();
+                let mut f = |x: f64| at(&mut trial, x);
                 let g: Vec<f64> = if log_scale {
                     grid.iter().map(|v| math::ln(*v)).collect()
                 } else {
                     grid.clone()
                 };
-                let (x, fx) = search::grid_then_golden(&g, &mut f, if integer { 0 } else { 20 })
+                // The grid's least-squares solves are independent: on an idle core too.
+                let on_grid = |xs: &[f64]| -> Vec<f64> {
+                    let (a, b) = xs.split_at(xs.len() / 2);
+                    let part = |xs: &[f64]| -> Vec<f64> {
+                        let mut trial = cfg.clone();
+                        xs.iter().map(|&x| at(&mut trial, x)).collect()
+                    };
+                    let (mut va, vb) = crate::par::join(|| part(a), || part(b));
+                    va.extend(vb);
+                    va
+                };
+                let iters = if integer { 0 } else { 20 };
+                let (x, fx) = search::grid_then_golden_batched(&g, on_grid, &mut f, iters)
                     .ok_or_else(|| {
                         FitError::Singular(alloc::format!(
                             "{kind}: no finite cost over the search grid"

@@ -34,6 +34,44 @@ pub fn grid_then_golden_bounded(
             best = Some((i, v));
         }
     }
+    golden_from(grid, best, flat, f, iters)
+}
+
+/// As [`grid_then_golden`], the grid's values all computed first by `on_grid` (in grid order:
+/// e.g. on two threads, [`crate::par::join`]), then the golden section with `f`. The same
+/// result as [`grid_then_golden`] when `on_grid` returns `f` at each grid point.
+pub fn grid_then_golden_batched(
+    grid: &[f64],
+    on_grid: impl FnOnce(&[f64]) -> alloc::vec::Vec<f64>,
+    mut f: impl FnMut(f64) -> f64,
+    iters: usize,
+) -> Option<(f64, f64)> {
+    let values = on_grid(grid);
+    if values.len() != grid.len() {
+        return None;
+    }
+    let mut best: Option<(usize, f64)> = None;
+    let mut flat = true;
+    for (i, &v) in values.iter().enumerate() {
+        flat &= v.is_finite() && best.is_none_or(|b| v == b.1);
+        // Strictly lower: the first of equal values wins, as a scan of every value would.
+        if v.is_finite() && best.is_none_or(|b| v < b.1) {
+            best = Some((i, v));
+        }
+    }
+    golden_from(grid, best, flat, |x, _| f(x), iters)
+}
+
+/// The golden-section refinement of the grid scans: between the neighbours of the best grid
+/// point `best` (index, value), unless the grid was `flat`; `f` against a bound as in
+/// [`grid_then_golden_bounded`].
+fn golden_from(
+    grid: &[f64],
+    best: Option<(usize, f64)>,
+    flat: bool,
+    mut f: impl FnMut(f64, f64) -> f64,
+    iters: usize,
+) -> Option<(f64, f64)> {
     let (ib, fb) = best?;
     if flat && grid.len() > 1 {
         return Some((grid[ib], fb));

@@ -66,6 +66,15 @@ pub const COARSE_MAX_CONTACT_PHASE: f64 = 1.5;
 /// [-].
 pub const COARSE_EVENT_MARGIN: f64 = 0.05;
 
+/// The end of a whole period, which starts the next one: the nonlinear torques there, the gap
+/// state ([`gap_state`]) and its contact mode ([`PlantSim::contact_mode`]).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Carry {
+    torques: (f64, f64),
+    gap: (f64, f64),
+    mode: (usize, f64),
+}
+
 impl PlantSim {
     /// This simulator taking each control period in one exact step whenever no event can happen
     /// inside it (see the module docs of `sim::coarse`), and in sub-steps otherwise. Unchanged
@@ -122,10 +131,10 @@ impl PlantSim {
                 for i in 0..NS {
                     let mut acc = 0.0;
                     for j in 0..NS {
-                        acc += after.phi[i][j] * before.g0[j][0];
+                        acc += after.phi_t[j][i] * before.g0_t[0][j];
                     }
                     t.g_old[mode][i] = acc;
-                    whole.g0[i][0] = after.g0[i][0];
+                    whole.g0_t[0][i] = after.g0_t[0][i];
                 }
             }
             t.disc[mode] = whole;
@@ -161,23 +170,24 @@ impl PlantSim {
     /// One exact step over the period with the inputs `u_new` (after the switch) and `u_old`
     /// (before it) [V], kept in `self.x` and returning the nonlinear torques at its end when no
     /// event can have happened inside it; `None` (state untouched) otherwise.
-    fn coarse_step(
-        &mut self,
-        u_new: f64,
-        u_old: f64,
-        carry: Option<(f64, f64)>,
-    ) -> Option<(f64, f64)> {
+    fn coarse_step(&mut self, u_new: f64, u_old: f64, carry: Option<Carry>) -> Option<Carry> {
         let x0 = self.x;
         let (inv_n, tol) = {
             let t = self.coarse.as_ref()?;
             (t.inv_n, t.torque_tol[usize::from(self.dir > 0.0)])
         };
-        let g0 = gap_state(&x0, inv_n);
-        let (mode, tau_offset) = self.contact_mode(g0);
-        let (tm0, tl0) = match carry {
-            Some(t) => t,
-            None => self.nonlinear_torques(&x0),
+        let start = match carry {
+            Some(c) => c,
+            None => {
+                let gap = gap_state(&x0, inv_n);
+                Carry {
+                    torques: self.nonlinear_torques(&x0),
+                    gap,
+                    mode: self.contact_mode(gap),
+                }
+            }
         };
+        let (g0, (mode, tau_offset), (tm0, tl0)) = (start.gap, start.mode, start.torques);
         let t = self.coarse.as_ref()?;
         let d = &t.disc[mode];
         let inp: [f64; NI] = [u_new, tm0, tl0, tau_offset];
@@ -210,15 +220,22 @@ impl PlantSim {
                 return None;
             }
         }
-        if !self.contact_unchanged(g0, gap_state(&x1, inv_n), mode) {
+        let g1 = gap_state(&x1, inv_n);
+        let end_mode = self.contact_mode(g1);
+        if end_mode.0 != mode || !self.contact_unchanged(g0, g1, mode) {
             return None;
         }
         self.x = x1;
-        Some((tm1, tl1))
+        Some(Carry {
+            torques: (tm1, tl1),
+            gap: g1,
+            mode: end_mode,
+        })
     }
 
-    /// Whether the contact can have kept mode `mode` over a period between the gap states
-    /// `(d0, r0)` and `(d1, r1)` ([`gap_state`]): always without a gap (the contact never opens);
+    /// Whether the contact can have kept mode `mode` (that of both ends) over a period between
+    /// the gap states `(d0, r0)` and `(d1, r1)` ([`gap_state`]): always without a gap (the
+    /// contact never opens);
     /// pressed, on a contact slow against the period, the force stays above
     /// [`COARSE_EVENT_MARGIN`] of its value at the ends everywhere in between; free, the motor
     /// stays clear of both flanks by that share of the half gap. Both read along the cubic
@@ -229,9 +246,6 @@ impl PlantSim {
         };
         if b.gap <= 0.0 {
             return true;
-        }
-        if self.contact_mode((d1, r1)).0 != mode {
-            return false;
         }
         let h = self.dt_s;
         if mode & CONTACT != 0 {

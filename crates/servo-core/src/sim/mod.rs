@@ -173,17 +173,19 @@ const NA: usize = NS + NI + NR;
 /// Exact discretisation of one mode over one sub-step length.
 #[derive(Debug, Clone, Copy)]
 struct Disc {
-    /// State transition exp(A h).
-    phi: [[f64; NS]; NS],
-    /// Zero-order-hold input matrix (u_in, tau_m, tau_l, tau_offset).
-    g0: [[f64; NI]; NS],
+    /// State transition exp(A h), by columns: `phi_t[j][i]` is row i, column j (so that a step
+    /// adds whole columns, which the compiler vectorises; each row is still summed in column
+    /// order).
+    phi_t: [[f64; NS]; NS],
+    /// Zero-order-hold input matrix (u_in, tau_m, tau_l, tau_offset), by columns as `phi_t`.
+    g0_t: [[f64; NS]; NI],
     /// First-order-hold correction for (tau_m, tau_l): response to an input ramping 0 -> 1.
     g1: [[f64; NR]; NS],
 }
 
 const ZERO_DISC: Disc = Disc {
-    phi: [[0.0; NS]; NS],
-    g0: [[0.0; NI]; NS],
+    phi_t: [[0.0; NS]; NS],
+    g0_t: [[0.0; NS]; NI],
     g1: [[0.0; NR]; NS],
 };
 
@@ -302,9 +304,9 @@ pub struct PlantSim {
     /// ([`PlantSim::with_coarse_periods`]).
     coarse: Option<coarse::CoarseTables>,
     // State.
-    /// The nonlinear torques at the end of the last period when it was stepped whole (they start
-    /// the next one).
-    coarse_carry: Option<(f64, f64)>,
+    /// What the end of the last period computed when it was stepped whole (it starts the next
+    /// one).
+    coarse_carry: Option<coarse::Carry>,
     /// Periods stepped whole since the simulator was built.
     whole_periods: u64,
     x: [f64; NS],
@@ -1060,16 +1062,20 @@ fn custom_signals(s: &Signals) -> [f64; 7] {
 /// x+ = Phi x + G0 inp over the first `N` states (4 rigid, 6 with play).
 #[inline(always)]
 fn advance<const N: usize>(d: &Disc, x0: &[f64; NS], inp: &[f64; NI]) -> [f64; NS] {
+    // Column by column: row i sums phi[i][0] x0[0], ..., phi[i][N-1] x0[N-1], then the inputs,
+    // in that order, from zero (the same arithmetic as a dot product per row).
     let mut xp = [0.0; NS];
-    for i in 0..N {
-        let mut acc = 0.0;
-        for j in 0..N {
-            acc += d.phi[i][j] * x0[j];
+    for j in 0..N {
+        let (col, xj) = (&d.phi_t[j], x0[j]);
+        for i in 0..N {
+            xp[i] += col[i] * xj;
         }
-        for j in 0..NI {
-            acc += d.g0[i][j] * inp[j];
+    }
+    for j in 0..NI {
+        let (col, uj) = (&d.g0_t[j], inp[j]);
+        for i in 0..N {
+            xp[i] += col[i] * uj;
         }
-        xp[i] = acc;
     }
     xp
 }
@@ -1141,10 +1147,10 @@ fn discretise(plant: &Plant, frac: f64, play: Option<&Play>, mode: usize, h: f64
     let mut d = ZERO_DISC;
     for i in 0..NS {
         for j in 0..NS {
-            d.phi[i][j] = e[(i, j)];
+            d.phi_t[j][i] = e[(i, j)];
         }
         for j in 0..NI {
-            d.g0[i][j] = e[(i, NS + j)];
+            d.g0_t[j][i] = e[(i, NS + j)];
         }
         for j in 0..NR {
             d.g1[i][j] = e[(i, NS + NI + j)];
