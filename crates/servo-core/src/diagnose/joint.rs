@@ -147,10 +147,7 @@ pub(super) fn best_pair(
         .iter()
         .zip(starts)
         .filter_map(|(&(i, j), s)| {
-            let best = s
-                .into_iter()
-                .flatten()
-                .min_by(|x, y| x.0.total_cmp(&y.0))?;
+            let best = s.into_iter().flatten().min_by(|x, y| x.0.total_cmp(&y.0))?;
             Some((i, j, best.1))
         })
         .collect();
