@@ -25,15 +25,6 @@ pub(super) const STARTS: usize = 3;
 /// refinement uses 90; each evaluation here is one of several hundred).
 pub(super) const MAX_SEGMENTS: usize = 45;
 
-/// Golden-section steps of the last pass of a refinement ([`Tuner::refine`]), between the
-/// neighbours of the best of its 5 grid points: the bracket shrinks to 0.618^8 = 2 % of two grid
-/// spacings (0.1 % of J_eq, 0.4 % of a play's gap in a last pass at half span).
-pub(super) const GOLDEN_STEPS: usize = 8;
-/// Golden-section steps of a pass another pass follows: it only places the parameter, whose
-/// next grid (half as wide, centred there) spans 2.5 times the bracket these leave
-/// (0.618^4 = 15 % of two grid spacings).
-pub(super) const PLACING_GOLDEN_STEPS: usize = 4;
-
 /// A parameter tuned on the simulation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) enum Target {
@@ -158,13 +149,7 @@ impl<'a> Tuner<'a> {
     pub(super) fn refine(&self, p: &Plant, ts: &[(Target, Span)], passes: &[f64]) -> (Plant, f64) {
         let mut best = *p;
         let mut c_best = self.cost(&best);
-        for (pass, &shrink) in passes.iter().enumerate() {
-            // A pass another one follows only places the parameter for that one's grid.
-            let iters = if pass + 1 < passes.len() {
-                PLACING_GOLDEN_STEPS
-            } else {
-                GOLDEN_STEPS
-            };
+        for &shrink in passes {
             for &(t, span) in ts {
                 let Some(x0) = get(&best, t) else { continue };
                 if !x0.is_finite() {
@@ -194,7 +179,7 @@ impl<'a> Tuner<'a> {
                         }
                         with(&from, t, to_x(l)).map_or(f64::INFINITY, |q| self.cost(&q))
                     },
-                    iters,
+                    8,
                 );
                 if let Some((l, c)) = r {
                     if c < c_best {
