@@ -113,8 +113,8 @@ pub(super) fn best_pair(
         Start(usize, usize),
     }
     enum Done {
-        Reference(Reference),
-        Start(Option<(f64, Solved)>),
+        Reference(alloc::boxed::Box<Reference>),
+        Start(Option<alloc::boxed::Box<(f64, Solved)>>),
     }
     let tasks: Vec<Task> = (0..top.len())
         .map(Task::Reference)
@@ -123,22 +123,22 @@ pub(super) fn best_pair(
     let done = par_map(&tasks, cx.opts.parallel, |t| match *t {
         Task::Reference(i) => {
             let plant = cx.ds.refine_rigid_on_simulation(&top[i].1.plant);
-            Done::Reference(Reference {
+            Done::Reference(alloc::boxed::Box::new(Reference {
                 oe_holdout: oe::prediction_cost(cx.ds, &plant, Part::Holdout),
                 plant,
-            })
+            }))
         }
         Task::Start(p, k) => {
             let (i, j) = pairs[p];
-            Done::Start(joint_start(cx, top[i], top[j], k))
+            Done::Start(joint_start(cx, top[i], top[j], k).map(alloc::boxed::Box::new))
         }
     });
     let mut refs = Vec::new();
     let mut starts: Vec<Vec<Option<(f64, Solved)>>> = pairs.iter().map(|_| Vec::new()).collect();
     for (t, d) in tasks.iter().zip(done) {
         match (t, d) {
-            (Task::Reference(_), Done::Reference(r)) => refs.push(r),
-            (Task::Start(p, _), Done::Start(s)) => starts[*p].push(s),
+            (Task::Reference(_), Done::Reference(r)) => refs.push(*r),
+            (Task::Start(p, _), Done::Start(s)) => starts[*p].push(s.map(|b| *b)),
             _ => return None,
         }
     }
