@@ -193,8 +193,8 @@ fn joint_start(
     Some((cost, s))
 }
 
-/// Judges each of `a` and `b` given the other in their joint fit `joint`. `Some((joint held-out simulation
-/// drop against the model holding neither, [members]))` when both pass.
+/// Judges each of `a` and `b` given the other in their joint fit `joint`. `Some((joint held-out
+/// simulation drop against the model holding neither, [members]))` when both pass.
 fn judge_pair(
     cx: &Context,
     a: (EffectKind, &Solved, &Reference),

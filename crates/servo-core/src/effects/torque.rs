@@ -26,15 +26,23 @@ pub const MAX_INPUT_MAPS: usize = 8;
 /// lives in the simulator's delay line.
 #[derive(Clone, Copy, Default)]
 pub struct InputNonlinearity {
-    maps: [Option<Effect>; MAX_INPUT_MAPS],
-    /// Each map's model and parameter count, looked up once: the simulator applies the maps
-    /// every control period.
-    models: [Option<(&'static dyn EffectModel, usize)>; MAX_INPUT_MAPS],
+    maps: [Option<InputMap>; MAX_INPUT_MAPS],
+}
+
+/// One input map: the effect with its model and parameter count looked up once (the simulator
+/// applies the maps every control period).
+#[derive(Clone, Copy)]
+struct InputMap {
+    effect: Effect,
+    model: &'static dyn EffectModel,
+    len: usize,
 }
 
 impl core::fmt::Debug for InputNonlinearity {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.debug_list().entries(self.maps.iter().flatten()).finish()
+        f.debug_list()
+            .entries(self.maps.iter().flatten().map(|m| &m.effect))
+            .finish()
     }
 }
 
@@ -61,8 +69,15 @@ impl InputNonlinearity {
                 j -= 1;
             }
         }
-        let models = maps.map(|m| m.map(|e| (e.kind.model(), e.kind.params().len())));
-        InputNonlinearity { maps, models }
+        InputNonlinearity {
+            maps: maps.map(|m| {
+                m.map(|effect| InputMap {
+                    effect,
+                    model: effect.kind.model(),
+                    len: effect.kind.params().len(),
+                })
+            }),
+        }
     }
     /// True when no input map is active.
     pub fn is_identity(&self) -> bool {
@@ -72,11 +87,8 @@ impl InputNonlinearity {
     #[inline]
     pub fn apply(&self, u_v: f64) -> f64 {
         let mut u = u_v;
-        for (e, m) in self.maps.iter().zip(&self.models) {
-            let (Some(e), Some((model, len))) = (e, m) else {
-                break;
-            };
-            u = model.input_v(&e.values[..*len], u);
+        for m in self.maps.iter().flatten() {
+            u = m.model.input_v(&m.effect.values[..m.len], u);
         }
         u
     }

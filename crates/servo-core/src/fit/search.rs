@@ -23,18 +23,12 @@ pub fn grid_then_golden_bounded(
     mut f: impl FnMut(f64, f64) -> f64,
     iters: usize,
 ) -> Option<(f64, f64)> {
-    let mut best: Option<(usize, f64)> = None;
-    let mut flat = true;
+    let mut scan = GridScan::default();
     for (i, &x) in grid.iter().enumerate() {
-        let bound = best.map_or(f64::INFINITY, |b| b.1);
-        let v = f(x, bound);
-        flat &= v.is_finite() && best.is_none_or(|b| v == b.1);
-        // Strictly lower: the first of equal values wins, as a scan of every value would.
-        if v.is_finite() && best.is_none_or(|b| v < b.1) {
-            best = Some((i, v));
-        }
+        let v = f(x, scan.bound());
+        scan.push(i, v);
     }
-    golden_from(grid, best, flat, f, iters)
+    golden_from(grid, scan, f, iters)
 }
 
 /// As [`grid_then_golden`], the grid's values all computed first by `on_grid` (in grid order:
@@ -50,30 +44,56 @@ pub fn grid_then_golden_batched(
     if values.len() != grid.len() {
         return None;
     }
-    let mut best: Option<(usize, f64)> = None;
-    let mut flat = true;
+    let mut scan = GridScan::default();
     for (i, &v) in values.iter().enumerate() {
-        flat &= v.is_finite() && best.is_none_or(|b| v == b.1);
-        // Strictly lower: the first of equal values wins, as a scan of every value would.
-        if v.is_finite() && best.is_none_or(|b| v < b.1) {
-            best = Some((i, v));
+        scan.push(i, v);
+    }
+    golden_from(grid, scan, |x, _| f(x), iters)
+}
+
+/// The scan of a grid's values in grid order: the best (index, value) and whether every value
+/// was the same.
+struct GridScan {
+    best: Option<(usize, f64)>,
+    flat: bool,
+}
+
+impl Default for GridScan {
+    fn default() -> Self {
+        GridScan {
+            best: None,
+            flat: true,
         }
     }
-    golden_from(grid, best, flat, |x, _| f(x), iters)
+}
+
+impl GridScan {
+    /// The best value so far (infinity before any): the bound of the next evaluation.
+    fn bound(&self) -> f64 {
+        self.best.map_or(f64::INFINITY, |b| b.1)
+    }
+
+    /// Grid point `i` of value `v`.
+    fn push(&mut self, i: usize, v: f64) {
+        self.flat &= v.is_finite() && self.best.is_none_or(|b| v == b.1);
+        // Strictly lower: the first of equal values wins, as a scan of every value would.
+        if v.is_finite() && self.best.is_none_or(|b| v < b.1) {
+            self.best = Some((i, v));
+        }
+    }
 }
 
 /// The golden-section refinement of the grid scans: between the neighbours of the best grid
-/// point `best` (index, value), unless the grid was `flat`; `f` against a bound as in
+/// point of `scan`, unless the grid was flat; `f` against a bound as in
 /// [`grid_then_golden_bounded`].
 fn golden_from(
     grid: &[f64],
-    best: Option<(usize, f64)>,
-    flat: bool,
+    scan: GridScan,
     mut f: impl FnMut(f64, f64) -> f64,
     iters: usize,
 ) -> Option<(f64, f64)> {
-    let (ib, fb) = best?;
-    if flat && grid.len() > 1 {
+    let (ib, fb) = scan.best?;
+    if scan.flat && grid.len() > 1 {
         return Some((grid[ib], fb));
     }
     let lo = grid[ib.saturating_sub(1)];

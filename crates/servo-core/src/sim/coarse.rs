@@ -168,8 +168,9 @@ impl PlantSim {
     }
 
     /// One exact step over the period with the inputs `u_new` (after the switch) and `u_old`
-    /// (before it) [V], kept in `self.x` and returning the nonlinear torques at its end when no
-    /// event can have happened inside it; `None` (state untouched) otherwise.
+    /// (before it) [V], kept in `self.x` and returning what its end starts the next period with
+    /// ([`Carry`]) when no event can have happened inside it; `None` (state untouched)
+    /// otherwise. `carry`: the last period's, when it was stepped whole.
     fn coarse_step(&mut self, u_new: f64, u_old: f64, carry: Option<Carry>) -> Option<Carry> {
         let x0 = self.x;
         let (inv_n, tol) = {
@@ -235,11 +236,10 @@ impl PlantSim {
 
     /// Whether the contact can have kept mode `mode` (that of both ends) over a period between
     /// the gap states `(d0, r0)` and `(d1, r1)` ([`gap_state`]): always without a gap (the
-    /// contact never opens);
-    /// pressed, on a contact slow against the period, the force stays above
-    /// [`COARSE_EVENT_MARGIN`] of its value at the ends everywhere in between; free, the motor
-    /// stays clear of both flanks by that share of the half gap. Both read along the cubic
-    /// through the motor's place in the gap and its rate at both ends.
+    /// contact never opens); pressed, on a contact slow against the period, the force stays
+    /// above [`COARSE_EVENT_MARGIN`] of its value at the ends everywhere in between; free, the
+    /// motor stays clear of both flanks by that share of the half gap. Both read along the
+    /// cubic through the motor's place in the gap and its rate at both ends.
     fn contact_unchanged(&self, (d0, r0): (f64, f64), (d1, r1): (f64, f64), mode: usize) -> bool {
         let (Some(b), Some(t)) = (&self.play, &self.coarse) else {
             return true;
