@@ -54,7 +54,7 @@ pub fn servo_bin() -> PathBuf {
 }
 
 /// Runs `servo` with `args`, returning (exit success, stdout, stderr). The process holds the
-/// machine shared ([`cpu_heavy`]) unless the calling thread already holds it.
+/// machine shared ([`shared`]) unless the calling thread already holds it.
 ///
 /// When `args` hold `--json` and servo succeeds, the output is validated against the schema it
 /// names (`"schema": "servo.<command>/1"`, docs/schemas/<command>.json): every `--json` output
@@ -62,7 +62,7 @@ pub fn servo_bin() -> PathBuf {
 pub fn servo(args: &[&str]) -> (bool, String, String) {
     let bin = servo_bin();
     let out = {
-        let _machine = cpu_heavy();
+        let _machine = shared();
         std::process::Command::new(bin)
             .args(args)
             .output()
@@ -159,13 +159,16 @@ pub fn qemu_image() -> Option<PathBuf> {
 }
 
 /// The machine as the tests share it: real-time tests (a board, QEMU or a pseudo-terminal
-/// paced by the wall clock) hold it alone through [`realtime`]; tests that load every core
-/// (a diagnosis runs its candidates on all of them) hold it shared through [`cpu_heavy`], and
-/// so does every `servo` process a test spawns through [`servo`] when its thread holds nothing
-/// (a command's simulation or diagnosis loads a core whatever the test it serves). On a 2-core
-/// CI machine a diagnosis beside a QEMU board starves the host's loop into missed deadlines
-/// that say nothing about servo (stop 41's CI: 3873 of 5904 samples missed beside a report
-/// test's `servo diagnose`, and the board tripped on over-current).
+/// paced by the wall clock, all in tests/e2e/serial.rs) hold it alone through [`realtime`];
+/// every other test holds it shared through [`shared`] for its whole run, as its first
+/// statement (tests/e2e/layout.rs checks that), and so does every `servo` process a test spawns
+/// through [`servo`] from a thread that holds nothing. A real-time test therefore runs with
+/// no other test beside it: it waits for the tests in flight to end, and none starts until it
+/// ends. On a 2-core CI machine any CPU-bound test beside a QEMU board (a diagnosis, and also
+/// one thread of in-process simulation) starves the host's loop into missed deadlines that say
+/// nothing about servo: stop 41's CI lost 3873 of 5904 samples beside a report test's `servo
+/// diagnose`; stop 44's lost 2403 of 4350 beside the in-process simulator tests, which held
+/// nothing then, and the board's Stop was not acknowledged in time.
 static MACHINE: std::sync::RwLock<()> = std::sync::RwLock::new(());
 
 thread_local! {
@@ -173,7 +176,7 @@ thread_local! {
     static HOLDS_MACHINE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
-/// A hold on the machine ([`realtime`], [`cpu_heavy`]); released when dropped.
+/// A hold on the machine ([`realtime`], [`shared`]); released when dropped.
 pub struct MachineGuard {
     _guard: Option<MachineLock>,
 }
@@ -193,7 +196,7 @@ impl Drop for MachineGuard {
 
 fn hold(alone: bool) -> MachineGuard {
     if HOLDS_MACHINE.with(|h| h.get()) {
-        // Already held by this thread (a CPU-heavy test spawning servo): nothing more to take.
+        // Already held by this thread (a test spawning servo): nothing more to take.
         assert!(
             !alone,
             "a test asked for the machine alone while its thread already held it shared"
@@ -209,15 +212,16 @@ fn hold(alone: bool) -> MachineGuard {
     MachineGuard { _guard: Some(lock) }
 }
 
-/// Exclusive use of the machine for a real-time test (waits for the CPU-heavy tests and the
-/// spawned `servo` processes of other tests to end).
+/// Exclusive use of the machine for a real-time test (waits for the other tests in flight and
+/// the `servo` processes they spawned to end).
 pub fn realtime() -> MachineGuard {
     hold(true)
 }
 
-/// Shared use of the machine for a test that loads every core (waits while a real-time test
-/// runs).
-pub fn cpu_heavy() -> MachineGuard {
+/// Shared use of the machine: the first statement of every test that is not real-time (waits
+/// while a real-time test runs). The test's threads must not call [`servo`] while it holds
+/// this (a waiting real-time test would make them wait for ever): only the test's own thread.
+pub fn shared() -> MachineGuard {
     hold(false)
 }
 

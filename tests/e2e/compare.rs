@@ -50,6 +50,7 @@ fn regime<'a>(v: &'a Value, name: &str) -> &'a Value {
 
 #[test]
 fn hidden_coulomb_friction_is_located_and_added() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("steps.csv");
     let model = dir.path().join("model.toml");
@@ -149,6 +150,7 @@ fn hidden_coulomb_friction_is_located_and_added() {
 
 #[test]
 fn model_equal_to_truth_fits_within_noise() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("steps.csv");
     let model = dir.path().join("model.toml");
@@ -180,6 +182,7 @@ fn model_equal_to_truth_fits_within_noise() {
 
 #[test]
 fn real_closed_loop_steps_show_friction() {
+    let _machine = servo_e2e::shared();
     let Some(dir) = realdata_dir() else { return };
     let log = dir.join("padova2021-jacopisky/csv/pid_bode_steps.csv");
     let tmp = tempfile::tempdir().unwrap();
@@ -311,6 +314,7 @@ const SQUARE: [&str; 4] = ["--ref", "square:amp=1.5,period=1", "--duration", "4"
 
 #[test]
 fn closed_loop_replay_uses_the_controller_the_run_used() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let (_gains, model, log) = tustin_square_run(dir.path());
 
@@ -385,6 +389,7 @@ fn closed_loop_replay_uses_the_controller_the_run_used() {
 
 #[test]
 fn logs_without_a_controller_record_replay_through_gains_and_options() {
+    let _machine = servo_e2e::shared();
     use servo_cli::io::{mcap_read::read_mcap, meta_keys, McapLog, McapLogOptions};
     let dir = tempfile::tempdir().unwrap();
     let (gains, model, log) = tustin_square_run(dir.path());
@@ -453,6 +458,7 @@ fn logs_without_a_controller_record_replay_through_gains_and_options() {
 
 #[test]
 fn the_logged_feedforward_is_replayed() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let (gains, model, log) = tustin_files(dir.path(), "ff.mcap");
     sim_run(
@@ -506,6 +512,7 @@ fn the_logged_feedforward_is_replayed() {
 /// log's PID named beside it), and `diagnose` (none: the logged u drives the model).
 #[test]
 fn compare_and_diagnose_say_their_plant_and_controller_in_one_line() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let (_gains, model, log) = tustin_square_run(dir.path());
     let line_of = |out: &str| -> String {

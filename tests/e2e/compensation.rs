@@ -125,7 +125,6 @@ fn tracking(dir: &Path, hidden: &str, model: &Path, ff: &str, log: Option<&str>)
 /// The bar on one hidden effect: `--ff all` cuts the RMS tracking error by `min_cut`
 /// against `--ff friction`.
 fn check_cut(hidden: &str, name: &str, min_cut: f64) {
-    let _heavy = servo_e2e::cpu_heavy();
     let dir = tempfile::tempdir().unwrap();
     let fitted = identified_with(dir.path(), hidden, name);
     let (friction, _) = tracking(dir.path(), hidden, &fitted, "friction", None);
@@ -160,11 +159,13 @@ fn check_cut(hidden: &str, name: &str, min_cut: f64) {
 
 #[test]
 fn an_identified_imbalance_is_compensated_and_the_error_falls_70_percent() {
+    let _machine = servo_e2e::shared();
     check_cut("imbalance:amplitude=0.01,phase=0.5", "imbalance", 0.70);
 }
 
 #[test]
 fn an_identified_cogging_is_compensated_and_the_error_falls_50_percent() {
+    let _machine = servo_e2e::shared();
     check_cut(
         "cogging:amplitude=3e-4,harmonic=12,phase=0.3",
         "cogging",
@@ -174,11 +175,13 @@ fn an_identified_cogging_is_compensated_and_the_error_falls_50_percent() {
 
 #[test]
 fn an_identified_stribeck_hump_is_compensated_and_the_error_falls_50_percent() {
+    let _machine = servo_e2e::shared();
     check_cut("stribeck:tau_s=0.02,omega_s=1", "stribeck", 0.50);
 }
 
 #[test]
 fn an_identified_asymmetry_is_compensated_and_the_error_falls_50_percent() {
+    let _machine = servo_e2e::shared();
     check_cut(
         "asymmetry:tau_sf_pos=0.004,tau_sf_neg=0.012",
         "asymmetry",
@@ -188,6 +191,7 @@ fn an_identified_asymmetry_is_compensated_and_the_error_falls_50_percent() {
 
 #[test]
 fn an_identified_dead_zone_is_compensated_and_the_error_falls_70_percent() {
+    let _machine = servo_e2e::shared();
     check_cut("deadzone:width=0.4", "deadzone", 0.70);
 }
 
@@ -206,7 +210,7 @@ fn flipped(model: &Path, to: &Path) {
 
 #[test]
 fn a_wrong_sign_makes_the_error_rise_and_compare_names_the_suspect() {
-    let _heavy = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let hidden = "imbalance:amplitude=0.01,phase=0.5";
     let fitted = identified_with(dir.path(), hidden, "imbalance");
@@ -250,6 +254,7 @@ fn a_wrong_sign_makes_the_error_rise_and_compare_names_the_suspect() {
 
 #[test]
 fn doubtful_or_uncompensable_effects_are_refused_with_the_reason() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let d = |n: &str| dir.path().join(n);
     std::fs::write(d("plant.toml"), ok(&["params"])).unwrap();
@@ -340,6 +345,7 @@ mod library {
 
     #[test]
     fn without_effects_it_is_the_linear_feedforward() {
+        let _machine = servo_e2e::shared();
         let p = plant(&[]);
         let cfg = exact(FeedforwardConfig::FULL);
         let c = LoopCompensation::new(&p, cfg, EffectSelect::None, 0.0).unwrap();
@@ -356,6 +362,7 @@ mod library {
 
     #[test]
     fn a_friction_curve_replaces_the_linear_coulomb_term() {
+        let _machine = servo_e2e::shared();
         // Stribeck: the curve's level at 0.5 rad/s is above tau_sf; the linear Coulomb is off.
         let p = plant(&["stribeck:tau_s=0.02,omega_s=0.5"]);
         let cfg = exact(FeedforwardConfig::FRICTION);
@@ -378,6 +385,7 @@ mod library {
 
     #[test]
     fn the_ramp_scales_the_effects_not_the_linear_part() {
+        let _machine = servo_e2e::shared();
         let p = plant(&["imbalance:amplitude=0.02,phase=0"]);
         let cfg = exact(FeedforwardConfig::INERTIA);
         let c = LoopCompensation::new(&p, cfg, EffectSelect::All, 2.0).unwrap();
@@ -393,6 +401,7 @@ mod library {
 
     #[test]
     fn the_dead_band_inverse_stays_inside_the_limit() {
+        let _machine = servo_e2e::shared();
         let p = plant(&["deadzone:width=0.5"]);
         let c = LoopCompensation::new(&p, exact(FeedforwardConfig::OFF), EffectSelect::All, 0.0)
             .unwrap();
@@ -407,6 +416,7 @@ mod library {
 
     #[test]
     fn a_compensated_saturation_narrows_the_limit() {
+        let _machine = servo_e2e::shared();
         let p = plant(&["saturation:limit=4.5"]);
         let c = LoopCompensation::new(&p, exact(FeedforwardConfig::OFF), EffectSelect::All, 0.0)
             .unwrap();
@@ -509,6 +519,7 @@ mod board_core {
 
     #[test]
     fn onboard_loop_compensates_an_unbalanced_load() {
+        let _machine = servo_e2e::shared();
         let plain = onboard_hold_error(false);
         let comp = onboard_hold_error(true);
         eprintln!("on-board hold of 1 rad, P only: error {plain:.4e} rad without, {comp:.4e} rad with the compensation");
@@ -563,7 +574,7 @@ fn tracking_on_model(model: &str, gains: &str, ff: &str, log: Option<&str>) -> (
 /// runs next).
 #[test]
 fn design_on_the_identified_model_is_verified_with_and_without_compensation() {
-    let _heavy = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
     let model = model_with(
@@ -656,7 +667,7 @@ fn design_on_the_identified_model_is_verified_with_and_without_compensation() {
 /// the figures are the ones `servo run` printed and the ladder ends near the measured error.
 #[test]
 fn compare_on_two_runs_prints_the_tracking_ladder_per_effect() {
-    let _heavy = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
     let model = model_with(
@@ -713,7 +724,7 @@ fn compare_on_two_runs_prints_the_tracking_ladder_per_effect() {
 /// --ff all` shows their rungs, and a sensor map is refused with the reason.
 #[test]
 fn user_defined_torques_and_input_maps_are_compensated() {
-    let _heavy = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
     let model = model_with(

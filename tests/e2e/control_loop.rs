@@ -62,6 +62,7 @@ fn run(
 
 #[test]
 fn feedforward_cuts_the_tracking_error_of_a_trapezoid() {
+    let _machine = servo_e2e::shared();
     // 2 rad in about 0.6 s: well within the 10 V of the driver input.
     let reference = Reference::parse("trap:distance=2,vmax=5,amax=40@0.1").expect("reference");
     // Derivative on the error: on the measurement, K_D would brake the reference motion by
@@ -95,6 +96,7 @@ fn feedforward_cuts_the_tracking_error_of_a_trapezoid() {
 
 #[test]
 fn anti_windup_bounds_the_overshoot_of_a_saturating_step_on_the_simulator() {
+    let _machine = servo_e2e::shared();
     let reference = Reference::step(2.0 * PI, 0.0); // 360 deg, the step that saturates on the real motor
     let base = PidConfig::new(bode_gains(), 1e-3).with_symmetric_limit(10.0);
     let overshoot = |aw: AntiWindup| {
@@ -131,6 +133,7 @@ fn anti_windup_bounds_the_overshoot_of_a_saturating_step_on_the_simulator() {
 /// nominal electrical constants: both must agree.
 #[test]
 fn feedforward_predicts_the_measured_steady_voltage_of_the_real_motor() {
+    let _machine = servo_e2e::shared();
     let Some(dir) = servo_e2e::realdata_dir() else {
         return;
     };
@@ -179,6 +182,7 @@ fn feedforward_predicts_the_measured_steady_voltage_of_the_real_motor() {
 /// (the logged reference switches one 1 ms sample after the nominal instant).
 #[test]
 fn steps_recipe_matches_the_real_run_reference() {
+    let _machine = servo_e2e::shared();
     let Some(dir) = servo_e2e::realdata_dir() else {
         return;
     };

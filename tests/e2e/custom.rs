@@ -142,6 +142,7 @@ fn diagnose(c: &Case, extra: &[&str]) -> Value {
 
 #[test]
 fn hidden_cable_is_fitted_discovered_and_the_proposal_round_trips() {
+    let _machine = servo_e2e::shared();
     let (k, theta0) = (0.02, 0.4);
     let truth = with_custom(CABLE, "cable", &[("k", k), ("theta0", theta0)]);
     let c = case(&truth, CABLE);
@@ -257,6 +258,7 @@ fn round_trip(name: &str, key: &str, value: f64, tol: f64) -> Case {
 /// sensor shapes (a second harmonic, a scale error with the base held) are unit tests there.
 #[test]
 fn user_sensor_effect_round_trips() {
+    let _machine = servo_e2e::shared();
     let c = round_trip("eccentric", "e", 0.02, 0.15);
     // diagnose --effects judges it as a candidate and sizes it the same.
     let d = diagnose(&c, &["--effects", c.effects.to_str().unwrap()]);
@@ -308,6 +310,7 @@ fn catalogue_named(d: &Value) -> bool {
 /// written, and no file appears; `--json` says the same in `saved_effect`.
 #[test]
 fn save_effect_never_replaces_the_report() {
+    let _machine = servo_e2e::shared();
     let c = case(&base_plant(), CABLE);
     let found = c._dir.path().join("found.toml");
     let f = found.to_str().unwrap();
@@ -346,6 +349,7 @@ fn save_effect_never_replaces_the_report() {
 /// on the plain model proposes that term, sized within 30 %.
 #[test]
 fn a_friction_growing_with_the_transmitted_torque_is_discovered() {
+    let _machine = servo_e2e::shared();
     const LOADFRIC: &str = r#"
 [custom.loadfric]
 acts_on = "load_torque"
@@ -375,11 +379,13 @@ mu = { value = 0.0, min = 0.0, unit = "N m/A" }
 
 #[test]
 fn user_input_effect_round_trips() {
+    let _machine = servo_e2e::shared();
     round_trip("offset", "u_off", 0.3, 0.15);
 }
 
 #[test]
 fn bad_expressions_are_clear_errors() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let model = dir.path().join("m.toml");
     ModelFile::from_plant(&base_plant()).save(&model).unwrap();
@@ -496,6 +502,7 @@ fn holding_u(tau_l_nm: f64) -> f64 {
 
 #[test]
 fn run_plant_simulates_user_effects_and_compare_save_round_trips() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let (k, theta0, e, u_off) = (0.02, 0.3, 0.1, 0.2);
     let cable = CABLE
@@ -627,7 +634,7 @@ fn curve_check(v: &Value, effect: &str) -> (bool, bool, String) {
 /// friction and is not judged on the curve.
 #[test]
 fn a_user_friction_is_judged_against_the_measured_friction_curve() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
     let (ok, params, err) = servo(&["params"]);

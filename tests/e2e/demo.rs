@@ -32,6 +32,7 @@ fn numbers(s: &str) -> Vec<f64> {
 
 #[test]
 fn demo_tells_the_whole_story() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo out");
     let (ok, stdout, stderr) = servo(&["demo", "--out", out.to_str().unwrap()]);
@@ -118,6 +119,7 @@ fn demo_tells_the_whole_story() {
 
 #[test]
 fn demo_rejects_an_unusable_out_folder() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("a file");
     std::fs::write(&file, "x").unwrap();
@@ -130,6 +132,7 @@ fn demo_rejects_an_unusable_out_folder() {
 /// does on a closed stdout); the command finishes its work and exits normally.
 #[test]
 fn closed_stdout_is_not_a_panic() {
+    let _machine = servo_e2e::shared();
     use std::process::{Command, Stdio};
     let mut child = Command::new(servo_e2e::servo_bin())
         .args(["params"])
@@ -151,6 +154,7 @@ fn closed_stdout_is_not_a_panic() {
 /// within 15 %, the fit rises when it is added, and nothing significant is left.
 #[test]
 fn demo_finds_other_hidden_effects() {
+    let _machine = servo_e2e::shared();
     for (hidden, name, key, truth) in [
         ("backlash:gap=0.03", "backlash", "gap", 0.03),
         (

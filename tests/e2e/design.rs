@@ -34,6 +34,7 @@ fn rel(a: f64, b: f64) -> f64 {
 
 #[test]
 fn reference_point_table2_and_json_shape() {
+    let _machine = servo_e2e::shared();
     let v = json(&["--wc", "30", "--pm", "60"]);
     for (k, want) in [
         ("kp", 7.0476),
@@ -74,6 +75,7 @@ fn reference_point_table2_and_json_shape() {
 
 #[test]
 fn published_savian_design_is_reproduced() {
+    let _machine = servo_e2e::shared();
     // padova2021-savian (SOURCE.txt): nominal k_m = 77.8628, T_m = 0.0296687, t_s,5% = 0.15 s,
     // M_p = 0.1 -> delta = 0.59116, phi_m = 1.02264 rad, w_gc = 33.8321 rad/s,
     // P(j w_gc) = -0.082194 - 0.081887j, DeltaK = 8.61899, DeltaPhi = 0.239117 rad.
@@ -135,6 +137,7 @@ fn published_savian_design_is_reproduced() {
 /// independently of servo-core; the crossover and phase margin are found by a dense linear sweep.
 #[test]
 fn exact_achieves_the_spec_measured_independently() {
+    let _machine = servo_e2e::shared();
     let (km, tm, n, ts): (f64, f64, f64, f64) = (78.125, 0.029661, 14.0, 1e-3);
     for (wc, pm, alpha) in [(30.0, 60.0, 4.0), (20.0, 50.0, 6.0), (45.0, 65.0, 4.0)] {
         let v = json(&[
@@ -208,6 +211,7 @@ fn exact_achieves_the_spec_measured_independently() {
 
 #[test]
 fn exact_on_the_default_full_discrete_loop() {
+    let _machine = servo_e2e::shared();
     let h = json(&["--wc", "30", "--pm", "60"]);
     let v = json(&["--wc", "30", "--pm", "60", "--exact"]);
     let d = &v["achieved"]["discrete"];
@@ -227,6 +231,7 @@ fn exact_on_the_default_full_discrete_loop() {
 
 #[test]
 fn time_domain_specs() {
+    let _machine = servo_e2e::shared();
     // rise time: w_gc = 1.8 / t_r (eq. 39)
     let v = json(&["--rise-time", "0.06", "--pm", "60"]);
     assert!(rel(f(&v, "wgc_rad_s"), 30.0) < 1e-12);
@@ -240,6 +245,7 @@ fn time_domain_specs() {
 
 #[test]
 fn meaningless_or_infeasible_requests_fail_with_explanations() {
+    let _machine = servo_e2e::shared();
     let cases: &[(&[&str], &[&str])] = &[
         (&["--wc", "0", "--pm", "60"], &["w_gc", "> 0"]),
         (&["--wc", "-3", "--pm", "60"], &["w_gc"]),
@@ -287,6 +293,7 @@ fn meaningless_or_infeasible_requests_fail_with_explanations() {
 
 #[test]
 fn writes_gains_file_and_plots() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let (gains, bode, step) = (
         dir.path().join("gains.toml"),
@@ -350,6 +357,7 @@ fn writes_gains_file_and_plots() {
 
 #[test]
 fn params_file_is_used() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let (ok, text, _) = servo(&["params", "--preset", "table2"]);
     assert!(ok);
@@ -411,6 +419,7 @@ fn step_figures_from_csv(path: &std::path::Path, a: f64, t0_s: f64) -> (f64, f64
 /// controller structure comes from the file), measured from its CSV.
 #[test]
 fn meet_specs_gains_meet_the_specs_in_servo_run() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let gains = dir.path().join("gains.toml");
     let v = json(&[
@@ -477,6 +486,7 @@ fn meet_specs_gains_meet_the_specs_in_servo_run() {
 
 #[test]
 fn infeasible_specs_are_reported_with_the_closest_pair() {
+    let _machine = servo_e2e::shared();
     // 5 % settling in 20 ms for a 1 rad step at 10 V: the motor cannot even get there in time
     let args = [
         "design",
@@ -508,6 +518,7 @@ fn infeasible_specs_are_reported_with_the_closest_pair() {
 /// verification) no longer claims a match and warns in words, with the shortfall.
 #[test]
 fn plain_bode_design_warns_when_the_time_specs_are_missed() {
+    let _machine = servo_e2e::shared();
     let args = [
         "design",
         "--overshoot",
@@ -550,6 +561,7 @@ fn plain_bode_design_warns_when_the_time_specs_are_missed() {
 /// + K_D (z - 1)/((T_L + T_s) z - T_L).
 #[test]
 fn transfer_functions_in_json() {
+    let _machine = servo_e2e::shared();
     let v = json(&["--wc", "30", "--pm", "60", "--derivative-on", "measurement"]);
     let tf = &v["transfer_functions"];
     type C = (f64, f64);
@@ -607,6 +619,7 @@ fn transfer_functions_in_json() {
 
 #[test]
 fn plot_shows_the_steps_against_the_spec_box() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let svg = dir.path().join("design.svg");
     let (ok, _, err) = servo(&[
@@ -653,6 +666,7 @@ fn run_figures(args: &[&str]) -> (f64, Option<f64>, String) {
 /// the design does not print MET and names the cases it misses, which do miss in `servo run`.
 #[test]
 fn meet_specs_claim_holds_in_servo_run_at_t0_later_and_after_a_move() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     // The specs and made-up ones, on both built-in plants.
     for (preset, os_spec, ts_spec) in [
@@ -741,6 +755,7 @@ fn meet_specs_claim_holds_in_servo_run_at_t0_later_and_after_a_move() {
 /// which plant and controller it used.
 #[test]
 fn run_warns_when_the_gains_were_designed_for_another_plant() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let default = dir.path().join("default.toml");
     let t2 = dir.path().join("t2.toml");

@@ -270,7 +270,7 @@ macro_rules! hidden_tests {
     ($($name:ident: $spec:expr, $seeds:expr;)*) => {$(
         #[test]
         fn $name() {
-            let _cpu = servo_e2e::cpu_heavy();
+            let _machine = servo_e2e::shared();
             every_seed($seeds, |seed| check_hidden($spec, seed));
         }
     )*};
@@ -301,7 +301,7 @@ hidden_tests! {
 
 #[test]
 fn complete_model_has_nothing_significant() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     for seed in [11, 12, 13, 14, 15] {
         let plant = truth(&[]);
         let logs = logs(&plant, seed);
@@ -370,7 +370,7 @@ fn check_two_hidden(specs: [&str; 2], seed: u64) -> Plant {
 
 #[test]
 fn two_hidden_effects_are_found_one_after_the_other() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     for seed in [21, 22] {
         check_two_hidden(
             ["deadzone:width=0.4", "imbalance:amplitude=0.01,phase=0.5"],
@@ -381,7 +381,7 @@ fn two_hidden_effects_are_found_one_after_the_other() {
 
 #[test]
 fn two_hidden_friction_and_drive_effects_are_found_one_after_the_other() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     for seed in [21, 22] {
         check_two_hidden(
             ["stribeck:tau_s=0.02,omega_s=0.5", "delay:delay=0.003"],
@@ -392,7 +392,7 @@ fn two_hidden_friction_and_drive_effects_are_found_one_after_the_other() {
 
 #[test]
 fn two_hidden_mechanical_effects_are_found_one_after_the_other() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     for seed in [21, 22] {
         check_two_hidden(
             ["backlash:gap=0.03", "imbalance:amplitude=0.01,phase=0.5"],
@@ -430,7 +430,7 @@ fn check_play_and_delay(seed: u64) {
 
 #[test]
 fn a_gear_play_and_an_input_delay_are_found_with_their_parameters() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     every_seed([21, 22, 23, 24, 25], check_play_and_delay);
 }
 
@@ -438,7 +438,7 @@ fn a_gear_play_and_an_input_delay_are_found_with_their_parameters() {
 /// nominal datasheet model: the missing friction is named.
 #[test]
 fn real_pid_steps_name_the_missing_friction() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let Some(dir) = servo_e2e::realdata_dir() else {
         return;
     };
@@ -542,7 +542,7 @@ fn real_pid_steps_name_the_missing_friction() {
 /// and the verdict says that no simulation check was possible.
 #[test]
 fn real_logs_without_voltage_name_the_missing_friction() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let Some(dir) = servo_e2e::realdata_dir() else {
         return;
     };
@@ -745,7 +745,7 @@ fn other_simulator_with(m: &Mechanism, seed: u64) -> Vec<Record> {
 /// and sized within 15 %. Guards against fitting servo's own simulator rather than the physics.
 #[test]
 fn another_simulators_data_are_diagnosed_on_the_physics() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     for seed in [31, 32] {
         let logs = other_simulator_logs(None, seed);
         let model = identified(&logs);
@@ -921,7 +921,7 @@ fn check_friction_shape(tag: &str, m: &Mechanism, shape: &str, key: &str, truth:
 /// `--discover` proposes c_drag w_l |w_l| within 25 %.
 #[test]
 fn friction_rising_faster_than_linear_is_unexplained() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let drag = |_th: f64, w_m: f64| {
         let w_l = w_m / 14.0;
         5e-5 * w_l * w_l.abs() / 14.0
@@ -950,7 +950,7 @@ fn friction_rising_faster_than_linear_is_unexplained() {
 /// 0.25 k_t N (load side: the simulator's motor-side 0.25 k_t |i_a| times N = 14).
 #[test]
 fn friction_growing_with_transmitted_torque_names_no_resonance() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let k_t = PlantParams::TABLE2.k_t;
     for seed in [55, 56] {
         check_friction_shape(
@@ -977,7 +977,7 @@ fn friction_growing_with_transmitted_torque_names_no_resonance() {
 /// balance's friction-curve shape first.
 #[test]
 fn a_drag_at_terminal_speed_names_no_resonance() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
     let (ok, params, err) = servo_e2e::servo(&["params"]);
@@ -1054,7 +1054,7 @@ fn a_drag_at_terminal_speed_names_no_resonance() {
 /// 25 % (load side).
 #[test]
 fn direction_dependent_viscous_friction_is_unexplained() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let fwd = |_th: f64, w_m: f64| 5e-4 * (w_m / 14.0).max(0.0) / 14.0;
     for seed in [57, 58] {
         check_friction_shape(
@@ -1073,7 +1073,7 @@ fn direction_dependent_viscous_friction_is_unexplained() {
 
 #[test]
 fn torque_ripple_at_a_non_harmonic_is_unexplained() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     // 7.5 cycles per motor revolution: no harmonic of the motor (cogging) nor the load.
     let ripple = |th_m: f64, _w: f64| 4e-4 * (7.5 * th_m + 0.3).sin();
     check_outside(
@@ -1090,7 +1090,7 @@ fn torque_ripple_at_a_non_harmonic_is_unexplained() {
 
 #[test]
 fn current_sensor_offset_is_unexplained() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     check_outside(
         "current offset",
         &Mechanism {
@@ -1105,7 +1105,7 @@ fn current_sensor_offset_is_unexplained() {
 
 #[test]
 fn periodic_angle_sensor_error_is_unexplained() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     // The load encoder reads 0.01 rad too far at twice per revolution (an eccentric disc).
     let err = |th_l: f64| 0.01 * (2.0 * th_l).sin();
     check_outside(
@@ -1258,26 +1258,26 @@ fn check_long_complete(shape: Shape) {
 
 #[test]
 fn ten_minute_logs_of_complete_models_are_complete_steps() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     check_long_complete(Shape::Steps);
 }
 
 #[test]
 fn ten_minute_logs_of_complete_models_are_complete_square() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     check_long_complete(Shape::Square);
 }
 
 #[test]
 fn ten_minute_logs_of_complete_models_are_complete_chirp() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     check_long_complete(Shape::Chirp);
 }
 
 /// One hour of closed-loop square waves (the case, six times longer): complete.
 #[test]
 fn hour_long_log_of_a_complete_model_is_complete() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let plant = truth(&[]);
     let log = long_log(&plant, Shape::Square, true, 3600.0, 7);
     let d = diagnose::diagnose(&[log], &plant, &DiagnoseOptions::default()).unwrap();
@@ -1292,7 +1292,7 @@ fn hour_long_log_of_a_complete_model_is_complete() {
 /// on a CSV without a current column.
 #[test]
 fn logs_without_current_are_identified_and_diagnosed() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let strip = |logs: Vec<Record>| -> Vec<Record> {
         logs.into_iter()
             .map(|r| Record { i_a_a: None, ..r })
@@ -1383,7 +1383,7 @@ fn logs_without_current_are_identified_and_diagnosed() {
 /// `three_hidden_effects_with_backlash_are_found_with_their_parameters`.)
 #[test]
 fn three_hidden_effects_are_found_with_their_parameters() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let specs = [
         "stribeck:tau_s=0.02,omega_s=0.5",
         "imbalance:amplitude=0.01,phase=0.5",
@@ -1484,7 +1484,7 @@ fn check_three_with_backlash(seed: u64) {
 
 #[test]
 fn three_hidden_effects_with_backlash_are_found_with_their_parameters() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     every_seed([23, 24, 25], check_three_with_backlash);
 }
 
@@ -1508,7 +1508,7 @@ fn three_hidden_effects_with_backlash_are_found_with_their_parameters() {
 /// within 10 %. Any compliance reported on a case must lie within 20 % of the shaft's mode.
 #[test]
 fn compliant_shaft_is_unexplained_and_not_a_gear_play() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let frac = 0.5;
     let (n, j) = (PlantParams::TABLE2.n, 7.0e-7);
     let cases: [(f64, u64); 7] = [
@@ -1677,7 +1677,7 @@ pub(crate) fn write_csv(path: &std::path::Path, r: &Record) {
 /// of which it is 4 % here).
 #[test]
 fn identify_without_current_gets_b_eq_alone_within_10_percent() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let plant = truth(&[]);
     let dir = tempfile::tempdir().unwrap();
     for seed in [53u64, 54] {
@@ -1708,7 +1708,7 @@ fn identify_without_current_gets_b_eq_alone_within_10_percent() {
 /// plausible stiffnesses that contains the true gap. The same figures reach `--json`.
 #[test]
 fn backlash_gap_with_an_unknown_contact_stiffness() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let hidden = Effect::parse("backlash:gap=0.03,stiffness=60").unwrap();
     let plant = truth(&[hidden]);
     let logs = logs(&plant, 61);
@@ -1789,7 +1789,7 @@ fn backlash_gap_with_an_unknown_contact_stiffness() {
 /// experiment that would resolve it.
 #[test]
 fn cogging_below_the_noise_floor_is_complete_and_not_resolvable() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let amp = 4.5e-5;
     every_seed([1, 2], |seed| {
         let tag = format!("weak cogging seed {seed}");

@@ -466,7 +466,7 @@ fn check_identify(rig: &Rig, dir: &Path) {
 
 #[test]
 fn each_drive_on_a_rotary_gear_is_identified_within_3_percent() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     for rig in [voltage_rig(), current_rig(), duty_rig()] {
         check_identify(&rig, dir.path());
@@ -479,7 +479,7 @@ fn each_drive_on_a_rotary_gear_is_identified_within_3_percent() {
 /// R_eq nor k_drv.
 #[test]
 fn each_drive_diagnoses_and_adds_a_hidden_imbalance() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let amplitude = 0.25;
     for rig in [voltage_rig(), current_rig(), duty_rig()] {
@@ -579,6 +579,7 @@ fn true_base(rig: &Rig) -> String {
 /// drive's input is refused naming both.
 #[test]
 fn a_drive_needs_only_its_keys_and_its_input() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let rig = current_rig();
     let (logs, nominal) = files(&rig, &[], dir.path(), 9);
@@ -703,7 +704,7 @@ fn lift_log(rig: &Rig, plant: &Plant, seconds: f64, seed: u64) -> Vec<Row> {
 
 #[test]
 fn a_smart_servo_lifting_a_pendulum_is_identified_and_diagnosed() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let (rig, gravity, phase) = smart_servo();
     assert!(gravity > 50.0 * rig.motor.tau_sf.unwrap());
@@ -782,7 +783,7 @@ fn a_smart_servo_lifting_a_pendulum_is_identified_and_diagnosed() {
 /// asymmetry` lowers the held-out error, the ladder says so, and the model is saved.
 #[test]
 fn each_drive_on_a_screw_axis_is_identified_diagnosed_and_added() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let (f_pos, f_neg) = (30.0, 18.0);
     for rig in [

@@ -123,6 +123,7 @@ fn coverage(v: &Value, truth: &dyn Fn(f64) -> Complex<f64>) -> (f64, usize, f64)
 
 #[test]
 fn chirp_estimates_match_the_true_plant_and_the_true_discrete_loop_margins() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let model = tmp.path().join("model.toml");
     ModelFile::default().save(&model).unwrap();
@@ -175,6 +176,7 @@ fn chirp_estimates_match_the_true_plant_and_the_true_discrete_loop_margins() {
 
 #[test]
 fn backlash_estimates_match_the_rigid_plant_where_coherent_and_show_amplitude_dependence() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let g = tmp.path().join("gains.toml");
     let chirp = chirp();
@@ -228,6 +230,7 @@ fn backlash_estimates_match_the_rigid_plant_where_coherent_and_show_amplitude_de
 
 #[test]
 fn real_closed_loop_steps_run_and_report_poor_coherence() {
+    let _machine = servo_e2e::shared();
     let Some(dir) = realdata_dir() else { return };
     let log = dir.join("padova2021-jacopisky/csv/pid_bode_steps.csv");
     let cols = "time=t_s,theta_l=thl_meas_deg:deg,ref=thl_ref_deg:deg,u=u_V";

@@ -124,6 +124,7 @@ const GAINS: &str = "[pid]\nkp = 7.0476\nki = 86.121\nkd = 0.14418\ntl_s = 6.67e
 
 #[test]
 fn fuzz_csv_reader() {
+    let _machine = servo_e2e::shared();
     let own = "time_s,u_V,theta_l_rad,i_a_A,ref_rad\n0,1,0,0.1,1\n0.001,2,0.01,0.2,1\n0.002,2.5,0.02,0.25,1\n0.003,2,0.03,0.2,1\n";
     let foreign =
         "# lab export\nt_ms;pos_deg;I_mA;u_V\n0;180;100;1\n1;90;-50;2\n2;91;-40;2\n3;92;-30;2\n";
@@ -142,6 +143,7 @@ fn fuzz_csv_reader() {
 
 #[test]
 fn fuzz_toml_files() {
+    let _machine = servo_e2e::shared();
     let model = ModelFile::from_plant(&servo_core::Plant::nominal()).to_toml_commented();
     let mut with_effects = model.clone();
     with_effects.push_str("\n[effects.backlash]\ngap = 0.04\nstiffness = 5.0\ndamping = 0.01\nload_inertia_fraction = 0.5\n[effects.cogging]\namplitude = 0.002\nharmonic = 12\nphase = 0.3\n");
@@ -180,6 +182,7 @@ fn fuzz_toml_files() {
 
 #[test]
 fn fuzz_mcap_reader() {
+    let _machine = servo_e2e::shared();
     fuzz("mcap read", &mcap_seeds(), 10000, |b| {
         parse_mcap(b, "fuzz.mcap")
     });
@@ -187,6 +190,7 @@ fn fuzz_mcap_reader() {
 
 #[test]
 fn fuzz_mcap_recover() {
+    let _machine = servo_e2e::shared();
     fuzz("log recover", &mcap_seeds(), 10000, |b| {
         servo_cli::cmd::log::recover_bytes(b, std::io::Cursor::new(Vec::new()))
     });
@@ -194,6 +198,7 @@ fn fuzz_mcap_recover() {
 
 #[test]
 fn fuzz_wire_decoder() {
+    let _machine = servo_e2e::shared();
     use servo_core::protocol::{Decoder, Frame, Message};
     let msgs = [
         Message::Hello {
@@ -238,6 +243,7 @@ fn fuzz_wire_decoder() {
 /// The hostile inputs listed in issue #14, one by one: each gets a clear error.
 #[test]
 fn mcap_with_corrupted_lengths_is_refused_cleanly() {
+    let _machine = servo_e2e::shared();
     let seeds = mcap_seeds();
     let good = &seeds[1];
     // A record length of u64::MAX right after the magic and at the first chunk.
@@ -275,6 +281,7 @@ fn mcap_with_corrupted_lengths_is_refused_cleanly() {
 
 #[test]
 fn absurd_plant_constants_are_refused_not_hung_on() {
+    let _machine = servo_e2e::shared();
     let model = ModelFile::from_plant(&servo_core::Plant::nominal()).to_toml_commented();
     for key in ["k_t", "k_e", "f_c_drv"] {
         let bad: String = model
@@ -343,6 +350,7 @@ const MAT_MAP: &str = "time=thl_u.time,theta_l=thl_u.signals(1).values(:,1):deg,
 
 #[test]
 fn fuzz_mat_reader() {
+    let _machine = servo_e2e::shared();
     use servo_cli::io::mat_log;
     use servo_cli::io::mat_read::parse_mat;
     let seeds = mat_seeds();
@@ -378,6 +386,7 @@ fn fuzz_mat_reader() {
 
 #[test]
 fn fuzz_matlab_path_columns() {
+    let _machine = servo_e2e::shared();
     use servo_cli::io::mat_path::MatPath;
     use servo_cli::io::ColumnMap;
     let paths: Vec<Vec<u8>> = [
@@ -403,6 +412,7 @@ fn fuzz_matlab_path_columns() {
 /// program never panic, whatever the text; a compiled program evaluates without panicking.
 #[test]
 fn fuzz_user_effect_expressions() {
+    let _machine = servo_e2e::shared();
     use servo_core::custom::Program;
     let seeds: Vec<Vec<u8>> = [
         "k * (theta_l - theta0)",
@@ -441,6 +451,7 @@ fn fuzz_user_effect_expressions() {
 /// Effects files (`--effects`, `[custom.NAME]` sections).
 #[test]
 fn fuzz_effects_files() {
+    let _machine = servo_e2e::shared();
     let seeds = vec![br#"[custom.cable]
 acts_on = "load_torque"
 expr = "k * (theta_l - theta0)"

@@ -346,6 +346,7 @@ fn fitted_amplitude(v: &serde_json::Value) -> f64 {
 /// within 25 % (it is 1/50-1/70 of the gravity torque).
 #[test]
 fn identify_fits_a_declared_imbalance_with_the_base() {
+    let _machine = servo_e2e::shared();
     for (rig, profile) in cases() {
         for seed in [1, 2] {
             let f = case_files(&rig, profile, seed);
@@ -387,6 +388,7 @@ fn identify_fits_a_declared_imbalance_with_the_base() {
 /// writes holds the imbalance, and the text names it.
 #[test]
 fn identify_finds_a_dominant_gravity_torque() {
+    let _machine = servo_e2e::shared();
     for (rig, profile) in cases() {
         let seed = 3;
         let f = case_files(&rig, profile, seed);
@@ -435,7 +437,7 @@ fn identify_finds_a_dominant_gravity_torque() {
 /// samples").
 #[test]
 fn diagnose_names_gravity_on_bare_params() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     for (rig, profile) in cases() {
         let seed = 4;
         let f = case_files(&rig, profile, seed);
@@ -470,6 +472,7 @@ fn diagnose_names_gravity_on_bare_params() {
 /// encoder on the load) it stays at its bound of 1 rad/s.
 #[test]
 fn stuck_speed_scales_with_the_rig() {
+    let _machine = servo_e2e::shared();
     use servo_core::fit::{Dataset, FitOptions};
     let rig = smart_servo_n1();
     let log = lift_log(&rig, 10.0, 5);
@@ -499,6 +502,7 @@ fn stuck_speed_scales_with_the_rig() {
 #[test]
 #[ignore = "writes the rigs' logs and params files to $GRAVITY_OUT for manual runs"]
 fn write_rig_files() {
+    let _machine = servo_e2e::shared();
     let out = PathBuf::from(std::env::var("GRAVITY_OUT").unwrap_or_else(|_| "/tmp/gravity".into()));
     std::fs::create_dir_all(&out).unwrap();
     for (i, rig) in [smart_servo_n1(), smart_servo_n250(), gearmotor_arm_n100()]

@@ -343,6 +343,7 @@ fn check_command(cmd: &ServoCommand, cache: &mut HashMap<Vec<String>, Help>) -> 
 /// Every `servo` command of every checked ```sh block names a subcommand and flags that exist.
 #[test]
 fn every_documented_command_parses() {
+    let _machine = servo_e2e::shared();
     let mut cache = HashMap::new();
     let mut errors = Vec::new();
     let mut n = 0;
@@ -375,6 +376,7 @@ fn every_documented_command_parses() {
 /// continuation lines are read as a shell reads them.
 #[test]
 fn the_command_checker_catches_wrong_commands() {
+    let _machine = servo_e2e::shared();
     let mut cache = HashMap::new();
     let parse = |s: &str| servo_commands(&s.lines().map(String::from).collect::<Vec<_>>());
     let cmds = parse(
@@ -450,6 +452,7 @@ fn ladder_fits(stdout: &str) -> Vec<f64> {
 /// finds nothing left.
 #[test]
 fn the_readme_story_runs_as_written() {
+    let _machine = servo_e2e::shared();
     let docs = docs();
     let readme = &docs[0];
     let first = &blocks(&readme.text)[0];
@@ -489,7 +492,6 @@ fn the_readme_story_runs_as_written() {
         story.len()
     );
 
-    let _machine = servo_e2e::cpu_heavy();
     let dir = tempfile::tempdir().unwrap();
     let mut outputs = Vec::new();
     for cmd in &story {
@@ -638,6 +640,7 @@ fn links(text: &str) -> Vec<String> {
 /// chapter, and every chapter it lists exists (draft entries `[Name]()` aside).
 #[test]
 fn every_link_resolves() {
+    let _machine = servo_e2e::shared();
     let docs = docs();
     let src = guide_src();
     let chapters: HashMap<PathBuf, &Doc> = docs.iter().map(|d| (d.path.clone(), d)).collect();
@@ -721,6 +724,7 @@ fn every_link_resolves() {
 /// The link checker catches a missing file, a missing anchor and a link out of the book.
 #[test]
 fn the_link_checker_sees_links_and_anchors() {
+    let _machine = servo_e2e::shared();
     let text = "# Top: the `x` part\n\nSee [a](b.md#c-d) and `[not](code.md)`.\n```sh\n[no](x.md)\n```\n## C, d\n";
     assert_eq!(links(text), ["b.md#c-d"]);
     assert!(

@@ -150,6 +150,7 @@ fn groups() -> Vec<Group> {
 
 #[test]
 fn real_data_library_reproduces_published_estimates() {
+    let _machine = servo_e2e::shared();
     let Some(root) = servo_e2e::realdata_dir() else {
         return;
     };
@@ -312,6 +313,7 @@ fn sim_j_ok(what: &str, e: &servo_core::ident::Estimate) {
 
 #[test]
 fn synthetic_truth_is_inside_the_reported_intervals() {
+    let _machine = servo_e2e::shared();
     // Exact torque balance (eq. 54) with current-sensor and speed noise: staircase both ways + ramps.
     let p = truth();
     let (j, b, tsf, n, kt) = (7e-7, 1.1e-6, 8e-3, 14.0, p.k_t);
@@ -399,6 +401,7 @@ fn synthetic_truth_is_inside_the_reported_intervals() {
 
 #[test]
 fn simulated_truth_is_inside_the_reported_intervals() {
+    let _machine = servo_e2e::shared();
     let p = truth();
     for seed in 1..=4 {
         let (f, i) = simulate(seed);
@@ -449,6 +452,7 @@ fn simulated_truth_is_inside_the_reported_intervals() {
 
 #[test]
 fn combined_works_on_an_open_loop_voltage_sweep() {
+    let _machine = servo_e2e::shared();
     let p = truth();
     let plant = Plant::from_params(p).unwrap();
     for seed in [3, 9] {
@@ -497,6 +501,7 @@ fn combined_works_on_an_open_loop_voltage_sweep() {
 
 #[test]
 fn unidentifiable_data_is_refused_with_an_explanation() {
+    let _machine = servo_e2e::shared();
     let p = truth();
     // One speed level only (both directions): B_eq and tau_sf cannot be separated.
     let n = 6000;
@@ -556,6 +561,7 @@ fn course_params_file(dir: &Path) -> std::path::PathBuf {
 
 #[test]
 fn cli_identify_reproduces_published_estimates_from_csv() {
+    let _machine = servo_e2e::shared();
     let Some(root) = servo_e2e::realdata_dir() else {
         return;
     };
@@ -672,6 +678,7 @@ fn cli_identify_reproduces_published_estimates_from_csv() {
 
 #[test]
 fn cli_identify_refuses_bad_input_clearly() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let (ok, _, err) = servo_e2e::servo(&["identify"]);
     assert!(!ok && err.contains("no logs given"), "{err}");
@@ -701,6 +708,7 @@ fn cli_identify_refuses_bad_input_clearly() {
 
 #[test]
 fn cli_identify_ramp_runs_the_experiments_on_the_simulator() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     let truth = servo_cli::model_file::ModelFile {

@@ -6,7 +6,10 @@
 //!   file under `crates/servo-cli/src/cmd/` is longer than 400 lines;
 //! - servo-core's modules form layers (#32): no import cycle between its top-level modules (the
 //!   effects' fit hooks, the one plug-in seam, apart), and no two sibling source files of any
-//!   crate import each other.
+//!   crate import each other;
+//! - a real-time test runs alone (stop 44's CI): every test outside tests/e2e/serial.rs holds
+//!   the machine shared from its first statement (`servo_e2e::shared`), so a QEMU board test
+//!   never runs beside one.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
@@ -58,6 +61,7 @@ fn crate_sources() -> Vec<PathBuf> {
 
 #[test]
 fn each_catalogue_effect_name_appears_in_at_most_three_source_files() {
+    let _machine = servo_e2e::shared();
     let sources: Vec<(PathBuf, String)> = crate_sources()
         .into_iter()
         .map(|p| {
@@ -99,6 +103,7 @@ fn each_catalogue_effect_name_appears_in_at_most_three_source_files() {
 
 #[test]
 fn no_command_file_is_longer_than_400_lines() {
+    let _machine = servo_e2e::shared();
     let cmd = workspace().join("crates/servo-cli/src/cmd");
     let files = rust_files(&cmd);
     assert!(
@@ -464,6 +469,7 @@ fn describe(graph: &Graph, cycle: &[String]) -> String {
 
 #[test]
 fn the_cycle_finder_finds_a_cycle_and_only_a_cycle() {
+    let _machine = servo_e2e::shared();
     let mut g = Graph::new();
     for (a, b) in [("a", "b"), ("b", "c"), ("a", "c"), ("d", "a")] {
         g.entry(a.into())
@@ -514,6 +520,7 @@ fn the_cycle_finder_finds_a_cycle_and_only_a_cycle() {
 /// [`FitHooks`]: servo_core::effects::FitHooks
 #[test]
 fn servo_core_modules_form_layers() {
+    let _machine = servo_e2e::shared();
     let graph = core_module_graph();
     let edges: usize = graph.values().map(BTreeMap::len).sum();
     assert!(
@@ -561,6 +568,7 @@ fn servo_core_modules_form_layers() {
 /// checked, through their whole folders, by [`servo_core_modules_form_layers`].)
 #[test]
 fn no_two_sibling_source_files_import_each_other() {
+    let _machine = servo_e2e::shared();
     let crates = workspace().join("crates");
     let mut circles = Vec::new();
     let mut pairs_seen = 0usize;
@@ -669,5 +677,78 @@ fn no_two_sibling_source_files_import_each_other() {
         "sibling source files importing each other (move what both need into one of them, or \
          below both):\n{}",
         circles.join("\n")
+    );
+}
+
+/// The first statement of every `#[test]` function of `src`: `(line number, function line,
+/// first statement)`, the statement trimmed (empty when the body is empty).
+fn test_first_statements(src: &str) -> Vec<(usize, String, String)> {
+    let lines: Vec<&str> = src.lines().collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < lines.len() {
+        if lines[i].trim() != "#[test]" {
+            i += 1;
+            continue;
+        }
+        let mut j = i + 1;
+        while j < lines.len() && !lines[j].trim_start().starts_with("fn ") {
+            j += 1;
+        }
+        let mut open = j;
+        while open < lines.len() && !lines[open].trim_end().ends_with('{') {
+            open += 1;
+        }
+        let first = lines.get(open + 1).map_or("", |l| l.trim()).to_string();
+        out.push((
+            j + 1,
+            lines.get(j).map_or("", |l| l.trim()).to_string(),
+            first,
+        ));
+        i = open + 1;
+    }
+    out
+}
+
+#[test]
+fn every_test_but_the_real_time_ones_holds_the_machine_shared_first() {
+    let _machine = servo_e2e::shared();
+    const HOLD: &str = "let _machine = servo_e2e::shared();";
+    // The checker finds a test that does not hold the machine and only such a test.
+    let sample = "#[test]\nfn a() {\n    let _machine = servo_e2e::shared();\n}\n\
+                  #[test]\n#[ignore]\nfn b(\n    x: u8,\n) {\n    let x = 1;\n}\n";
+    let found = test_first_statements(sample);
+    assert_eq!(found.len(), 2, "{found:?}");
+    assert_eq!(found[0].2, HOLD);
+    assert_eq!((found[1].0, found[1].2.as_str()), (7, "let x = 1;"));
+
+    let dir = workspace().join("tests/e2e");
+    let mut tests = 0;
+    let mut bare = Vec::new();
+    for path in rust_files(&dir) {
+        if path.file_name().is_some_and(|n| n == "serial.rs") {
+            continue; // real-time: each holds the machine alone (servo_e2e::realtime)
+        }
+        let src = fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        for (line, func, first) in test_first_statements(&src) {
+            tests += 1;
+            if first != HOLD {
+                bare.push(format!(
+                    "{}:{line}: {func} starts with `{first}`",
+                    path.display()
+                ));
+            }
+        }
+    }
+    assert!(
+        tests > 150,
+        "found only {tests} tests under {}",
+        dir.display()
+    );
+    assert!(
+        bare.is_empty(),
+        "these tests do not start with `{HOLD}` (a QEMU board test could run beside them and miss \
+         its deadlines):\n{}",
+        bare.join("\n")
     );
 }

@@ -70,6 +70,7 @@ fn write(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
 
 #[test]
 fn log_reader_registry_takes_a_format_from_outside_in_one_line() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().expect("tempdir");
     // Samples of a made-up run: u a ramp, theta_l its running sum.
     let mut text = String::from("servo-ws 1\n");

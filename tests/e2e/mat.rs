@@ -67,6 +67,7 @@ fn write_tmp(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
 
 #[test]
 fn synthetic_mat_paths_resampling_and_guess() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     for compressed in [true, false] {
         let bytes = synthetic(compressed);
@@ -136,6 +137,7 @@ fn synthetic_mat_paths_resampling_and_guess() {
 
 #[test]
 fn ambiguous_labels_are_not_guessed() {
+    let _machine = servo_e2e::shared();
     let t: Vec<f64> = (0..50).map(|k| k as f64 * 1e-3).collect();
     let i = vec![0.1; 50];
     let bytes = mat_file(
@@ -158,6 +160,7 @@ fn ambiguous_labels_are_not_guessed() {
 
 #[test]
 fn cli_inspect_lists_mat_csv_and_guess() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let p = write_tmp(tmp.path(), "lab.mat", &synthetic(true));
     let (ok, out, err) = servo_e2e::servo(&["inspect", p.to_str().unwrap()]);
@@ -230,6 +233,7 @@ const MUS_STEP: &str = "time=ScopeData1.time,theta_l=ScopeData1.signals(1).value
 
 #[test]
 fn every_realdata_mat_imports() {
+    let _machine = servo_e2e::shared();
     let Some(dir) = servo_e2e::realdata_dir() else {
         return;
     };
@@ -276,6 +280,7 @@ fn identify(args: &[&str]) -> [f64; 3] {
 
 #[test]
 fn identify_on_mat_matches_csv_and_published() {
+    let _machine = servo_e2e::shared();
     let Some(root) = servo_e2e::realdata_dir() else {
         return;
     };
@@ -412,6 +417,7 @@ fn model(dir: &Path, name: &str, b: f64, tau: f64, j: f64) -> String {
 
 #[test]
 fn compare_runs_on_tester_pid_mat_files() {
+    let _machine = servo_e2e::shared();
     let Some(root) = servo_e2e::realdata_dir() else {
         return;
     };
@@ -461,6 +467,7 @@ fn compare_runs_on_tester_pid_mat_files() {
 
 #[test]
 fn compare_replays_step_without_u_from_gains_and_reference() {
+    let _machine = servo_e2e::shared();
     let Some(root) = servo_e2e::realdata_dir() else {
         return;
     };
@@ -508,6 +515,7 @@ fn compare_replays_step_without_u_from_gains_and_reference() {
 
 #[test]
 fn foreign_mcap_without_nullable_fields_is_read() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("foreign.mcap");
     let mut w = mcap::Writer::new(std::io::BufWriter::new(
@@ -655,6 +663,7 @@ fn fuzz(name: &str, base: &[u8], map: Option<&str>, iterations: u64, seed: u64) 
 
 #[test]
 fn mat_reader_survives_mutations() {
+    let _machine = servo_e2e::shared();
     // Synthetic files, compressed and not, and hand-made hostile headers.
     for (k, compressed) in [true, false].into_iter().enumerate() {
         let (ok, n) = fuzz(

@@ -73,6 +73,7 @@ fn readme_sequence(dir: &Path) {
 
 #[test]
 fn the_readme_add_backlash_does_not_save_a_worse_model_unless_forced() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     readme_sequence(dir.path());
     let d = |n: &str| dir.path().join(n);
@@ -161,6 +162,7 @@ fn the_readme_add_backlash_does_not_save_a_worse_model_unless_forced() {
 
 #[test]
 fn diagnose_auto_saves_only_a_model_that_does_not_predict_worse() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     readme_sequence(dir.path());
     let d = |n: &str| dir.path().join(n);
@@ -235,6 +237,7 @@ fn lab(b_eq: f64, tau_sf: f64, k_drv: f64) -> Plant {
 
 #[test]
 fn a_model_saved_after_a_good_add_predicts_a_new_log_better() {
+    let _machine = servo_e2e::shared();
     // A rig with a dead band in its driver that the model lacks; fitted on one run, judged on
     // a run with another reference and noise seed.
     let dir = tempfile::tempdir().unwrap();
@@ -303,6 +306,7 @@ fn a_model_saved_after_a_good_add_predicts_a_new_log_better() {
 
 #[test]
 fn servo_params_writes_each_quantity_once_and_a_file_with_one_twice_is_refused() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let params = ok(&["params"]);
     for key in ["b_eq", "tau_sf"] {
@@ -340,6 +344,7 @@ fn servo_params_writes_each_quantity_once_and_a_file_with_one_twice_is_refused()
 
 #[test]
 fn identify_writes_the_friction_where_compare_reads_it() {
+    let _machine = servo_e2e::shared();
     // The template says B_eq = 1e-6, tau_sf = 9e-3 (servo params); the rig has others.
     let dir = tempfile::tempdir().unwrap();
     let d = |n: &str| dir.path().join(n);
@@ -428,6 +433,7 @@ fn identify_writes_the_friction_where_compare_reads_it() {
 
 #[test]
 fn keep_fitted_k_drv_writes_the_fitted_gain_and_compare_uses_it() {
+    let _machine = servo_e2e::shared();
     // The handout's rig: the driver gain is 0.70, the datasheet (and the template) say 0.60.
     let dir = tempfile::tempdir().unwrap();
     let d = |n: &str| dir.path().join(n);

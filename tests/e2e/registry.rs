@@ -118,6 +118,7 @@ fn open_loop(plant: &Plant, seconds: f64, seed: u64) -> Record {
 
 #[test]
 fn run_time_effect_is_registered_parsed_and_bounded() {
+    let _machine = servo_e2e::shared();
     let k = spring();
     assert!(!k.is_catalogue());
     assert_eq!(EffectKind::from_name("test_spring"), Some(k));
@@ -162,6 +163,7 @@ fn run_time_effect_is_registered_parsed_and_bounded() {
 /// names it.
 #[test]
 fn run_time_effect_is_simulated_fitted_and_diagnosed() {
+    let _machine = servo_e2e::shared();
     let k = spring();
     let hidden = Effect::new(k, &[0.003, 0.3]).unwrap();
     let plant = truth(hidden);
@@ -231,6 +233,7 @@ fn run_time_effect_is_simulated_fitted_and_diagnosed() {
 /// ([`effects::CatalogueTable`]).
 #[test]
 fn guide_table_is_the_registry() {
+    let _machine = servo_e2e::shared();
     let readme = include_str!("../../docs/guide/src/effects.md");
     let want = effects::CatalogueTable.to_string();
     let catalogue_only: String = want

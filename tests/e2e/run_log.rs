@@ -20,6 +20,7 @@ fn csv_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
 
 #[test]
 fn every_realdata_csv_imports() {
+    let _machine = servo_e2e::shared();
     let Some(dir) = servo_e2e::realdata_dir() else {
         return;
     };
@@ -70,6 +71,7 @@ fn raw_column(path: &Path, column: &str) -> Vec<f64> {
 
 #[test]
 fn realdata_units_are_converted() {
+    let _machine = servo_e2e::shared();
     let Some(dir) = servo_e2e::realdata_dir() else {
         return;
     };
@@ -134,6 +136,7 @@ fn realdata_units_are_converted() {
 
 #[test]
 fn bad_csv_inputs_name_file_line_column() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let cases: [(&str, &str, Option<&str>, &[&str]); 6] = [
         (
@@ -249,6 +252,7 @@ fn handout_pid() -> PidConfig {
 
 #[test]
 fn mcap_of_a_run_reopens_equal_to_what_was_written() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run.mcap");
     let mut plant = servo_core::Plant::from_params(servo_core::PlantParams::TABLE2).unwrap();
@@ -307,6 +311,7 @@ fn write_gains(dir: &Path) -> std::path::PathBuf {
 
 #[test]
 fn killed_run_is_readable_up_to_100ms_before_the_kill() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let gains = write_gains(dir.path());
     let log = dir.path().join("killed.mcap");
@@ -369,6 +374,7 @@ fn killed_run_is_readable_up_to_100ms_before_the_kill() {
 
 #[test]
 fn ctrl_c_stops_at_zero_volts_and_finishes_the_log() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let gains = write_gains(dir.path());
     let log = dir.path().join("int.mcap");
@@ -413,6 +419,7 @@ fn ctrl_c_stops_at_zero_volts_and_finishes_the_log() {
 
 #[test]
 fn diverging_simulation_and_soft_limit_stop_with_an_error() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let gains = write_gains(dir.path());
     let g = gains.to_str().unwrap();
@@ -455,6 +462,7 @@ fn diverging_simulation_and_soft_limit_stop_with_an_error() {
 
 #[test]
 fn run_summary_figures_are_sane() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let gains = write_gains(dir.path());
     let csv = dir.path().join("small.csv");
@@ -534,6 +542,7 @@ fn num_in(out: &str, key: &str) -> f64 {
 
 #[test]
 fn run_rejects_bad_input_clearly() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let gains = write_gains(dir.path());
     let g = gains.to_str().unwrap();
@@ -598,6 +607,7 @@ fn run_rejects_bad_input_clearly() {
 
 #[test]
 fn demo_leaves_its_files_and_says_where() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let out_dir = dir.path().join("demo");
     let (ok, out, err) = servo_e2e::servo(&["demo", "--out", out_dir.to_str().unwrap()]);

@@ -22,6 +22,7 @@ fn json(args: &[&str]) -> serde_json::Value {
 
 #[test]
 fn schema_files_are_valid_2020_12_and_documented() {
+    let _machine = servo_e2e::shared();
     let readme = std::fs::read_to_string(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/schemas/README.md"),
     )
@@ -45,6 +46,7 @@ fn schema_files_are_valid_2020_12_and_documented() {
 
 #[test]
 fn every_command_output_follows_its_schema() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
     // design: plain Bode, time-domain specs with the range check, and --meet-specs
@@ -167,6 +169,7 @@ fn every_command_output_follows_its_schema() {
 
 #[test]
 fn an_output_breaking_the_convention_is_refused() {
+    let _machine = servo_e2e::shared();
     let (ok, out, err) = servo(&["design", "--wc", "30", "--pm", "60", "--json"]);
     assert!(ok, "{err}");
     let good: serde_json::Value = serde_json::from_str(&out).unwrap();
@@ -187,6 +190,7 @@ fn an_output_breaking_the_convention_is_refused() {
 
 #[test]
 fn loop_message_schema_requires_only_the_time() {
+    let _machine = servo_e2e::shared();
     let schema: serde_json::Value =
         serde_json::from_str(&servo_cli::io::loop_msg::loop_schema()).unwrap();
     jsonschema::meta::validate(&schema).unwrap();

@@ -1150,7 +1150,7 @@ mod qemu_cli {
         }
         let dir = tempfile::tempdir().unwrap();
         let fitted = {
-            let _heavy = servo_e2e::cpu_heavy();
+            let _heavy = servo_e2e::shared();
             crate::compensation::identified_with(
                 dir.path(),
                 "imbalance:amplitude=0.01,phase=0.5",

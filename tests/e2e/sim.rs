@@ -288,6 +288,7 @@ fn compare_with_reference(specs: &[&str], steps: usize, whole: bool) -> (f64, f6
 
 #[test]
 fn linear_plant_equals_exact_zoh_solution() {
+    let _machine = servo_e2e::shared();
     // Independent exact solution: nalgebra's matrix exponential of the augmented 5x5 system
     // [[A, B], [0, 0]] dt, states (u_drv, i_a, omega_m, theta_m).
     let p = plant(&[]);
@@ -344,6 +345,7 @@ fn linear_plant_equals_exact_zoh_solution() {
 
 #[test]
 fn nonlinear_mechanics_match_fine_reference_integration() {
+    let _machine = servo_e2e::shared();
     for specs in [
         &["coulomb:tau_sf=0.006"][..],
         &["coulomb:tau_sf=0.004", "stribeck:tau_s=0.008,omega_s=0.5"][..],
@@ -377,6 +379,7 @@ fn nonlinear_mechanics_match_fine_reference_integration() {
 
 #[test]
 fn below_breakaway_the_shaft_does_not_creep() {
+    let _machine = servo_e2e::shared();
     for (specs, tau_break, tau_kin) in [
         (&["coulomb:tau_sf=0.006"][..], 0.006, 0.006),
         (
@@ -433,6 +436,7 @@ fn below_breakaway_the_shaft_does_not_creep() {
 
 #[test]
 fn stick_slip_does_not_chatter() {
+    let _machine = servo_e2e::shared();
     // A slow sine just above breakaway: the shaft alternates stuck and slipping phases, with one
     // breakaway per half period and no chattering at the stops.
     let p = plant(&["coulomb:tau_sf=0.004", "stribeck:tau_s=0.008,omega_s=0.3"]);
@@ -467,6 +471,7 @@ fn stick_slip_does_not_chatter() {
 
 #[test]
 fn asymmetry_moves_one_way_only() {
+    let _machine = servo_e2e::shared();
     let p = plant(&["asymmetry:tau_sf_pos=0.003,tau_sf_neg=0.008"]);
     let u = u_for_load_torque(&p.params, 0.005);
     let mut sim = PlantSim::new(&p, DT).unwrap();
@@ -479,6 +484,7 @@ fn asymmetry_moves_one_way_only() {
 
 #[test]
 fn backlash_load_waits_for_the_gap_after_a_reversal() {
+    let _machine = servo_e2e::shared();
     let gap = 0.08;
     let p = plant(&[&format!("backlash:gap={gap}"), "coulomb:tau_sf=0.003"]);
     let mut sim = PlantSim::new(&p, DT).unwrap();
@@ -524,6 +530,7 @@ fn backlash_load_waits_for_the_gap_after_a_reversal() {
 
 #[test]
 fn saturation_limits_the_applied_input() {
+    let _machine = servo_e2e::shared();
     let p = plant(&["saturation:limit=4"]);
     let mut sim = PlantSim::new(&p, DT).unwrap();
     let states = run(&mut sim, |k| 12.0 * (k as f64 * 0.01).sin(), 2000);
@@ -543,6 +550,7 @@ fn saturation_limits_the_applied_input() {
 
 #[test]
 fn deadzone_ignores_small_inputs() {
+    let _machine = servo_e2e::shared();
     let p = plant(&["deadzone:width=0.7"]);
     let mut sim = PlantSim::new(&p, DT).unwrap();
     let states = run(&mut sim, |k| 0.69 * (k as f64 * 0.01).sin(), 2000);
@@ -559,6 +567,7 @@ fn deadzone_ignores_small_inputs() {
 
 #[test]
 fn delay_shifts_the_response() {
+    let _machine = servo_e2e::shared();
     // Whole and fractional delays against the undelayed plant simulated at a period that makes
     // the delay a whole number of samples (both linear, so both exact).
     let u = |k: usize| test_input(k);
@@ -600,6 +609,7 @@ fn harmonic_amplitude(y: &[f64], angle: &[f64], cycles: f64) -> f64 {
 
 #[test]
 fn cogging_ripple_has_the_motor_side_period() {
+    let _machine = servo_e2e::shared();
     let p = plant(&["cogging:amplitude=4e-4,harmonic=8"]);
     let mut sim = PlantSim::with_max_substep(&p, DT, 20e-6).unwrap();
     let states = run(&mut sim, |_| 0.6, 6000);
@@ -620,6 +630,7 @@ fn cogging_ripple_has_the_motor_side_period() {
 
 #[test]
 fn imbalance_ripple_has_the_load_period_and_holds_against_friction() {
+    let _machine = servo_e2e::shared();
     let p = plant(&["imbalance:amplitude=0.02,phase=0"]);
     let mut sim = PlantSim::new(&p, DT).unwrap();
     let states = run(&mut sim, |_| 3.0, 6000);
@@ -649,6 +660,7 @@ fn imbalance_ripple_has_the_load_period_and_holds_against_friction() {
 
 #[test]
 fn any_combination_is_finite_and_deterministic() {
+    let _machine = servo_e2e::shared();
     let all = [
         "coulomb:tau_sf=0.005",
         "stribeck:tau_s=0.009,omega_s=0.2",
@@ -689,6 +701,7 @@ fn any_combination_is_finite_and_deterministic() {
 
 #[test]
 fn sensors_quantise_add_seeded_noise() {
+    let _machine = servo_e2e::shared();
     let cfg = SensorConfig {
         counts_per_rev: 4096,
         current_noise_a: 0.01,
@@ -743,6 +756,7 @@ fn sensors_quantise_add_seeded_noise() {
 
 #[test]
 fn cogging_and_imbalance_torques_have_their_stated_amplitude() {
+    let _machine = servo_e2e::shared();
     // Quasi-static breakaway from rest: with the resisting cogging torque at its peak
     // (phase pi/2 at theta_m = 0), the motor torque at breakaway is tau_sf / N + amplitude; with
     // the imbalance at its peak it is (tau_sf + amplitude) / N.
@@ -798,6 +812,7 @@ mod sim_effects {
 
     #[test]
     fn every_effect_together_stays_finite_and_deterministic() {
+        let _machine = servo_e2e::shared();
         let p = plant_with(&[
             "coulomb:tau_sf=0.005",
             "stribeck:tau_s=0.008,omega_s=0.3",
@@ -828,6 +843,7 @@ mod sim_effects {
 
     #[test]
     fn extreme_contact_stiffness_stays_bounded() {
+        let _machine = servo_e2e::shared();
         for spec in [
             "backlash:gap=0.02,stiffness=1e12,damping=0",
             "backlash:gap=0,stiffness=1e9,damping=10",
@@ -851,6 +867,7 @@ mod sim_effects {
 
     #[test]
     fn rejects_unusable_effects() {
+        let _machine = servo_e2e::shared();
         let p = plant_with(&["delay:delay=2"]);
         assert!(matches!(
             PlantSim::new(&p, 1e-3),

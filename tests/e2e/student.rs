@@ -36,6 +36,7 @@ fn demo() -> &'static (PathBuf, String) {
 
 #[test]
 fn demo_says_each_file_it_wrote_once() {
+    let _machine = servo_e2e::shared();
     let (_, stdout) = demo();
     let wrote: Vec<&str> = stdout
         .lines()
@@ -63,6 +64,7 @@ fn demo_says_each_file_it_wrote_once() {
 
 #[test]
 fn demo_says_plant_controller_clamps_and_changes_in_words() {
+    let _machine = servo_e2e::shared();
     let (_, stdout) = demo();
     // the run stage says which plant and controller it simulated, in one line
     let run = stdout
@@ -241,6 +243,7 @@ fn svgs(dir: &Path) -> Vec<PathBuf> {
 
 #[test]
 fn every_svg_of_the_demo_renders_readably_and_small() {
+    let _machine = servo_e2e::shared();
     let (dir, _) = demo();
     let files = svgs(dir);
     assert!(files.len() >= 4, "the demo wrote only {files:?}");
@@ -280,7 +283,6 @@ fn chromium() -> Option<PathBuf> {
 fn render_html(html: &Path, png: &Path) -> Option<String> {
     let bin = chromium()?;
     // Chromium loads every core while it lays the page out: not beside a real-time test.
-    let _machine = servo_e2e::cpu_heavy();
     let url = format!("file://{}", html.canonicalize().unwrap().display());
     let profile = tmp(&format!(
         "chromium-profile-{}",
@@ -332,6 +334,7 @@ fn render_html(html: &Path, png: &Path) -> Option<String> {
 
 #[test]
 fn a_three_log_diagnosis_report_shows_three_panels_of_points() {
+    let _machine = servo_e2e::shared();
     let (demo_dir, _) = demo();
     let dir = tmp("student-three-logs");
     // a third log: the hidden truth driven by another step sequence
@@ -452,6 +455,7 @@ fn printed_interval(out: &str, what: &str) -> Option<(f64, f64)> {
 
 #[test]
 fn multisine_run_and_frf_say_what_was_measured() {
+    let _machine = servo_e2e::shared();
     let dir = tmp("student-multisine");
     let g = dir.join("gains.toml");
     crate::util::write_pid_gains(&g);
@@ -598,6 +602,7 @@ fn multisine_run_and_frf_say_what_was_measured() {
 
 #[test]
 fn a_long_run_plots_under_300_kb() {
+    let _machine = servo_e2e::shared();
     let dir = tmp("student-long");
     let g = dir.join("gains.toml");
     crate::util::write_pid_gains(&g);
@@ -624,6 +629,7 @@ fn a_long_run_plots_under_300_kb() {
 
 #[test]
 fn small_values_get_distinct_tick_labels() {
+    let _machine = servo_e2e::shared();
     let dir = tmp("student-ticks");
     let t: Vec<f64> = (0..2000).map(|k| k as f64 * 1e-3).collect();
     let y: Vec<f64> = t.iter().map(|t| 3e-5 * (7.0 * t).sin()).collect();

@@ -365,7 +365,7 @@ fn check_identify(rig: &Rig, logs: &[PathBuf], dir: &Path) -> PathBuf {
 
 #[test]
 fn a_screw_axis_is_identified_in_linear_units() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let rig = screw_rig();
     let logs = logs(&rig, &[], dir.path(), 3);
@@ -374,7 +374,7 @@ fn a_screw_axis_is_identified_in_linear_units() {
 
 #[test]
 fn a_belt_axis_with_two_encoders_is_identified_in_linear_units() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let rig = belt_rig();
     let logs = logs(&rig, &[], dir.path(), 5);
@@ -383,7 +383,7 @@ fn a_belt_axis_with_two_encoders_is_identified_in_linear_units() {
 
 #[test]
 fn a_rotary_rig_with_a_motor_encoder_is_identified() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let rig = rotary_motor_encoder_rig();
     let logs = logs(&rig, &[], dir.path(), 7);
@@ -414,7 +414,7 @@ fn long_lead_screw_rig(encoder: EncoderSide) -> Rig {
 
 #[test]
 fn a_second_screw_round_trips_with_its_encoder_on_the_motor_the_load_or_both() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     // One simulation; the logs hold both encoders, each identify reads the ones its model names.
     let logs = logs(&long_lead_screw_rig(EncoderSide::Load), &[], dir.path(), 21);
@@ -460,7 +460,7 @@ fn rad_in(text: &str) -> Option<&str> {
 
 #[test]
 fn a_screw_axis_with_a_direction_asymmetry_is_diagnosed_in_newtons_and_added() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let rig = long_lead_screw_rig(EncoderSide::Load);
     let (f_pos, f_neg) = (22.0, 12.0);
@@ -626,7 +626,7 @@ fn a_screw_axis_with_a_direction_asymmetry_is_diagnosed_in_newtons_and_added() {
 /// `--columns`, in m and kg.
 #[test]
 fn a_belt_axis_runs_with_references_in_mm_and_logs_in_metres() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let rig = belt_rig();
     let truth = dir.path().join("belt-truth.toml");

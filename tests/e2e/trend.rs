@@ -124,7 +124,7 @@ fn days_after_start(date: &str) -> f64 {
 
 #[test]
 fn a_fleet_s_wear_is_found_forecast_and_cached() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let fleet = tmp.path().join("fleet");
     for a in ["arm-1", "arm-2", "arm-3"] {
@@ -318,7 +318,7 @@ fn run_json(args: &[&str]) -> serde_json::Value {
 /// each said in the log's `time_from`.
 #[test]
 fn trend_groups_by_a_field_and_takes_each_log_s_time_from_its_source() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let mixed = tmp.path().join("mixed");
     // 2 x 3 CSV logs, all in the folder `arm-3`, units A and B, dated a week apart.
@@ -438,7 +438,7 @@ fn trend_groups_by_a_field_and_takes_each_log_s_time_from_its_source() {
 /// again, and the rest is.
 #[test]
 fn an_interrupted_trend_resumes_from_the_cache() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let fleet = tmp.path().join("fleet");
     const N: usize = 12;

@@ -227,7 +227,7 @@ fn diagnose_drive(logs: &[Record], tag: &str) -> Diagnosis {
 /// electrical balance.
 #[test]
 fn two_mass_lugre_without_hump_is_complete() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     for (sigma0, seed) in [(10.0, 61), (2.0, 61), (10.0, 66), (2.0, 72), (2.0, 73)] {
         let tag = format!("two-mass null sigma0 {sigma0} seed {seed}");
         let mut drive = DriveTrain::null();
@@ -247,7 +247,7 @@ fn two_mass_lugre_without_hump_is_complete() {
 /// pre-sliding regime near reversals must be judged apart or it hides the hump).
 #[test]
 fn two_mass_lugre_stribeck_hump_is_named() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     for (sigma0, seed) in [(10.0, 62), (2.0, 62)] {
         let tag = format!("two-mass stribeck sigma0 {sigma0}");
         let mut drive = DriveTrain::null();
@@ -280,7 +280,7 @@ fn two_mass_lugre_stribeck_hump_is_named() {
 /// search is not run (no catalogue effect simulates bristles).
 #[test]
 fn two_mass_lugre_soft_hump_the_simulation_cannot_carry_is_reported() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     for seed in [67, 68] {
         let tag = format!("two-mass soft hump seed {seed}");
         let mut drive = DriveTrain::null();
@@ -349,7 +349,7 @@ fn two_mass_lugre_soft_hump_the_simulation_cannot_carry_is_reported() {
 /// the plant does not change, so no change of the base parameters is reported.
 #[test]
 fn two_mass_lugre_without_hump_is_complete_on_ten_minutes() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let logs = DriveTrain::null().logs(300.0, 300.0, 64);
     let d = diagnose_drive(&logs, "two-mass null 10 min");
     assert_no_resonance("two-mass null 10 min", &d);
@@ -361,7 +361,7 @@ fn two_mass_lugre_without_hump_is_complete_on_ten_minutes() {
 /// is within 1 s of the true one.
 #[test]
 fn two_mass_inertia_change_mid_log_is_unexplained_with_its_time() {
-    let _cpu = servo_e2e::cpu_heavy();
+    let _machine = servo_e2e::shared();
     let drive = DriveTrain {
         inertia_step: Some((0.5, 0.12)),
         ..DriveTrain::null()

@@ -58,6 +58,7 @@ fn value(v: &Value, key: &str) -> f64 {
 
 #[test]
 fn a_drive_switched_off_ends_the_log_for_identify() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let cols = "time=time_s,u=u_V,theta_l=theta_l_rad";
     let with_enable = format!("{cols},enable=drv_on");
@@ -133,6 +134,7 @@ fn a_drive_switched_off_ends_the_log_for_identify() {
 
 #[test]
 fn bad_windows_are_refused_with_the_flag_and_the_span() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let plant = Plant::lab();
     let full = dir.path().join("full.csv");
@@ -183,6 +185,7 @@ fn bad_windows_are_refused_with_the_flag_and_the_span() {
 
 #[test]
 fn export_writes_the_part_used() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let full = dir.path().join("full.csv");
     let cut = dir.path().join("cut.csv");
