@@ -25,6 +25,7 @@ use crate::diagnose::{
 };
 use servo_core::diagnose::{self, DiagnoseOptions, Diagnosis, Status};
 use servo_core::effects::EffectKind;
+use servo_core::fit::Equation;
 use servo_core::record::Record;
 use servo_core::sim::excitation::{RandomSteps, ZeroRamps};
 use servo_core::sim::sensors::SplitMix64;
@@ -269,6 +270,67 @@ fn two_mass_lugre_stribeck_hump_is_named() {
             "[{tag}] tau_s {tau_s} against {}",
             drive.friction.fs
         );
+    }
+}
+
+/// Two hump cases found at stop 45 by running the hump test on more seeds (not tuned on):
+/// with stiff bristles, seed 81 named "missing cogging" of 34 cycles per motor revolution (a
+/// residual of the closed loop's reversals, at fixed angles: the same on both halves, with
+/// another phase in the open-loop log); with soft ones, seed 79 read "complete" while its torque
+/// balance stood 3.4 times its floor and a Stribeck removed 18.5 % of its held-out residual (the
+/// bristles' reversals held the rest). Neither may name a torque of the angle, nor be complete:
+/// a Stribeck named has tau_s within 25 %, and "unexplained" says what carries the residual.
+#[test]
+fn two_mass_hump_is_neither_an_angle_locked_torque_nor_complete() {
+    let _machine = servo_e2e::shared();
+    for (sigma0, seed) in [(10.0, 81), (2.0, 79)] {
+        let tag = format!("two-mass hump sigma0 {sigma0} seed {seed}");
+        let mut drive = DriveTrain::null();
+        drive.friction.fs = 0.02;
+        drive.friction.sigma0 = sigma0;
+        let logs = drive.logs(12.0, 12.0, seed);
+        let d = diagnose_drive(&logs, &tag);
+        assert_ne!(d.status, Status::Complete, "[{tag}] {}", d.verdict);
+        for c in d.ranking.iter().filter(|c| c.significant) {
+            assert!(
+                !c.effect.model().depends_on_angle_only(),
+                "[{tag}] {} named: {}",
+                c.effect,
+                d.verdict
+            );
+        }
+        match d.winner() {
+            Some(w) => {
+                assert_eq!(w.effect, EffectKind::Stribeck, "[{tag}] {}", d.verdict);
+                let tau_s = w.params.iter().find(|p| p.key == "tau_s").unwrap().value;
+                assert!(
+                    (tau_s / drive.friction.fs - 1.0).abs() < 0.25,
+                    "[{tag}] {tau_s}"
+                );
+            }
+            None => {
+                let torque = d
+                    .unexplained
+                    .iter()
+                    .find(|b| b.equation == Equation::Torque)
+                    .unwrap_or_else(|| panic!("[{tag}] no torque balance left: {}", d.verdict));
+                let first = torque
+                    .signatures
+                    .first()
+                    .unwrap_or_else(|| panic!("[{tag}] no shape named: {}", d.verdict));
+                assert!(
+                    first.kind == "friction_curve" || first.kind == "partial_effect",
+                    "[{tag}] first shape {}: {}",
+                    first.kind,
+                    first.description
+                );
+                assert!(
+                    first.description.contains("hump") || first.description.contains("stribeck"),
+                    "[{tag}] {}",
+                    first.description
+                );
+            }
+        }
     }
 }
 

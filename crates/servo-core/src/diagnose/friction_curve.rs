@@ -401,20 +401,27 @@ fn shape(
                 coef_m * n,
                 "N m",
                 alloc::format!(
-                    "falls with speed below about {ws:.3} rad/s at the load (a hump no catalogue friction fits){}",
-                    hump_range(ds)
-                        .map(|(lo, hi)| if ws < lo || ws > hi {
-                            alloc::format!(
-                                ", outside the catalogue's search range of a breakaway's speed scale ({lo:.3}-{hi:.3} rad/s)"
-                            )
-                        } else {
-                            alloc::format!(
-                                ", inside the catalogue's search range of a breakaway's speed scale ({lo:.3}-{hi:.3} rad/s): see why the breakaway candidate was refused"
-                            )
-                        })
-                        .unwrap_or_default()
+                    "falls with speed below about {ws:.3} rad/s at the load (a hump no catalogue friction fits)"
                 ),
             ),
+        };
+        // Where the hump lies against the breakaway search, after the figures: inside it, the
+        // breakaway candidate was tried, and the verdict says why it was refused.
+        let range_note = match shape {
+            CurveShape::Hump(ws) => hump_range(ds)
+                .map(|(lo, hi)| {
+                    if *ws < lo || *ws > hi {
+                        alloc::format!(
+                            ", outside the catalogue's search range of a breakaway's speed scale ({lo:.3}-{hi:.3} rad/s)"
+                        )
+                    } else {
+                        alloc::format!(
+                            ", inside the catalogue's search range of a breakaway's speed scale ({lo:.3}-{hi:.3} rad/s), so the verdict says why the breakaway candidate was refused"
+                        )
+                    }
+                })
+                .unwrap_or_default(),
+            _ => String::new(),
         };
         found = Some(ShapeFit {
             shape: *shape,
@@ -424,7 +431,7 @@ fn shape(
             share,
             explained_rms: rms,
             description: alloc::format!(
-                "the measured friction curve {words}: {coef:.3e} {unit}, |t| = {t:.1}"
+                "the measured friction curve {words}: {coef:.3e} {unit}, |t| = {t:.1}{range_note}"
             ),
         });
     }

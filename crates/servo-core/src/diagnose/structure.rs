@@ -24,7 +24,8 @@ pub use super::thresholds::Thresholds;
 #[derive(Debug, Clone, PartialEq)]
 pub struct Signature {
     /// Family: `speed`, `load_angle`, `motor_angle`, `time_drift`, `oscillation`, `resonance`,
-    /// `current`, `voltage`, `offset`.
+    /// `current`, `voltage`, `offset`, `partial_effect` (a catalogue effect that predicts part
+    /// of it, named in the conclusion).
     pub kind: &'static str,
     /// Plain-language description with the measured figure (shape, cycles per revolution, ...).
     pub description: String,
