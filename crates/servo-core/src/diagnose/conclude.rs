@@ -16,6 +16,7 @@ use crate::effects::EffectKind;
 use crate::fit::Dataset;
 use crate::math;
 use crate::plant::Plant;
+use alloc::string::String;
 use alloc::vec::Vec;
 
 /// What the verdict of `d` adds on the regimes the diagnosis judged apart: `outside`, why no
