@@ -193,8 +193,9 @@ fn agree_locked(
 }
 
 /// Fits the candidate again on independent parts of the data: the first and second half of
-/// every log, each log against the others (for torques set by the angle alone), and (for effects that should not depend on speed: periodic torques, Coulomb
-/// friction) slow and fast motion. A mechanism is the same everywhere; a mimic is not.
+/// every log, each log against the others (for torques set by the angle alone), and (for
+/// effects that should not depend on speed: periodic torques, Coulomb friction) slow and fast
+/// motion. A mechanism is the same everywhere; a mimic is not.
 pub fn consistency(ds: &Dataset, model: &Plant, c: &Candidate, th: &Thresholds) -> Vec<Check> {
     consistency_with(ds, model, c, th, EffectToFit::all(c.effect))
 }
@@ -221,19 +222,13 @@ pub fn consistency_with(
     // named a ripple torque of 34 cycles per motor revolution, 4.6e-4 against 5.7e-4 N m on the
     // halves, when no angle-locked torque was there).
     let locked = kind.model().depends_on_angle_only();
-    let to_fit = match c.plant.effects.get(kind).filter(|_| locked) {
-        Some(fitted) => {
-            let mut held = EffectToFit {
-                effect: *fitted,
-                fit: to_fit.fit,
-            };
-            for (f, spec) in held.fit.iter_mut().zip(kind.params()) {
-                *f &= !spec.nonlinear;
-            }
-            held
-        }
-        None => to_fit,
-    };
+    let to_fit = c
+        .plant
+        .effects
+        .get(kind)
+        .filter(|_| locked)
+        .and_then(|fitted| to_fit.levels_of(*fitted))
+        .unwrap_or(to_fit);
     let tau_sf = model.tau_sf();
     let compare = |name, what: &str, a: &[ParamEstimate], b: &[ParamEstimate]| {
         if locked {

@@ -16,7 +16,6 @@ use crate::effects::EffectKind;
 use crate::fit::Dataset;
 use crate::math;
 use crate::plant::Plant;
-use alloc::string::String;
 use alloc::vec::Vec;
 
 /// What the verdict of `d` adds on the regimes the diagnosis judged apart: `outside`, why no
@@ -178,14 +177,19 @@ fn attach_changes(balances: &mut [BalanceReport], changes: &[Change]) {
 /// simulation error; the bristles' reversals held the rest).
 fn attach_partial(balances: &mut [BalanceReport], ranking: &[Candidate], th: &Thresholds) {
     for c in ranking.iter().filter(|c| !c.significant) {
-        let fails_share_only = c
+        // The share check failed, and only it.
+        let Some(share_check) = c
             .checks
             .iter()
-            .any(|k| k.name == STRUCTURED_CHECK && !k.passed)
-            && c.checks
-                .iter()
-                .all(|k| k.passed || k.name == STRUCTURED_CHECK);
-        if !fails_share_only {
+            .find(|k| k.name == STRUCTURED_CHECK && !k.passed)
+        else {
+            continue;
+        };
+        if !c
+            .checks
+            .iter()
+            .all(|k| k.passed || k.name == STRUCTURED_CHECK)
+        {
             continue;
         }
         let Some(b) = balances
@@ -195,17 +199,13 @@ fn attach_partial(balances: &mut [BalanceReport], ranking: &[Candidate], th: &Th
             continue;
         };
         let share = phrase::squared_from_rms(c.error_reduction_pct) / 100.0;
-        let structured = c
-            .checks
-            .iter()
-            .find(|k| k.name == STRUCTURED_CHECK)
-            .map_or(String::new(), |k| alloc::format!(" and {}", k.detail));
         b.signatures.push(super::structure::Signature {
             kind: "partial_effect",
             description: alloc::format!(
-                "{} predicts part of it: it removes {:.1} % of the held-out residual (RMS){structured}, so the model misses more than {}",
+                "{} predicts part of it: it removes {:.1} % of the held-out residual (RMS) and {}, so the model misses more than {}",
                 c.effect,
                 c.error_reduction_pct,
+                share_check.detail,
                 c.effect
             ),
             share,

@@ -375,13 +375,16 @@ fn shape(
             continue;
         }
         let rms = math::sqrt(gain / hold.len() as f64);
-        let (coef, unit, words) = match *shape {
+        // A hump's place against the breakaway search goes after the figures: inside it, the
+        // breakaway candidate was tried, and the verdict says why it was refused.
+        let (coef, unit, words, range_note) = match *shape {
             CurveShape::FasterThanLinear => (
                 coef_m * n * n * n,
                 "N m s^2/rad^2",
                 String::from(
                     "rises faster than linearly with speed, like w_l |w_l| (a fluid or aerodynamic drag)",
                 ),
+                String::new(),
             ),
             CurveShape::DirectionSlopes => (
                 coef_m * n * n,
@@ -389,6 +392,7 @@ fn shape(
                 String::from(
                     "has a viscous slope that differs between the two directions (the extra slope forwards, at the load)",
                 ),
+                String::new(),
             ),
             CurveShape::TransmittedTorque => (
                 coef_m,
@@ -396,6 +400,7 @@ fn shape(
                 String::from(
                     "rises with the transmitted torque at equal speed, like |k_t i_a| sign(w) (a load-dependent gear loss)",
                 ),
+                String::new(),
             ),
             CurveShape::Hump(ws) => (
                 coef_m * n,
@@ -403,25 +408,20 @@ fn shape(
                 alloc::format!(
                     "falls with speed below about {ws:.3} rad/s at the load (a hump no catalogue friction fits)"
                 ),
+                hump_range(ds)
+                    .map(|(lo, hi)| {
+                        if ws < lo || ws > hi {
+                            alloc::format!(
+                                ", outside the catalogue's search range of a breakaway's speed scale ({lo:.3}-{hi:.3} rad/s)"
+                            )
+                        } else {
+                            alloc::format!(
+                                ", inside the catalogue's search range of a breakaway's speed scale ({lo:.3}-{hi:.3} rad/s), so the verdict says why the breakaway candidate was refused"
+                            )
+                        }
+                    })
+                    .unwrap_or_default(),
             ),
-        };
-        // Where the hump lies against the breakaway search, after the figures: inside it, the
-        // breakaway candidate was tried, and the verdict says why it was refused.
-        let range_note = match shape {
-            CurveShape::Hump(ws) => hump_range(ds)
-                .map(|(lo, hi)| {
-                    if *ws < lo || *ws > hi {
-                        alloc::format!(
-                            ", outside the catalogue's search range of a breakaway's speed scale ({lo:.3}-{hi:.3} rad/s)"
-                        )
-                    } else {
-                        alloc::format!(
-                            ", inside the catalogue's search range of a breakaway's speed scale ({lo:.3}-{hi:.3} rad/s), so the verdict says why the breakaway candidate was refused"
-                        )
-                    }
-                })
-                .unwrap_or_default(),
-            _ => String::new(),
         };
         found = Some(ShapeFit {
             shape: *shape,

@@ -359,26 +359,12 @@ fn confirm_member(cx: &Context, c: &mut Candidate, joint: &Solved) -> bool {
 fn halves_fit(c: &Candidate, given: &Plant) -> EffectToFit {
     let all = EffectToFit::all(c.effect);
     let beside_play = given.effects.iter().any(|e| on_simulation(e.kind));
-    let Some(member) = c
-        .plant
+    c.plant
         .effects
         .get(c.effect)
         .filter(|_| beside_play && c.effect.is_mechanical() && !on_simulation(c.effect))
-    else {
-        return all;
-    };
-    let mut t = EffectToFit {
-        effect: *member,
-        fit: all.fit,
-    };
-    for (f, spec) in t.fit.iter_mut().zip(c.effect.params()) {
-        *f &= !spec.nonlinear;
-    }
-    if t.fit.iter().any(|f| *f) {
-        t
-    } else {
-        all
-    }
+        .and_then(|member| all.levels_of(*member))
+        .unwrap_or(all)
 }
 
 /// The agreement of `c` across independent parts of the data, refitted on `given` (the joint

@@ -136,6 +136,20 @@ impl EffectToFit {
         }
     }
 
+    /// Only the levels of `fitted`: its nonlinear parameters (a harmonic, a speed scale) keep
+    /// `fitted`'s values, and the linear ones this marks are fitted again. `None` when no
+    /// parameter is left to fit.
+    pub fn levels_of(self, fitted: Effect) -> Option<EffectToFit> {
+        let mut t = EffectToFit {
+            effect: fitted,
+            fit: self.fit,
+        };
+        for (f, spec) in t.fit.iter_mut().zip(fitted.kind.params()) {
+            *f &= !spec.nonlinear;
+        }
+        t.fit.iter().any(|f| *f).then_some(t)
+    }
+
     /// Parses the `--add` syntax `name[:key=value,...]`: given keys are kept as given, every
     /// other fittable key is fitted.
     pub fn parse(spec: &str) -> Result<EffectToFit, EffectError> {
