@@ -135,7 +135,7 @@ impl EffectModel for Backlash {
         Some(crate::math::linspace(0.0, GAP_MAX_RAD, 16))
     }
     fn schedule_rank(&self) -> u8 {
-        0
+        1
     }
     fn experiment(&self) -> &str {
         "run small position reversals (a 1-2 Hz sine of a few degrees) and log both motor and load angles"

@@ -593,11 +593,23 @@ impl Dataset {
         base: &Plant,
         effects: &[EffectToFit],
     ) -> Result<Solved, FitError> {
-        let (kept, resized) = self.fit_config_started(base, effects, false)?;
+        // Whether the second start applies depends only on the configuration: known before
+        // either runs, so the two run side by side (on an idle core, else in turn; the same
+        // fits either way).
+        let mut cfg = self.config(base, effects, self.opts.refit_base);
+        let (_, resizable) = self.play_enters(&mut cfg, false);
+        if !resizable {
+            return Ok(self.fit_config_started(base, effects, false)?.0);
+        }
+        let (kept, other) = crate::par::join(
+            || self.fit_config_started(base, effects, false),
+            || self.fit_config_started(base, effects, true),
+        );
+        let (kept, resized) = kept?;
         if !resized {
             return Ok(kept);
         }
-        let Ok((other, _)) = self.fit_config_started(base, effects, true) else {
+        let Ok((other, _)) = other else {
             return Ok(kept);
         };
         let cost = |s: &Solved| oe::prediction_cost(self, &s.plant, oe::Part::Fit);

@@ -452,20 +452,7 @@ fn columns(
     nc: usize,
     raw: impl Fn(&RecData) -> Vec<Vec<f64>>,
 ) -> Vec<Vec<f64>> {
-    let mut out: Vec<Vec<f64>> = (0..nc).map(|_| Vec::with_capacity(rows.len())).collect();
-    let mut cur: Option<(usize, Vec<Vec<f64>>)> = None;
-    for (&ri, &k) in rows.rec.iter().zip(&rows.k) {
-        if cur.as_ref().map(|c| c.0) != Some(ri) {
-            let r = &ds.recs[ri];
-            cur = Some((ri, r.filt_all(&raw(r))));
-        }
-        if let Some((_, cs)) = &cur {
-            for (o, c) in out.iter_mut().zip(cs) {
-                o.push(c[k]);
-            }
-        }
-    }
-    out
+    ds.columns_with(rows, nc, raw)
 }
 
 fn cfg_tau_sf(cfg: &Config) -> f64 {
