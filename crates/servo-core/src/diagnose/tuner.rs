@@ -21,14 +21,6 @@ pub(super) const GRID_POINTS: usize = 6;
 pub(super) const TRIM: f64 = 0.2;
 /// Starts of the joint refinement (the best grid points).
 pub(super) const STARTS: usize = 3;
-/// Golden-section iterations of a parameter in the last pass of a refinement
-/// ([`Tuner::refine`]): the bracket between two grid points narrowed to 2 % of its width.
-pub(super) const GOLDEN_ITERS: usize = 8;
-/// Golden-section iterations in a pass another (narrower) pass follows: its grid, centred on
-/// this pass's value, spans ten times the 15 % of the bracket four iterations leave, so more
-/// would only sharpen a value the next pass searches again (a sixth of the evaluations of a
-/// two-pass refinement).
-pub(super) const GOLDEN_ITERS_BEFORE_LAST: usize = 4;
 /// At most this many long segments (spread over the logs) for the joint fit (a play's own
 /// refinement uses 90; each evaluation here is one of several hundred).
 pub(super) const MAX_SEGMENTS: usize = 45;
@@ -153,17 +145,11 @@ impl<'a> Tuner<'a> {
 
     /// Coordinate refinement of `ts` from `p`, `passes` times: per parameter a grid over its
     /// span (narrowed by `shrink` at each pass; a scale on a log axis) then a golden-section
-    /// search ([`GOLDEN_ITERS`], [`GOLDEN_ITERS_BEFORE_LAST`] in a pass another follows), a
-    /// change kept only when it lowers the cost.
+    /// search, a change kept only when it lowers the cost.
     pub(super) fn refine(&self, p: &Plant, ts: &[(Target, Span)], passes: &[f64]) -> (Plant, f64) {
         let mut best = *p;
         let mut c_best = self.cost(&best);
-        for (pass, &shrink) in passes.iter().enumerate() {
-            let iters = if pass + 1 < passes.len() {
-                GOLDEN_ITERS_BEFORE_LAST
-            } else {
-                GOLDEN_ITERS
-            };
+        for &shrink in passes {
             for &(t, span) in ts {
                 let Some(x0) = get(&best, t) else { continue };
                 if !x0.is_finite() {
@@ -193,7 +179,7 @@ impl<'a> Tuner<'a> {
                         }
                         with(&from, t, to_x(l)).map_or(f64::INFINITY, |q| self.cost(&q))
                     },
-                    iters,
+                    8,
                 );
                 if let Some((l, c)) = r {
                     if c < c_best {
