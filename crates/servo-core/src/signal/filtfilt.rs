@@ -302,9 +302,7 @@ impl ZeroPhase {
         for k in (1..=pad).rev() {
             buf.push(core::array::from_fn(|l| 2.0 * xs[l][0] - xs[l][k]));
         }
-        for k in 0..n {
-            buf.push(core::array::from_fn(|l| xs[l][k]));
-        }
+        buf.extend((0..n).map(|k| core::array::from_fn(|l| xs[l][k])));
         for k in 1..=pad {
             buf.push(core::array::from_fn(|l| {
                 2.0 * xs[l][n - 1] - xs[l][n - 1 - k]
