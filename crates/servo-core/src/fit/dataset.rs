@@ -60,22 +60,6 @@ impl RecData {
         self.filter.apply_pair(a, b)
     }
 
-    /// [`Self::filt`] of every signal of `raw`, two at a time ([`Self::filt_pair`]).
-    pub fn filt_all(&self, raw: &[Vec<f64>]) -> Vec<Vec<f64>> {
-        let mut out = Vec::with_capacity(raw.len());
-        for two in raw.chunks(2) {
-            match two {
-                [a, b] => {
-                    let (fa, fb) = self.filt_pair(a, b);
-                    out.push(fa);
-                    out.push(fb);
-                }
-                _ => out.extend(two.iter().map(|c| self.filt(c))),
-            }
-        }
-        out
-    }
-
     /// The logged input with a transformation per sample (input nonlinearity), then seen through
     /// the zero-order hold shifted by `shift_s` [s] and averaged over one sample centred on each
     /// row: row k gets the mean of the held input over [t_k - dt/2 - shift, t_k + dt/2 - shift].

@@ -599,17 +599,14 @@ impl Dataset {
         let mut cfg = self.config(base, effects, self.opts.refit_base);
         let (_, resizable) = self.play_enters(&mut cfg, false);
         if !resizable {
-            return Ok(self.fit_config_started(base, effects, false)?.0);
+            return self.fit_config_started(base, effects, false);
         }
         let (kept, other) = crate::par::join(
             || self.fit_config_started(base, effects, false),
             || self.fit_config_started(base, effects, true),
         );
-        let (kept, resized) = kept?;
-        if !resized {
-            return Ok(kept);
-        }
-        let Ok((other, _)) = other else {
+        let kept = kept?;
+        let Ok(other) = other else {
             return Ok(kept);
         };
         let cost = |s: &Solved| oe::prediction_cost(self, &s.plant, oe::Part::Fit);
@@ -620,16 +617,15 @@ impl Dataset {
     }
 
     /// [`Dataset::fit_config_searched`] from one start: with `resize`, the input effects in the
-    /// model are searched again when a play enters. Returns the fit and whether `resize` would
-    /// change anything here (a play entering beside input effects, current logged).
+    /// model are searched again when a play enters.
     fn fit_config_started(
         &self,
         base: &Plant,
         effects: &[EffectToFit],
         resize: bool,
-    ) -> Result<(Solved, bool), FitError> {
+    ) -> Result<Solved, FitError> {
         let mut cfg = self.config(base, effects, self.opts.refit_base);
-        let (play_searched, resizable) = self.play_enters(&mut cfg, resize);
+        let (play_searched, _) = self.play_enters(&mut cfg, resize);
         let searched: Vec<(usize, &'static str)> = cfg
             .slots
             .iter()
@@ -769,7 +765,7 @@ impl Dataset {
             }
         }
         self.polish_on_simulation(&mut solved, effects)?;
-        Ok((solved, resizable))
+        Ok(solved)
     }
 
     /// Refines, on the simulation cost of the fit blocks, the parameters of the fitted effects

@@ -402,7 +402,7 @@ fn push_effect_terms(
     let n = cfg.base.params.n;
     let filter_hz = ds.opts.filter_hz;
     let tau_sf = cfg_tau_sf(cfg);
-    let cols = columns(ds, rows, nc, |r: &RecData| {
+    let cols = ds.columns_with(rows, nc, |r: &RecData| {
         let len = r.theta_m_rad.len();
         let mut raw = alloc::vec![alloc::vec![0.0; len]; nc];
         let mut out = alloc::vec![0.0; nc];
@@ -443,16 +443,6 @@ fn push_effect_terms(
             },
         });
     }
-}
-
-/// As [`Dataset::column`] for `nc` signals built together by `raw` (one pass over each record).
-fn columns(
-    ds: &Dataset,
-    rows: &Rows,
-    nc: usize,
-    raw: impl Fn(&RecData) -> Vec<Vec<f64>>,
-) -> Vec<Vec<f64>> {
-    ds.columns_with(rows, nc, raw)
 }
 
 fn cfg_tau_sf(cfg: &Config) -> f64 {

@@ -88,52 +88,6 @@ impl Butter2 {
         self.run_from(x0, x.iter_mut().rev());
     }
 
-    /// [`Self::run`] of two signals of one length at once (each exactly as alone): the two
-    /// recursions interleaved, for a core to overlap their chains of dependent operations.
-    fn run_pair(&self, x: &mut [f64], y: &mut [f64]) {
-        let (Some(&x0), Some(&y0)) = (x.first(), y.first()) else {
-            self.run(x);
-            self.run(y);
-            return;
-        };
-        self.run_pair_from(x0, y0, x.iter_mut().zip(y.iter_mut()));
-    }
-
-    /// [`Self::run_backwards`] of two signals of one length at once (see [`Self::run_pair`]).
-    fn run_pair_backwards(&self, x: &mut [f64], y: &mut [f64]) {
-        let (Some(&x0), Some(&y0)) = (x.last(), y.last()) else {
-            self.run_backwards(x);
-            self.run_backwards(y);
-            return;
-        };
-        self.run_pair_from(x0, y0, x.iter_mut().rev().zip(y.iter_mut().rev()));
-    }
-
-    /// [`Self::run_from`] of two signals in lockstep: the same operations on each.
-    #[inline(always)]
-    fn run_pair_from<'a>(
-        &self,
-        x0: f64,
-        y0: f64,
-        xs: impl Iterator<Item = (&'a mut f64, &'a mut f64)>,
-    ) {
-        let [b0, b1, b2] = self.b;
-        let [a1, a2] = self.a;
-        let (mut z1, mut w1) = (x0 - b0 * x0, y0 - b0 * y0);
-        let (mut z2, mut w2) = (b2 * x0 - a2 * x0, b2 * y0 - a2 * y0);
-        for (v, u) in xs {
-            let (xin, yin) = (*v, *u);
-            let y = b0 * xin + z1;
-            let yy = b0 * yin + w1;
-            z1 = b1 * xin - a1 * y + z2;
-            w1 = b1 * yin - a1 * yy + w2;
-            z2 = b2 * xin - a2 * y;
-            w2 = b2 * yin - a2 * yy;
-            *v = y;
-            *u = yy;
-        }
-    }
-
     /// [`Self::run`] (or, `backwards`, [`Self::run_backwards`]) of `L` signals of one length
     /// interleaved (sample k of signal l at `x[k][l]`), each exactly as alone: the same
     /// operations in the same order per lane, the lanes' independent recursions overlapped.
@@ -277,15 +231,10 @@ impl ZeroPhase {
     /// [`Self::apply`] to two signals: the same values, the two filtered in lockstep (about
     /// twice as fast as one after the other: each recursion alone leaves a core mostly idle).
     pub fn apply_pair(&self, x: &[f64], y: &[f64]) -> (Vec<f64>, Vec<f64>) {
-        let n = x.len();
-        if n < 3 || y.len() != n {
-            return (self.apply(x), self.apply(y));
+        match self.apply_lanes([x, y]) {
+            Some([a, b]) => (a, b),
+            None => (self.apply(x), self.apply(y)),
         }
-        let (mut a, pad) = self.padded(x);
-        let (mut b, _) = self.padded(y);
-        self.biquad.run_pair(&mut a, &mut b);
-        self.biquad.run_pair_backwards(&mut a, &mut b);
-        (unpadded(a, pad, n), unpadded(b, pad, n))
     }
 
     /// [`Self::apply`] to `L` signals of one length (at least 3 samples), interleaved and
