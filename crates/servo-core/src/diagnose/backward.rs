@@ -141,7 +141,15 @@ pub(super) fn search(
         || {
             par_map(&gridded, cx.opts.parallel, |g| {
                 trace(|| alloc::format!("grid start {} cost {:.4e}", show(g, &all), tuner.cost(g)));
-                tuner.refine(g, &targets(g, &all), &[1.0, 0.5])
+                let r = tuner.refine(g, &targets(g, &all), &[1.0, 0.5]);
+                trace(|| {
+                    alloc::format!(
+                        "refined from this start: cost {:.6e} {}",
+                        r.1,
+                        show(&r.0, &all)
+                    )
+                });
+                r
             })
             .into_iter()
             .min_by(|a, b| a.1.total_cmp(&b.1))
@@ -367,7 +375,9 @@ fn narrower(
         starts.extend([0.5, 0.7].iter().filter_map(|f| with(&full, t, f * x)));
     }
     par_map(&starts, cx.opts.parallel, |p| {
-        tuner.refine(p, &targets(p, members), &[1.0, 0.5])
+        let r = tuner.refine(p, &targets(p, members), &[1.0, 0.5]);
+        trace(|| alloc::format!("restart refined: cost {:.6e} {}", r.1, show(&r.0, members)));
+        r
     })
     .into_iter()
     .chain(core::iter::once((full, c_full)))
@@ -565,16 +575,20 @@ fn grid_stage(
     best.sort_by(|a, b| a.0.total_cmp(&b.0));
     best.truncate(STARTS);
     // Starts of the same cost (to [`SAME_COST`]) are one start: the parameter they differ in
-    // changed nothing the simulation shows (a gap the motor never crosses: on the Padova
-    // friction ramps the three best grid points differ only in the gap, at one cost to 1e-12).
+    // changed nothing the simulation shows.
     best.dedup_by(|a, b| (a.0 - b.0).abs() <= SAME_COST * b.0.abs());
     best.into_iter().map(|(_, p)| p).collect()
 }
 
 /// Relative difference below which two starts of the joint refinement have the same cost [-]:
-/// far below any change a parameter makes when the simulation shows it, above the rounding of
-/// simulations that step whole periods where the other's sub-steps ([`crate::sim::PlantSim::with_coarse_periods`]).
-const SAME_COST: f64 = 1e-9;
+/// they differ in a parameter the simulation barely sees, and refined they end in the same
+/// place. On the Padova friction ramps (`padova2021-jacopisky`) the three best grid points differ
+/// only in the gap (0.013, 0.040 and 0.080 rad, the motor seldom crosses it), their costs within
+/// 3e-5 of each other; refined, each ends at the same parameters but the gap, costs within 1e-4,
+/// the first the best: two of the three refinements (a tenth of the diagnosis) changed nothing.
+/// The distinct starts of the tests' joint searches (16 searches: plays, breakaways, delays,
+/// two-mass drive trains) differ by 9e-4 or more.
+const SAME_COST: f64 = 1e-4;
 
 /// The equation-error solution of `plant`'s configuration (its nonlinear parameters fixed, the
 /// linear ones and the base re-solved) carrying `plant` itself as the model the simulation judges.
