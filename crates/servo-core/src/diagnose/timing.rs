@@ -1,5 +1,7 @@
 //! Where a diagnosis spends its time: with the environment variable `SERVO_DIAG_TIMING` set
-//! (std builds), each timed stage prints its wall time [s] and the thread it ran on to stderr.
+//! (std builds), each timed stage prints its wall time [s], the thread it ran on, how many cores
+//! it kept busy and how many control periods its simulations stepped to stderr (stages that run
+//! side by side count each other's periods).
 //! Off by default: nothing is measured or printed.
 
 /// Runs `f`, printing `label` and its wall time [s] to stderr when `SERVO_DIAG_TIMING` is set.
@@ -9,17 +11,20 @@ pub fn timed<R>(label: impl FnOnce() -> alloc::string::String, f: impl FnOnce() 
         return f();
     }
     let (t0, c0) = (std::time::Instant::now(), cpu_s());
+    let p0 = crate::fit::oe::simulated_periods();
     let r = f();
     let wall = t0.elapsed().as_secs_f64();
+    let periods = crate::fit::oe::simulated_periods().saturating_sub(p0);
     let cpu = match (c0, cpu_s()) {
         (Some(a), Some(b)) => alloc::format!(", {:.2} cores busy", (b - a) / wall.max(1e-9)),
         _ => alloc::string::String::new(),
     };
     std::eprintln!(
-        "[diagnose timing] {:>7.3} s  {} ({:?}{cpu})",
+        "[diagnose timing] {:>7.3} s  {} ({:?}{cpu}, {:.1} M periods simulated)",
         wall,
         label(),
-        std::thread::current().id()
+        std::thread::current().id(),
+        periods as f64 * 1e-6
     );
     r
 }

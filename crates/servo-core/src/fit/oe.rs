@@ -10,6 +10,26 @@ use crate::plant::Plant;
 use crate::sim::{PlantSim, PlantState};
 use alloc::vec::Vec;
 
+/// Control periods simulated by every output-error cost of this process so far (std builds;
+/// `SERVO_DIAG_TIMING` prints each stage's share): the measure of a search's work that does not
+/// depend on the machine.
+#[cfg(feature = "std")]
+pub fn simulated_periods() -> u64 {
+    SIMULATED_PERIODS.load(core::sync::atomic::Ordering::Relaxed)
+}
+
+#[cfg(feature = "std")]
+static SIMULATED_PERIODS: core::sync::atomic::AtomicU64 = core::sync::atomic::AtomicU64::new(0);
+
+/// Adds `n` periods to [`simulated_periods`] (nothing without std).
+#[inline]
+fn count_periods(n: usize) {
+    #[cfg(feature = "std")]
+    SIMULATED_PERIODS.fetch_add(n as u64, core::sync::atomic::Ordering::Relaxed);
+    #[cfg(not(feature = "std"))]
+    let _ = n;
+}
+
 /// Which part of the data a cost is computed on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Part {
@@ -387,6 +407,7 @@ fn simulate_segments(
             }
         }
         let done = if second.is_some() { 2 } else { 1 };
+        count_periods(done * h);
         for seg_errs in errs.iter().take(done) {
             for &e in seg_errs {
                 if !e.is_finite() {
