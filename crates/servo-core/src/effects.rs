@@ -363,18 +363,6 @@ pub trait EffectModel: Sync + Send {
     fn depends_on_angle_only(&self) -> bool {
         false
     }
-    /// [`SimRole::Smooth`] with [`EffectModel::depends_on_angle_only`]: the torque as a harmonic
-    /// of its angle, `(amplitude [N m], rate [rad of phase per rad of angle])`, a bound on how
-    /// fast it turns along the travel: |torque| <= amplitude, |d torque / d theta| <= amplitude
-    /// rate and |d^2 torque / d theta^2| <= amplitude rate^2 (`A sin(k theta + phi)`: `(|A|,
-    /// k)`). The simulations of a diagnosis step a whole control period across such a torque when
-    /// a first-order hold of it is accurate there
-    /// ([`crate::sim::PlantSim::with_coarse_periods`]). Default `None`: unknown, every period
-    /// with the effect runs in sub-steps.
-    fn angle_harmonic(&self, v: &[f64]) -> Option<(f64, f64)> {
-        let _ = v;
-        None
-    }
     /// A load torque set by the load's position alone that can dwarf the friction (an arm's or
     /// a pendulum's gravity, m g L sin(theta_l + phi)): identification fits it with the base
     /// when it dominates the balance instead of returning an unphysical inertia

@@ -74,12 +74,6 @@ impl EffectModel for Cogging {
     fn depends_on_angle_only(&self) -> bool {
         true
     }
-    fn angle_harmonic(&self, v: &[f64]) -> Option<(f64, f64)> {
-        match v {
-            [amplitude, harmonic, ..] => Some((amplitude.abs(), harmonic.abs())),
-            _ => None,
-        }
-    }
     fn schedule_rank(&self) -> u8 {
         // Its harmonic's search over every order is the longest fit on real logs (1.3 s of a
         // 2 x 30 s diagnosis, the others 0.1-0.5 s): started first, it ends with the rest.

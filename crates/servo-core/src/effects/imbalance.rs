@@ -60,10 +60,6 @@ impl EffectModel for Imbalance {
     fn depends_on_angle_only(&self) -> bool {
         true
     }
-    fn angle_harmonic(&self, v: &[f64]) -> Option<(f64, f64)> {
-        // One cycle per load revolution.
-        v.first().map(|amplitude| (amplitude.abs(), 1.0))
-    }
     fn dominant_load_candidate(&self) -> bool {
         true
     }

@@ -1,13 +1,11 @@
 //! Whole-period steps away from events ([`PlantSim::with_coarse_periods`]).
 //!
 //! The sub-steps of [`PlantSim::step`] exist for the events (a stop, a breakaway, a flank met or
-//! left) and for nonlinear torques that change fast. Between events the linear part is
-//! discretised exactly over any length, the friction torque of a body sliding one way changes
-//! only with its speed, and a torque locked to the angle (a harmonic of it, with known amplitude
-//! and rate: [`crate::effects::EffectModel::angle_harmonic`]) only along the travel: the
-//! first-order hold over a whole period then gives what ten sub-steps give, to the torques'
-//! curvature. A user torque (it may depend on anything) or an angle-dependent torque without
-//! such bounds keeps every period in sub-steps. A coarse period is one exact step (a fractional delay's switch inside it is exact
+//! left) and for nonlinear torques that change fast. Between events, with only dry friction
+//! nonlinear (no angle-dependent or user torque), the linear part is discretised exactly over any
+//! length and the friction torque of a body sliding one way changes only with its speed: the
+//! first-order hold over a whole period then gives what ten sub-steps give, to the torque's
+//! curvature. A coarse period is one exact step (a fractional delay's switch inside it is exact
 //! too: the linear part superposes the responses to the two inputs), **accepted only when
 //! nothing could have happened inside it**:
 //!
@@ -18,14 +16,8 @@
 //!   contact force stays positive with a margin ([`COARSE_EVENT_MARGIN`]), on a contact whose
 //!   own oscillation is slow against the period ([`COARSE_MAX_CONTACT_PHASE`]); free, the motor
 //!   stays clear of both flanks with that margin;
-//! - the friction torque changes by at most [`COARSE_MAX_TORQUE_CHANGE`] of its breakaway level
-//!   over the period (the steep part of a friction curve is crossed in sub-steps);
-//! - the first-order hold of the torques locked to the angle errs by at most
-//!   [`COARSE_MAX_HOLD_ERROR`] of the nonlinear torques' level: with |tau'| <= A k and |tau''| <=
-//!   A k^2 along the angle, the hold's error over a period h is at most (A k^2 w^2 + A k a) h^2 / 8
-//!   for a speed up to w and an acceleration up to a (taken from both ends: w the larger end speed
-//!   or mean speed, a twice the mean acceleration). A harmonic that turns a whole cycle inside a
-//!   period is therefore never stepped across.
+//! - the nonlinear torques change by at most [`COARSE_MAX_TORQUE_CHANGE`] of the friction's
+//!   breakaway level over the period (the steep part of a friction curve is crossed in sub-steps).
 //!
 //! Otherwise the state is left as it was and the period runs in sub-steps as always. The torques
 //! at a coarse period's end start the next one (as a sub-step's start the next sub-step). Every event is
@@ -33,7 +25,7 @@
 //! stepped whole. Used by the simulations the diagnosis tunes and judges models on
 //! ([`crate::fit::oe`]), thousands per diagnosis, where the logs are mostly sliding motion.
 
-use super::{advance, discretise, AngleBounds, Disc, Period, PlantSim, CONTACT, NI, NS, ZERO_DISC};
+use super::{advance, discretise, Disc, Period, PlantSim, CONTACT, NI, NS, ZERO_DISC};
 use crate::math;
 
 /// Largest change of the nonlinear torques over a coarse period, as a share of the friction's
@@ -41,12 +33,6 @@ use crate::math;
 /// grows with the curvature, bounded by the change: at 1 % of the level the error of a period
 /// is below 0.1 % of the level.
 pub const COARSE_MAX_TORQUE_CHANGE: f64 = 0.01;
-
-/// Largest error of the first-order hold of the torques locked to the angle over a coarse
-/// period, as a share of the nonlinear torques' level (the friction's breakaway level plus the
-/// amplitudes of those torques, load side) [-]: the accuracy [`COARSE_MAX_TORQUE_CHANGE`] gives
-/// the friction (0.1 %).
-pub const COARSE_MAX_HOLD_ERROR: f64 = 1e-3;
 
 /// The discretisation of a whole period per mode, with the delayed input split exactly: the
 /// input of the last period acts over the first part (up to the switch), this period's over the
@@ -65,15 +51,9 @@ pub(super) struct CoarseTables {
     contact_whole: bool,
     /// 1 / N [-].
     inv_n: f64,
-    /// The largest change of the friction torque over a period [N m, load side], sliding
+    /// The largest change of the nonlinear torques over a period [N m, load side], sliding
     /// backwards and forwards ([`COARSE_MAX_TORQUE_CHANGE`] of the breakaway level).
     torque_tol: [f64; 2],
-    /// The bounds of the torques locked to the motor and to the load angle, when there are
-    /// any.
-    angle_locked: Option<[AngleBounds; 2]>,
-    /// The largest error of their first-order hold over a period [N m, load side], sliding
-    /// backwards and forwards ([`COARSE_MAX_HOLD_ERROR`] of the level).
-    hold_tol: [f64; 2],
 }
 
 /// Largest phase the contact's natural oscillation turns in one period for a period in contact
@@ -91,8 +71,6 @@ pub const COARSE_EVENT_MARGIN: f64 = 0.05;
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Carry {
     torques: (f64, f64),
-    /// The part of `torques` locked to the angle.
-    locked: (f64, f64),
     gap: (f64, f64),
     mode: (usize, f64),
 }
@@ -100,16 +78,13 @@ pub(super) struct Carry {
 impl PlantSim {
     /// This simulator taking each control period in one exact step whenever no event can happen
     /// inside it (see the module docs of `sim::coarse`), and in sub-steps otherwise. Unchanged
-    /// when the plant has a user torque or an angle-dependent torque without bounds along the
-    /// angle (they may change in any way inside a period), or takes one step per period anyway.
+    /// when the plant has an angle-dependent or a user torque (they change along the travel,
+    /// not with a slowly varying speed) or takes one step per period anyway.
     pub fn with_coarse_periods(mut self) -> Self {
-        let (Some(bm), Some(bl)) = (self.smooth_m.bounds, self.smooth_l.bounds) else {
-            return self;
-        };
-        if self.substeps <= 1 || self.custom_torque || self.coarse.is_some() {
+        let smooth = self.smooth_m.is_active() || self.smooth_l.is_active() || self.custom_torque;
+        if self.substeps <= 1 || smooth || self.coarse.is_some() {
             return self;
         }
-        let locked = self.smooth_m.is_active() || self.smooth_l.is_active();
         // Where the delayed input switches inside the period [share of the period].
         let f = match self.switch_at {
             None => 0.0,
@@ -130,13 +105,6 @@ impl PlantSim {
             inv_n: 1.0 / self.n,
             torque_tol: [-1.0, 1.0]
                 .map(|dir| COARSE_MAX_TORQUE_CHANGE * self.friction.breakaway_l(dir).abs()),
-            angle_locked: locked.then_some([bm, bl]),
-            hold_tol: [-1.0, 1.0].map(|dir| {
-                let level = self.friction.breakaway_l(dir).abs()
-                    + self.n * bm.amplitude_nm
-                    + bl.amplitude_nm;
-                COARSE_MAX_HOLD_ERROR * level
-            }),
         };
         if let Some(b) = &self.play {
             // The contact's natural frequency: the spring between the motor (J_eq (1 - f),
@@ -205,27 +173,16 @@ impl PlantSim {
     /// otherwise. `carry`: the last period's, when it was stepped whole.
     fn coarse_step(&mut self, u_new: f64, u_old: f64, carry: Option<Carry>) -> Option<Carry> {
         let x0 = self.x;
-        let (inv_n, tol, locked) = {
+        let (inv_n, tol) = {
             let t = self.coarse.as_ref()?;
-            (
-                t.inv_n,
-                t.torque_tol[usize::from(self.dir > 0.0)],
-                t.angle_locked.is_some(),
-            )
+            (t.inv_n, t.torque_tol[usize::from(self.dir > 0.0)])
         };
-        // A torque locked to the angle that turns too fast at the start's speed alone is held
-        // badly whatever the end ([`Self::hold_accurate`] bounds the speed from below by it).
-        if locked && !self.hold_accurate(&x0, &x0) {
-            return None;
-        }
         let start = match carry {
             Some(c) => c,
             None => {
                 let gap = gap_state(&x0, inv_n);
-                let (torques, locked_part) = self.torques_split(&x0, locked);
                 Carry {
-                    torques,
-                    locked: locked_part,
+                    torques: self.nonlinear_torques(&x0),
                     gap,
                     mode: self.contact_mode(gap),
                 }
@@ -243,16 +200,13 @@ impl PlantSim {
         for i in 0..self.ns {
             xp[i] += t.g_old[mode][i] * u_old;
         }
-        let ((tm1, tl1), (sm1, sl1)) = self.torques_split(&xp, locked);
+        let (tm1, tl1) = self.nonlinear_torques(&xp);
         let (dm, dl) = (tm1 - tm0, tl1 - tl0);
-        // The friction's part of the change (all of it without torques locked to the angle).
-        let (sm0, sl0) = start.locked;
-        let (fm, fl) = ((tm1 - sm1) - (tm0 - sm0), (tl1 - sl1) - (tl0 - sl0));
         if self.dry {
-            if (fm * self.n).abs() + fl.abs() > tol {
+            if (dm * self.n).abs() + dl.abs() > tol {
                 return None;
             }
-        } else if fm != 0.0 || fl != 0.0 {
+        } else if dm != 0.0 || dl != 0.0 {
             return None;
         }
         let d = &self.coarse.as_ref()?.disc[mode];
@@ -267,9 +221,6 @@ impl PlantSim {
                 return None;
             }
         }
-        if locked && !self.hold_accurate(&x0, &x1) {
-            return None;
-        }
         let g1 = gap_state(&x1, inv_n);
         let end_mode = self.contact_mode(g1);
         if end_mode.0 != mode || !self.contact_unchanged(g0, g1, mode) {
@@ -278,46 +229,9 @@ impl PlantSim {
         self.x = x1;
         Some(Carry {
             torques: (tm1, tl1),
-            locked: (sm1, sl1),
             gap: g1,
             mode: end_mode,
         })
-    }
-
-    /// The nonlinear torques at `x` ([`PlantSim::nonlinear_torques`]) and, when `locked`, their
-    /// part locked to the angle ((0, 0) otherwise).
-    #[inline]
-    fn torques_split(&mut self, x: &[f64; NS], locked: bool) -> ((f64, f64), (f64, f64)) {
-        if !locked {
-            return (self.nonlinear_torques(x), (0.0, 0.0));
-        }
-        // Angle-only torques: the second evaluation reuses the first (same angles).
-        let part = self.smooth_cached(x);
-        (self.nonlinear_torques(x), part)
-    }
-
-    /// Whether the first-order hold of the torques locked to the angle over the period from `x0`
-    /// to `x1` errs by at most [`COARSE_MAX_HOLD_ERROR`] of the level (module docs): the bound
-    /// (|tau''| w^2 + |tau'| a) h^2 / 8 on each side, the load side's plus N times the motor's.
-    fn hold_accurate(&self, x0: &[f64; NS], x1: &[f64; NS]) -> bool {
-        let Some(t) = &self.coarse else {
-            return false;
-        };
-        let Some([bm, bl]) = t.angle_locked else {
-            return true;
-        };
-        let h = self.dt_s;
-        let err = |b: &AngleBounds, (a0, w0): (f64, f64), (a1, w1): (f64, f64)| -> f64 {
-            if b.amplitude_nm == 0.0 {
-                return 0.0;
-            }
-            let w = w0.abs().max(w1.abs()).max((a1 - a0).abs() / h);
-            let acc = 2.0 * (w1 - w0).abs() / h;
-            (b.curvature_nm_per_rad2 * w * w + b.slope_nm_per_rad * acc) * h * h / 8.0
-        };
-        let load = |x: &[f64; NS]| (self.theta_l(x), self.fb_speed_l(x));
-        let e = self.n * err(&bm, (x0[3], x0[2]), (x1[3], x1[2])) + err(&bl, load(x0), load(x1));
-        e <= t.hold_tol[usize::from(self.dir > 0.0)]
     }
 
     /// Whether the contact can have kept mode `mode` (that of both ends) over a period between

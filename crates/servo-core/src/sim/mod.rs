@@ -210,19 +210,6 @@ struct SmoothSide {
     effects: [Option<Effect>; MAX_SMOOTH],
     angle_only: bool,
     cache: (f64, f64),
-    /// Bounds on the torques along the angle, summed over the effects ([`AngleBounds`]);
-    /// `None` when an effect gives none ([`crate::effects::EffectModel::angle_harmonic`]).
-    bounds: Option<AngleBounds>,
-}
-
-/// Bounds on a side's smooth torques along its angle theta: |torque| <= `amplitude_nm`,
-/// |d torque / d theta| <= `slope_nm_per_rad`, |d^2 torque / d theta^2| <=
-/// `curvature_nm_per_rad2` (sums over harmonics A sin(k theta + phi) of A, A k and A k^2).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub(super) struct AngleBounds {
-    pub amplitude_nm: f64,
-    pub slope_nm_per_rad: f64,
-    pub curvature_nm_per_rad2: f64,
 }
 
 impl SmoothSide {
@@ -231,7 +218,6 @@ impl SmoothSide {
             effects: [None; MAX_SMOOTH],
             angle_only: true,
             cache: (f64::NAN, 0.0),
-            bounds: Some(AngleBounds::default()),
         };
         let mut n = 0;
         for e in effects
@@ -240,19 +226,7 @@ impl SmoothSide {
         {
             if n < MAX_SMOOTH {
                 out.effects[n] = Some(*e);
-                let model = e.kind.model();
-                out.angle_only &= model.depends_on_angle_only();
-                let harmonic = model.angle_harmonic(e.values()).filter(|&(a, k)| {
-                    model.depends_on_angle_only() && a.is_finite() && k.is_finite()
-                });
-                out.bounds = match (out.bounds, harmonic) {
-                    (Some(b), Some((a, k))) => Some(AngleBounds {
-                        amplitude_nm: b.amplitude_nm + a,
-                        slope_nm_per_rad: b.slope_nm_per_rad + a * k,
-                        curvature_nm_per_rad2: b.curvature_nm_per_rad2 + a * k * k,
-                    }),
-                    _ => None,
-                };
+                out.angle_only &= e.kind.model().depends_on_angle_only();
                 n += 1;
             }
         }
@@ -1289,52 +1263,29 @@ mod tests {
     #[test]
     fn whole_periods_follow_the_sub_steps() {
         let play = alloc::format!("{}:gap=0.03", effect_by(SimRole::Contact, "gap"));
-        // A breakaway friction with its speed scale, an angle-periodic torque at the motor (its
-        // harmonic a parameter) and one at the load.
+        // A breakaway friction with its speed scale, an angle-periodic torque.
         let hump = alloc::format!(
             "{}:tau_s=0.02,omega_s=0.8",
             effect_by(SimRole::DryFriction, "omega_s")
         );
-        let ripple = |amplitude: f64| {
-            alloc::format!(
-                "{}:amplitude={amplitude},harmonic=4,phase=0",
-                effect_by(SimRole::Smooth, "harmonic")
-            )
-        };
-        let (strong, weak) = (ripple(0.002), ripple(0.0002));
-        let load_side = EffectKind::ALL
-            .into_iter()
-            .find(|k| {
-                k.sim_role() == SimRole::Smooth
-                    && k.acts_on() == crate::effects::ActsOn::LoadTorque
-                    && k.model().depends_on_angle_only()
-            })
-            .unwrap();
-        let unbalanced = alloc::format!("{load_side}:amplitude=0.01,phase=0.3");
+        let ripple = alloc::format!(
+            "{}:amplitude=0.002,harmonic=4,phase=0",
+            effect_by(SimRole::Smooth, "harmonic")
+        );
         // Within the sub-steps' own accuracy against RK4 at 1 us (module docs): ~1e-4 rad with
         // dry friction, 2-4e-3 rad with a gear play (whose impacts and stops at reversals make
-        // the two drift apart by an event's resolution each time), 5e-4 rad with a ripple at
-        // the motor 15 times the friction. Each against RK4: tests/e2e/sim.rs.
-        for (specs, bar_rad, min_share) in [
-            (&["coulomb:tau_sf=0.009"][..], 1e-6, 0.5),
+        // the two drift apart by an event's resolution each time). Each against RK4:
+        // tests/e2e/sim.rs.
+        for (specs, bar_rad) in [
+            (&["coulomb:tau_sf=0.009"][..], 1e-6),
             (
                 &["coulomb:tau_sf=0.009", hump.as_str(), "delay:delay=0.00125"][..],
                 1e-4,
-                0.5,
             ),
-            (&["coulomb:tau_sf=0.009", play.as_str()][..], 4e-3, 0.5),
+            (&["coulomb:tau_sf=0.009", play.as_str()][..], 4e-3),
             (
                 &["coulomb:tau_sf=0.009", play.as_str(), "delay:delay=0.0304"][..],
                 4e-3,
-                0.5,
-            ),
-            // Ripples turning up to 1.4 rad a period at the test's speeds: stepped whole only
-            // where the motor is slow (the hold's error bound).
-            (&["coulomb:tau_sf=0.009", strong.as_str()][..], 2e-3, 0.1),
-            (
-                &["coulomb:tau_sf=0.009", weak.as_str(), unbalanced.as_str()][..],
-                1e-4,
-                0.15,
             ),
         ] {
             let (worst, share) = fine_against_coarse(specs);
@@ -1342,12 +1293,12 @@ mod tests {
                 "{specs:?}: largest difference {worst:.2e} rad, {:.0} % of the periods whole",
                 100.0 * share
             );
-            assert!(
-                share > min_share,
-                "{specs:?}: only {share} of the periods whole"
-            );
+            assert!(share > 0.5, "{specs:?}: only {share} of the periods whole");
             assert!(worst < bar_rad, "{specs:?}: {worst} rad apart");
         }
+        // An angle-dependent torque is always sub-stepped.
+        let (worst, share) = fine_against_coarse(&["coulomb:tau_sf=0.009", ripple.as_str()]);
+        assert_eq!((worst, share), (0.0, 0.0));
     }
 
     #[test]
