@@ -74,23 +74,11 @@ impl Butter2 {
         a: [0.0, 0.0],
     };
 
-    /// Filters `x` in place, starting from the steady state of its first sample (unit DC gain:
-    /// a constant input leaves the filter in that state).
-    fn run(&self, x: &mut [f64]) {
-        let Some(&x0) = x.first() else { return };
-        self.run_from(x0, x.iter_mut());
-    }
-
-    /// As [`Butter2::run`] on `x` reversed (last sample first), in place: the same arithmetic in
-    /// the same order as reversing, running and reversing back, without the two copies.
-    fn run_backwards(&self, x: &mut [f64]) {
-        let Some(&x0) = x.last() else { return };
-        self.run_from(x0, x.iter_mut().rev());
-    }
-
-    /// [`Self::run`] (or, `backwards`, [`Self::run_backwards`]) of `L` signals of one length
-    /// interleaved (sample k of signal l at `x[k][l]`), each exactly as alone: the same
-    /// operations in the same order per lane, the lanes' independent recursions overlapped.
+    /// Filters `L` signals of one length in place, interleaved (sample k of signal l at
+    /// `x[k][l]`), forwards (or, `backwards`, last sample first), each from the steady state of
+    /// its first sample (unit DC gain: a constant input leaves the filter in that state). Each
+    /// lane gets the same operations in the same order as alone; the lanes' independent
+    /// recursions overlap (one recursion alone leaves most of a core idle).
     fn run_lanes<const L: usize>(&self, x: &mut [[f64; L]], backwards: bool) {
         let first = if backwards { x.last() } else { x.first() };
         let Some(&x0) = first else { return };
@@ -111,22 +99,6 @@ impl Butter2 {
             x.iter_mut().rev().for_each(&mut step);
         } else {
             x.iter_mut().for_each(&mut step);
-        }
-    }
-
-    /// Filters the samples of `xs` in place, in the order given, from the steady state of `x0`.
-    #[inline(always)]
-    fn run_from<'a>(&self, x0: f64, xs: impl Iterator<Item = &'a mut f64>) {
-        let [b0, b1, b2] = self.b;
-        let [a1, a2] = self.a;
-        let mut z1 = x0 - b0 * x0;
-        let mut z2 = b2 * x0 - a2 * x0;
-        for v in xs {
-            let xin = *v;
-            let y = b0 * xin + z1;
-            z1 = b1 * xin - a1 * y + z2;
-            z2 = b2 * xin - a2 * y;
-            *v = y;
         }
     }
 }
@@ -218,14 +190,10 @@ impl ZeroPhase {
     /// Filters `x` forwards and backwards; returns a signal of the same length (a copy of `x`
     /// when it has fewer than 3 samples).
     pub fn apply(&self, x: &[f64]) -> Vec<f64> {
-        let n = x.len();
-        if n < 3 {
-            return x.to_vec();
+        match self.apply_lanes([x]) {
+            Some([y]) => y,
+            None => x.to_vec(),
         }
-        let (mut buf, pad) = self.padded(x);
-        self.biquad.run(&mut buf);
-        self.biquad.run_backwards(&mut buf);
-        unpadded(buf, pad, n)
     }
 
     /// [`Self::apply`] to two signals: the same values, the two filtered in lockstep (about
@@ -247,7 +215,7 @@ impl ZeroPhase {
         }
         let pad = self.pad.min(n - 1);
         let mut buf: Vec<[f64; L]> = Vec::with_capacity(n + 2 * pad);
-        // The odd reflection of [`Self::padded`], lane by lane.
+        // Odd reflection about the end points keeps value and slope continuous.
         for k in (1..=pad).rev() {
             buf.push(core::array::from_fn(|l| 2.0 * xs[l][0] - xs[l][k]));
         }
@@ -265,35 +233,11 @@ impl ZeroPhase {
         }))
     }
 
-    /// `x` (at least 3 samples) with its odd reflection about each end (`pad` samples each
-    /// side), and `pad`.
-    fn padded(&self, x: &[f64]) -> (Vec<f64>, usize) {
-        let n = x.len();
-        let pad = self.pad.min(n - 1);
-        let mut buf = Vec::with_capacity(n + 2 * pad);
-        // Odd reflection about the end points keeps value and slope continuous.
-        for k in (1..=pad).rev() {
-            buf.push(2.0 * x[0] - x[k]);
-        }
-        buf.extend_from_slice(x);
-        for k in 1..=pad {
-            buf.push(2.0 * x[n - 1] - x[n - 1 - k]);
-        }
-        (buf, pad)
-    }
-
     /// The derivative of the filtered `x` per second (central differences of [`ZeroPhase::apply`]),
     /// e.g. speed [rad/s] from position [rad].
     pub fn derivative(&self, x: &[f64]) -> Vec<f64> {
         derivative(&self.apply(x), self.dt_s)
     }
-}
-
-/// The `n` samples of a padded buffer `buf` after its first `pad`.
-fn unpadded(mut buf: Vec<f64>, pad: usize, n: usize) -> Vec<f64> {
-    buf.truncate(pad + n);
-    buf.drain(..pad);
-    buf
 }
 
 /// Zero-phase low-pass of `x` sampled every `dt_s` with cut-off `cutoff_hz` (see [`ZeroPhase::new`]
@@ -381,8 +325,9 @@ mod tests {
         // (Measured: 0.5 - 7e-15 and 3e-14 rad.)
         let fc = 10.0;
         let x = sine(fc, 0.3, 20_000);
-        let mut one_pass = x.clone();
-        Butter2::lowpass(fc, DT).run(&mut one_pass);
+        let mut lane: Vec<[f64; 1]> = x.iter().map(|v| [*v]).collect();
+        Butter2::lowpass(fc, DT).run_lanes(&mut lane, false);
+        let one_pass: Vec<f64> = lane.iter().map(|v| v[0]).collect();
         let (amp, phase) = amplitude_and_phase(&one_pass, fc, 5_000, 15_000);
         assert!(
             (amp - core::f64::consts::FRAC_1_SQRT_2).abs() < 1e-9,
