@@ -146,6 +146,14 @@ impl<'a> Tuner<'a> {
         trimmed(self.ds, p, &self.segs, self.horizon_s, TRIM).unwrap_or(f64::INFINITY)
     }
 
+    /// [`Self::cost`] simulated with the sub-steps of a search's grid
+    /// ([`oe::SEARCH_SUBSTEP_S`]): for the joint search's coarse grid, which only chooses the
+    /// starts the refinement then tunes on [`Self::cost`].
+    pub(super) fn grid_cost(&self, p: &Plant) -> f64 {
+        oe::segment_costs_stepped(self.ds, p, &self.segs, self.horizon_s, oe::SEARCH_SUBSTEP_S)
+            .map_or(f64::INFINITY, |c| trimmed_of(c, TRIM))
+    }
+
     /// How many segments the trimmed cost keeps.
     pub(super) fn kept(&self) -> usize {
         kept(self.segs.len(), TRIM)
@@ -220,11 +228,15 @@ pub(super) fn trimmed(
     horizon_s: f64,
     trim: f64,
 ) -> Option<f64> {
-    let mut c = oe::segment_costs(ds, p, segs, horizon_s)?;
+    Some(trimmed_of(oe::segment_costs(ds, p, segs, horizon_s)?, trim))
+}
+
+/// The trimmed cost [rad] of the segment costs `c` (every segment's).
+fn trimmed_of(mut c: Vec<f64>, trim: f64) -> f64 {
     c.sort_by(|a, b| a.total_cmp(b));
     let keep = kept(c.len(), trim);
     let s: f64 = c.iter().take(keep).map(|x| x * x).sum();
-    Some(math::sqrt(s / keep.max(1) as f64))
+    math::sqrt(s / keep.max(1) as f64)
 }
 
 /// How many of `n` segments a cost trimmed by `trim` keeps (at least one).

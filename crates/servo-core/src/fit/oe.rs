@@ -246,33 +246,45 @@ pub fn segment_costs(
     segs: &[(usize, usize)],
     horizon_s: f64,
 ) -> Option<Vec<f64>> {
+    segment_costs_stepped(ds, plant, segs, horizon_s, crate::sim::MAX_SUBSTEP_S)
+}
+
+/// As [`segment_costs`] with the simulator's largest internal sub-step `max_substep_s` [s]
+/// ([`SEARCH_SUBSTEP_S`] for the grid of a search, as in [`prediction_cost_stepped`]).
+pub fn segment_costs_stepped(
+    ds: &Dataset,
+    plant: &Plant,
+    segs: &[(usize, usize)],
+    horizon_s: f64,
+    max_substep_s: f64,
+) -> Option<Vec<f64>> {
     // Independent simulations: in two halves on two threads when a core is idle (the serial
     // refinements of the joint search), the same values either way.
     if segs.len() >= 2 && simulated_samples(ds, segs, horizon_s) >= SPLIT_MIN_SAMPLES {
         if let Some(_held) = idle_core_guard() {
             let (a, b) = segs.split_at(segs.len() / 2);
             let (ca, cb) = both(
-                || segment_costs_serial(ds, plant, a, horizon_s),
-                || segment_costs_serial(ds, plant, b, horizon_s),
+                || segment_costs_serial(ds, plant, a, horizon_s, max_substep_s),
+                || segment_costs_serial(ds, plant, b, horizon_s, max_substep_s),
             );
             let mut out = ca?;
             out.extend(cb?);
             return Some(out);
         }
     }
-    segment_costs_serial(ds, plant, segs, horizon_s)
+    segment_costs_serial(ds, plant, segs, horizon_s, max_substep_s)
 }
 
-/// [`segment_costs`] on one thread.
+/// [`segment_costs_stepped`] on one thread, sub-steps of at most `h` [s].
 fn segment_costs_serial(
     ds: &Dataset,
     plant: &Plant,
     segs: &[(usize, usize)],
     horizon_s: f64,
+    h: f64,
 ) -> Option<Vec<f64>> {
     let mut out = Vec::with_capacity(segs.len());
     let (mut sum, mut count) = (0.0, 0usize);
-    let h = crate::sim::MAX_SUBSTEP_S;
     simulate_segments(ds, plant, segs, horizon_s, h, |ev| {
         match ev {
             Sample::Error(e) => {
