@@ -16,8 +16,9 @@
 //!    segments start from a state no measurement fixes and carry most of the plain cost). A
 //!    coarse grid over two nonlinear parameters of different members (e.g. a play's gap and a
 //!    breakaway's speed scale, the pair that trades off at low speed), the linear ones
-//!    re-solved by least squares at each point, then a coordinate refinement from the best
-//!    points: the base first (the Coulomb level, B_eq, R_a, J_eq), then every member's
+//!    re-solved by least squares at each point (simulated with a search's coarser sub-steps,
+//!    [`Tuner::grid_cost`]: the grid only chooses the starts), then a coordinate refinement from
+//!    the best points (its first pass from each, its second from the best of them): the base first (the Coulomb level, B_eq, R_a, J_eq), then every member's
 //!    parameters; then restarts with the play's gap at half and 0.7 times its value
 //!    ([`narrower`]). The effects named earlier are re-estimated too (a delay sized without the
 //!    play).
