@@ -396,15 +396,29 @@ fn narrower(
         };
         starts.extend([0.5, 0.7].iter().filter_map(|f| with(&full, t, f * x)));
     }
-    par_map(&starts, cx.opts.parallel, |p| {
-        let r = tuner.refine(p, &targets(p, members), &[1.0, 0.5]);
-        trace(|| alloc::format!("restart refined: cost {:.6e} {}", r.1, show(&r.0, members)));
+    // As the joint refinement: the first pass from every restart, the second from the best.
+    let Some((first, _)) = par_map(&starts, cx.opts.parallel, |p| {
+        let r = tuner.refine(p, &targets(p, members), &[1.0]);
+        trace(|| {
+            alloc::format!(
+                "restart, one pass: cost {:.6e} {}",
+                r.1,
+                show(&r.0, members)
+            )
+        });
         r
     })
     .into_iter()
-    .chain(core::iter::once((full, c_full)))
-    .min_by(|a, b| a.1.total_cmp(&b.1))
-    .unwrap_or((full, c_full))
+    .min_by(|a, b| a.1.total_cmp(&b.1)) else {
+        return (full, c_full);
+    };
+    let r = tuner.refine(&first, &targets(&first, members), &[0.5]);
+    trace(|| alloc::format!("restart refined: cost {:.6e} {}", r.1, show(&r.0, members)));
+    if r.1 < c_full {
+        r
+    } else {
+        (full, c_full)
+    }
 }
 
 /// Adds to `fresh`, in ranking order and while it holds fewer than `cap`, every candidate not
