@@ -18,8 +18,9 @@
 //!    breakaway's speed scale, the pair that trades off at low speed), the linear ones
 //!    re-solved by least squares at each point (simulated with a search's coarser sub-steps,
 //!    [`Tuner::grid_cost`]: the grid only chooses the starts), then a coordinate refinement from
-//!    the best points (its first pass from each, its second from the best of them): the base first (the Coulomb level, B_eq, R_a, J_eq), then every member's
-//!    parameters; then restarts with the play's gap at half and 0.7 times its value
+//!    the best points (its first pass from each, its second from the best of them,
+//!    [`refine_best`]): the base first (the Coulomb level, B_eq, R_a, J_eq), then every
+//!    member's parameters; then restarts with the play's gap at half and 0.7 times its value
 //!    ([`narrower`]). The effects named earlier are re-estimated too (a delay sized without the
 //!    play).
 //! 2. **Drop-one test.** Each new member is judged given all the others, against the joint
@@ -143,25 +144,10 @@ pub(super) fn search(
     let (full, c_full) = super::timing::timed(
         || "backward: joint refinement".into(),
         || {
-            // The first pass from every start, the second (half the spans) from the best of
-            // them only: the starts end in different basins after one pass already (on seed 24
-            // of the three-effect test at 0.090, 0.105 and 0.225 rad after both), and the
-            // second pass polishes within a basin.
-            let (first, _) = par_map(&gridded, cx.opts.parallel, |g| {
+            for g in &gridded {
                 trace(|| alloc::format!("grid start {} cost {:.4e}", show(g, &all), tuner.cost(g)));
-                let r = tuner.refine(g, &targets(g, &all), &[1.0]);
-                trace(|| {
-                    alloc::format!(
-                        "one pass from this start: cost {:.6e} {}",
-                        r.1,
-                        show(&r.0, &all)
-                    )
-                });
-                r
-            })
-            .into_iter()
-            .min_by(|a, b| a.1.total_cmp(&b.1))?;
-            Some(tuner.refine(&first, &targets(&first, &all), &[0.5]))
+            }
+            refine_best(cx, &tuner, &gridded, &all, "start")
         },
     )?;
     trace(|| {
@@ -368,7 +354,8 @@ fn drop_group(
 
 /// Restarts the joint refinement from the tuned model `full` (cost `c_full`) with the first
 /// nonlinear parameter of each member judged on the simulation (a gear play's gap) at half and
-/// at 0.7 times its value, and returns the model of lowest cost.
+/// at 0.7 times its value ([`refine_best`]: the best restart after one pass gets the second),
+/// and returns the model of lowest cost.
 ///
 /// A wide gap beside a spiked breakaway friction is a local optimum of the joint cost that the
 /// grid's starts can all fall into: the refinement moves a gap by at most half again per pass.
@@ -396,29 +383,45 @@ fn narrower(
         };
         starts.extend([0.5, 0.7].iter().filter_map(|f| with(&full, t, f * x)));
     }
-    // As the joint refinement: the first pass from every restart, the second from the best.
-    let Some((first, _)) = par_map(&starts, cx.opts.parallel, |p| {
-        let r = tuner.refine(p, &targets(p, members), &[1.0]);
-        trace(|| {
-            alloc::format!(
-                "restart, one pass: cost {:.6e} {}",
-                r.1,
-                show(&r.0, members)
-            )
-        });
-        r
-    })
-    .into_iter()
-    .min_by(|a, b| a.1.total_cmp(&b.1)) else {
+    let Some(r) = refine_best(cx, tuner, &starts, members, "restart") else {
         return (full, c_full);
     };
-    let r = tuner.refine(&first, &targets(&first, members), &[0.5]);
-    trace(|| alloc::format!("restart refined: cost {:.6e} {}", r.1, show(&r.0, members)));
     if r.1 < c_full {
         r
     } else {
         (full, c_full)
     }
+}
+
+/// Refines each of `starts` by one pass of the tuner's coordinate refinement over the parameters
+/// of `members` ([`targets`]), then the best of them by a second pass at half the spans; `what`
+/// names the starts in the trace. The starts end in their basins after one pass already (on seed
+/// 24 of the three-effect test at 0.090, 0.105 and 0.225 rad after both), and the second pass
+/// polishes within one: given to every start it was a third of the joint search's refinements.
+/// `None` without a start.
+fn refine_best(
+    cx: &joint::Context,
+    tuner: &Tuner,
+    starts: &[Plant],
+    members: &[EffectKind],
+    what: &str,
+) -> Option<(Plant, f64)> {
+    let (first, _) = par_map(starts, cx.opts.parallel, |p| {
+        let r = tuner.refine(p, &targets(p, members), &[1.0]);
+        trace(|| alloc::format!("{what}, one pass: cost {:.6e} {}", r.1, show(&r.0, members)));
+        r
+    })
+    .into_iter()
+    .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    let r = tuner.refine(&first, &targets(&first, members), &[0.5]);
+    trace(|| {
+        alloc::format!(
+            "best {what} refined: cost {:.6e} {}",
+            r.1,
+            show(&r.0, members)
+        )
+    });
+    Some(r)
 }
 
 /// Adds to `fresh`, in ranking order and while it holds fewer than `cap`, every candidate not
