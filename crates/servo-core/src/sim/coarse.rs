@@ -10,7 +10,12 @@
 //! nothing could have happened inside it**:
 //!
 //! - the friction body slides at both ends in its direction, with a speed larger than the
-//!   period's speed change (it cannot have stopped and restarted in between);
+//!   period's speed change (it cannot have stopped and restarted in between); or it is stuck,
+//!   and the torque driving it stays [`COARSE_EVENT_MARGIN`] below breakaway both ways along
+//!   the cubic through its values and rates at both ends (with play, the contact's; without,
+//!   the motor's through its armature current), so that no breakaway can fall inside (the
+//!   load held while the motor crosses the gap or presses on a flank: most of the periods of
+//!   closed-loop step logs);
 //! - the contact state (free or pressed on a flank) is the same at both ends and, along the cubic
 //!   through the motor's place in the gap and its rate at both ends, in between: pressed, the
 //!   contact force stays positive with a margin ([`COARSE_EVENT_MARGIN`]), on a contact whose
@@ -25,7 +30,7 @@
 //! stepped whole. Used by the simulations the diagnosis tunes and judges models on
 //! ([`crate::fit::oe`]), thousands per diagnosis, where the logs are mostly sliding motion.
 
-use super::{advance, discretise, Disc, Period, PlantSim, CONTACT, NI, NS, ZERO_DISC};
+use super::{advance, discretise, Disc, Period, PlantSim, CONTACT, NI, NS, STUCK, ZERO_DISC};
 use crate::math;
 
 /// Largest change of the nonlinear torques over a coarse period, as a share of the friction's
@@ -54,6 +59,13 @@ pub(super) struct CoarseTables {
     /// The largest change of the nonlinear torques over a period [N m, load side], sliding
     /// backwards and forwards ([`COARSE_MAX_TORQUE_CHANGE`] of the breakaway level).
     torque_tol: [f64; 2],
+    /// The largest driving torque a stuck friction body may feel inside a coarse period [N m,
+    /// load side], backwards and forwards ([`COARSE_EVENT_MARGIN`] below breakaway).
+    hold_tol: [f64; 2],
+    /// Without play, the rate of the armature current [A/s] per unit of (u_drv [V], i_a [A],
+    /// omega_m [rad/s]) (eq. 19), and k_t N [N m/A, load side]: the torque that drives a stuck
+    /// rigid drivetrain.
+    armature: ([f64; 3], f64),
 }
 
 /// Largest phase the contact's natural oscillation turns in one period for a period in contact
@@ -105,6 +117,13 @@ impl PlantSim {
             inv_n: 1.0 / self.n,
             torque_tol: [-1.0, 1.0]
                 .map(|dir| COARSE_MAX_TORQUE_CHANGE * self.friction.breakaway_l(dir).abs()),
+            hold_tol: [-1.0, 1.0]
+                .map(|dir| (1.0 - COARSE_EVENT_MARGIN) * self.friction.breakaway_l(dir).abs()),
+            armature: {
+                let p = &self.plant.params;
+                let inv_l = 1.0 / p.l_a;
+                ([inv_l, -p.r_eq() * inv_l, -p.k_e * inv_l], p.k_t * self.n)
+            },
         };
         if let Some(b) = &self.play {
             // The contact's natural frequency: the spring between the motor (J_eq (1 - f),
@@ -115,9 +134,9 @@ impl PlantSim {
             t.contact_whole = omega_c * self.dt_s <= COARSE_MAX_CONTACT_PHASE;
         }
         let modes: &[usize] = if self.play.is_some() {
-            &[0, CONTACT]
+            &[0, STUCK, CONTACT, STUCK | CONTACT]
         } else {
-            &[0]
+            &[0, STUCK]
         };
         let play = self.play;
         let disc = |mode: usize, len: f64| discretise(&self.plant, frac, play.as_ref(), mode, len);
@@ -149,7 +168,7 @@ impl PlantSim {
     pub(super) fn coarse_period(&mut self, period: &Period) -> bool {
         // The torques at the end of the last coarse period, when it was the last thing done.
         let carry = self.coarse_carry.take();
-        if self.coarse.is_none() || self.stuck {
+        if self.coarse.is_none() {
             return false;
         }
         let u_old = if self.switch_at.is_some() {
@@ -171,6 +190,7 @@ impl PlantSim {
     /// (before it) [V], kept in `self.x` and returning what its end starts the next period with
     /// ([`Carry`]) when no event can have happened inside it; `None` (state untouched)
     /// otherwise. `carry`: the last period's, when it was stepped whole.
+    #[inline]
     fn coarse_step(&mut self, u_new: f64, u_old: f64, carry: Option<Carry>) -> Option<Carry> {
         let x0 = self.x;
         let (inv_n, tol) = {
@@ -188,7 +208,9 @@ impl PlantSim {
                 }
             }
         };
-        let (g0, (mode, tau_offset), (tm0, tl0)) = (start.gap, start.mode, start.torques);
+        let (g0, (contact, tau_offset), (tm0, tl0)) = (start.gap, start.mode, start.torques);
+        let stuck = self.stuck;
+        let mode = contact | if stuck { STUCK } else { 0 };
         let t = self.coarse.as_ref()?;
         let d = &t.disc[mode];
         let inp: [f64; NI] = [u_new, tm0, tl0, tau_offset];
@@ -214,8 +236,12 @@ impl PlantSim {
         for i in 0..self.ns {
             x1[i] += d.g1[i][0] * dm + d.g1[i][1] * dl;
         }
-        if self.dry {
-            let w = self.fb_w();
+        let w = self.fb_w();
+        if stuck {
+            // Held by dry friction: the friction body stays where it is (as in a stuck sub-step).
+            x1[w] = 0.0;
+            x1[w + 1] = x0[w + 1];
+        } else if self.dry {
             let (w0, w1) = (x0[w] * self.dir, x1[w] * self.dir);
             if !(w0 > 0.0 && w1 > 0.0 && w0.min(w1) > (w1 - w0).abs()) {
                 return None;
@@ -223,7 +249,10 @@ impl PlantSim {
         }
         let g1 = gap_state(&x1, inv_n);
         let end_mode = self.contact_mode(g1);
-        if end_mode.0 != mode || !self.contact_unchanged(g0, g1, mode) {
+        if end_mode.0 != contact || !self.contact_unchanged(g0, g1, contact) {
+            return None;
+        }
+        if stuck && !self.holds_over_period((&x0, g0), (&x1, g1), contact) {
             return None;
         }
         self.x = x1;
@@ -234,12 +263,64 @@ impl PlantSim {
         })
     }
 
+    /// Whether dry friction holds the stuck friction body over a period from state `x0` to `x1`
+    /// (gap states `g0`, `g1`, [`gap_state`]; contact mode `contact` at both ends): the torque
+    /// driving it stays [`COARSE_EVENT_MARGIN`] below breakaway in either direction everywhere
+    /// in between, read along the cubic through its values and rates at both ends. With play
+    /// that torque is the contact's (none while the motor is free in the gap); without, the
+    /// motor's, through the armature current (eq. 19 with the motor at rest). The smooth
+    /// torques are zero (a plant with one is never stepped whole).
+    #[inline(never)]
+    fn holds_over_period(
+        &self,
+        (x0, g0): (&[f64; NS], (f64, f64)),
+        (x1, g1): (&[f64; NS], (f64, f64)),
+        contact: usize,
+    ) -> bool {
+        let Some(t) = &self.coarse else {
+            return false;
+        };
+        let h = self.dt_s;
+        let drive = match &self.play {
+            Some(b) => {
+                if contact & CONTACT == 0 {
+                    return true;
+                }
+                // The spring-damper torque k (delta - offset) + c d(delta)/dt along the cubic
+                // through the motor's place in the gap, the offset the flank in contact.
+                let offset = if b.gap > 0.0 {
+                    math::sign(g0.0) * 0.5 * b.gap
+                } else {
+                    0.0
+                };
+                let [a0, a1, a2, a3] = hermite_coefficients([g0.0, g0.1 * h, g1.0, g1.1 * h]);
+                let (k, c) = (b.stiffness, b.damping / h);
+                [
+                    k * (a0 - offset) + c * a1,
+                    k * a1 + 2.0 * c * a2,
+                    k * a2 + 3.0 * c * a3,
+                    k * a3,
+                ]
+            }
+            None => {
+                let (rate, k_t_n) = t.armature;
+                let di = |x: &[f64; NS]| rate[0] * x[0] + rate[1] * x[1] + rate[2] * x[2];
+                let [a0, a1, a2, a3] = hermite_coefficients([x0[1], di(x0) * h, x1[1], di(x1) * h]);
+                [a0 * k_t_n, a1 * k_t_n, a2 * k_t_n, a3 * k_t_n]
+            }
+        };
+        let [back, fore] = t.hold_tol;
+        let within = |(lo, hi): (f64, f64)| lo > -back && hi < fore;
+        within(cubic_bounds(drive)) || within(cubic_range(drive))
+    }
+
     /// Whether the contact can have kept mode `mode` (that of both ends) over a period between
     /// the gap states `(d0, r0)` and `(d1, r1)` ([`gap_state`]): always without a gap (the
     /// contact never opens); pressed, on a contact slow against the period, the force stays
     /// above [`COARSE_EVENT_MARGIN`] of its value at the ends everywhere in between; free, the
     /// motor stays clear of both flanks by that share of the half gap. Both read along the
     /// cubic through the motor's place in the gap and its rate at both ends.
+    #[inline(never)]
     fn contact_unchanged(&self, (d0, r0): (f64, f64), (d1, r1): (f64, f64), mode: usize) -> bool {
         let (Some(b), Some(t)) = (&self.play, &self.coarse) else {
             return true;
