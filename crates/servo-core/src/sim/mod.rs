@@ -1302,6 +1302,64 @@ mod tests {
         assert_eq!((worst, share), (0.0, 0.0));
     }
 
+    /// A load held by dry friction while the motor crosses the gap and presses on a flank (with
+    /// play), or while a delayed input switches inside the period (without): the held periods
+    /// are stepped whole, the load does not move, the motor and the current follow the
+    /// sub-steps to rounding, and the breakaway that ends the hold falls in the same period.
+    #[test]
+    fn held_periods_are_stepped_whole() {
+        let play = alloc::format!("{}:gap=0.03", effect_by(SimRole::Contact, "gap"));
+        for specs in [
+            &["coulomb:tau_sf=0.009", play.as_str()][..],
+            &["coulomb:tau_sf=0.009", "delay:delay=0.00125"][..],
+        ] {
+            let p = plant_with(specs);
+            let mut fine = PlantSim::new(&p, 1e-3).unwrap();
+            let mut coarse = fine.clone().with_coarse_periods();
+            // 0.02 V drives less than half the breakaway torque through the gearbox; the sign
+            // flips every 0.5 s (the motor crosses the gap), then 2 V breaks the load away.
+            let (hold, periods) = (4000, 4500);
+            let (mut worst_m, mut worst_i): (f64, f64) = (0.0, 0.0);
+            let mut whole_in_hold = 0;
+            for k in 0..periods {
+                let u = if k >= hold {
+                    2.0
+                } else if (k / 500) % 2 == 0 {
+                    0.02
+                } else {
+                    -0.02
+                };
+                let before = coarse.whole_periods();
+                fine.step(u);
+                coarse.step(u);
+                let (f, c) = (fine.state(), coarse.state());
+                if k < hold {
+                    whole_in_hold += (coarse.whole_periods() - before) as usize;
+                    assert!(f.stuck && c.stuck, "{specs:?}: broke away at {k}");
+                    assert_eq!(c.theta_l_rad, 0.0, "{specs:?}: the held load moved");
+                }
+                assert_eq!(
+                    f.stuck, c.stuck,
+                    "{specs:?}: breakaway at another period ({k})"
+                );
+                worst_m = worst_m.max((f.theta_m_rad - c.theta_m_rad).abs());
+                worst_i = worst_i.max((f.i_a_a - c.i_a_a).abs());
+            }
+            std::eprintln!(
+                "{specs:?}: {whole_in_hold} of {hold} held periods whole, motor {worst_m:.1e} \
+                 rad and current {worst_i:.1e} A apart"
+            );
+            assert!(
+                whole_in_hold > hold * 8 / 10,
+                "{specs:?}: {whole_in_hold} whole"
+            );
+            assert!(
+                worst_m < 1e-6 && worst_i < 1e-6,
+                "{specs:?}: {worst_m} rad {worst_i} A"
+            );
+        }
+    }
+
     #[test]
     fn rejects_a_bad_period() {
         assert!(matches!(
