@@ -3,9 +3,10 @@
 # 30 s of each of the two friction-identification runs of the Padova 2021 lab motor
 # (padova2021-jacopisky: the PID follows load-angle ramps of 50 to 450 rpm, forwards and
 # backwards; current logged), against the handout's nominal model (`servo params`). Nothing
-# passes alone there and the joint search runs (a gear play is always one of its members): this
-# is the case the 10 s target is not met on. Prints the wall time and peak memory of each run
-# (GNU time), the status and, with SERVO_DIAG_TIMING, the joint search's share.
+# passes alone there and the joint search runs (a gear play is always one of its members). Then
+# the two PID step logs of the same motor (54 s of closed loop), when present. The target is at
+# most 10 s each on two cores. Prints the wall time and peak memory of each run (GNU time), the
+# status and, with SERVO_DIAG_TIMING, the joint search's share.
 #
 #   crates/servo-cli/benches/diagnose_real_logs.sh [REALDATA] [SERVO] [RUNS]
 #
@@ -26,12 +27,23 @@ TIME=/usr/bin/time
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 "$SERVO" params > "$WORK/model.toml"
-for ((k = 1; k <= RUNS; k++)); do
-  SERVO_DIAG_TIMING=1 "$TIME" -v "$SERVO" diagnose "$DIR/friction_pos.csv" "$DIR/friction_neg.csv" \
-    --window 0..30 --model "$WORK/model.toml" > "$WORK/diagnose.txt" 2> "$WORK/diagnose.err"
-  wall=$(grep 'Elapsed (wall clock)' "$WORK/diagnose.err" | awk '{print $NF}')
-  rss=$(grep 'Maximum resident set size' "$WORK/diagnose.err" | awk '{print $NF}')
-  joint=$(grep -o '[0-9.]* s  backward elimination' "$WORK/diagnose.err" | awk '{print $1}' || true)
-  status=$(grep -o '^Status: [a-z]*' "$WORK/diagnose.txt" || echo "Status: ?")
-  echo "run $k: wall $wall, peak RSS $((rss / 1024)) MiB, joint search ${joint:-0} s; $status"
-done
+# Two cases of about one minute each: the friction ramps (the first 30 s of each run, 60 s) and
+# the two PID step logs (54 s of closed loop, the load held between steps: most of the simulated
+# periods of a model with a gear play are held ones).
+run_case() {
+  local name=$1
+  shift
+  for ((k = 1; k <= RUNS; k++)); do
+    SERVO_DIAG_TIMING=1 "$TIME" -v "$SERVO" diagnose "$@" --model "$WORK/model.toml" \
+      > "$WORK/diagnose.txt" 2> "$WORK/diagnose.err"
+    wall=$(grep 'Elapsed (wall clock)' "$WORK/diagnose.err" | awk '{print $NF}')
+    rss=$(grep 'Maximum resident set size' "$WORK/diagnose.err" | awk '{print $NF}')
+    joint=$(grep -o '[0-9.]* s  backward elimination' "$WORK/diagnose.err" | awk '{print $1}' || true)
+    status=$(grep -o '^Status: [a-z]*' "$WORK/diagnose.txt" || echo "Status: ?")
+    echo "$name run $k: wall $wall, peak RSS $((rss / 1024)) MiB, joint search ${joint:-0} s; $status"
+  done
+}
+run_case "friction ramps (60 s)" "$DIR/friction_pos.csv" "$DIR/friction_neg.csv" --window 0..30
+if [ -f "$DIR/pid_best_steps.csv" ] && [ -f "$DIR/pid_bode_steps.csv" ]; then
+  run_case "PID step logs (54 s)" "$DIR/pid_best_steps.csv" "$DIR/pid_bode_steps.csv"
+fi
