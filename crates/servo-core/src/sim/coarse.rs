@@ -294,13 +294,7 @@ impl PlantSim {
                     0.0
                 };
                 let [a0, a1, a2, a3] = hermite_coefficients([g0.0, g0.1 * h, g1.0, g1.1 * h]);
-                let (k, c) = (b.stiffness, b.damping / h);
-                [
-                    k * (a0 - offset) + c * a1,
-                    k * a1 + 2.0 * c * a2,
-                    k * a2 + 3.0 * c * a3,
-                    k * a3,
-                ]
+                spring_damper_cubic(b.stiffness, b.damping / h, [a0 - offset, a1, a2, a3])
             }
             None => {
                 let (rate, k_t_n) = t.armature;
@@ -339,14 +333,7 @@ impl PlantSim {
             let side = math::sign(d0);
             let (p0, p1) = (side * d0 - 0.5 * b.gap, side * d1 - 0.5 * b.gap);
             let pen = hermite_coefficients([p0, side * r0 * h, p1, side * r1 * h]);
-            let [a0, a1, a2, a3] = pen;
-            let (k, c) = (b.stiffness, b.damping / h);
-            let force = [
-                k * a0 + c * a1,
-                k * a1 + 2.0 * c * a2,
-                k * a2 + 3.0 * c * a3,
-                k * a3,
-            ];
+            let force = spring_damper_cubic(b.stiffness, b.damping / h, pen);
             // Both stay positive: the penetration (the motor on the flank) and the force.
             let above = |a: [f64; 4], ends: f64| {
                 let ok = |(lo, _): (f64, f64)| lo > COARSE_EVENT_MARGIN * ends;
@@ -368,6 +355,18 @@ impl PlantSim {
 #[inline]
 fn gap_state(x: &[f64; NS], inv_n: f64) -> (f64, f64) {
     (x[3] * inv_n - x[5], x[2] * inv_n - x[4])
+}
+
+/// The force k p + c dp/dt [N m] of a spring-damper (stiffness `k`, damping `c_per_h` = c / h)
+/// along the cubic penetration `p` ([`hermite_coefficients`], time in periods h): a cubic too.
+#[inline]
+fn spring_damper_cubic(k: f64, c_per_h: f64, [a0, a1, a2, a3]: [f64; 4]) -> [f64; 4] {
+    [
+        k * a0 + c_per_h * a1,
+        k * a1 + 2.0 * c_per_h * a2,
+        k * a2 + 3.0 * c_per_h * a3,
+        k * a3,
+    ]
 }
 
 /// The coefficients [a0, a1, a2, a3] (a0 + a1 t + a2 t^2 + a3 t^3) of the cubic through `y0`
