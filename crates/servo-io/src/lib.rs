@@ -20,6 +20,7 @@
 //! * [`mat_read`], [`mat_path`], [`mat_log`]: MATLAB MAT-files (Level 5, -v6/-v7), MATLAB paths
 //!   in `--columns`, Simulink Scope structures.
 
+pub mod chart_axes;
 pub mod columns;
 pub mod compensation;
 pub mod controller;
