@@ -58,13 +58,26 @@ use crate::math;
 use crate::plant::Plant;
 use alloc::vec::Vec;
 
-/// The result of the backward elimination: the survivors (best first), judged each given the
-/// others, every one carrying the joint model in its `plant`.
+/// How the backward elimination ended.
+pub(super) enum Outcome {
+    /// The survivors (best first), judged each given the others, every one carrying the joint
+    /// model in its `plant`.
+    Found(Vec<Candidate>),
+    /// The elimination ran to its end and no set passes: every member failed given the others,
+    /// a lone survivor was left to the single candidates' verdict, or the survivors together
+    /// are immaterial.
+    Refused,
+    /// The elimination did not run (fewer than two members) or could not finish (a fit or a
+    /// cost that could not be computed).
+    NotRun,
+}
+
+/// The backward elimination ([`Outcome`]).
 pub(super) fn search(
     cx: &joint::Context,
     fits: &[(EffectKind, Result<Solved, FitError>)],
     ranking: &[Candidate],
-) -> Option<Vec<Candidate>> {
+) -> Outcome {
     let ds = cx.ds;
     let mut fresh: Vec<EffectKind> = joint::seeds(cx, fits, ranking)
         .into_iter()
@@ -105,7 +118,7 @@ pub(super) fn search(
         |c| plays.iter().any(|p| partners(*p, c.effect)),
     );
     if fresh.len() < 2 {
-        return None;
+        return Outcome::NotRun;
     }
     let named: Vec<EffectKind> = cx
         .model
@@ -122,11 +135,12 @@ pub(super) fn search(
         .chain(&fresh)
         .map(|&k| EffectToFit::all(k))
         .collect();
-    let start = super::timing::timed(
+    let Ok(start) = super::timing::timed(
         || "backward: equation-error start".into(),
         || ds.fit_config(cx.model, &to_fit),
-    )
-    .ok()?;
+    ) else {
+        return Outcome::NotRun;
+    };
     let tuner = Tuner::new(ds);
     let gridded = super::timing::timed(
         || "backward: grid".into(),
@@ -141,7 +155,7 @@ pub(super) fn search(
             tuner.kept()
         )
     });
-    let (full, c_full) = super::timing::timed(
+    let Some((full, c_full)) = super::timing::timed(
         || "backward: joint refinement".into(),
         || {
             for g in &gridded {
@@ -149,7 +163,9 @@ pub(super) fn search(
             }
             refine_best(cx, &tuner, &gridded, &all, "start")
         },
-    )?;
+    ) else {
+        return Outcome::NotRun;
+    };
     trace(|| {
         alloc::format!(
             "joint {} r_a {} b_eq {:e} cost {c_full:.4e}",
@@ -171,7 +187,7 @@ pub(super) fn search(
     let mut survivors = fresh.clone();
     loop {
         if survivors.is_empty() {
-            return None;
+            return Outcome::Refused;
         }
         if named.is_empty() && survivors.len() == 1 {
             // A lone survivor hid nothing and was hidden by nothing: whether it passes given
@@ -181,7 +197,7 @@ pub(super) fn search(
             trace(|| {
                 alloc::format!("a lone survivor {survivors:?}: left to the single candidates")
             });
-            return None;
+            return Outcome::Refused;
         }
         let members: Vec<EffectKind> = named.iter().chain(&survivors).copied().collect();
         let judged: Vec<(Candidate, f64)> = super::timing::timed(
@@ -197,7 +213,7 @@ pub(super) fn search(
         .collect();
         if judged.len() < survivors.len() {
             trace(|| "a drop-one test could not be computed".into());
-            return None;
+            return Outcome::NotRun;
         }
         for (c, d) in &judged {
             trace(|| {
@@ -255,9 +271,13 @@ pub(super) fn search(
                 }
             }
             None => {
-                let total = 1.0
-                    - oe::prediction_cost(ds, &full, Part::Holdout)?
-                        / cx.reference.oe_holdout?.max(1e-300);
+                let (Some(with_them), Some(without_them)) = (
+                    oe::prediction_cost(ds, &full, Part::Holdout),
+                    cx.reference.oe_holdout,
+                ) else {
+                    return Outcome::NotRun;
+                };
+                let total = 1.0 - with_them / without_them.max(1e-300);
                 let need = frac(if survivors.iter().any(|k| on_simulation(*k)) {
                     cx.opts.thresholds.min_simulation_oe_drop_pct
                 } else {
@@ -271,12 +291,12 @@ pub(super) fn search(
                     )
                 });
                 if total < need {
-                    return None;
+                    return Outcome::Refused;
                 }
                 let mut out: Vec<(Candidate, f64)> = judged;
                 out.sort_by(|a, b| b.1.total_cmp(&a.1));
                 let names: Vec<EffectKind> = out.iter().map(|(c, _)| c.effect).collect();
-                return Some(
+                return Outcome::Found(
                     out.into_iter()
                         .map(|(mut c, _)| {
                             c.joint_with = names.iter().copied().find(|k| *k != c.effect);

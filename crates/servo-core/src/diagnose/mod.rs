@@ -109,8 +109,13 @@ pub fn diagnose(
     model: &Plant,
     opts: &DiagnoseOptions,
 ) -> Result<Diagnosis, FitError> {
-    let ds = Dataset::new(records, &model.params, &opts.fit)?;
-    diagnose_dataset(&ds, model, opts)
+    timing::timed(
+        || "whole diagnosis".into(),
+        || {
+            let ds = Dataset::new(records, &model.params, &opts.fit)?;
+            diagnose_dataset(&ds, model, opts)
+        },
+    )
 }
 
 /// Stages 1-7 of a diagnosis on `ds`: the base, the candidates fitted and judged, best first.
@@ -342,7 +347,10 @@ pub fn diagnose_loop(
     let mut added_also: Vec<EffectKind> = Vec::new();
     for step in 0..=max_steps {
         opts.cancel.check()?;
-        let d = diagnose_dataset(&ds, &plant, opts)?;
+        let d = timing::timed(
+            || alloc::format!("whole diagnosis, step {step}"),
+            || diagnose_dataset(&ds, &plant, opts),
+        )?;
         ladder.push(Rung {
             added,
             added_with,

@@ -24,7 +24,8 @@ pub struct DiagnoseOptions {
     pub thresholds: Thresholds,
     /// When no single candidate passes and a balance is above its noise floor, how many of the
     /// best candidates (by held-out simulation drop) to fit jointly with the effects already
-    /// named, then eliminate backward ([`backward`]; failing that, to try in pairs, [`joint`]);
+    /// named, then eliminate backward ([`backward`]; when the elimination cannot run, to try in
+    /// pairs, [`joint`]);
     /// 0: none (2 at least otherwise). Default 3. The candidates acting where a gear play acts
     /// (sharing a regime with it) and those with clear evidence in their own balance join them.
     /// On a breakaway friction, a gear play and a delay hidden together (28 s of open- and
