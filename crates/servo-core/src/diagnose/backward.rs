@@ -262,6 +262,11 @@ pub(super) fn search(
         match weakest {
             Some(w) => {
                 survivors.retain(|k| *k != w);
+                if ends_here(&named, &survivors) {
+                    // No model is judged after this round: the refinement would be thrown away
+                    // (0.9 s of a 25 s diagnosis of a torque ripple outside the catalogue).
+                    continue;
+                }
                 if let Some(p) = without(&full, w) {
                     let left: Vec<EffectKind> = named.iter().chain(&survivors).copied().collect();
                     // The full refinement again: the members left had bent to the one
@@ -442,6 +447,13 @@ fn refine_best(
         )
     });
     Some(r)
+}
+
+/// Whether the elimination ends with `survivors` left beside the effects `named` earlier, before
+/// any test: none left, or a lone survivor and none named (left to the single candidates'
+/// verdict).
+fn ends_here(named: &[EffectKind], survivors: &[EffectKind]) -> bool {
+    survivors.is_empty() || (named.is_empty() && survivors.len() == 1)
 }
 
 /// Adds to `fresh`, in ranking order and while it holds fewer than `cap`, every candidate not
