@@ -45,7 +45,7 @@
 //! bending together to soak up a mechanism outside the catalogue) must pass every guard, each
 //! given the others.
 
-use super::judge::simulation_bic;
+use super::judge::{simulation_bic, Simulated};
 use super::survey::Reference;
 use super::thresholds::frac;
 use super::tuner::{get, targets, with, Target, Tuner, GRID_POINTS, STARTS};
@@ -203,8 +203,13 @@ pub(super) fn search(
         let judged: Vec<(Candidate, f64)> = super::timing::timed(
             || alloc::format!("backward: drop-one tests of {survivors:?}"),
             || {
+                // The joint model's solution and held-out cost, the same in every member's test.
+                let Some(j_solved) = solved_at(ds, &full) else {
+                    return Vec::new();
+                };
+                let joint_now = Simulated::new(ds, &j_solved);
                 par_map(&survivors, cx.opts.parallel, |&m| {
-                    drop_one(cx, &tuner, &full, &members, m)
+                    drop_one(cx, &tuner, &joint_now, &members, m)
                 })
             },
         )
@@ -670,17 +675,18 @@ fn solved_at(ds: &Dataset, plant: &Plant) -> Option<Solved> {
     Some(s)
 }
 
-/// Judges member `m` of the joint model `full` given all the other `members`: against `full`
-/// without `m`, re-tuned on the simulation. Returns the candidate and its held-out simulation
-/// drop.
+/// Judges member `m` of the joint model `joint_now` ([`solved_at`] its plant, with its held-out
+/// cost) given all the other `members`: against the joint model without `m`, re-tuned on the
+/// simulation. Returns the candidate and its held-out simulation drop.
 fn drop_one(
     cx: &joint::Context,
     tuner: &Tuner,
-    full: &Plant,
+    joint_now: &Simulated,
     members: &[EffectKind],
     m: EffectKind,
 ) -> Option<(Candidate, f64)> {
     let ds = cx.ds;
+    let full = &joint_now.solved.plant;
     let others: Vec<EffectKind> = members.iter().copied().filter(|k| *k != m).collect();
     let reduced = without(full, m)?;
     let (reduced, _) = tuner.refine(&reduced, &targets(&reduced, &others), &[0.5]);
@@ -692,8 +698,7 @@ fn drop_one(
         alloc::format!("drop {m}: reduced {} | costs fit short {:?} vs {:?}, hold short {:?} vs {:?}, long fit {:.4e} vs {:.4e}", show(&reduced, &others), oe::prediction_cost(ds, &reduced, Part::Fit), oe::prediction_cost(ds, full, Part::Fit), oe::prediction_cost(ds, &reduced, Part::Holdout), oe::prediction_cost(ds, full, Part::Holdout), tuner.cost(&reduced), tuner.cost(full))
     });
     let o_solved = solved_at(ds, &reduced)?;
-    let j_solved = solved_at(ds, full)?;
-    let (mut c, before) = joint::judge_given(cx, m, &o_solved, &reference, &j_solved)?;
+    let (mut c, before) = joint::judge_given(cx, m, &o_solved, &reference, joint_now)?;
     if on_simulation(m) && !c.significant && c.checks.is_empty() {
         on_tuned_cost(cx, tuner, &mut c, full, &reduced);
         joint::resonance_given(
@@ -701,7 +706,7 @@ fn drop_one(
             &mut c,
             &before,
             &o_solved,
-            &j_solved,
+            joint_now.solved,
             &cx.opts.thresholds,
         );
     }

@@ -23,7 +23,7 @@
 //! member in the model). A mimic pair (two effects bending together to soak up a mechanism
 //! outside the catalogue) must therefore pass every guard twice over.
 
-use super::judge::{judge, resonance_check, structure_check};
+use super::judge::{judge, resonance_check, structure_check, Simulated};
 use super::survey::Reference;
 use super::thresholds::frac;
 use super::{checks, on_simulation, par_map, structure, Candidate, DiagnoseOptions};
@@ -235,29 +235,30 @@ fn judge_member(
     (o, o_alone, o_ref): (EffectKind, &Solved, &Reference),
     joint: &Solved,
 ) -> Option<Candidate> {
-    let (mut c, _) = judge_given(cx, m, o_alone, o_ref, joint)?;
+    let (mut c, _) = judge_given(cx, m, o_alone, o_ref, &Simulated::new(cx.ds, joint))?;
     c.joint_with = Some(o);
     Some(c)
 }
 
-/// Judges `m` in the joint fit `joint` against the model without it (`o_alone`, its simulation
-/// reference `o_ref`): every check of a single candidate but the agreement across parts of the
-/// data ([`confirm_given`]). Shared by the pairs and the backward elimination. `None` when a
-/// balance is missing.
+/// Judges `m` in the joint fit `sim` (with its held-out simulation cost) against the model
+/// without it (`o_alone`, its simulation reference `o_ref`): every check of a single candidate
+/// but the agreement across parts of the data ([`confirm_given`]). Shared by the pairs and the
+/// backward elimination. `None` when a balance is missing.
 pub(super) fn judge_given(
     cx: &Context,
     m: EffectKind,
     o_alone: &Solved,
     o_ref: &Reference,
-    joint: &Solved,
+    sim: &Simulated,
 ) -> Option<(Candidate, structure::BalanceReport)> {
+    let joint = sim.solved;
     let ds = cx.ds;
     let th = &cx.opts.thresholds;
     let eq = Config::equation_of(m, ds.has_current);
     let floor = cx.floor_of(eq);
     let before = structure::analyse(ds, o_alone.equation(eq)?, floor, th, ds.gear_ratio);
     let mut c = judge(
-        ds, cx.labels, o_alone, o_ref, cx.noise_a, floor, before.rms, m, joint, cx.opts, true, None,
+        ds, cx.labels, o_alone, o_ref, cx.noise_a, floor, before.rms, m, sim, cx.opts, true, None,
     );
     if c.significant && !on_simulation(m) && m != EffectKind::Coulomb {
         if let Some(k) = structure_check(ds, &before, joint.equation(eq)?, floor, th) {

@@ -64,7 +64,7 @@ pub(super) fn all(
             floor_of(eq),
             bal.map_or(0.0, |b| b.rms),
             kind,
-            solved,
+            &Simulated::new(ds, solved),
             opts,
             false,
             curve,
@@ -207,7 +207,25 @@ pub(super) fn simulation_bic(x: f64, y: f64, n: f64, kind: EffectKind, th: &Thre
     n * math::ln(x * x / (y * y)) - th.bic_search_charge * q * math::ln(n)
 }
 
-/// Judges candidate `kind` fitted as `cand` against `base` (its balance: `balance_rms` over the
+/// A fitted model and its held-out simulation cost [rad] ([`oe::prediction_cost`] on the
+/// held-out blocks), computed once for every judgement of it: the joint model of a round of
+/// drop-one tests is judged once per member.
+pub(super) struct Simulated<'a> {
+    pub solved: &'a Solved,
+    pub oe_holdout_rad: Option<f64>,
+}
+
+impl<'a> Simulated<'a> {
+    /// `solved` with its held-out simulation cost.
+    pub(super) fn new(ds: &Dataset, solved: &'a Solved) -> Self {
+        Simulated {
+            solved,
+            oe_holdout_rad: oe::prediction_cost(ds, &solved.plant, Part::Holdout),
+        }
+    }
+}
+
+/// Judges candidate `kind` fitted as `sim` against `base` (its balance: `balance_rms` over the
 /// noise floor `balance_floor`) and the simulation `reference`: the information criterion, the
 /// held-out residual and simulation drops, then the practical-significance checks and the
 /// effect's constraints. `given_others`: `kind` is a member of a joint model judged given the
@@ -222,11 +240,12 @@ pub(super) fn judge(
     balance_floor: f64,
     balance_rms: f64,
     kind: EffectKind,
-    cand: &Solved,
+    sim: &Simulated,
     opts: &DiagnoseOptions,
     given_others: bool,
     curve: Option<&super::friction_curve::FrictionCurve>,
 ) -> Candidate {
+    let cand = sim.solved;
     let eq = fit::model::Config::equation_of(kind, ds.has_current);
     let params: Vec<ParamEstimate> = ds
         .estimates(cand)
@@ -235,7 +254,7 @@ pub(super) fn judge(
         .collect();
     let sim_only = on_simulation(kind);
     let base_oe = reference.oe_holdout;
-    let cand_oe = oe::prediction_cost(ds, &cand.plant, Part::Holdout);
+    let cand_oe = sim.oe_holdout_rad;
     let oe_drop = match (base_oe, cand_oe) {
         (Some(b), Some(c)) if b > 0.0 => Some(1.0 - c / b),
         _ => None,
