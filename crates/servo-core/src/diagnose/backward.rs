@@ -200,14 +200,16 @@ pub(super) fn search(
             return Outcome::Refused;
         }
         let members: Vec<EffectKind> = named.iter().chain(&survivors).copied().collect();
+        // The joint model's solution and held-out cost: the same in every member's test, the
+        // group test and the guard below.
+        let Some(j_solved) = solved_at(ds, &full) else {
+            trace(|| "the joint model could not be solved".into());
+            return Outcome::NotRun;
+        };
+        let joint_now = Simulated::new(ds, &j_solved);
         let judged: Vec<(Candidate, f64)> = super::timing::timed(
             || alloc::format!("backward: drop-one tests of {survivors:?}"),
             || {
-                // The joint model's solution and held-out cost, the same in every member's test.
-                let Some(j_solved) = solved_at(ds, &full) else {
-                    return Vec::new();
-                };
-                let joint_now = Simulated::new(ds, &j_solved);
                 par_map(&survivors, cx.opts.parallel, |&m| {
                     drop_one(cx, &tuner, &joint_now, &members, m)
                 })
@@ -246,7 +248,7 @@ pub(super) fn search(
             let group = if harmful.is_empty() { failing } else { harmful };
             let reduced = super::timing::timed(
                 || alloc::format!("backward: group drop of {group:?}"),
-                || drop_group(cx, &tuner, &full, &named, &survivors, &group),
+                || drop_group(cx, &tuner, &joint_now, &named, &survivors, &group),
             );
             if let Some(reduced) = reduced {
                 survivors.retain(|k| !group.contains(k));
@@ -281,10 +283,9 @@ pub(super) fn search(
                 }
             }
             None => {
-                let (Some(with_them), Some(without_them)) = (
-                    oe::prediction_cost(ds, &full, Part::Holdout),
-                    cx.reference.oe_holdout,
-                ) else {
+                let (Some(with_them), Some(without_them)) =
+                    (joint_now.oe_holdout_rad, cx.reference.oe_holdout)
+                else {
                     return Outcome::NotRun;
                 };
                 let total = 1.0 - with_them / without_them.max(1e-300);
@@ -322,9 +323,10 @@ pub(super) fn search(
     }
 }
 
-/// The joint model `full` without every member of `failing` (each failed its drop-one test
-/// given the others), re-tuned, when together they are immaterial too: their held-out
-/// simulation contribution (`full` against the model without them) stays below the bar a single
+/// The joint model (`joint_now`, with its held-out cost) without every member of `failing` (each
+/// failed its drop-one test given the others), re-tuned, when together they are immaterial too:
+/// their held-out simulation contribution (the joint model against the model without them) stays
+/// below the bar a single
 /// member must clear ([`super::Thresholds::min_oe_drop_pct`], or
 /// [`super::Thresholds::min_simulation_oe_drop_pct`] with a member judged on the simulation).
 /// `None` when the group is material (two mimics of one mechanism each redundant given the
@@ -337,11 +339,12 @@ pub(super) fn search(
 fn drop_group(
     cx: &joint::Context,
     tuner: &Tuner,
-    full: &Plant,
+    joint_now: &Simulated,
     named: &[EffectKind],
     survivors: &[EffectKind],
     failing: &[EffectKind],
 ) -> Option<Plant> {
+    let full = &joint_now.solved.plant;
     let mut reduced = *full;
     for &k in failing {
         reduced.effects.remove(k)?;
@@ -365,7 +368,7 @@ fn drop_group(
     } else {
         th.min_oe_drop_pct
     });
-    let with_them = oe::prediction_cost(cx.ds, full, Part::Holdout)?;
+    let with_them = joint_now.oe_holdout_rad?;
     let without_them = if left.is_empty() {
         cx.reference.oe_holdout?
     } else {

@@ -46,8 +46,8 @@
 //! The simulations a diagnosis runs by the thousand ([`crate::fit::oe`]) go faster with
 //! [`PlantSim::with_coarse_periods`]: a period in which no event can happen (the friction body
 //! slides on or stays held below breakaway with a margin, the contact stays shut or open with a
-//! margin, the friction torque barely changes)
-//! is one exact step; any other period runs in sub-steps as above (module `coarse`).
+//! margin, the friction torque barely changes) is one exact step; any other period runs in
+//! sub-steps as above (module `coarse`).
 //!
 //! The transport `delay` is a fixed-size delay line (no heap) of [`DELAY_CAPACITY`] samples;
 //! fractional delays are exact: the period is split at the instant the delayed input switches.
