@@ -273,17 +273,21 @@ fn two_mass_lugre_stribeck_hump_is_named() {
     }
 }
 
-/// Two hump cases found at stop 45 by running the hump test on more seeds (not tuned on):
+/// Three hump cases found by running the hump test on more seeds (not tuned on): at stop 45,
 /// with stiff bristles, seed 81 named "missing cogging" of 34 cycles per motor revolution (a
 /// residual of the closed loop's reversals, at fixed angles: the same on both halves, with
 /// another phase in the open-loop log); with soft ones, seed 79 read "complete" while its torque
 /// balance stood 3.4 times its floor and a Stribeck removed 18.5 % of its held-out residual (the
-/// bristles' reversals held the rest). Neither may name a torque of the angle, nor be complete:
-/// a Stribeck named has tau_s within 25 %, and "unexplained" says what carries the residual.
+/// bristles' reversals held the rest); at stop 51, with bristles of 3 N m/rad, seed 196 read
+/// "unexplained" with the hump (0.48 rad/s, inside the breakaway's search range) and not a word
+/// on the Stribeck that fitted it (tau_s 0.019 N m) and made the held-out simulation 5.9 %
+/// worse. None may name a torque of the angle, nor be complete: a Stribeck named has tau_s
+/// within 25 %, and "unexplained" says what carries the residual and why the breakaway the hump
+/// calls for was refused.
 #[test]
 fn two_mass_hump_is_neither_an_angle_locked_torque_nor_complete() {
     let _machine = servo_e2e::shared();
-    for (sigma0, seed) in [(10.0, 81), (2.0, 79)] {
+    for (sigma0, seed) in [(10.0, 81), (2.0, 79), (3.0, 196)] {
         let tag = format!("two-mass hump sigma0 {sigma0} seed {seed}");
         let mut drive = DriveTrain::null();
         drive.friction.fs = 0.02;
@@ -329,6 +333,18 @@ fn two_mass_hump_is_neither_an_angle_locked_torque_nor_complete() {
                     "[{tag}] {}",
                     first.description
                 );
+                // A hump the catalogue's breakaway could take says why that one was refused
+                // (seed 196, found at stop 51: the hump's words promised it, and the verdict
+                // said nothing of the Stribeck the held-out simulation refused).
+                if first.description.contains("so the verdict says why") {
+                    assert!(
+                        d.sliding_fit.is_some()
+                            || d.verdict
+                                .contains("The breakaway friction the hump calls for"),
+                        "[{tag}] {}",
+                        d.verdict
+                    );
+                }
             }
         }
     }

@@ -16,6 +16,7 @@ use crate::effects::EffectKind;
 use crate::fit::Dataset;
 use crate::math;
 use crate::plant::Plant;
+use alloc::string::String;
 use alloc::vec::Vec;
 
 /// What the verdict of `d` adds on the regimes the diagnosis judged apart: `outside`, why no
@@ -23,12 +24,15 @@ use alloc::vec::Vec;
 /// status is "unexplained"; `presliding`, the pre-sliding rows left out (the candidates were
 /// judged on the sliding rows), kept in `d.presliding`; `lead`, a friction the sliding rows
 /// show that only the simulation refuses, when the status is "unexplained", kept in
-/// `d.sliding_fit`.
+/// `d.sliding_fit`; otherwise `hump`, why the breakaway friction a hump of the measured
+/// friction curve calls for was refused ([`super::friction_curve::hump_refusal`]), when the
+/// status is "unexplained".
 pub(super) fn regimes(
     d: &mut Diagnosis,
     outside: Option<&str>,
     presliding: Option<Extent>,
     lead: Option<SlidingFit>,
+    hump: Option<String>,
 ) {
     if let (Some(why), Status::Unexplained) = (outside, d.status) {
         d.verdict.push_str(why);
@@ -44,9 +48,14 @@ pub(super) fn regimes(
         ));
         d.presliding = Some(ext);
     }
-    if let (Some(l), Status::Unexplained) = (lead, d.status) {
+    if d.status != Status::Unexplained {
+        return;
+    }
+    if let Some(l) = lead {
         d.verdict.push_str(&l.sentence());
         d.sliding_fit = Some(l);
+    } else if let Some(h) = hump {
+        d.verdict.push_str(&h);
     }
 }
 

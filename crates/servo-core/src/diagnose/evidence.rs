@@ -228,6 +228,48 @@ pub fn append_failed(c: &mut Candidate) {
 }
 
 /// The thresholds in one sentence (stated in every verdict).
+/// Why candidate `c` was not named, in words: the first guard it failed in the order the
+/// diagnosis applies them (the information criterion, the held-out residual drop of its balance
+/// (an effect judged on the simulation: its held-out simulation drop), the held-out simulation
+/// drop, then its checks); `None` when it passed every one.
+pub fn refusal(c: &Candidate, th: &Thresholds) -> Option<String> {
+    if c.significant {
+        return None;
+    }
+    let sim = super::on_simulation(c.effect);
+    let sim_drop = |d: f64, need: f64| {
+        alloc::format!(
+            "simulating it {} (needs a {} % drop)",
+            super::phrase::change("the held-out prediction error", d),
+            super::phrase::pct(need)
+        )
+    };
+    if c.bic_gain <= th.min_bic_gain {
+        return Some(alloc::format!(
+            "the information criterion gains {:.1} (needs more than {:.1})",
+            c.bic_gain,
+            th.min_bic_gain
+        ));
+    }
+    if sim {
+        let d = c.oe_reduction_pct.unwrap_or(0.0);
+        if d < th.min_simulation_oe_drop_pct {
+            return Some(sim_drop(d, th.min_simulation_oe_drop_pct));
+        }
+    } else if c.error_reduction_pct < th.min_eq_rms_drop_pct() {
+        return Some(alloc::format!(
+            "it {} (needs {} %)",
+            super::phrase::rms_drop(c.equation.name(), c.error_reduction_pct),
+            super::phrase::pct(th.min_eq_rms_drop_pct())
+        ));
+    }
+    if let Some(d) = c.oe_reduction_pct.filter(|d| *d < th.min_oe_drop_pct) {
+        return Some(sim_drop(d, th.min_oe_drop_pct));
+    }
+    c.failed_check()
+        .map(|k| alloc::format!("{}: {}", k.name, k.detail))
+}
+
 pub fn thresholds_text(th: &Thresholds) -> String {
     alloc::format!(
         "Thresholds: an effect must pass the information criterion, the held-out residual and simulation drops, explain at least {:.1} times its balance's noise floor (RMS) and {:.0} % of its structured error, have physically meaningful parameters and agree within {:.0} % across halves of the data; no torque is named while the electrical balance is {:.0} times its noise floor; a balance is incomplete when its residual exceeds {:.1} times its noise floor; a shape is named when it explains {:.0} % of the held-out residual.",

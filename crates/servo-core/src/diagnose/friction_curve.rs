@@ -31,7 +31,7 @@ use crate::fit::model::{EqSolution, Equation};
 use crate::fit::Dataset;
 use crate::math;
 use crate::plant::Plant;
-use crate::verdict::Check;
+use crate::verdict::{Candidate, Check};
 use alloc::string::String;
 use alloc::vec::Vec;
 
@@ -67,7 +67,7 @@ pub enum CurveShape {
     /// Rises faster than linearly with speed: c w_l |w_l| [N m s^2/rad^2] at the load.
     FasterThanLinear,
     /// A viscous slope that differs between the directions: the extra slope forwards [N m s/rad]
-    /// at the load.
+    /// at the load (negative: steeper backwards; the description names the steeper direction).
     DirectionSlopes,
     /// Grows with the transmitted torque at equal speed: a share of |k_t i_a| [1].
     TransmittedTorque,
@@ -389,9 +389,13 @@ fn shape(
             CurveShape::DirectionSlopes => (
                 coef_m * n * n,
                 "N m s/rad",
-                String::from(
-                    "has a viscous slope that differs between the two directions (the extra slope forwards, at the load)",
-                ),
+                // Beside B_eq the forward column stands for both directions: a negative extra
+                // slope forwards is an extra slope backwards (B_eq takes the difference).
+                String::from(if coef_m >= 0.0 {
+                    "has a viscous slope that differs between the two directions (steeper forwards; the extra slope forwards, at the load)"
+                } else {
+                    "has a viscous slope that differs between the two directions (steeper backwards; the extra slope backwards, at the load)"
+                }),
                 String::new(),
             ),
             CurveShape::TransmittedTorque => (
@@ -431,7 +435,13 @@ fn shape(
             share,
             explained_rms: rms,
             description: alloc::format!(
-                "the measured friction curve {words}: {coef:.3e} {unit}, |t| = {t:.1}{range_note}"
+                "the measured friction curve {words}: {:.3e} {unit}, |t| = {t:.1}{range_note}",
+                // A direction's slope is told as the steeper direction's, positive.
+                if *shape == CurveShape::DirectionSlopes {
+                    coef.abs()
+                } else {
+                    coef
+                }
             ),
         });
     }
@@ -443,9 +453,7 @@ fn shape(
 fn hump_range(ds: &Dataset) -> Option<(f64, f64)> {
     let ctx = ds.grid_context();
     let mut range: Option<(f64, f64)> = None;
-    for k in crate::effects::EffectKind::registered()
-        .filter(|k| k.sim_role() == crate::effects::SimRole::DryFriction)
-    {
+    for k in crate::effects::EffectKind::registered().filter(|k| breakaway(*k)) {
         for p in k
             .params()
             .iter()
@@ -457,6 +465,49 @@ fn hump_range(ds: &Dataset) -> Option<(f64, f64)> {
         }
     }
     range
+}
+
+/// Whether `kind` is a dry friction with a speed scale (a nonlinear parameter in rad/s): a
+/// breakaway friction, whose curve can fall with speed (a hump).
+fn breakaway(kind: crate::effects::EffectKind) -> bool {
+    kind.sim_role() == crate::effects::SimRole::DryFriction
+        && kind
+            .params()
+            .iter()
+            .any(|p| p.nonlinear && p.unit == "rad/s")
+}
+
+/// The verdict's sentence on the breakaway friction that a hump of `curve` inside the
+/// catalogue's search range of its speed scale calls for, when nothing was named: the best
+/// ranked such candidate of `ranking`, its parameters, and the first guard it failed
+/// ([`super::evidence::refusal`]). `None` for another shape, a hump outside the range (its words
+/// say so), or without such a candidate.
+pub fn hump_refusal(
+    curve: &FrictionCurve,
+    ds: &Dataset,
+    ranking: &[Candidate],
+    th: &Thresholds,
+) -> Option<String> {
+    let CurveShape::Hump(ws) = curve.shape.as_ref()?.shape else {
+        return None;
+    };
+    let (lo, hi) = hump_range(ds)?;
+    if ws < lo || ws > hi {
+        return None;
+    }
+    let c = ranking.iter().find(|c| breakaway(c.effect))?;
+    let why = super::evidence::refusal(c, th)?;
+    let params: Vec<String> = c
+        .params
+        .iter()
+        .filter(|p| p.effect == Some(c.effect))
+        .map(|p| alloc::format!("{} = {:.4} {}", p.key, p.value, p.unit))
+        .collect();
+    Some(alloc::format!(
+        " The breakaway friction the hump calls for, {} ({}), was refused: {why}.",
+        c.effect,
+        params.join(", ")
+    ))
 }
 
 impl FrictionCurve {

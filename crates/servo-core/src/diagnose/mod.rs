@@ -301,11 +301,16 @@ pub fn diagnose_dataset(
         ds, model, base, survey, &labels, &kinds, ranking, changes, opts,
     );
     d.friction_curve = curve;
+    let hump = d
+        .friction_curve
+        .as_ref()
+        .and_then(|c| friction_curve::hump_refusal(c, ds, &d.ranking, th));
     conclude::regimes(
         &mut d,
         outside.as_deref(),
         sliding.map(|(_, ext)| ext),
         lead,
+        hump,
     );
     Ok(d)
 }

@@ -665,6 +665,7 @@ pub fn discover(
             None => break,
         }
     }
+    let found: Vec<Found> = found.into_iter().map(steeper_direction).collect();
     let equation = base.mech.equation;
     if found.is_empty() {
         return Ok(Discovery {
@@ -715,6 +716,22 @@ pub fn discover(
         rejected,
         proposal: Some((fitted, judged)),
     })
+}
+
+/// `f` told as the slope of the steeper direction: beside B_eq (refitted with the proposal), a
+/// negative extra slope forwards is a positive extra slope backwards (omega = max(omega, 0) +
+/// min(omega, 0)), the friction a user measures in that direction. Other terms unchanged.
+fn steeper_direction(f: Found) -> Found {
+    let backwards = LIBRARY.iter().find(|t| t.key == "b_bwd");
+    match backwards {
+        Some(&term) if f.term.key == "b_fwd" && f.value < 0.0 => Found {
+            term,
+            value: -f.value,
+            halves: (-f.halves.0, -f.halves.1),
+            ..f
+        },
+        _ => f,
+    }
 }
 
 fn paren(e: &str) -> String {
