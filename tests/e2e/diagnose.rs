@@ -1577,13 +1577,17 @@ fn three_hidden_effects_with_backlash_are_found_with_their_parameters() {
 /// "unexplained" with nothing named, any resonance it names must be at the shaft's frequency,
 /// and otherwise it says which band it searched and names, first, a compliance fitted on the
 /// simulation (the gear play's contact without play: a two-mass model) at the shaft's frequency
-/// within 10 %. Any compliance reported on a case must lie within 20 % of the shaft's mode.
+/// within 10 %. Any compliance reported on a case must lie within 20 % of the shaft's mode, or
+/// say that it is away from the resonance the balance rings at
+/// (`lead_resonance_max_gap_pct`).
 #[test]
 fn compliant_shaft_is_unexplained_and_not_a_gear_play() {
     let _machine = servo_e2e::shared();
     let frac = 0.5;
     let (n, j) = (PlantParams::TABLE2.n, 7.0e-7);
-    let cases: [(f64, u64); 7] = [
+    // k 0.8 seed 182 (stop 51, a seed no test had): the resonance at the mode, 24.3 Hz, and an
+    // overdamped compliance lead at 17.7 Hz beside it that did not say it was off.
+    let cases: [(f64, u64); 8] = [
         (1.2, 49),
         (1.2, 50),
         (1.2, 51),
@@ -1591,6 +1595,7 @@ fn compliant_shaft_is_unexplained_and_not_a_gear_play() {
         (0.6, 52),
         (3.0, 49),
         (3.0, 53),
+        (0.8, 182),
     ];
     let failures: Vec<String> = cases
         .iter()
@@ -1642,9 +1647,16 @@ fn check_compliant_shaft(k: f64, frac: f64, n: f64, j: f64, seed: u64) {
         .map(|p| p.2);
     eprintln!("[{tag}] shaft mode {f_hz:.1} Hz, compliance lead {lead_hz:?} Hz");
     if let Some(lead) = lead_hz {
+        // Within 20 %, or the lead says it is away from the resonance the balance rings at
+        // (then the resonance, checked below, gives the frequency).
+        let says = torque
+            .signatures
+            .iter()
+            .any(|s| s.kind == "compliance" && s.description.contains("away from the resonance"));
         assert!(
-            (lead / f_hz - 1.0).abs() < 0.2,
-            "[{tag}] compliance at {lead:.1} Hz, shaft mode {f_hz:.1} Hz"
+            (lead / f_hz - 1.0).abs() < 0.2 || (says && torque.resonance.is_some()),
+            "[{tag}] compliance at {lead:.1} Hz, shaft mode {f_hz:.1} Hz: {:?}",
+            torque.signatures
         );
     }
     let band = torque

@@ -118,8 +118,8 @@ pub(super) fn run(
                 || "neighbours outside the catalogue".into(),
                 || neighbours::find(ds, kinds, &[model, &reference.plant], c0, opts),
             );
-            neighbours::attach(&mut unexplained, &found);
-            neighbours::attach(&mut balances, &found);
+            neighbours::attach(&mut unexplained, &found, &opts.thresholds);
+            neighbours::attach(&mut balances, &found, &opts.thresholds);
             leads = found.into_iter().map(|(n, _)| n).collect();
         }
     }

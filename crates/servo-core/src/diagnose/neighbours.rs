@@ -88,9 +88,15 @@ pub(super) fn find(
 
 /// Adds each neighbour's signature to the report of its balance in `reports` (where present):
 /// after a resonance or a friction-curve shape the balance itself shows (the direct evidence
-/// stays first), otherwise
-/// first, and then its experiment becomes the balance's.
-pub(super) fn attach(reports: &mut [BalanceReport], found: &[(Neighbour, Signature)]) {
+/// stays first), otherwise first, and then its experiment becomes the balance's. A neighbour
+/// whose mode (its `frequency` parameter) is farther than
+/// [`super::Thresholds::lead_resonance_max_gap_pct`] from the resonance the balance rings at
+/// says so in its signature there.
+pub(super) fn attach(
+    reports: &mut [BalanceReport],
+    found: &[(Neighbour, Signature)],
+    th: &super::Thresholds,
+) {
     for (n, sig) in found.iter().rev() {
         for b in reports.iter_mut().filter(|b| b.balance == n.balance) {
             let at = b
@@ -98,12 +104,41 @@ pub(super) fn attach(reports: &mut [BalanceReport], found: &[(Neighbour, Signatu
                 .iter()
                 .take_while(|s| s.kind == "resonance" || s.kind == super::friction_curve::KIND)
                 .count();
-            b.signatures.insert(at, sig.clone());
+            let mut sig = sig.clone();
+            sig.description
+                .push_str(&off_resonance(n, b.resonance.as_ref(), th));
+            b.signatures.insert(at, sig);
             if at == 0 {
                 b.experiment = n.experiment.clone();
             }
         }
     }
+}
+
+/// "; its mode ... is not the resonance ..." when the mode of `n` (its `frequency` parameter
+/// [Hz]) is farther than [`super::Thresholds::lead_resonance_max_gap_pct`] from the resonance
+/// `res` of its balance; empty otherwise.
+fn off_resonance(
+    n: &Neighbour,
+    res: Option<&super::resonance::Resonance>,
+    th: &super::Thresholds,
+) -> alloc::string::String {
+    let mode = n
+        .params
+        .iter()
+        .find(|p| p.0 == "frequency" && p.1 == "Hz")
+        .map(|p| p.2);
+    let (Some(f_hz), Some(r)) = (mode, res) else {
+        return alloc::string::String::new();
+    };
+    let gap_pct = 100.0 * (f_hz / r.freq_hz - 1.0).abs();
+    if !(gap_pct > th.lead_resonance_max_gap_pct) {
+        return alloc::string::String::new();
+    }
+    alloc::format!(
+        "; its mode ({f_hz:.1} Hz) is {gap_pct:.0} % away from the resonance this balance rings at ({:.1} Hz; more than lead_resonance_max_gap_pct = {:.0} %): the spectrum measures the frequency, while this fit on the simulation trades stiffness, damping and the inertia split, so take the resonance's frequency and this lead's kind of mechanism",
+        r.freq_hz, th.lead_resonance_max_gap_pct
+    )
 }
 
 #[cfg(test)]
@@ -161,7 +196,11 @@ mod tests {
             report(BalanceKind::Torque, Some("resonance")),
             report(BalanceKind::Electrical, Some("offset")),
         ];
-        attach(&mut reports, &[lead()]);
+        attach(
+            &mut reports,
+            &[lead()],
+            &crate::diagnose::Thresholds::default(),
+        );
         let kinds: Vec<Vec<&str>> = reports
             .iter()
             .map(|b| b.signatures.iter().map(|s| s.kind).collect())
@@ -171,5 +210,40 @@ mod tests {
         assert_eq!(kinds[1], ["resonance", "compliance"]);
         assert_eq!(reports[1].experiment, "before");
         assert_eq!(kinds[2], ["offset"]);
+    }
+
+    /// A lead whose mode is far from the resonance its balance rings at says so (the k = 0.8
+    /// N m/rad shaft of stop 51: an overdamped 17.7 Hz lead beside a 24.3 Hz resonance); one
+    /// near it, or beside no resonance, does not.
+    #[test]
+    fn a_lead_off_the_resonance_says_so() {
+        let res = |freq_hz: f64| crate::diagnose::resonance::Resonance {
+            freq_hz,
+            damping_ratio: 0.05,
+            damping_resolved: true,
+            band_hz: 2.0,
+            share: 0.6,
+            band_ms: 1.0,
+            prominence: 29.0,
+            prominence_needed: 3.0,
+            scanned_hz: (11.0, 45.0),
+            held_out_runs: 10,
+            held_out_rows: 1000,
+            row_rate_hz: 250.0,
+        };
+        let th = crate::diagnose::Thresholds::default();
+        for (resonance, lead_hz, says) in [
+            (Some(res(63.5)), 47.0, true),
+            (Some(res(52.0)), 47.0, false),
+            (None, 47.0, false),
+        ] {
+            let mut reports = [report(BalanceKind::Torque, Some("resonance"))];
+            reports[0].resonance = resonance;
+            let mut l = lead();
+            l.0.params[0].2 = lead_hz;
+            attach(&mut reports, &[l], &th);
+            let d = &reports[0].signatures[1].description;
+            assert_eq!(d.contains("away from the resonance"), says, "{d}");
+        }
     }
 }

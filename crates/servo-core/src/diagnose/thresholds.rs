@@ -51,6 +51,11 @@ pub struct Thresholds {
     /// times the floor; a friction's pre-sliding ringing at 1.3 times), no mode a user must act
     /// on.
     pub resonance_min_ratio: f64,
+    /// A lead's mode (a compliance fitted on the simulation) farther than this from the
+    /// resonance its balance rings at says so [% of the resonance's frequency]: the spectrum
+    /// measures the frequency, while a fit on the simulation trades stiffness, damping and the
+    /// inertia split (an overdamped 17.7 Hz spring beside a ringing 24.3 Hz shaft).
+    pub lead_resonance_max_gap_pct: f64,
     /// Parameters fitted on the two halves of the data agree within this relative difference [%]
     /// (or within `consistency_std_errors` combined standard errors).
     pub consistency_tol_pct: f64,
@@ -128,6 +133,7 @@ impl Default for Thresholds {
             max_resonance_kept_pct: 50.0,
             resonance_refuse_prominence: super::resonance::REFUSE_PROMINENCE,
             resonance_min_ratio: 2.0,
+            lead_resonance_max_gap_pct: 20.0,
             consistency_tol_pct: 35.0,
             consistency_std_errors: 3.0,
             electrical_block_ratio: 6.0,
@@ -195,6 +201,8 @@ impl Thresholds {
                 why: "only a clear resonance refuses candidates" },
             Bar { name: "resonance_min_ratio", value: t.resonance_min_ratio, unit: "x noise floor", rule: ">=",
                 why: "a resonance is named only in an incomplete balance (unexplained_ratio): in a complete one a spectral peak is nothing material (an encoder's quantisation ripple aliased at a speed the log dwells at, a friction's pre-sliding ringing)" },
+            Bar { name: "lead_resonance_max_gap_pct", value: t.lead_resonance_max_gap_pct, unit: "% of the resonance's frequency", rule: "<=",
+                why: "a lead's mode farther from the resonance its balance rings at says so: the spectrum measures the frequency, a fit on the simulation trades stiffness, damping and split" },
             Bar { name: "consistency_tol_pct", value: t.consistency_tol_pct, unit: "%", rule: "<=",
                 why: "parameters fitted on the two halves of the data must agree (or within consistency_std_errors standard errors)" },
             Bar { name: "consistency_std_errors", value: t.consistency_std_errors, unit: "standard errors", rule: "<=",
