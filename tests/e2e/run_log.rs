@@ -565,6 +565,22 @@ fn run_rejects_bad_input_clearly() {
             vec!["run", "--gains", "/nonexistent/g.toml", "--ref", "step:1"],
             "/nonexistent/g.toml",
         ),
+        // A generator the 1 kHz loop would alias (a 1 GHz sine sampled every 1 ms reads as a
+        // constant: it ran, silently, until stop 51).
+        (
+            vec!["run", "--voltage", "sine:amp=2,freq=1e9", "--duration", "1"],
+            "--voltage `sine:amp=2,freq=1e9`: 1000000000 Hz is above the Nyquist frequency 500 Hz",
+        ),
+        (
+            vec![
+                "run",
+                "--gains",
+                g,
+                "--ref",
+                "chirp:amp=0.1,f0=1,f1=900,duration=2",
+            ],
+            "above the Nyquist frequency",
+        ),
         (
             vec![
                 "run",

@@ -233,10 +233,12 @@ pub fn parse_csv_on(
                 }
                 if t <= last_t {
                     bail!(
-                        "{source}: line {}, column {} (`{}`): time must increase strictly, got {t} s after {last_t} s",
+                        "{source}: line {}, column {} (`{}`): time must increase strictly, got {} s after {} s",
                         line_of(&row),
                         i + 1,
-                        e.column
+                        e.column,
+                        seconds(t),
+                        seconds(last_t)
                     );
                 }
                 last_t = t;
@@ -479,5 +481,15 @@ mod tests {
         let t = "time_s,u_V\n0,1\n10,1\n20,1\n";
         let e = format!("{:#}", parse_csv(t, "slow.csv", None).unwrap_err());
         assert!(e.contains("outside"), "{e}");
+    }
+}
+
+/// A time [s] as a message shows it: as read below a million seconds, in scientific notation
+/// beyond (a corrupt cell of 1e300 would print 301 digits).
+fn seconds(t: f64) -> String {
+    if t.abs() < 1e6 {
+        format!("{t}")
+    } else {
+        format!("{t:e}")
     }
 }

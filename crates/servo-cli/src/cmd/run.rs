@@ -266,6 +266,15 @@ impl Run {
         let gains_src = gains.as_ref().zip(gains_name.as_deref());
         let ctl = run_controller(gains_src, &self.pid, self.ts, self.u_limit)?;
         let (ts_s, u_limit_v, pid) = (ctl.ts_s, ctl.u_limit_v, ctl.pid);
+        let what = match (&self.reference, &self.voltage, &self.experiment) {
+            (Some(r), _, _) => format!("--ref `{r}`"),
+            (_, Some(v), _) => format!("--voltage `{v}`"),
+            (_, _, Some(p)) => format!("--experiment {}", p.display()),
+            _ => String::from("the program"),
+        };
+        program
+            .check_sampling(ts_s)
+            .map_err(|e| anyhow!("{what}: {e} ({:.4} ms)", 1e3 * ts_s))?;
         self.say_plant_and_controller(gains.as_ref(), pid.as_ref(), ctl.description.as_deref());
         let model = match &self.model {
             Some(p) => Some(ModelFile::load(p).context("--model")?),

@@ -33,7 +33,7 @@ pub use feedforward::{
 pub use loop_compensation::{CompensationTerms, LoopCompensation};
 pub use pid::{AntiWindup, DerivativeOn, Discretization, Pid, PidConfig, PidGains, PidOutput};
 #[cfg(feature = "alloc")]
-pub use program::{Program, ProgramError, SpeedPiece, SpeedProfile};
+pub use program::{Aliased, Program, ProgramError, SpeedPiece, SpeedProfile};
 pub use reference::{ChirpMode, RefParseError, RefSample, Reference, Shape, Snippet};
 pub use sequence::{
     PlacedSegment, Segment, SegmentMode, Sequence, SequenceError, Setpoint, Target,

@@ -27,6 +27,19 @@ pub enum ProgramError {
     },
 }
 
+/// A generator of a program whose frequency the loop's sampling cannot carry
+/// ([`Program::check_sampling`]).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("{}{freq_hz} Hz is above the Nyquist frequency {nyquist_hz} Hz of the loop's sampling (the samples would alias it); lower the frequency, lengthen the PRBS bit or sample faster", segment.map_or(alloc::string::String::new(), |i| alloc::format!("segment {}: ", i + 1)))]
+pub struct Aliased {
+    /// The segment (0-based) of a sequence; `None` for a single reference.
+    pub segment: Option<usize>,
+    /// The generator's highest frequency [Hz] ([`Reference::highest_freq_hz`]).
+    pub freq_hz: f64,
+    /// 1 / (2 T_s) [Hz].
+    pub nyquist_hz: f64,
+}
+
 /// The setpoint program of a run.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Program {
@@ -70,6 +83,35 @@ impl Program {
         let p = PlacedSegment::after(&[], Segment::voltage(voltage, duration_s))
             .map_err(ProgramError::OpenLoop)?;
         Ok(Program::Segments(vec![p]))
+    }
+
+    /// Checks that a loop sampled every `ts_s` [s] reproduces the program's generators: none
+    /// puts a frequency above the Nyquist frequency 1 / (2 ts_s) in its signal
+    /// ([`Reference::highest_freq_hz`]), where the samples would alias it into another (a 1 GHz
+    /// sine sampled at 1 kHz reads as a constant).
+    pub fn check_sampling(&self, ts_s: f64) -> Result<(), Aliased> {
+        let nyquist_hz = 0.5 / ts_s;
+        let refs: Vec<(Option<usize>, &Reference)> = match self {
+            Program::Position(r) => vec![(None, r)],
+            Program::Segments(s) => s
+                .iter()
+                .enumerate()
+                .map(|(i, p)| ((s.len() > 1).then_some(i), &p.segment.reference))
+                .collect(),
+            Program::Speed(_) => Vec::new(),
+        };
+        for (segment, r) in refs {
+            if let Some(f) = r.highest_freq_hz() {
+                if !(f <= nyquist_hz * (1.0 + 1e-9)) {
+                    return Err(Aliased {
+                        segment,
+                        freq_hz: f,
+                        nyquist_hz,
+                    });
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The setpoint at run time `t_s` [s].
@@ -213,6 +255,34 @@ impl SpeedProfile {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A generator above the loop's Nyquist frequency is refused, naming the segment of a
+    /// sequence; at or below it (a PRBS of one-sample bits) it runs.
+    #[test]
+    fn generators_above_nyquist_are_refused() {
+        let ts = 1e-3;
+        let sine = |f: f64| Reference::parse(&alloc::format!("sine:amp=1,freq={f}")).unwrap();
+        assert!(Program::Position(sine(100.0)).check_sampling(ts).is_ok());
+        let e = Program::Position(sine(1e9)).check_sampling(ts).unwrap_err();
+        assert_eq!((e.segment, e.nyquist_hz), (None, 500.0));
+        let prbs = |bit: f64| {
+            Program::open_loop(
+                Reference::parse(&alloc::format!("prbs:amp=3,bit={bit}")).unwrap(),
+                1.0,
+            )
+            .unwrap()
+        };
+        assert!(prbs(1e-3).check_sampling(ts).is_ok());
+        assert!(prbs(5e-4).check_sampling(ts).is_err());
+        let seq = |r: Reference| Segment::voltage(r, 1.0);
+        let a = PlacedSegment::after(&[], seq(sine(10.0))).unwrap();
+        let b = PlacedSegment::after(&[a], seq(sine(800.0))).unwrap();
+        let e = Program::Segments(vec![a, b])
+            .check_sampling(ts)
+            .unwrap_err();
+        assert_eq!(e.segment, Some(1));
+        assert!(e.to_string().starts_with("segment 2: 800 Hz"), "{e}");
+    }
 
     #[test]
     fn open_loop_and_reference() {

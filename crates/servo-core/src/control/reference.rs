@@ -465,6 +465,24 @@ impl Reference {
         r
     }
 
+    /// The highest frequency the generator puts in its signal by design [Hz]: a sine's
+    /// frequency, a chirp's or a multisine's upper end, a square wave's fundamental, a PRBS's
+    /// fastest alternation (one bit up, one down: 1 / (2 bit)); `None` for the shapes without
+    /// one (a step, a ramp, a trapezoid). A loop sampled
+    /// every T_s reproduces it only below the Nyquist frequency 1 / (2 T_s)
+    /// ([`super::Program::check_sampling`]).
+    pub fn highest_freq_hz(&self) -> Option<f64> {
+        match self.shape {
+            Shape::Sine { freq_hz, .. } => Some(freq_hz),
+            Shape::Chirp { f0_hz, f1_hz, .. } | Shape::Multisine { f0_hz, f1_hz, .. } => {
+                Some(f0_hz.max(f1_hz))
+            }
+            Shape::Square { period_s, .. } => Some(1.0 / period_s),
+            Shape::Prbs { bit_s, .. } => Some(0.5 / bit_s),
+            _ => None,
+        }
+    }
+
     /// Checks every parameter (finite, positive where needed). Names the bad key.
     pub fn validate(&self) -> Result<(), RefParseError> {
         let require = |ok: bool, key: &'static str, reason: &'static str| {
