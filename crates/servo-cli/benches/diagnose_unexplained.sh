@@ -1,46 +1,93 @@
 #!/usr/bin/env bash
-# Benchmark of a whole `servo diagnose` that ends "unexplained" (issue #28, item 7): one minute
-# of logs (30 s open loop on a PRBS voltage, 30 s closed loop on a square reference) of a plant
-# outside the catalogue: the lab plant with a fluid drag c w_l |w_l| (c = 5e-5 N m s^2/rad^2 at
-# the load, a user effect of the plant file), diagnosed against the lab model (viscous +
-# Coulomb). Prints the wall time and the peak memory of each run (GNU time), and the status,
-# which must be "unexplained". The target is at most 10 s on two cores.
+# Benchmark of a whole `servo diagnose` that ends "unexplained" (issue #28, item 7): for each
+# mechanism outside the catalogue, one minute of logs (30 s open loop on a PRBS voltage, 30 s
+# closed loop on a square reference) of the lab plant with that mechanism as a user effect of the
+# plant file, diagnosed against the lab model (viscous + Coulomb). Prints, per case and run, the
+# wall time and the peak memory (GNU time), the joint search's time (SERVO_DIAG_TIMING) and the
+# status, which must be "unexplained". The target is at most 10 s each on two cores.
 #
-#   crates/servo-cli/benches/diagnose_unexplained.sh DIR [SERVO] [RUNS]
+#   crates/servo-cli/benches/diagnose_unexplained.sh DIR [SERVO] [RUNS] [CASE...]
 #
-#   DIR    work directory (plant, gains and logs; reused when the logs exist)
+#   DIR    work directory (plants, gains and logs; reused when the logs exist)
 #   SERVO  the servo binary (default target/release/servo)
-#   RUNS   timed runs (default 3); quote the median, on a quiet machine
+#   RUNS   timed runs per case (default 3); quote the median, on a quiet machine
+#   CASE   drag (a fluid drag c w_l |w_l|), ripple (a torque ripple of 7.5 cycles per motor
+#          revolution: no harmonic of either angle, so every simulation holding a cogging or an
+#          imbalance candidate runs in sub-steps), slopes (a viscous slope forwards only),
+#          torque_friction (a friction growing with |i_a|); default: all four
 set -euo pipefail
-DIR=${1:?usage: diagnose_unexplained.sh DIR [SERVO] [RUNS]}
+DIR=${1:?usage: diagnose_unexplained.sh DIR [SERVO] [RUNS] [CASE...]}
 SERVO=${2:-target/release/servo}
 RUNS=${3:-3}
+shift $(($# < 3 ? $# : 3))
+CASES=("$@")
+[ ${#CASES[@]} -gt 0 ] || CASES=(drag ripple slopes torque_friction)
 TIME=/usr/bin/time
 [ -x "$TIME" ] || { echo "needs GNU time at $TIME (apt-get install time)"; exit 1; }
 mkdir -p "$DIR"
 "$SERVO" params > "$DIR/model.toml"
-cp "$DIR/model.toml" "$DIR/truth.toml"
-cat >> "$DIR/truth.toml" <<'TOML'
+[ -f "$DIR/gains.toml" ] || "$SERVO" design --wc 30 --pm 60 -o "$DIR/gains.toml" > /dev/null
 
+# The user effect of each case (a [custom.*] section of the plant file).
+effect() {
+  case $1 in
+    drag) cat <<'TOML'
 [custom.drag]
 acts_on = "load_torque"
 expr = "c * omega_l * abs(omega_l)"
-description = "a fluid drag rising with the square of speed (outside the catalogue)"
+description = "a fluid drag rising with the square of speed"
 [custom.drag.params]
 c = { value = 5e-5, unit = "N m s^2/rad^2" }
 TOML
-if [ ! -f "$DIR/open.mcap" ] || [ ! -f "$DIR/closed.mcap" ]; then
-  "$SERVO" design --wc 30 --pm 60 -o "$DIR/gains.toml" > /dev/null
-  "$SERVO" run --plant "$DIR/truth.toml" --voltage prbs:amp=5,bit=0.2 --duration 30 --seed 1 \
-    --log "$DIR/open.mcap" > /dev/null
-  "$SERVO" run --plant "$DIR/truth.toml" --gains "$DIR/gains.toml" --ref square:amp=2,period=3 \
-    --duration 30 --seed 2 --log "$DIR/closed.mcap" > /dev/null 2>&1
-fi
-for ((k = 1; k <= RUNS; k++)); do
-  "$TIME" -v "$SERVO" diagnose "$DIR/open.mcap" "$DIR/closed.mcap" --model "$DIR/model.toml" \
-    > "$DIR/diagnose.txt" 2> "$DIR/diagnose.time"
-  wall=$(grep 'Elapsed (wall clock)' "$DIR/diagnose.time" | awk '{print $NF}')
-  rss=$(grep 'Maximum resident set size' "$DIR/diagnose.time" | awk '{print $NF}')
-  status=$(grep -o '^Status: [a-z]*' "$DIR/diagnose.txt" || echo "Status: ?")
-  echo "run $k: wall $wall, peak RSS $((rss / 1024)) MiB; $status"
+      ;;
+    ripple) cat <<'TOML'
+[custom.ripple]
+acts_on = "motor_torque"
+expr = "a * sin(7.5 * theta_m + 0.3)"
+description = "a torque ripple of 7.5 cycles per motor revolution"
+[custom.ripple.params]
+a = { value = 4e-4, unit = "N m" }
+TOML
+      ;;
+    slopes) cat <<'TOML'
+[custom.slopes]
+acts_on = "load_torque"
+expr = "b * max(omega_l, 0)"
+description = "a viscous slope forwards only"
+[custom.slopes.params]
+b = { value = 5e-4, unit = "N m s/rad" }
+TOML
+      ;;
+    torque_friction) cat <<'TOML'
+[custom.torque_friction]
+acts_on = "load_torque"
+expr = "mu * abs(i_a) * sign(omega_l)"
+description = "a friction growing with the transmitted torque"
+[custom.torque_friction.params]
+mu = { value = 0.025, unit = "N m/A" }
+TOML
+      ;;
+    *) echo "unknown case $1 (drag, ripple, slopes, torque_friction)" >&2; exit 1 ;;
+  esac
+}
+
+for c in "${CASES[@]}"; do
+  d="$DIR/$c"
+  mkdir -p "$d"
+  if [ ! -f "$d/open.mcap" ] || [ ! -f "$d/closed.mcap" ]; then
+    { cat "$DIR/model.toml"; echo; effect "$c"; } > "$d/truth.toml"
+    "$SERVO" run --plant "$d/truth.toml" --voltage prbs:amp=5,bit=0.2 --duration 30 --seed 1 \
+      --log "$d/open.mcap" > /dev/null 2>&1
+    "$SERVO" run --plant "$d/truth.toml" --gains "$DIR/gains.toml" --ref square:amp=2,period=3 \
+      --duration 30 --seed 2 --log "$d/closed.mcap" > /dev/null 2>&1
+  fi
+  for ((k = 1; k <= RUNS; k++)); do
+    SERVO_DIAG_TIMING=1 "$TIME" -v "$SERVO" diagnose "$d/open.mcap" "$d/closed.mcap" \
+      --model "$DIR/model.toml" > "$d/diagnose.txt" 2> "$d/diagnose.time"
+    wall=$(grep 'Elapsed (wall clock)' "$d/diagnose.time" | awk '{print $NF}')
+    rss=$(grep 'Maximum resident set size' "$d/diagnose.time" | awk '{print $NF}')
+    joint=$(grep -o '[0-9.]* s  backward elimination' "$d/diagnose.time" | awk '{print $1}' || true)
+    status=$(grep -o '^Status: [a-z]*' "$d/diagnose.txt" || echo "Status: ?")
+    echo "$c run $k: wall $wall, peak RSS $((rss / 1024)) MiB, joint search ${joint:-0} s; $status"
+  done
 done
