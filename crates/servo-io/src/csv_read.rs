@@ -373,6 +373,16 @@ fn csv_error_text(e: &csv::Error) -> String {
     }
 }
 
+/// A time [s] as a message shows it: as read below a million seconds, in scientific notation
+/// beyond (a corrupt cell of 1e300 would print 301 digits).
+fn seconds(t: f64) -> String {
+    if t.abs() < 1e6 {
+        format!("{t}")
+    } else {
+        format!("{t:e}")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -481,15 +491,5 @@ mod tests {
         let t = "time_s,u_V\n0,1\n10,1\n20,1\n";
         let e = format!("{:#}", parse_csv(t, "slow.csv", None).unwrap_err());
         assert!(e.contains("outside"), "{e}");
-    }
-}
-
-/// A time [s] as a message shows it: as read below a million seconds, in scientific notation
-/// beyond (a corrupt cell of 1e300 would print 301 digits).
-fn seconds(t: f64) -> String {
-    if t.abs() < 1e6 {
-        format!("{t}")
-    } else {
-        format!("{t:e}")
     }
 }

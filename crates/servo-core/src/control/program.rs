@@ -102,7 +102,8 @@ impl Program {
         };
         for (segment, r) in refs {
             if let Some(f) = r.highest_freq_hz() {
-                if !(f <= nyquist_hz * (1.0 + 1e-9)) {
+                // (A NaN frequency is refused too: the generators validate theirs.)
+                if f.is_nan() || f > nyquist_hz * (1.0 + 1e-9) {
                     return Err(Aliased {
                         segment,
                         freq_hz: f,

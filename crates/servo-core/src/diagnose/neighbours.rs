@@ -132,7 +132,7 @@ fn off_resonance(
         return alloc::string::String::new();
     };
     let gap_pct = 100.0 * (f_hz / r.freq_hz - 1.0).abs();
-    if !(gap_pct > th.lead_resonance_max_gap_pct) {
+    if gap_pct.is_nan() || gap_pct <= th.lead_resonance_max_gap_pct {
         return alloc::string::String::new();
     }
     alloc::format!(
