@@ -227,7 +227,6 @@ pub fn append_failed(c: &mut Candidate) {
     }
 }
 
-/// The thresholds in one sentence (stated in every verdict).
 /// Why candidate `c` was not named, in words: the first guard it failed in the order the
 /// diagnosis applies them (the information criterion, the held-out residual drop of its balance
 /// (an effect judged on the simulation: its held-out simulation drop), the held-out simulation
@@ -270,6 +269,7 @@ pub fn refusal(c: &Candidate, th: &Thresholds) -> Option<String> {
         .map(|k| alloc::format!("{}: {}", k.name, k.detail))
 }
 
+/// The thresholds in one sentence (stated in every verdict).
 pub fn thresholds_text(th: &Thresholds) -> String {
     alloc::format!(
         "Thresholds: an effect must pass the information criterion, the held-out residual and simulation drops, explain at least {:.1} times its balance's noise floor (RMS) and {:.0} % of its structured error, have physically meaningful parameters and agree within {:.0} % across halves of the data; no torque is named while the electrical balance is {:.0} times its noise floor; a balance is incomplete when its residual exceeds {:.1} times its noise floor; a shape is named when it explains {:.0} % of the held-out residual.",

@@ -530,7 +530,7 @@ impl FrictionCurve {
             explained_rms: s.explained_rms,
             on_simulation: false,
             measured_on: alloc::format!(
-                "{} sliding rows (away from standstill and velocity reversals), {} bins of the friction curve",
+                "{} sliding rows (away from standstill and velocity reversals; its share is of what the Coulomb, viscous and inertia terms refitted on them leave), {} bins of the friction curve",
                 self.sliding_rows,
                 self.bins.len()
             ),
