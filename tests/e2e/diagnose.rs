@@ -1025,6 +1025,48 @@ fn friction_growing_with_transmitted_torque_names_no_resonance() {
     }
 }
 
+/// The lab model (`servo params`) as `model.toml` in `dir`, the truth `truth.toml` (the lab model
+/// with the user-effect section `section`) and gains designed at 30 rad/s, 60 deg
+/// (`gains.toml`).
+fn user_effect_rig(dir: &std::path::Path, section: &str) {
+    let p = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let (ok, params, err) = servo_e2e::servo(&["params"]);
+    assert!(ok, "servo params failed: {err}");
+    std::fs::write(p("model.toml"), &params).unwrap();
+    std::fs::write(p("truth.toml"), format!("{params}\n{section}")).unwrap();
+    let (ok, _, err) =
+        servo_e2e::servo(&["design", "--wc", "30", "--pm", "60", "-o", &p("gains.toml")]);
+    assert!(ok, "design failed: {err}");
+}
+
+/// One minute of logs of the rig in `dir` ([`user_effect_rig`]) as the benchmark takes them (a
+/// PRBS of `amp` V, a square wave; seed `seed`), diagnosed through `servo diagnose --json` against
+/// its lab model; `tag` in the messages.
+fn diagnose_rig_json(dir: &std::path::Path, amp: &str, seed: u64, tag: &str) -> serde_json::Value {
+    let p = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let (open, closed) = (
+        p(&format!("open{seed}.mcap")),
+        p(&format!("closed{seed}.mcap")),
+    );
+    servo_e2e::prbs_and_square_logs(
+        &["--plant", &p("truth.toml")],
+        &p("gains.toml"),
+        amp,
+        seed,
+        (&open, &closed),
+    );
+    let (ok, out, err) = servo_e2e::servo(&[
+        "diagnose",
+        &open,
+        &closed,
+        "--model",
+        &p("model.toml"),
+        "--json",
+    ]);
+    assert!(ok, "[{tag}] diagnose failed: {err}");
+    serde_json::from_str(&out).unwrap()
+}
+
 /// servo's own simulator with a fluid drag c w_l |w_l| (a user effect of the plant file, outside
 /// the catalogue; the benchmark's plant), open loop on a PRBS voltage and closed loop on a square
 /// reference, diagnosed through `servo diagnose --json` against the lab model. The PRBS holds the
@@ -1037,42 +1079,14 @@ fn friction_growing_with_transmitted_torque_names_no_resonance() {
 fn a_drag_at_terminal_speed_names_no_resonance() {
     let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
-    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    let (ok, params, err) = servo_e2e::servo(&["params"]);
-    assert!(ok, "servo params failed: {err}");
-    std::fs::write(p("model.toml"), &params).unwrap();
-    let truth = format!(
-        "{params}\n[custom.drag]\nacts_on = \"load_torque\"\nexpr = \"c * omega_l * abs(omega_l)\"\n\
-         description = \"a fluid drag\"\n[custom.drag.params]\nc = {{ value = 5e-5, unit = \"N m s^2/rad^2\" }}\n"
+    user_effect_rig(
+        dir.path(),
+        "[custom.drag]\nacts_on = \"load_torque\"\nexpr = \"c * omega_l * abs(omega_l)\"\n\
+         description = \"a fluid drag\"\n[custom.drag.params]\nc = { value = 5e-5, unit = \"N m s^2/rad^2\" }\n",
     );
-    std::fs::write(p("truth.toml"), truth).unwrap();
-    let (ok, _, err) =
-        servo_e2e::servo(&["design", "--wc", "30", "--pm", "60", "-o", &p("gains.toml")]);
-    assert!(ok, "design failed: {err}");
     for (amp, seed) in [("5", 3u64), ("4.5", 5)] {
         let tag = format!("drag PRBS {amp} V seed {seed}");
-        let (open, closed) = (
-            p(&format!("open{seed}.mcap")),
-            p(&format!("closed{seed}.mcap")),
-        );
-        let truth = p("truth.toml");
-        servo_e2e::prbs_and_square_logs(
-            &["--plant", &truth],
-            &p("gains.toml"),
-            amp,
-            seed,
-            (&open, &closed),
-        );
-        let (ok, out, err) = servo_e2e::servo(&[
-            "diagnose",
-            &open,
-            &closed,
-            "--model",
-            &p("model.toml"),
-            "--json",
-        ]);
-        assert!(ok, "[{tag}] diagnose failed: {err}");
-        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        let v = diagnose_rig_json(dir.path(), amp, seed, &tag);
         for b in v["balances"].as_array().unwrap() {
             let kinds: Vec<&str> = b["signatures"]
                 .as_array()
@@ -1091,18 +1105,7 @@ fn a_drag_at_terminal_speed_names_no_resonance() {
                 b["signatures"]
             );
         }
-        assert_eq!(v["status"], "unexplained", "[{tag}] {}", v["verdict"]);
-        let torque = v["balances"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|b| b["balance"] == "torque")
-            .unwrap();
-        assert_eq!(
-            torque["signatures"][0]["kind"], "friction_curve",
-            "[{tag}] {}",
-            torque["signatures"]
-        );
+        assert_unexplained_by_a_friction_shape(&v, &tag);
     }
 }
 
@@ -1119,43 +1122,25 @@ fn a_drag_at_terminal_speed_names_no_resonance() {
 fn a_friction_growing_with_the_current_on_servos_simulator_is_shaped() {
     let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
-    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    let (ok, params, err) = servo_e2e::servo(&["params"]);
-    assert!(ok, "servo params failed: {err}");
-    std::fs::write(p("model.toml"), &params).unwrap();
-    let truth = format!(
-        "{params}\n[custom.tf]\nacts_on = \"load_torque\"\nexpr = \"mu * abs(i_a) * sign(omega_l)\"\n\
-         description = \"a friction growing with the transmitted torque\"\n[custom.tf.params]\nmu = {{ value = 0.025, unit = \"N m/A\" }}\n"
+    user_effect_rig(
+        dir.path(),
+        "[custom.tf]\nacts_on = \"load_torque\"\nexpr = \"mu * abs(i_a) * sign(omega_l)\"\n\
+         description = \"a friction growing with the transmitted torque\"\n[custom.tf.params]\nmu = { value = 0.025, unit = \"N m/A\" }\n",
     );
-    std::fs::write(p("truth.toml"), truth).unwrap();
-    let (ok, _, err) =
-        servo_e2e::servo(&["design", "--wc", "30", "--pm", "60", "-o", &p("gains.toml")]);
-    assert!(ok, "design failed: {err}");
-    let (open, closed) = (p("open.mcap"), p("closed.mcap"));
-    servo_e2e::prbs_and_square_logs(
-        &["--plant", &p("truth.toml")],
-        &p("gains.toml"),
-        "5",
-        1,
-        (&open, &closed),
-    );
-    let (ok, out, err) = servo_e2e::servo(&[
-        "diagnose",
-        &open,
-        &closed,
-        "--model",
-        &p("model.toml"),
-        "--json",
-    ]);
-    assert!(ok, "diagnose failed: {err}");
-    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
-    assert_eq!(v["status"], "unexplained", "{}", v["verdict"]);
+    let v = diagnose_rig_json(dir.path(), "5", 1, "torque friction");
+    assert_unexplained_by_a_friction_shape(&v, "torque friction");
     let shape = &v["friction_curve"]["shape"];
     assert_eq!(shape["shape"], "transmitted_torque", "{shape}");
     let k_t = PlantParams::TABLE2.k_t;
     let truth = 0.025 / (k_t * PlantParams::TABLE2.n);
     let got = shape["coefficient"].as_f64().unwrap();
     assert!((got / truth - 1.0).abs() < 0.25, "{got} for {truth}");
+}
+
+/// `servo diagnose --json` output `v` is "unexplained", the torque balance's first signature the
+/// measured friction curve's shape (`tag` in the messages).
+fn assert_unexplained_by_a_friction_shape(v: &serde_json::Value, tag: &str) {
+    assert_eq!(v["status"], "unexplained", "[{tag}] {}", v["verdict"]);
     let torque = v["balances"]
         .as_array()
         .unwrap()
@@ -1164,7 +1149,7 @@ fn a_friction_growing_with_the_current_on_servos_simulator_is_shaped() {
         .unwrap();
     assert_eq!(
         torque["signatures"][0]["kind"], "friction_curve",
-        "{}",
+        "[{tag}] {}",
         torque["signatures"]
     );
 }

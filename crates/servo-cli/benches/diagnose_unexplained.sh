@@ -28,45 +28,23 @@ mkdir -p "$DIR"
 "$SERVO" params > "$DIR/model.toml"
 [ -f "$DIR/gains.toml" ] || "$SERVO" design --wc 30 --pm 60 -o "$DIR/gains.toml" > /dev/null
 
-# The user effect of each case (a [custom.*] section of the plant file).
+# The user effect of each case (a [custom.*] section of the plant file): its place, expression,
+# description and parameter.
+section() { # NAME ACTS_ON EXPR DESCRIPTION PARAM
+  printf '[custom.%s]\nacts_on = "%s"\nexpr = "%s"\ndescription = "%s"\n[custom.%s.params]\n%s\n' \
+    "$1" "$2" "$3" "$4" "$1" "$5"
+}
 effect() {
   case $1 in
-    drag) cat <<'TOML'
-[custom.drag]
-acts_on = "load_torque"
-expr = "c * omega_l * abs(omega_l)"
-description = "a fluid drag rising with the square of speed"
-[custom.drag.params]
-c = { value = 5e-5, unit = "N m s^2/rad^2" }
-TOML
-      ;;
-    ripple) cat <<'TOML'
-[custom.ripple]
-acts_on = "motor_torque"
-expr = "a * sin(7.5 * theta_m + 0.3)"
-description = "a torque ripple of 7.5 cycles per motor revolution"
-[custom.ripple.params]
-a = { value = 4e-4, unit = "N m" }
-TOML
-      ;;
-    slopes) cat <<'TOML'
-[custom.slopes]
-acts_on = "load_torque"
-expr = "b * max(omega_l, 0)"
-description = "a viscous slope forwards only"
-[custom.slopes.params]
-b = { value = 5e-4, unit = "N m s/rad" }
-TOML
-      ;;
-    torque_friction) cat <<'TOML'
-[custom.torque_friction]
-acts_on = "load_torque"
-expr = "mu * abs(i_a) * sign(omega_l)"
-description = "a friction growing with the transmitted torque"
-[custom.torque_friction.params]
-mu = { value = 0.025, unit = "N m/A" }
-TOML
-      ;;
+    drag) section drag load_torque "c * omega_l * abs(omega_l)" \
+      "a fluid drag rising with the square of speed" \
+      'c = { value = 5e-5, unit = "N m s^2/rad^2" }' ;;
+    ripple) section ripple motor_torque "a * sin(7.5 * theta_m + 0.3)" \
+      "a torque ripple of 7.5 cycles per motor revolution" 'a = { value = 4e-4, unit = "N m" }' ;;
+    slopes) section slopes load_torque "b * max(omega_l, 0)" "a viscous slope forwards only" \
+      'b = { value = 5e-4, unit = "N m s/rad" }' ;;
+    torque_friction) section torque_friction load_torque "mu * abs(i_a) * sign(omega_l)" \
+      "a friction growing with the transmitted torque" 'mu = { value = 0.025, unit = "N m/A" }' ;;
     *) echo "unknown case $1 (drag, ripple, slopes, torque_friction)" >&2; exit 1 ;;
   esac
 }

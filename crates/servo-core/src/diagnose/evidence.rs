@@ -227,6 +227,17 @@ pub fn append_failed(c: &mut Candidate) {
     }
 }
 
+/// The parameters of `c`'s own effect, "key = value unit" joined by commas (the base's left out).
+pub(super) fn own_params(c: &Candidate) -> String {
+    let params: Vec<String> = c
+        .params
+        .iter()
+        .filter(|p| p.effect == Some(c.effect))
+        .map(|p| alloc::format!("{} = {:.4} {}", p.key, p.value, p.unit))
+        .collect();
+    params.join(", ")
+}
+
 /// Why candidate `c` was not named, in words: the first guard it failed in the order the
 /// diagnosis applies them (the information criterion, the held-out residual drop of its balance
 /// (an effect judged on the simulation: its held-out simulation drop), the held-out simulation

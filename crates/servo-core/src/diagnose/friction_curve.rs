@@ -506,16 +506,10 @@ pub fn hump_refusal(
     }
     let c = ranking.iter().find(|c| breakaway(c.effect))?;
     let why = super::evidence::refusal(c, th)?;
-    let params: Vec<String> = c
-        .params
-        .iter()
-        .filter(|p| p.effect == Some(c.effect))
-        .map(|p| alloc::format!("{} = {:.4} {}", p.key, p.value, p.unit))
-        .collect();
     Some(alloc::format!(
         " The breakaway friction the hump calls for, {} ({}), was refused: {why}.",
         c.effect,
-        params.join(", ")
+        super::evidence::own_params(c)
     ))
 }
 

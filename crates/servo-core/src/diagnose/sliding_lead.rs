@@ -19,7 +19,6 @@ use crate::fit::model::Config;
 use crate::fit::Dataset;
 use crate::verdict::Candidate;
 use alloc::string::String;
-use alloc::vec::Vec;
 
 /// The friction the sliding rows show, refused only by the simulation.
 #[derive(Debug, Clone, PartialEq)]
@@ -34,19 +33,13 @@ impl SlidingFit {
     /// The verdict's sentence.
     pub fn sentence(&self) -> String {
         let c = &self.candidate;
-        let params: Vec<String> = c
-            .params
-            .iter()
-            .filter(|p| p.effect == Some(c.effect))
-            .map(|p| alloc::format!("{} = {:.4} {}", p.key, p.value, p.unit))
-            .collect();
         alloc::format!(
             " On the sliding rows (the {} torque-balance rows within {:.0} encoder counts of travel since a reversal left out: they carry {:.1} times the residual of the sliding rows, a pre-sliding regime), {} fits the measured friction curve ({}; it removes {:.1} % of the held-out torque balance residual there), but simulating it makes the held-out prediction {:.0} % worse: the friction has dynamics at the reversals (pre-sliding, frictional lag) that no friction of the catalogue simulates, so it is not named. These are the steady-state curve of a dynamic (bristle) friction such as LuGre or Dahl.",
             self.extent.rows,
             self.extent.counts,
             self.extent.ratio,
             c.effect,
-            params.join(", "),
+            super::evidence::own_params(c),
             c.error_reduction_pct,
             -c.oe_reduction_pct.unwrap_or(0.0),
         )
