@@ -151,13 +151,30 @@ pub fn get(params: &[ParamEstimate], key: &str) -> Option<f64> {
     params.iter().find(|p| p.key == key).map(|p| p.value)
 }
 
+/// Fewest levels a log's commanded u must span on its grid for the grid's spacing to be the
+/// command's resolution [1]: a PRBS between +-5 V (two levels) or a few voltage steps sit on a
+/// "grid" as wide as their steps, which says nothing of the DAC or PWM count behind them (a
+/// 0.30 V dead band was refused as narrower than a 10 V "resolution"); a real quantiser spans
+/// hundreds (an 8-bit PWM: 511 levels over +-full scale).
+pub const MIN_U_LEVELS: f64 = 16.0;
+
 /// The resolution of the commanded u [V]: its grid spacing when u is quantised (a DAC, a PWM
-/// count), else the smallest step between distinct values near zero.
+/// count) in a log whose u spans at least [`MIN_U_LEVELS`] levels of it, the coarsest such; 0
+/// when none is.
 pub fn u_resolution(ds: &Dataset) -> f64 {
     let mut q = 0.0f64;
     for r in ds.recs.iter().filter(|r| r.has_u) {
         if let Some(g) = crate::signal::quantum::encoder_quantum(&r.u_v) {
-            q = q.max(g);
+            let (lo, hi) = r
+                .u_v
+                .iter()
+                .filter(|u| u.is_finite())
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), u| {
+                    (a.min(*u), b.max(*u))
+                });
+            if (hi - lo) / g + 1.0 >= MIN_U_LEVELS {
+                q = q.max(g);
+            }
         }
     }
     q
