@@ -27,23 +27,11 @@ TIME=/usr/bin/time
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 "$SERVO" params > "$WORK/model.toml"
+. "$(dirname "$0")/timed_diagnose.sh"
 # Two cases of about one minute each: the friction ramps (the first 30 s of each run, 60 s) and
 # the two PID step logs (54 s of closed loop, the load held between steps: most of the simulated
 # periods of a model with a gear play are held ones).
-run_case() {
-  local name=$1
-  shift
-  for ((k = 1; k <= RUNS; k++)); do
-    SERVO_DIAG_TIMING=1 "$TIME" -v "$SERVO" diagnose "$@" --model "$WORK/model.toml" \
-      > "$WORK/diagnose.txt" 2> "$WORK/diagnose.err"
-    wall=$(grep 'Elapsed (wall clock)' "$WORK/diagnose.err" | awk '{print $NF}')
-    rss=$(grep 'Maximum resident set size' "$WORK/diagnose.err" | awk '{print $NF}')
-    joint=$(grep -o '[0-9.]* s  backward elimination' "$WORK/diagnose.err" | awk '{print $1}' || true)
-    status=$(grep -o '^Status: [a-z]*' "$WORK/diagnose.txt" || echo "Status: ?")
-    echo "$name run $k: wall $wall, peak RSS $((rss / 1024)) MiB, joint search ${joint:-0} s; $status"
-  done
-}
-run_case "friction ramps (60 s)" "$DIR/friction_pos.csv" "$DIR/friction_neg.csv" --window 0..30
+timed_diagnose "friction ramps (60 s)" "$RUNS" "$WORK" "$WORK/model.toml" "$DIR/friction_pos.csv" "$DIR/friction_neg.csv" --window 0..30
 if [ -f "$DIR/pid_best_steps.csv" ] && [ -f "$DIR/pid_bode_steps.csv" ]; then
-  run_case "PID step logs (54 s)" "$DIR/pid_best_steps.csv" "$DIR/pid_bode_steps.csv"
+  timed_diagnose "PID step logs (54 s)" "$RUNS" "$WORK" "$WORK/model.toml" "$DIR/pid_best_steps.csv" "$DIR/pid_bode_steps.csv"
 fi

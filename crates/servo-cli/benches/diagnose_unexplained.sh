@@ -25,6 +25,7 @@ CASES=("$@")
 TIME=/usr/bin/time
 [ -x "$TIME" ] || { echo "needs GNU time at $TIME (apt-get install time)"; exit 1; }
 mkdir -p "$DIR"
+. "$(dirname "$0")/timed_diagnose.sh"
 "$SERVO" params > "$DIR/model.toml"
 [ -f "$DIR/gains.toml" ] || "$SERVO" design --wc 30 --pm 60 -o "$DIR/gains.toml" > /dev/null
 
@@ -59,13 +60,5 @@ for c in "${CASES[@]}"; do
     "$SERVO" run --plant "$d/truth.toml" --gains "$DIR/gains.toml" --ref square:amp=2,period=3 \
       --duration 30 --seed 2 --log "$d/closed.mcap" > /dev/null 2>&1
   fi
-  for ((k = 1; k <= RUNS; k++)); do
-    SERVO_DIAG_TIMING=1 "$TIME" -v "$SERVO" diagnose "$d/open.mcap" "$d/closed.mcap" \
-      --model "$DIR/model.toml" > "$d/diagnose.txt" 2> "$d/diagnose.time"
-    wall=$(grep 'Elapsed (wall clock)' "$d/diagnose.time" | awk '{print $NF}')
-    rss=$(grep 'Maximum resident set size' "$d/diagnose.time" | awk '{print $NF}')
-    joint=$(grep -o '[0-9.]* s  backward elimination' "$d/diagnose.time" | awk '{print $1}' || true)
-    status=$(grep -o '^Status: [a-z]*' "$d/diagnose.txt" || echo "Status: ?")
-    echo "$c run $k: wall $wall, peak RSS $((rss / 1024)) MiB, joint search ${joint:-0} s; $status"
-  done
+  timed_diagnose "$c" "$RUNS" "$d" "$DIR/model.toml" "$d/open.mcap" "$d/closed.mcap"
 done

@@ -326,8 +326,7 @@ pub(super) fn search(
 /// The joint model (`joint_now`, with its held-out cost) without every member of `failing` (each
 /// failed its drop-one test given the others), re-tuned, when together they are immaterial too:
 /// their held-out simulation contribution (the joint model against the model without them) stays
-/// below the bar a single
-/// member must clear ([`super::Thresholds::min_oe_drop_pct`], or
+/// below the bar a single member must clear ([`super::Thresholds::min_oe_drop_pct`], or
 /// [`super::Thresholds::min_simulation_oe_drop_pct`] with a member judged on the simulation).
 /// `None` when the group is material (two mimics of one mechanism each redundant given the
 /// other): the members are then dropped one at a time.
