@@ -9,7 +9,8 @@
 //! 1. **Joint fit.** When no single candidate passes and a balance is still above its noise
 //!    floor, the effects already in the model beyond friction (named by earlier steps), the
 //!    best candidates by held-out simulation drop ([`super::DiagnoseOptions::joint_candidates`]
-//!    of them), those with clear evidence in their own balance and those acting where a play
+//!    of them, none whose fit makes its own balance clearly worse held out, [`joint::seeds`]),
+//!    those with clear evidence in their own balance and those acting where a play
 //!    acts ([`partners`]) are fitted together: first by the usual equation-error fit (base refitted), then
 //!    on the simulation cost of the fit blocks over long segments (several reversals each),
 //!    where the motion shows every one of them, trimmed of its worst fifth ([`trimmed`]: a few

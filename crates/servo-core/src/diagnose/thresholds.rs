@@ -180,7 +180,7 @@ impl Thresholds {
             Bar { name: "min_bic_gain", value: t.min_bic_gain, unit: "-", rule: ">",
                 why: "information criterion: the fit gain must outweigh the cost of the effect's parameters (search-corrected, effective sample size)" },
             Bar { name: "min_eq_drop_pct", value: t.min_eq_drop_pct, unit: "%", rule: ">=",
-                why: "the effect must lower its balance's squared residual on held-out blocks" },
+                why: "the effect must lower its balance's squared residual on held-out blocks; a joint search's member must not raise it by as much" },
             Bar { name: "min_simulation_oe_drop_pct", value: t.min_simulation_oe_drop_pct, unit: "%", rule: ">=",
                 why: "an effect judged on the simulation alone (a gear play) needs a clear held-out simulation drop" },
             Bar { name: "min_oe_drop_pct", value: t.min_oe_drop_pct, unit: "%", rule: ">=",
