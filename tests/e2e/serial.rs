@@ -1101,8 +1101,14 @@ mod qemu_cli {
 
     /// `servo run --backend serial` of the tracking reference on a fresh QEMU board simulating
     /// the lab plant with an unbalanced load, compensated by `ff` with `model`: the RMS tracking
-    /// error [rad].
-    fn qemu_tracking(dir: &Path, g: &Path, model: &Path, ff: &str) -> Option<f64> {
+    /// error [rad] (`None` when the run stopped on a board fault), and the board's statistics
+    /// line. `None` (skip) without qemu or the image.
+    fn qemu_tracking(
+        dir: &Path,
+        g: &Path,
+        model: &Path,
+        ff: &str,
+    ) -> Option<(Option<f64>, String)> {
         let board = QemuProc::start(
             dir,
             &["--watchdog-ms", "250", "--qemu-plant", "lab-unbalanced"],
@@ -1135,8 +1141,11 @@ mod qemu_cli {
         let stats = board.stats_after(Duration::from_millis(1200));
         board.quit();
         eprintln!("{out}\n{err}\nQEMU: {stats}");
-        assert!(ok, "{out}\n{err}");
-        Some(crate::compensation::printed_rms_rad(&out))
+        if !ok {
+            assert!(err.contains("board fault"), "{out}\n{err}");
+            return Some((None, stats));
+        }
+        Some((Some(crate::compensation::printed_rms_rad(&out)), stats))
     }
 
     /// Issue #29 on the QEMU board: the imbalance identified and added on the simulator's logs,
@@ -1159,23 +1168,50 @@ mod qemu_cli {
         };
         let _rt = realtime();
         let g = gains_2ms(dir.path());
-        let Some(friction) = qemu_tracking(dir.path(), &g, &fitted, "friction") else {
-            return;
-        };
-        let Some(all) = qemu_tracking(dir.path(), &g, &fitted, "all") else {
-            return;
-        };
-        let cut = 1.0 - all / friction;
-        eprintln!(
-            "QEMU board, lab plant with an imbalance: tracking error RMS {friction:.4e} rad with \
-             --ff friction, {all:.4e} rad with --ff all: cut {:.1} %",
-            100.0 * cut
-        );
-        assert!(
-            cut >= 0.70,
-            "on the QEMU board --ff all cut the tracking error by {:.1} % (< 70 %)",
-            100.0 * cut
-        );
+        // Up to two retries on fresh boards while a run was starved of time (the emulated board
+        // overran its 2 ms period or the host missed more than a tenth of its deadlines: late
+        // commands held for a period degrade the tracking, and a run can end on the position
+        // limit; said in the output). A run that was not starved is judged at once.
+        const TRIES: usize = 3;
+        for attempt in 1..=TRIES {
+            let Some((friction, stats_f)) = qemu_tracking(dir.path(), &g, &fitted, "friction")
+            else {
+                return;
+            };
+            let Some((all, stats_a)) = qemu_tracking(dir.path(), &g, &fitted, "all") else {
+                return;
+            };
+            let starved = run_starved(&stats_f, 2000) || run_starved(&stats_a, 2000);
+            let cut = match (friction, all) {
+                (Some(f), Some(a)) => {
+                    let cut = 1.0 - a / f;
+                    eprintln!(
+                        "QEMU board, lab plant with an imbalance: tracking error RMS {f:.4e} rad \
+                         with --ff friction, {a:.4e} rad with --ff all: cut {:.1} %",
+                        100.0 * cut
+                    );
+                    Some(cut)
+                }
+                _ => None,
+            };
+            if cut.is_some_and(|c| c >= 0.70) {
+                return;
+            }
+            if starved && attempt < TRIES {
+                eprintln!(
+                    "retrying on fresh boards: the runs were starved of time ({stats_f}; {stats_a})"
+                );
+                continue;
+            }
+            let Some(cut) = cut else {
+                panic!("a run stopped on a board fault ({stats_f}; {stats_a})");
+            };
+            panic!(
+                "on the QEMU board --ff all cut the tracking error by {:.1} % (< 70 %; {stats_f}; \
+                 {stats_a})",
+                100.0 * cut
+            );
+        }
     }
 
     #[test]
