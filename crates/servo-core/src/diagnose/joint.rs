@@ -99,9 +99,9 @@ fn seed_rank(c: &Candidate, th: &super::Thresholds) -> Option<f64> {
     // A candidate whose fit makes its own balance worse on the held-out rows, by as much as a
     // candidate must make it better, does not generalise: what it bends to fit is not its
     // structure (a torque locked to a harmonic of the motor angle, beside a torque ripple at no
-    // harmonic of it: -5 to -6 %). Another missing effect can hide how much it explains, not turn its fit into a
-    // clearly worse prediction than none. Each simulation holding such a mimic runs in
-    // sub-steps: it was two thirds of an "unexplained" diagnosis (28 s of 41 s).
+    // harmonic of it: -5 to -6 %). Another missing effect can hide how much it explains, not
+    // turn its fit into a clearly worse prediction than none. Each simulation holding such a
+    // mimic runs in sub-steps: it was two thirds of an "unexplained" diagnosis (28 s of 41 s).
     (drop >= th.min_oe_drop_pct && c.error_reduction_pct >= -th.min_eq_rms_drop_pct())
         .then_some(drop)
 }
