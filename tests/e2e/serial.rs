@@ -79,6 +79,71 @@ fn direct(cfg: BoardConfig) -> (TTYPort, BoardThread) {
     (slave, BoardThread::spawn(master, cfg))
 }
 
+/// How many fresh boards a real-time QEMU test tries while its runs are starved of time.
+const STARVED_TRIES: usize = 3;
+
+/// Runs and judges `try_once` on fresh QEMU boards until its verdict can be trusted.
+/// `try_once` runs one try and judges it: `Ok(())` or what failed, with the board's
+/// statistics lines (`None`: skip, no qemu or image). A pass ends the test; a failure on runs
+/// that were not starved of time ([`run_starved`]) fails it at once; a failure on a starved
+/// run is retried on a fresh board, up to [`STARVED_TRIES`] tries, and when every try was
+/// starved the test is skipped, saying so: such a run measures the host, not the firmware or
+/// servo (stop 52's host missed 50-98 % of the board's 2 ms deadlines for an hour; a CI host
+/// missed 86 % of them and the board's Stop acknowledgement came after 200 ms).
+fn judged_unless_starved(
+    what: &str,
+    mut try_once: impl FnMut() -> Option<(Result<(), String>, Vec<String>)>,
+) {
+    for attempt in 1..=STARVED_TRIES {
+        let Some((verdict, stats)) = try_once() else {
+            return;
+        };
+        let Err(failure) = verdict else {
+            return;
+        };
+        let starved = stats.iter().any(|s| run_starved(s, 2000));
+        let stats = stats.join("; ");
+        if !starved {
+            panic!("{what}: {failure} (QEMU: {stats})");
+        }
+        if attempt < STARVED_TRIES {
+            eprintln!(
+                "{what}: retrying on a fresh board: the run was starved of time ({failure}; \
+                 QEMU: {stats})"
+            );
+        } else {
+            eprintln!(
+                "skipped: {what}: the host starved the emulated board on all {STARVED_TRIES} \
+                 tries; nothing could be measured here (last: {failure}; QEMU: {stats})"
+            );
+        }
+    }
+}
+
+/// True when the QEMU statistics line shows the run was starved of time: the emulated board
+/// overran its `period_us` (a tick served late, or a period's work longer than the period:
+/// QEMU's TCG on a loaded host), or the host missed more than a tenth of the board's sample
+/// deadlines (the host process starved: stop 41's CI saw 3873 of 5904), not the firmware's
+/// or servo's logic.
+fn run_starved(stats: &str, period_us: u64) -> bool {
+    let after = |key: &str| -> Option<u64> {
+        stats
+            .split(key)
+            .nth(1)?
+            .split_whitespace()
+            .next()?
+            .parse()
+            .ok()
+    };
+    let host_missed = match (after(" samples "), after(" missed ")) {
+        (Some(n), Some(missed)) => n > 0 && missed * 10 > n,
+        _ => false,
+    };
+    host_missed
+        || after("late ticks ").is_some_and(|n| n > 0)
+        || after("busy/period max ").is_some_and(|us| us > period_us)
+}
+
 /// Which board a protocol test runs against: the same tests run on both.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Kind {
@@ -101,14 +166,24 @@ impl TestBoard {
     /// The board's report and its output voltage at the end (NaN if still driving). For QEMU,
     /// parsed from the firmware's statistics line (written once a second).
     fn finish(self) -> (BoardReport, f64) {
+        let (rep, u_end, _) = self.finish_with_stats();
+        (rep, u_end)
+    }
+
+    /// [`TestBoard::finish`] and, for QEMU, the firmware's statistics line (none for a thread).
+    fn finish_with_stats(self) -> (BoardReport, f64, Option<String>) {
         match self {
-            TestBoard::Thread(t) => t.finish(),
+            TestBoard::Thread(t) => {
+                let (rep, u_end) = t.finish();
+                (rep, u_end, None)
+            }
             TestBoard::Qemu { mut board, stats } => {
                 std::thread::sleep(Duration::from_millis(1300));
                 board.shutdown();
                 let text = std::fs::read_to_string(&stats).unwrap_or_default();
                 let line = text.lines().last().unwrap_or_default().to_string();
-                parse_qemu_stats(&line)
+                let (rep, u_end) = parse_qemu_stats(&line);
+                (rep, u_end, Some(line))
             }
         }
     }
@@ -679,19 +754,6 @@ fn an_experiment_runs_over_serial(kind: Kind) {
         sample_period_s: 2e-3,
         ..tolerant()
     };
-    let Some((mut host, board)) = direct_on(kind, cfg) else {
-        return;
-    };
-    // `servo run` opens the same pty by its path and locks it: hand it over, keeping a plain
-    // descriptor open so that the board's end does not see the terminal hang up meanwhile.
-    host.set_exclusive(false).unwrap();
-    let port = host.name().expect("the board's pty has a path");
-    let keep_open = std::fs::OpenOptions::new()
-        .read(true)
-        .write(true)
-        .open(&port)
-        .expect("open the board's pty");
-    drop(host);
     let dir = tempfile::tempdir().unwrap();
     let g = dir.path().join("gains.toml");
     let (ok, _, err) = servo_e2e::servo(&[
@@ -715,49 +777,87 @@ fn an_experiment_runs_over_serial(kind: Kind) {
     )
     .unwrap();
     let log = dir.path().join("exp.mcap");
-    let (ok, out, err) = servo_e2e::servo(&[
-        "run",
-        "--backend",
-        "serial",
-        "--port",
-        &port,
-        "--gains",
-        g.to_str().unwrap(),
-        "--experiment",
-        exp.to_str().unwrap(),
-        "--log",
-        log.to_str().unwrap(),
-        "--board-timeout-ms",
-        "500",
-    ]);
-    drop(keep_open);
-    let (rep, u_end) = board.finish();
-    assert!(ok, "{out}\n{err}");
-    let r = servo_cli::io::read_log(&log, None).expect("log readable");
-    let (th, u, rf) = (
-        r.theta_l_rad.unwrap(),
-        r.u_v.unwrap(),
-        r.ref_rad.expect("closed-loop segments log their reference"),
-    );
-    assert_eq!(r.time_s.len(), 1500, "3 s at 2 ms");
-    let at = |t: f64| (t / 2e-3).round() as usize;
-    // The step is reached, the open-loop segment applies its voltage and turns the motor
-    // back, the last step is reached.
-    assert!((th[at(1.49)] - 1.0).abs() < 0.05, "{}", th[at(1.49)]);
-    for k in at(1.5)..at(1.8) {
-        assert_eq!(u[k], -1.0, "sample {k}");
-        assert!(rf[k].is_nan());
+    judged_unless_starved("an experiment over serial", || {
+        let (mut host, board) = direct_on(kind, cfg.clone())?;
+        // `servo run` opens the same pty by its path and locks it: hand it over, keeping a plain
+        // descriptor open so that the board's end does not see the terminal hang up meanwhile.
+        host.set_exclusive(false).unwrap();
+        let port = host.name().expect("the board's pty has a path");
+        let keep_open = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&port)
+            .expect("open the board's pty");
+        drop(host);
+        let (ok, out, err) = servo_e2e::servo(&[
+            "run",
+            "--backend",
+            "serial",
+            "--port",
+            &port,
+            "--gains",
+            g.to_str().unwrap(),
+            "--experiment",
+            exp.to_str().unwrap(),
+            "--log",
+            log.to_str().unwrap(),
+            "--board-timeout-ms",
+            "500",
+        ]);
+        drop(keep_open);
+        let (rep, u_end, stats) = board.finish_with_stats();
+        let verdict = if ok {
+            judge_experiment(&log, &rep, u_end)
+        } else {
+            Err(format!("servo run failed: {out}\n{err}"))
+        };
+        Some((verdict, stats.into_iter().collect()))
+    });
+}
+
+/// Judges [`an_experiment_runs_over_serial`]'s log and board report: the step is reached, the
+/// open-loop segment applies its voltage and turns the motor back, the last step is reached,
+/// one run without faults, 0 V at the end.
+fn judge_experiment(log: &std::path::Path, rep: &BoardReport, u_end: f64) -> Result<(), String> {
+    let r = servo_cli::io::read_log(log, None).map_err(|e| format!("{}: {e}", log.display()))?;
+    let (Some(th), Some(u), Some(rf)) = (r.theta_l_rad, r.u_v, r.ref_rad) else {
+        return Err("the log lacks theta_l, u or the closed-loop segments' reference".into());
+    };
+    if r.time_s.len() != 1500 {
+        return Err(format!(
+            "{} samples, not 1500 (3 s at 2 ms)",
+            r.time_s.len()
+        ));
     }
-    assert!(
-        th[at(1.79)] < th[at(1.5)] - 0.3,
-        "{} -> {}",
-        th[at(1.5)],
-        th[at(1.79)]
-    );
-    assert!((th[1499] - 0.5).abs() < 0.05, "ends at {}", th[1499]);
-    assert_eq!(rep.runs, 1);
-    assert!(rep.faults.is_empty(), "{:?}", rep.faults);
-    assert_eq!(u_end, 0.0);
+    let at = |t: f64| (t / 2e-3).round() as usize;
+    if (th[at(1.49)] - 1.0).abs() >= 0.05 {
+        return Err(format!("the first step ends at {} rad", th[at(1.49)]));
+    }
+    for k in at(1.5)..at(1.8) {
+        if u[k] != -1.0 || !rf[k].is_nan() {
+            return Err(format!(
+                "sample {k} of the open-loop segment: u {} V, ref {}",
+                u[k], rf[k]
+            ));
+        }
+    }
+    if th[at(1.79)] >= th[at(1.5)] - 0.3 {
+        return Err(format!(
+            "-1 V did not turn the motor back: {} -> {} rad",
+            th[at(1.5)],
+            th[at(1.79)]
+        ));
+    }
+    if (th[1499] - 0.5).abs() >= 0.05 {
+        return Err(format!("the last step ends at {} rad", th[1499]));
+    }
+    if rep.runs != 1 || !rep.faults.is_empty() || u_end != 0.0 {
+        return Err(format!(
+            "the board counted {} runs and faults {:?}, ending at {u_end} V",
+            rep.runs, rep.faults
+        ));
+    }
+    Ok(())
 }
 
 // ---- The binaries: `servo board` and `servo run`/`servo identify` with `--backend serial` as
@@ -1043,7 +1143,7 @@ mod cli {
 
 mod qemu_cli {
     use super::board_proc::{gains, run_args, servo_owned, spawn_quiet, BoardProc};
-    use super::realtime;
+    use super::{judged_unless_starved, realtime};
     use servo_e2e::servo;
     use std::path::{Path, PathBuf};
     use std::time::Duration;
@@ -1221,71 +1321,6 @@ mod qemu_cli {
             };
             Some((verdict, vec![stats]))
         });
-    }
-
-    /// How many fresh boards a real-time QEMU test tries while its runs are starved of time.
-    const STARVED_TRIES: usize = 3;
-
-    /// Runs and judges `try_once` on fresh QEMU boards until its verdict can be trusted.
-    /// `try_once` runs one try and judges it: `Ok(())` or what failed, with the board's
-    /// statistics lines (`None`: skip, no qemu or image). A pass ends the test; a failure on runs
-    /// that were not starved of time ([`run_starved`]) fails it at once; a failure on a starved
-    /// run is retried on a fresh board, up to [`STARVED_TRIES`] tries, and when every try was
-    /// starved the test is skipped, saying so: such a run measures the host, not the firmware or
-    /// servo (stop 52's host missed 50-98 % of the board's 2 ms deadlines for an hour; a CI host
-    /// missed 86 % of them and the board's Stop acknowledgement came after 200 ms).
-    fn judged_unless_starved(
-        what: &str,
-        mut try_once: impl FnMut() -> Option<(Result<(), String>, Vec<String>)>,
-    ) {
-        for attempt in 1..=STARVED_TRIES {
-            let Some((verdict, stats)) = try_once() else {
-                return;
-            };
-            let Err(failure) = verdict else {
-                return;
-            };
-            let starved = stats.iter().any(|s| run_starved(s, 2000));
-            let stats = stats.join("; ");
-            if !starved {
-                panic!("{what}: {failure} (QEMU: {stats})");
-            }
-            if attempt < STARVED_TRIES {
-                eprintln!(
-                    "{what}: retrying on a fresh board: the run was starved of time ({failure}; \
-                     QEMU: {stats})"
-                );
-            } else {
-                eprintln!(
-                    "skipped: {what}: the host starved the emulated board on all {STARVED_TRIES} \
-                     tries; nothing could be measured here (last: {failure}; QEMU: {stats})"
-                );
-            }
-        }
-    }
-
-    /// True when the QEMU statistics line shows the run was starved of time: the emulated board
-    /// overran its `period_us` (a tick served late, or a period's work longer than the period:
-    /// QEMU's TCG on a loaded host), or the host missed more than a tenth of the board's sample
-    /// deadlines (the host process starved: stop 41's CI saw 3873 of 5904), not the firmware's
-    /// or servo's logic.
-    fn run_starved(stats: &str, period_us: u64) -> bool {
-        let after = |key: &str| -> Option<u64> {
-            stats
-                .split(key)
-                .nth(1)?
-                .split_whitespace()
-                .next()?
-                .parse()
-                .ok()
-        };
-        let host_missed = match (after(" samples "), after(" missed ")) {
-            (Some(n), Some(missed)) => n > 0 && missed * 10 > n,
-            _ => false,
-        };
-        host_missed
-            || after("late ticks ").is_some_and(|n| n > 0)
-            || after("busy/period max ").is_some_and(|us| us > period_us)
     }
 
     #[test]
