@@ -778,7 +778,7 @@ fn an_experiment_runs_over_serial(kind: Kind) {
     .unwrap();
     let log = dir.path().join("exp.mcap");
     judged_unless_starved("an experiment over serial", || {
-        let (mut host, board) = direct_on(kind, cfg.clone())?;
+        let (mut host, board) = direct_on(kind, cfg)?;
         // `servo run` opens the same pty by its path and locks it: hand it over, keeping a plain
         // descriptor open so that the board's end does not see the terminal hang up meanwhile.
         host.set_exclusive(false).unwrap();
