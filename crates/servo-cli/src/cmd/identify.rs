@@ -228,6 +228,9 @@ impl Identify {
         for (rec, path) in records.iter().zip(&logs) {
             let e = Experiment::from_record(rec, &params.params)
                 .with_context(|| format!("log {}", path.display()))?;
+            if let Some(note) = &e.speed_note {
+                eprintln!("note: {note}");
+            }
             exps.push(e);
         }
         let report = identify(&exps, &params.params, &self.options())?;

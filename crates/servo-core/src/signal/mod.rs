@@ -1,7 +1,9 @@
 //! Processing of sampled signals shared by identification, model fit and comparison: the
-//! zero-phase low-pass ([`filtfilt`]), central-difference derivatives and a moving average.
+//! zero-phase low-pass ([`filtfilt`]), central-difference derivatives, a moving average and the
+//! lag of one signal behind another ([`lag`]).
 
 pub mod filtfilt;
+pub mod lag;
 pub mod quantum;
 
 use alloc::vec::Vec;
