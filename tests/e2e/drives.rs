@@ -900,3 +900,193 @@ fn each_drive_on_a_screw_axis_is_identified_diagnosed_and_added() {
         assert_eq!(back.drive, rig.drive, "[{}]", rig.name);
     }
 }
+
+/// `servo run --plant` on the built-in simulator runs the plant file's drive (issue 27's
+/// drives, beyond the logs a user brings): an experiment's open-loop `u` segments are the
+/// drive's command in its unit; the MCAP log and the CSV hold it under its own name (`i_ref`, `duty`; no `u`), the
+/// summary names it with its unit, and `servo identify` on the run's own MCAP log with the rig's
+/// nominal params recovers the truth within 3 %, which holds only if the run applied what its
+/// log says through the drive (the current clipped at its limit; the duty times the sagging
+/// supply, less the dead time). A closed loop with gains designed on the drive's model tracks
+/// its steps, its command within the drive's limit. `--voltage` on a current drive is refused
+/// naming `--command`; `servo board` with such a plant is refused naming the drive.
+#[test]
+fn servo_run_simulates_each_drive_and_logs_its_command() {
+    let _machine = servo_e2e::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for rig in [current_rig(), duty_rig()] {
+        let truth = d.join(format!("{}-truth.toml", rig.name));
+        std::fs::write(&truth, true_base(&rig)).unwrap();
+        let nominal = d.join(format!("{}-nominal.toml", rig.name));
+        std::fs::write(&nominal, rig.params_toml("")).unwrap();
+        let (signal, csv_col, unit) = match rig.drive.kind {
+            DriveKind::Current => ("i_ref", "i_ref_A", " A"),
+            _ => ("duty", "duty", " (fraction"),
+        };
+        // Open loop: a staircase of the drive's command (levels of both signs held 0.3 s), as
+        // an experiment file's `u` segments.
+        let log = d.join(format!("{}-open.mcap", rig.name));
+        let csv = d.join(format!("{}-open.csv", rig.name));
+        let exp = d.join(format!("{}-stairs.toml", rig.name));
+        let levels = [
+            0.3, -0.6, 0.9, -0.2, 0.5, -1.0, 0.7, -0.4, 0.15, -0.8, 1.0, -0.5, 0.6, -0.3, 0.8,
+            -0.9, 0.4, -0.7, 0.2, -0.15,
+        ];
+        let mut text = String::new();
+        for l in levels.iter().chain(&levels) {
+            let c = l * 0.6 * rig.cmd_max;
+            write!(text, "[[segment]]\nu = \"step:{c}\"\nduration_s = 0.3\n\n").unwrap();
+        }
+        std::fs::write(&exp, text).unwrap();
+        let (ok, out, err) = servo(&[
+            "run",
+            "--plant",
+            truth.to_str().unwrap(),
+            "--experiment",
+            exp.to_str().unwrap(),
+            "--seed",
+            "5",
+            "--log",
+            log.to_str().unwrap(),
+            "--csv",
+            csv.to_str().unwrap(),
+        ]);
+        assert!(ok, "[{}] servo run: {err}\n{out}", rig.name);
+        assert!(
+            out.contains(&format!("{signal} RMS")) && out.contains(unit),
+            "[{}] the summary does not name the command: {out}",
+            rig.name
+        );
+        let header = std::fs::read_to_string(&csv).unwrap();
+        let header = header.lines().next().unwrap().to_string();
+        let cols: Vec<&str> = header.split(',').collect();
+        assert!(
+            cols.contains(&csv_col) && !cols.contains(&"u_V"),
+            "[{}] CSV header {header}",
+            rig.name
+        );
+        let rec = servo_cli::io::read_log(&log, None).unwrap();
+        assert!(rec.u_v.is_none(), "[{}] the MCAP log holds u", rig.name);
+        let cmd = match rig.drive.kind {
+            DriveKind::Current => rec.i_ref_a.as_ref(),
+            _ => rec.duty.as_ref(),
+        }
+        .unwrap_or_else(|| panic!("[{}] no {signal} in the MCAP log", rig.name));
+        let top = cmd.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+        assert!(
+            (top - 0.6 * rig.cmd_max).abs() < 1e-9,
+            "[{}] largest command {top}",
+            rig.name
+        );
+        let v = run_json(&[
+            "identify",
+            log.to_str().unwrap(),
+            "--params",
+            nominal.to_str().unwrap(),
+            "--json",
+        ]);
+        let p = &rig.motor;
+        for (key, want) in ["j_eq_kg_m2", "b_eq_n_m_s_rad", "tau_sf_n_m"].iter().zip([
+            p.j_eq.unwrap(),
+            p.b_eq.unwrap(),
+            p.tau_sf.unwrap(),
+        ]) {
+            let got = v[key]["value"].as_f64().unwrap_or(f64::NAN);
+            within(
+                &format!("{} run -> identify {key}", rig.name),
+                got,
+                want,
+                0.03,
+            );
+        }
+        // Closed loop on gains designed for the drive's model.
+        let gains = d.join(format!("{}-gains.toml", rig.name));
+        let (ok, out, err) = servo(&[
+            "design",
+            "--model",
+            truth.to_str().unwrap(),
+            "--pm",
+            "60",
+            "--wc",
+            "30",
+            "-o",
+            gains.to_str().unwrap(),
+        ]);
+        assert!(ok, "[{}] design: {err}\n{out}", rig.name);
+        let closed = d.join(format!("{}-closed.mcap", rig.name));
+        let (ok, out, err) = servo(&[
+            "run",
+            "--plant",
+            truth.to_str().unwrap(),
+            "--gains",
+            gains.to_str().unwrap(),
+            "--ref",
+            "square:amp=1,period=2",
+            "--duration",
+            "4",
+            "--log",
+            closed.to_str().unwrap(),
+        ]);
+        assert!(ok, "[{}] closed loop: {err}\n{out}", rig.name);
+        let rec = servo_cli::io::read_log(&closed, None).unwrap();
+        let (th, rf) = (rec.theta_l_rad.unwrap(), rec.ref_rad.unwrap());
+        let cmd = match rig.drive.kind {
+            DriveKind::Current => rec.i_ref_a.unwrap(),
+            _ => rec.duty.unwrap(),
+        };
+        for t_end in [0.95, 1.95, 2.95, 3.95] {
+            let k = (t_end / 1e-3) as usize;
+            assert!(
+                (th[k] - rf[k]).abs() < 0.05,
+                "[{}] at {t_end} s theta {} vs ref {}",
+                rig.name,
+                th[k],
+                rf[k]
+            );
+        }
+        let limit = match rig.drive.kind {
+            // The loop's 10 (A) limit; the drive clips at i_limit_a itself.
+            DriveKind::Current => 10.0,
+            // 10 V of the 24 V supply.
+            _ => 10.0 / 24.0,
+        };
+        assert!(
+            cmd.iter().all(|c| c.abs() <= limit + 1e-9),
+            "[{}] a command beyond {limit}",
+            rig.name
+        );
+    }
+    // --command: the current drive's reference in A, as the summary says.
+    let truth = d.join("current-truth.toml");
+    let (ok, out, err) = servo(&[
+        "run",
+        "--plant",
+        truth.to_str().unwrap(),
+        "--command",
+        "step:1.5",
+        "--duration",
+        "0.5",
+    ]);
+    assert!(
+        ok && out.contains("i_ref RMS            1.50 A"),
+        "{err}\n{out}"
+    );
+    // --voltage on a current drive: refused, naming --command.
+    let (ok, _, err) = servo(&[
+        "run",
+        "--plant",
+        truth.to_str().unwrap(),
+        "--voltage",
+        "step:1",
+    ]);
+    assert!(
+        !ok && err.contains("--command") && err.contains("current"),
+        "{err}"
+    );
+    let (ok, _, err) = servo(&["board", "--pty", "--plant", truth.to_str().unwrap()]);
+    assert!(
+        !ok && err.contains("current") && err.contains("volts"),
+        "{err}"
+    );
+}

@@ -76,6 +76,8 @@ fn msg(k: usize) -> LoopMsg {
         i_a_a: 0.01 * k as f64,
         saturated: k.is_multiple_of(7),
         ref_omega_l_rad_s: f64::NAN,
+        i_ref_a: f64::NAN,
+        duty: f64::NAN,
     }
 }
 

@@ -215,6 +215,18 @@ fn loop_message_schema_requires_only_the_time() {
         i_a_a: 0.2,
         saturated: false,
         ref_omega_l_rad_s: f64::NAN,
+        i_ref_a: f64::NAN,
+        duty: f64::NAN,
     };
     assert!(v.is_valid(&serde_json::to_value(m).unwrap()));
+    // A current drive's message (i_ref_a, u_v null) and a duty drive's validate too.
+    for (i_ref_a, duty) in [(0.75, f64::NAN), (f64::NAN, -0.5)] {
+        let d = servo_cli::io::loop_msg::LoopMsg {
+            u_v: f64::NAN,
+            i_ref_a,
+            duty,
+            ..m
+        };
+        assert!(v.is_valid(&serde_json::to_value(d).unwrap()));
+    }
 }

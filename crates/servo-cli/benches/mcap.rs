@@ -40,6 +40,8 @@ fn msg(k: usize) -> LoopMsg {
         i_a_a: 0.2 * (t * 7.0).sin(),
         saturated: k < 10,
         ref_omega_l_rad_s: f64::NAN,
+        i_ref_a: f64::NAN,
+        duty: f64::NAN,
     }
 }
 

@@ -152,6 +152,18 @@ impl PlantArgs {
         }
     }
 
+    /// The drive of the `--plant` file (`[drive]`; the presets' voltage amplifier).
+    pub fn drive(&self) -> anyhow::Result<servo_core::drive::Drive> {
+        match &self.plant {
+            Some(path) => Ok(ModelFile::load(path).context("--plant")?.drive),
+            None => Ok(self
+                .plant_preset
+                .unwrap_or(DEFAULT_PLANT)
+                .model_file()
+                .drive),
+        }
+    }
+
     /// The plant and sensor configuration these options describe.
     pub fn load(&self) -> anyhow::Result<(Plant, SensorConfig)> {
         let preset = self.plant_preset.unwrap_or(DEFAULT_PLANT);
@@ -189,6 +201,23 @@ impl PlantArgs {
         servo_core::sim::PlantSim::new(&plant, 1e-3).context("simulated plant")?;
         Ok((plant, sensors))
     }
+}
+
+/// Refuses a `--plant` whose drive is not a voltage amplifier for `what`, a simulation that
+/// applies volts: a current reference or a duty applied as volts would be silent garbage.
+pub fn voltage_drive_only(plant: &PlantArgs, what: &str) -> anyhow::Result<()> {
+    let drive = plant.drive()?;
+    if drive.kind != servo_core::drive::DriveKind::Voltage {
+        bail!(
+            "--plant: {what} applies volts, but the plant's drive is `{}` (its command is {} \
+             [{}]): simulate it with `servo run --plant ... --command` (open loop) or `--ref` \
+             (closed loop), and identify from that log",
+            drive.kind.name(),
+            drive.kind.input_signal(),
+            drive.kind.command_unit()
+        );
+    }
+    Ok(())
 }
 
 #[cfg(test)]

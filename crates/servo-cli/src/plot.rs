@@ -333,7 +333,12 @@ pub fn plot_run_on(
         },
         &series,
     )?;
-    let u = rec.u_v.clone().unwrap_or_default();
+    // The drive's command: u [V], or a current drive's reference, or a duty drive's duty.
+    let (u, label) = match (&rec.u_v, &rec.i_ref_a, &rec.duty) {
+        (None, Some(i), _) => (i.clone(), "i_ref [A]"),
+        (None, None, Some(d)) => (d.clone(), "duty [-]"),
+        (u, _, _) => (u.clone().unwrap_or_default(), "u [V]"),
+    };
     let upath = path.with_file_name(format!(
         "{}_u.svg",
         path.file_stem().and_then(|s| s.to_str()).unwrap_or("run")
@@ -341,13 +346,13 @@ pub fn plot_run_on(
     line_chart(
         &upath,
         &Chart {
-            title: "servo run: driver input",
+            title: "servo run: the drive's command",
             x_label: "time [s]",
-            y_label: "u [V]",
+            y_label: label,
             ..Chart::default()
         },
         &[Series {
-            label: "u [V]",
+            label,
             x: &rec.time_s,
             y: &u,
         }],

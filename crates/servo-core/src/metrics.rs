@@ -5,6 +5,7 @@
 //! (the run loop of servo-hw feeds it); [`RunSummary::compute`] computes the same figures from a
 //! finished [`Record`].
 
+use crate::drive::DriveKind;
 use crate::math;
 use crate::record::Record;
 use alloc::collections::BTreeMap;
@@ -45,30 +46,43 @@ pub struct RunSummary {
     pub steps: Vec<StepMetrics>,
     /// Time with the controller output clipped at the voltage limit [s].
     pub saturation_time_s: f64,
-    /// RMS of the driver input u [V].
+    /// RMS of the drive's command: the driver input u [V], or, named by `command`, a current
+    /// drive's reference i_ref [A] or a duty drive's duty cycle.
     pub u_rms_v: f64,
+    /// The drive whose command `u_rms_v` measures (a voltage amplifier unless a run says so).
+    pub command: DriveKind,
 }
 
 impl RunSummary {
-    /// Computes the summary of `rec` (needs `u_v`; tracking figures need `ref_rad` and
-    /// `theta_l_rad`), with per-sample saturation flags `saturated` (empty: none known).
+    /// Computes the summary of `rec` (the command: `u_v`, else `i_ref_a`, else `duty`; tracking
+    /// figures need `ref_rad` and `theta_l_rad`), with per-sample saturation flags
+    /// `saturated` (empty: none known).
     /// The same figures as [`SummaryAccumulator`] fed sample by sample.
     pub fn compute(rec: &Record, saturated: &[bool], band: f64) -> RunSummary {
         let n = rec.len();
         let ts = if n >= 2 { rec.sample_period_s() } else { 0.0 };
         let mut acc = SummaryAccumulator::new(ts, band);
         let get = |v: &Option<Vec<f64>>, k: usize| v.as_ref().map_or(f64::NAN, |v| v[k]);
+        let (command, u) = [
+            (DriveKind::Voltage, &rec.u_v),
+            (DriveKind::Current, &rec.i_ref_a),
+            (DriveKind::Duty, &rec.duty),
+        ]
+        .into_iter()
+        .find(|(_, v)| v.is_some())
+        .unwrap_or((DriveKind::Voltage, &rec.u_v));
         for k in 0..n {
             acc.push(
                 rec.time_s[k],
                 get(&rec.ref_rad, k),
                 get(&rec.theta_l_rad, k),
-                get(&rec.u_v, k),
+                get(u, k),
                 saturated.get(k).copied().unwrap_or(false),
             );
         }
         let mut s = acc.finish();
-        if rec.u_v.is_none() {
+        s.command = command;
+        if u.is_none() {
             s.u_rms_v = 0.0;
         }
         s
@@ -91,6 +105,16 @@ impl RunSummary {
         )
     }
 
+    /// The key of the command's RMS in [`RunSummary::to_map`]: `u_rms_v`, `i_ref_rms_a` or
+    /// `duty_rms`.
+    pub fn command_rms_key(&self) -> &'static str {
+        match self.command {
+            DriveKind::Voltage => "u_rms_v",
+            DriveKind::Current => "i_ref_rms_a",
+            DriveKind::Duty => "duty_rms",
+        }
+    }
+
     /// Key/value form for the MCAP summary metadata record (SI units in the keys).
     pub fn to_map(&self) -> BTreeMap<String, String> {
         let mut m = BTreeMap::new();
@@ -100,7 +124,7 @@ impl RunSummary {
             "saturation_time_s".into(),
             self.saturation_time_s.to_string(),
         );
-        m.insert("u_rms_v".into(), self.u_rms_v.to_string());
+        m.insert(self.command_rms_key().into(), self.u_rms_v.to_string());
         if let Some(v) = self.err_rms_rad {
             m.insert("tracking_error_rms_rad".into(), v.to_string());
         }
@@ -335,6 +359,7 @@ impl SummaryAccumulator {
             steps: if self.e_n > 0 { self.steps } else { Vec::new() },
             saturation_time_s: self.saturated as f64 * self.ts_s,
             u_rms_v: rms(self.u_sq, self.u_n),
+            command: DriveKind::Voltage,
         }
     }
 }
@@ -447,7 +472,12 @@ impl RunSummary {
             math::sig(self.saturation_time_s, 3),
             math::sig(pct, 3)
         )?;
-        write!(f, "  u RMS                {} V", math::sig(self.u_rms_v, 3))?;
+        let rms = math::sig(self.u_rms_v, 3);
+        match self.command {
+            DriveKind::Voltage => write!(f, "  u RMS                {rms} V")?,
+            DriveKind::Current => write!(f, "  i_ref RMS            {rms} A")?,
+            DriveKind::Duty => write!(f, "  duty RMS             {rms} (fraction of the supply)")?,
+        }
         if self.steps.len() > 1 {
             writeln!(f)?;
             let (unit, k) = match metres_per_rad {

@@ -6,7 +6,9 @@
 //! reference's speed and acceleration, an open-loop voltage, or a speed reference for the speed
 //! controller [`SpeedLoop`], e.g. the identification staircase); the output is clipped to the
 //! voltage limit and applied with `apply(u_k)`, held until t_{k+1}. Row k of the record and of
-//! the log holds the measurements at t_k and u_k (servo's log convention).
+//! the log holds the measurements at t_k and u_k (servo's log convention). Behind a current or
+//! duty drive ([`RunConfig::drive`]) u_k is the drive's command (i_ref [A], a duty), logged
+//! under its own name, and the backend gets its equivalent chain's input.
 //!
 //! The pure parts (PID, speed estimator and controller, programs, step metrics) are in
 //! servo-core; this module only drives them on a backend. Samples stream to a [`LogSink`]; a
@@ -43,6 +45,7 @@ use servo_core::control::{
     ControlError, LoopCompensation, Pid, PidConfig, Program, SpeedEstimator, SpeedLoop,
     SpeedLoopConfig, SpeedProfile,
 };
+use servo_core::drive::{Drive, DriveKind};
 use servo_core::metrics::{RunSummary, SummaryAccumulator};
 use servo_core::record::Record;
 use servo_io::{LoopMsg, McapLog};
@@ -146,6 +149,17 @@ pub struct RunConfig {
     pub keep_record: bool,
     /// The speed controller (required when the program has speed parts, [`Program::Speed`]).
     pub speed_loop: Option<SpeedLoopConfig>,
+    /// The drive between the loop and the motor (a linear voltage amplifier by default). The
+    /// controllers compute in the drive's equivalent chain ([`Drive::equivalent`]: volts, amps
+    /// on a current drive), where `u_limit_v` bounds them; the drive receives, and the record
+    /// and the log hold, its command: [`Drive::command_per_input`] times the controller's
+    /// output (u [V], i_ref [A] or a duty), and an open-loop segment's value is that command,
+    /// clipped at `u_limit_v`'s equivalent. The backend gets the command's chain input
+    /// ([`Drive::input`]: the current clipped at its limit, the duty times the supply less the
+    /// dead time), so that a simulator of the equivalent chain runs the drive, and a log of
+    /// the run replays through the same [`Drive::input`]. A duty drive needs its supply
+    /// (`v_supply_v`). A board takes volts: a serial run uses [`Drive::VOLTAGE`].
+    pub drive: Drive,
 }
 
 impl RunConfig {
@@ -161,6 +175,7 @@ impl RunConfig {
             speed_bandwidth_rad_s: DEFAULT_SPEED_BANDWIDTH_RAD_S,
             keep_record: true,
             speed_loop: None,
+            drive: Drive::VOLTAGE,
         }
     }
     /// An open-loop run (voltage program) with the same defaults.
@@ -393,6 +408,22 @@ pub fn run_loop_monitored(
         ));
     }
     let u_limit = cfg.u_limit_v.min(info.voltage_limit_v);
+    let drive = &cfg.drive;
+    // The drive's command per unit of the controller's output, and the supply of a duty drive.
+    let per_input = drive.command_per_input();
+    let v_supply_v = drive.v_supply_v.unwrap_or(f64::NAN);
+    if drive.kind == DriveKind::Duty && !(v_supply_v.is_finite() && v_supply_v > 0.0) {
+        return bad(format!(
+            "a duty drive needs its supply voltage to run ([drive] v_supply_v), got {v_supply_v} V"
+        ));
+    }
+    if !(per_input.is_finite() && per_input > 0.0) {
+        return bad(format!(
+            "the {} drive's command per controller output is {per_input}: check [drive]",
+            drive.kind.name()
+        ));
+    }
+    let command_limit = u_limit * per_input;
     let mut warnings = Vec::new();
     let mut pid = match (&cfg.pid, cfg.program.needs_controller()) {
         (Some(p), _) => {
@@ -446,10 +477,13 @@ pub fn run_loop_monitored(
     // come (no allocation sized by the planned duration).
     let keep = cfg.keep_record;
     let some_if = |keep: bool| keep.then(Vec::new);
+    let command_is = |kind: DriveKind| drive.kind == kind;
     let mut rec = Record {
         source: format!("servo run on {}", info.firmware),
         time_s: Vec::new(),
-        u_v: some_if(keep),
+        u_v: some_if(keep && command_is(DriveKind::Voltage)),
+        i_ref_a: some_if(keep && command_is(DriveKind::Current)),
+        duty: some_if(keep && command_is(DriveKind::Duty)),
         theta_l_rad: some_if(keep),
         omega_l_rad_s: some_if(keep),
         i_a_a: some_if(keep),
@@ -510,12 +544,13 @@ pub fn run_loop_monitored(
                     // PID (the replay adds it as logged).
                     let ff_v = o.ff_v + (u - o.u_v);
                     let sat = o.saturated || (u != o.u_v && u.abs() >= u_limit);
-                    (u, r.pos_rad, [o.p_v, o.i_v, o.d_v, ff_v], sat)
+                    (u * per_input, r.pos_rad, [o.p_v, o.i_v, o.d_v, ff_v], sat)
                 }
-                Setpoint::Voltage { u_v } => {
+                Setpoint::Voltage { u_v: command } => {
+                    // Open loop: the drive's command itself.
                     was_open_loop = true;
-                    let u = u_v.clamp(-u_limit, u_limit);
-                    (u, f64::NAN, [0.0, 0.0, 0.0, 0.0], u != u_v)
+                    let u = command.clamp(-command_limit, command_limit);
+                    (u, f64::NAN, [0.0, 0.0, 0.0, 0.0], u != command)
                 }
                 Setpoint::Speed {
                     omega_l_rad_s,
@@ -527,11 +562,15 @@ pub fn run_loop_monitored(
                     })?;
                     let o = c.update(omega_l_rad_s, alpha_l_rad_s2, omega, u_limit);
                     w_ref = omega_l_rad_s;
-                    (o.u_v, f64::NAN, [o.p_v, o.i_v, 0.0, o.ff_v], o.saturated)
+                    let u = o.u_v * per_input;
+                    (u, f64::NAN, [o.p_v, o.i_v, 0.0, o.ff_v], o.saturated)
                 }
             };
-            backend.apply(u).map_err(|source| RunError::Apply {
-                u_v: u,
+            // `u` is the drive's command; the backend gets its chain's input (u on a voltage
+            // drive).
+            let chain_in = drive.input(u, v_supply_v);
+            backend.apply(chain_in).map_err(|source| RunError::Apply {
+                u_v: chain_in,
                 t_s: t,
                 source: Box::new(source),
             })?;
@@ -541,6 +580,8 @@ pub fn run_loop_monitored(
             if keep {
                 rec.time_s.push(t);
                 push(&mut rec.u_v, u);
+                push(&mut rec.i_ref_a, u);
+                push(&mut rec.duty, u);
                 push(&mut rec.theta_l_rad, s.theta_l_rad);
                 push(&mut rec.omega_l_rad_s, omega);
                 push(&mut rec.i_a_a, s.i_a_a);
@@ -554,7 +595,21 @@ pub fn run_loop_monitored(
                     theta_l_rad: s.theta_l_rad,
                     omega_l_rad_s: omega,
                     err_rad: r - s.theta_l_rad,
-                    u_v: u,
+                    u_v: if command_is(DriveKind::Voltage) {
+                        u
+                    } else {
+                        f64::NAN
+                    },
+                    i_ref_a: if command_is(DriveKind::Current) {
+                        u
+                    } else {
+                        f64::NAN
+                    },
+                    duty: if command_is(DriveKind::Duty) {
+                        u
+                    } else {
+                        f64::NAN
+                    },
                     ff_v: terms[3],
                     p_v: terms[0],
                     i_v: terms[1],
@@ -594,7 +649,10 @@ pub fn run_loop_monitored(
         stop,
         samples: acc.samples(),
         last_time_s: last_t,
-        summary: acc.finish(),
+        summary: RunSummary {
+            command: drive.kind,
+            ..acc.finish()
+        },
         warnings,
     })
 }

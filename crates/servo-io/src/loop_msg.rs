@@ -8,9 +8,11 @@ pub const LOOP_TOPIC: &str = "/servo/loop";
 /// Schema name of [`LoopMsg`].
 pub const LOOP_SCHEMA_NAME: &str = "servo.Loop";
 
-/// One control sample. Row convention: measurements taken at `time_s`, `u_v` applied from then
-/// until the next sample. Fields that do not apply (no reference in an open-loop run) or were not
-/// measured are null (NaN in memory); a foreign writer may also leave them out (read as null).
+/// One control sample. Row convention: measurements taken at `time_s`, the drive's command
+/// (`u_v` on a voltage drive, `i_ref_a` on a current drive, `duty` on a PWM bridge) applied from
+/// then until the next sample. Fields that do not apply (no reference in an open-loop run, the
+/// other drives' commands) or were not measured are null (NaN in memory); a foreign writer may
+/// also leave them out (read as null).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct LoopMsg {
     /// Run time of the sample [s].
@@ -27,10 +29,12 @@ pub struct LoopMsg {
     /// Tracking error ref - theta_l [rad] (null in open loop).
     #[serde(with = "nullable", default = "nullable::absent")]
     pub err_rad: f64,
-    /// Driver input u applied until the next sample [V], after the output limit.
+    /// Driver input u applied until the next sample [V], after the output limit (null on a
+    /// current or duty drive: see `i_ref_a`, `duty`).
     #[serde(with = "nullable", default = "nullable::absent")]
     pub u_v: f64,
-    /// Feedforward part of u [V].
+    /// Feedforward part of the controller's output [V] (in the drive's equivalent chain: A on
+    /// a current drive, the bridge's effective volts on a duty drive; so are `p_v`, `i_v`, `d_v`).
     #[serde(with = "nullable", default = "nullable::absent")]
     pub ff_v: f64,
     /// Proportional term [V].
@@ -52,6 +56,22 @@ pub struct LoopMsg {
     /// staircase and ramps); null otherwise.
     #[serde(with = "nullable", default = "nullable::absent")]
     pub ref_omega_l_rad_s: f64,
+    /// Current reference i_ref sent to a current (torque) drive until the next sample [A];
+    /// null on other drives, and then left out of the message.
+    #[serde(
+        with = "nullable",
+        default = "nullable::absent",
+        skip_serializing_if = "nullable::is_null"
+    )]
+    pub i_ref_a: f64,
+    /// Duty cycle in [-1, 1] sent to a PWM bridge or smart servo until the next sample; null on
+    /// other drives, and then left out of the message.
+    #[serde(
+        with = "nullable",
+        default = "nullable::absent",
+        skip_serializing_if = "nullable::is_null"
+    )]
+    pub duty: f64,
 }
 
 impl LoopMsg {
@@ -84,6 +104,12 @@ impl LoopMsg {
             b",\"saturated\":false"
         });
         num(out, b",\"ref_omega_l_rad_s\":", self.ref_omega_l_rad_s);
+        if self.i_ref_a.is_finite() {
+            num(out, b",\"i_ref_a\":", self.i_ref_a);
+        }
+        if self.duty.is_finite() {
+            num(out, b",\"duty\":", self.duty);
+        }
         out.push(b'}');
     }
 }
@@ -93,8 +119,10 @@ impl LoopMsg {
 pub const LOOP_PROTO_NAME: &str = "servo.Loop";
 
 /// The numeric fields of the protobuf message, in field-number order (1..=11); field 12 is
-/// `saturated` (bool), field 13 `ref_omega_l_rad_s` (double). Every field is written, NaN where
-/// a value does not apply.
+/// `saturated` (bool), field 13 `ref_omega_l_rad_s` (double). Every one of them is written, NaN
+/// where a value does not apply. Fields 14 `i_ref_a` and 15 `duty` (double: a current drive's
+/// reference, a duty drive's command) are written only when they hold a value, so that a
+/// voltage drive's log is byte for byte what it was before they existed.
 const PROTO_F64_FIELDS: [&str; 11] = [
     "time_s",
     "ref_rad",
@@ -164,6 +192,8 @@ pub fn loop_descriptor_set() -> Vec<u8> {
     }
     pb_bytes(&mut msg, 2, &field("saturated", 12, 8));
     pb_bytes(&mut msg, 2, &field("ref_omega_l_rad_s", 13, 1));
+    pb_bytes(&mut msg, 2, &field("i_ref_a", 14, 1));
+    pb_bytes(&mut msg, 2, &field("duty", 15, 1));
     // FileDescriptorProto: name = 1, package = 2, message_type = 4, syntax = 12.
     let mut file = Vec::new();
     pb_bytes(&mut file, 1, b"servo/loop.proto");
@@ -176,8 +206,12 @@ pub fn loop_descriptor_set() -> Vec<u8> {
     set
 }
 
-/// Bytes of a message as [`LoopMsg::write_protobuf`] writes it.
+/// Bytes of a message as [`LoopMsg::write_protobuf`] writes it (a voltage drive's: fields 1-13;
+/// 9 more for each of fields 14 and 15 that holds a value).
 pub const PROTOBUF_LEN: usize = 110;
+
+/// The optional doubles after field 13: (field number, getter).
+const PROTO_OPTIONAL: [(u8, fn(&LoopMsg) -> f64); 2] = [(14, |m| m.i_ref_a), (15, |m| m.duty)];
 
 impl LoopMsg {
     fn f64_fields(&self) -> [f64; 11] {
@@ -212,11 +246,23 @@ impl LoopMsg {
             i_a_a: v[10],
             saturated,
             ref_omega_l_rad_s,
+            i_ref_a: f64::NAN,
+            duty: f64::NAN,
+        }
+    }
+
+    /// Sets optional field `field` (14 or 15) to `v`; other fields are ignored.
+    fn set_optional(&mut self, field: u64, v: f64) {
+        match field {
+            14 => self.i_ref_a = v,
+            15 => self.duty = v,
+            _ => {}
         }
     }
 
     /// Appends the message in protobuf wire format (`servo.Loop`, [`loop_descriptor_set`]):
-    /// fields 1-11 and 13 as 64-bit doubles, 12 as a bool; 110 bytes, no number formatting.
+    /// fields 1-11 and 13 as 64-bit doubles, 12 as a bool (110 bytes), then 14 and 15 when they
+    /// hold a value; no number formatting.
     pub fn write_protobuf(&self, out: &mut Vec<u8>) {
         // Laid out on the stack and appended at once: the log's hot path.
         let mut b = [0u8; PROTOBUF_LEN];
@@ -229,13 +275,21 @@ impl LoopMsg {
         b[101] = (13 << 3) | 1;
         b[102..110].copy_from_slice(&self.ref_omega_l_rad_s.to_le_bytes());
         out.extend_from_slice(&b);
+        for (field, get) in PROTO_OPTIONAL {
+            let v = get(self);
+            if v.is_finite() {
+                out.push((field << 3) | 1);
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
     }
 
     /// The message exactly as [`LoopMsg::write_protobuf`] lays it out (the fast path of the
     /// reader); `None` for any other layout, which the general parser reads.
     fn from_protobuf_as_written(b: &[u8]) -> Option<LoopMsg> {
-        // 101 bytes: fields 1-12 (logs written before field 13 existed); 110: with field 13.
-        if !(b.len() == 101 || b.len() == 110) || b[99] != 12 << 3 || b[100] > 1 {
+        // 101 bytes: fields 1-12 (logs written before field 13 existed); 110: with field 13;
+        // 119 or 128: with one or both of the optional fields 14 and 15.
+        if !matches!(b.len(), 101 | 110 | 119 | 128) || b[99] != 12 << 3 || b[100] > 1 {
             return None;
         }
         let ref_omega_l_rad_s = if b.len() == 110 {
@@ -258,7 +312,18 @@ impl LoopMsg {
             a.copy_from_slice(&b[at + 1..at + 9]);
             *x = f64::from_le_bytes(a);
         }
-        Some(Self::from_f64_fields(v, b[100] == 1, ref_omega_l_rad_s))
+        let mut m = Self::from_f64_fields(v, b[100] == 1, ref_omega_l_rad_s);
+        for extra in b.get(110..).unwrap_or_default().chunks(9) {
+            let (key, x) = extra.split_first()?;
+            let field = u64::from(key >> 3);
+            if key & 7 != 1 || !(14..=15).contains(&field) {
+                return None;
+            }
+            let mut a = [0u8; 8];
+            a.copy_from_slice(x);
+            m.set_optional(field, f64::from_le_bytes(a));
+        }
+        Some(m)
     }
 
     /// Parses a protobuf `servo.Loop` message (fields absent from the bytes take proto3's
@@ -270,6 +335,7 @@ impl LoopMsg {
         }
         let mut v = [0.0f64; 11];
         let mut ref_omega = f64::NAN;
+        let mut optional: [(u64, f64); 2] = [(14, f64::NAN), (15, f64::NAN)];
         let mut saturated = false;
         let mut at = 0usize;
         while at < b.len() {
@@ -287,6 +353,8 @@ impl LoopMsg {
                         v[field as usize - 1] = f64::from_le_bytes(a);
                     } else if field == 13 {
                         ref_omega = f64::from_le_bytes(a);
+                    } else if let Some(o) = optional.iter_mut().find(|o| o.0 == field) {
+                        o.1 = f64::from_le_bytes(a);
                     }
                 }
                 0 => {
@@ -312,7 +380,11 @@ impl LoopMsg {
                 w => return Err(format!("field {field}: unsupported wire type {w}")),
             }
         }
-        Ok(Self::from_f64_fields(v, saturated, ref_omega))
+        let mut m = Self::from_f64_fields(v, saturated, ref_omega);
+        for (field, x) in optional {
+            m.set_optional(field, x);
+        }
+        Ok(m)
     }
 }
 
@@ -331,14 +403,16 @@ pub fn loop_schema() -> String {
             "theta_l_rad": num("measured load angle theta_l [rad]"),
             "omega_l_rad_s": num("load speed estimate omega_l [rad/s]"),
             "err_rad": num("tracking error ref - theta_l [rad] (null in open loop)"),
-            "u_v": num("driver input voltage u applied until the next sample [V] (after the limit)"),
-            "ff_v": num("feedforward part of u [V]"),
+            "u_v": num("driver input voltage u applied until the next sample [V] (after the limit; null on a current or duty drive)"),
+            "ff_v": num("feedforward part of the controller's output [V] (A on a current drive; the bridge's effective volts on a duty drive; so are the PID terms)"),
             "p_v": num("PID proportional term [V]"),
             "i_v": num("PID integral term [V]"),
             "d_v": num("PID derivative term [V]"),
             "i_a_a": num("measured armature current i_a [A]"),
             "saturated": { "type": "boolean", "description": "controller output clipped at the voltage limit" },
-            "ref_omega_l_rad_s": num("speed reference at the load [rad/s] of a speed-controlled run (identification staircase and ramps; null otherwise)")
+            "ref_omega_l_rad_s": num("speed reference at the load [rad/s] of a speed-controlled run (identification staircase and ramps; null otherwise)"),
+            "i_ref_a": num("current reference i_ref sent to a current (torque) drive until the next sample [A] (left out on other drives)"),
+            "duty": num("duty cycle in [-1, 1] sent to a PWM bridge or smart servo until the next sample (left out on other drives)")
         },
         // Only the time is required: every other field may be null or left out (a foreign log
         // without a current sensor, an open-loop run), and the reader takes it as missing.
@@ -364,6 +438,10 @@ mod nullable {
     pub fn absent() -> f64 {
         f64::NAN
     }
+    /// True when the value is null (not finite): an optional field is then left out.
+    pub fn is_null(v: &f64) -> bool {
+        !v.is_finite()
+    }
 }
 
 /// Sample `k` of a made-up 1 kHz run for the log tests: every field different from message to
@@ -386,6 +464,12 @@ pub(crate) fn test_msg(k: usize) -> LoopMsg {
         i_a_a: 0.01 * k as f64,
         saturated: k.is_multiple_of(7),
         ref_omega_l_rad_s: if k > 900 { 2.5 } else { f64::NAN },
+        i_ref_a: if k.is_multiple_of(3) {
+            0.002 * k as f64
+        } else {
+            f64::NAN
+        },
+        duty: if k.is_multiple_of(4) { -0.5 } else { f64::NAN },
     }
 }
 
@@ -409,8 +493,14 @@ mod tests {
             i_a_a: 0.1,
             saturated: true,
             ref_omega_l_rad_s: 12.5,
+            i_ref_a: f64::NAN,
+            duty: -0.75,
         };
         let s = serde_json::to_string(&m).unwrap();
+        assert!(
+            !s.contains("i_ref_a") && s.contains("\"duty\":-0.75"),
+            "{s}"
+        );
         assert!(s.contains("\"ref_rad\":null"), "{s}");
         let b: LoopMsg = serde_json::from_str(&s).unwrap();
         assert!(b.ref_rad.is_nan() && b.err_rad.is_nan());
@@ -436,6 +526,8 @@ mod tests {
                 u_v: -v,
                 ref_omega_l_rad_s: v,
                 saturated: v > 0.5,
+                i_ref_a: v,
+                duty: -v,
                 ..m
             };
             let mut out = Vec::new();
@@ -446,7 +538,40 @@ mod tests {
             let theirs = serde_json::to_value(x).unwrap();
             assert_eq!(ours, theirs, "{}", String::from_utf8_lossy(&out));
         }
-        // Protobuf: exact round trip, NaN included.
+        // Protobuf: exact round trip, NaN included; the optional fields only when set (a
+        // voltage drive's message is 110 bytes, as before they existed).
+        for (i_ref_a, duty, len) in [
+            (f64::NAN, f64::NAN, 110),
+            (1.5, f64::NAN, 119),
+            (f64::NAN, -0.25, 119),
+            (1.5, -0.25, 128),
+        ] {
+            let x = LoopMsg { i_ref_a, duty, ..m };
+            let mut pb = Vec::new();
+            x.write_protobuf(&mut pb);
+            assert_eq!(pb.len(), len);
+            let back = LoopMsg::from_protobuf(&pb).unwrap();
+            assert_eq!(
+                back.f64_fields().map(f64::to_bits),
+                x.f64_fields().map(f64::to_bits)
+            );
+            assert_eq!(
+                [back.i_ref_a, back.duty].map(f64::to_bits),
+                [i_ref_a, duty].map(f64::to_bits)
+            );
+            // The general parser reads the same (the optional fields moved to the front).
+            let mut moved = pb[110..].to_vec();
+            moved.extend_from_slice(&pb[..110]);
+            let back = LoopMsg::from_protobuf(&moved).unwrap();
+            assert_eq!(
+                [back.i_ref_a, back.duty].map(f64::to_bits),
+                [i_ref_a, duty].map(f64::to_bits)
+            );
+        }
+        let m = LoopMsg {
+            duty: f64::NAN,
+            ..m
+        };
         let mut pb = Vec::new();
         m.write_protobuf(&mut pb);
         assert_eq!(pb.len(), 110);
@@ -510,8 +635,7 @@ mod tests {
         );
         let names: Vec<&str> = msg.field.iter().map(|f| f.name()).collect();
         let mut expected: Vec<&str> = PROTO_F64_FIELDS.to_vec();
-        expected.push("saturated");
-        expected.push("ref_omega_l_rad_s");
+        expected.extend(["saturated", "ref_omega_l_rad_s", "i_ref_a", "duty"]);
         assert_eq!(names, expected);
         for (i, f) in msg.field.iter().enumerate() {
             assert_eq!(f.number(), i as i32 + 1, "{}", f.name());
@@ -541,6 +665,8 @@ mod tests {
             saturated: bool,
             #[prost(double, tag = "13")]
             ref_omega_l_rad_s: f64,
+            #[prost(double, tag = "14")]
+            i_ref_a: f64,
         }
         let m = LoopMsg {
             time_s: 1.25,
@@ -556,10 +682,13 @@ mod tests {
             i_a_a: 0.0625,
             saturated: true,
             ref_omega_l_rad_s: 12.5,
+            i_ref_a: 0.75,
+            duty: f64::NAN,
         };
         let mut pb = Vec::new();
         m.write_protobuf(&mut pb);
         let d = Loop::decode(pb.as_slice()).unwrap();
+        assert_eq!(d.i_ref_a, 0.75);
         assert_eq!(
             (
                 d.time_s,

@@ -311,6 +311,8 @@ pub fn parse_mcap_signals(
         (Signal::OmegaL, |m| m.omega_l_rad_s),
         (Signal::IA, |m| m.i_a_a),
         (Signal::Ref, |m| m.ref_rad),
+        (Signal::IRef, |m| m.i_ref_a),
+        (Signal::Duty, |m| m.duty),
     ]
     .into_iter()
     .filter(|(s, _)| wants(*s))
@@ -741,6 +743,8 @@ pub fn record_of(msgs: &[LoopMsg], source: &str) -> Record {
         omega_l_rad_s: col(|m| m.omega_l_rad_s),
         i_a_a: col(|m| m.i_a_a),
         ref_rad: col(|m| m.ref_rad),
+        i_ref_a: col(|m| m.i_ref_a),
+        duty: col(|m| m.duty),
         ..Record::default()
     }
 }
@@ -767,6 +771,8 @@ pub fn loop_msgs_of(rec: &Record) -> Vec<LoopMsg> {
                 i_a_a: get(&rec.i_a_a, k),
                 saturated: false,
                 ref_omega_l_rad_s: f64::NAN,
+                i_ref_a: get(&rec.i_ref_a, k),
+                duty: get(&rec.duty, k),
             }
         })
         .collect()
@@ -819,6 +825,8 @@ mod tests {
             && eq(a.d_v, b.d_v)
             && eq(a.i_a_a, b.i_a_a)
             && eq(a.ref_omega_l_rad_s, b.ref_omega_l_rad_s)
+            && eq(a.i_ref_a, b.i_ref_a)
+            && eq(a.duty, b.duty)
             && a.saturated == b.saturated
     }
 

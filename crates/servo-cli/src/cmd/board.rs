@@ -121,6 +121,10 @@ impl Board {
             return self.run_qemu();
         }
         let (plant, sensors) = self.plant.load()?;
+        crate::plant_args::voltage_drive_only(
+            &self.plant,
+            "servo board (its protocol carries volts)",
+        )?;
         let cfg = self.config()?;
         let mut board = VirtualBoard::new(&plant, sensors, cfg)
             .context("virtual board (--period-ms, --watchdog-ms, --current-scale-a)")?;

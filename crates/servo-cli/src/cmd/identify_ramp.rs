@@ -85,6 +85,10 @@ fn open_backend(args: &RampArgs) -> anyhow::Result<Box<dyn Backend>> {
         )?))
     } else {
         let (plant, sensors) = args.plant.load()?;
+        crate::plant_args::voltage_drive_only(
+            &args.plant,
+            "identify --ramp (the handout's voltage experiments)",
+        )?;
         Ok(Box::new(servo_hw::sim::SimBackend::new(
             &plant, sensors, 1e-3,
         )?))

@@ -5,10 +5,12 @@
 //! servo run --gains gains.toml --ref step:1.5 --duration 5 --log run.mcap
 //! servo run --gains gains.toml --ref step:90deg --plant-effect saturation:limit=6 --csv run.csv
 //! servo run --voltage step:3 --duration 2 --log open_loop.mcap        (open loop, no gains)
+//! servo run --plant torque_drive.toml --command step:0.5 --log i_ref.mcap  (0.5 A to the drive)
 //! servo run --experiment experiments/steps.toml --gains gains.toml --log steps.mcap
 //! ```
 
 mod backend;
+mod program;
 mod said;
 
 use crate::gains_file::GainsFile;
@@ -16,10 +18,7 @@ use crate::io::{meta_keys, write_csv_on, McapLog, McapLogOptions};
 use crate::live;
 use crate::model_file::ModelFile;
 use crate::plant_args::PlantArgs;
-use crate::reference_file::load_experiment_on;
 use anyhow::{anyhow, bail, Context};
-use servo_core::control::program::Program;
-use servo_core::control::Reference;
 use servo_core::metrics::RunSummary;
 use servo_hw::run::logged::close_log;
 use servo_hw::run::{LogSink, RunConfig, RunOutput, StopOutcome, StopReason};
@@ -58,18 +57,25 @@ pub struct Run {
     /// `trap:distance=3,vmax=10,amax=100`, `square:amp=1,period=2`, `prbs:amp=0.5,bit=0.05`.
     /// On a linear axis (a `--plant` or `--model` file with a screw or belt `[transmission]`)
     /// positions are lengths in m (`step:10mm`, `trap:20mm,vmax=50mm/s,amax=1m/s2`).
-    #[arg(long = "ref", value_name = "REF", conflicts_with_all = ["voltage", "experiment"])]
+    #[arg(long = "ref", value_name = "REF", conflicts_with_all = ["voltage", "command", "experiment"])]
     pub reference: Option<String>,
 
     /// Experiment file (TOML, see `experiments/`): a sequence of closed-loop reference and
-    /// open-loop voltage segments. The run lasts the experiment's duration unless --duration.
-    #[arg(long, value_name = "FILE", conflicts_with = "voltage")]
+    /// open-loop segments (`u`: the drive's command, in V, A or duty). The run lasts the
+    /// experiment's duration unless --duration.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["voltage", "command"])]
     pub experiment: Option<PathBuf>,
 
     /// Open loop: driver input u [V] from a generator read in volts, e.g. `step:3`,
     /// `sine:amp=2,freq=1`, `prbs:amp=3,bit=0.02`.
-    #[arg(long, value_name = "REF")]
+    #[arg(long, value_name = "REF", conflicts_with = "command")]
     pub voltage: Option<String>,
+
+    /// Open loop: the drive's command from a generator, in the drive's unit: u [V] on a voltage
+    /// amplifier, the current reference i_ref [A] on a current drive, the duty cycle in [-1, 1]
+    /// on a PWM bridge or smart servo (a `--plant` file's `[drive]`), e.g. `step:0.5`.
+    #[arg(long, value_name = "REF")]
+    pub command: Option<String>,
 
     /// Run length [s] (default: the experiment's duration, else 5 s).
     #[arg(long, value_name = "SECONDS")]
@@ -185,39 +191,6 @@ impl Run {
         }
     }
 
-    /// The program and the text describing it (for the log's metadata); positions in metres on
-    /// a linear axis of travel `metres_per_rad` [m/rad].
-    fn program(
-        &self,
-        duration_s: Option<f64>,
-        metres_per_rad: Option<f64>,
-    ) -> anyhow::Result<(Program, String)> {
-        let d = duration_s.unwrap_or(5.0);
-        match (&self.reference, &self.voltage, &self.experiment) {
-            (Some(r), None, None) => Ok((
-                Program::Position(
-                    Reference::parse_on(r, metres_per_rad)
-                        .map_err(|e| anyhow!("--ref `{r}`: {e}"))?,
-                ),
-                r.clone(),
-            )),
-            (None, Some(v), None) => {
-                let r = Reference::parse(v).map_err(|e| anyhow!("--voltage `{v}`: {e}"))?;
-                Ok((Program::open_loop(r, d)?, format!("voltage {v}")))
-            }
-            (None, None, Some(path)) => {
-                let exp = load_experiment_on(path, metres_per_rad)?;
-                let text = std::fs::read_to_string(path).unwrap_or_default();
-                Ok((Program::Segments(exp.segments), text))
-            }
-            (None, None, None) => bail!(
-                "give a position reference (--ref step:1.5), an open-loop voltage (--voltage step:3) \
-                 or an experiment file (--experiment experiments/steps.toml)"
-            ),
-            _ => bail!("--ref, --voltage and --experiment exclude each other"),
-        }
-    }
-
     /// Runs and reports; used by `servo run` and by tests.
     pub fn execute(&self) -> anyhow::Result<RunReport> {
         for p in [&self.log, &self.csv, &self.plot].into_iter().flatten() {
@@ -246,7 +219,8 @@ impl Run {
         }
         let axis = self.axis()?;
         let metres = axis.metres_per_rad();
-        let (program, program_text) = self.program(self.duration, metres)?;
+        let drive = self.drive()?;
+        let (program, program_text) = self.program(self.duration, metres, &drive)?;
         if let Some(m) = metres {
             eprintln!(
                 "linear axis ({}, {:.4} mm per radian of the screw/pulley): references in m (suffix mm, um), the CSV log in metres (x_m, v_x_m_s, ref_m)",
@@ -266,12 +240,7 @@ impl Run {
         let gains_src = gains.as_ref().zip(gains_name.as_deref());
         let ctl = run_controller(gains_src, &self.pid, self.ts, self.u_limit)?;
         let (ts_s, u_limit_v, pid) = (ctl.ts_s, ctl.u_limit_v, ctl.pid);
-        let what = match (&self.reference, &self.voltage, &self.experiment) {
-            (Some(r), _, _) => format!("--ref `{r}`"),
-            (_, Some(v), _) => format!("--voltage `{v}`"),
-            (_, _, Some(p)) => format!("--experiment {}", p.display()),
-            _ => String::from("the program"),
-        };
+        let what = self.program_flag();
         program
             .check_sampling(ts_s)
             .map_err(|e| anyhow!("{what}: {e} ({:.4} ms)", 1e3 * ts_s))?;
@@ -324,6 +293,7 @@ impl Run {
             // Samples stay in memory only for --csv and --plot; the log and the summary stream.
             keep_record: self.csv.is_some() || self.plot.is_some(),
             speed_loop: None,
+            drive,
         };
         // A simulation faster than real time: log chunks by wall-clock time, fast compression.
         let fast = self.backend == BackendKind::Sim && !self.realtime;

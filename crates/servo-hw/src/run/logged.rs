@@ -9,6 +9,7 @@ use super::{chain, effective_pid_config, RunError, RunOutput};
 use crate::backend::BoardInfo;
 use crate::serial::LinkStats;
 use servo_core::control::{LoopCompensation, PidConfig};
+use servo_core::drive::Drive;
 use servo_core::sim::SensorConfig;
 use servo_core::Plant;
 use servo_io::compensation::CompensationChoice;
@@ -23,14 +24,17 @@ use std::collections::BTreeMap;
 pub struct RunMetadata(pub BTreeMap<String, String>);
 
 impl RunMetadata {
-    /// The plant a simulator runs: its model file (with the sensors), its effects and the
-    /// noise seed, so that `servo compare` and `diagnose` know the truth of a simulated log.
+    /// The plant a simulator runs behind `drive`: its model file (with the drive and the
+    /// sensors), its effects and the noise seed, so that `servo compare` and `diagnose` know the
+    /// truth of a simulated log.
     pub fn simulated_plant(
         &mut self,
         plant: &Plant,
+        drive: &Drive,
         sensors: SensorConfig,
     ) -> servo_io::Result<&mut Self> {
         let mut mf = ModelFile::from_plant(plant);
+        mf.drive = *drive;
         mf.sensors = Some(sensors);
         self.put(meta_keys::PLANT_TOML, mf.to_toml()?);
         let effects: Vec<String> = plant.effects.iter().map(|e| e.to_string()).collect();

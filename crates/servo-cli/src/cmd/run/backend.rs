@@ -27,7 +27,7 @@ impl super::Run {
                         .context("--soft-limit-rev")?,
                     None => sim,
                 };
-                meta.simulated_plant(&plant, sensors)?;
+                meta.simulated_plant(&plant, &self.plant.drive()?, sensors)?;
                 Ok((Box::new(sim), meta))
             }
             BackendKind::Serial => {
