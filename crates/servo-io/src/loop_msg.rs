@@ -210,8 +210,11 @@ pub fn loop_descriptor_set() -> Vec<u8> {
 /// 9 more for each of fields 14 and 15 that holds a value).
 pub const PROTOBUF_LEN: usize = 110;
 
+/// Reads one field of a message.
+type Field = fn(&LoopMsg) -> f64;
+
 /// The optional doubles after field 13: (field number, getter).
-const PROTO_OPTIONAL: [(u8, fn(&LoopMsg) -> f64); 2] = [(14, |m| m.i_ref_a), (15, |m| m.duty)];
+const PROTO_OPTIONAL: [(u8, Field); 2] = [(14, |m| m.i_ref_a), (15, |m| m.duty)];
 
 impl LoopMsg {
     fn f64_fields(&self) -> [f64; 11] {
