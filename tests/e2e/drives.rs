@@ -1090,3 +1090,84 @@ fn servo_run_simulates_each_drive_and_logs_its_command() {
         "{err}"
     );
 }
+
+/// `servo design`'s check through `servo run`'s loop runs the design plant's drive, as `servo
+/// run --plant` does: on a current drive whose reference is clipped at 0.5 A (below what the
+/// 2 rad step asks), the overshoot and settling the design reports for the 2 rad step at t = 0 are
+/// what `servo run` then measures with the written gains (the check had run the equivalent
+/// chain without the drive's clip, and reported another loop).
+#[test]
+fn design_checks_gains_through_the_drive_servo_run_simulates() {
+    let _machine = servo_e2e::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let truth = dir.path().join("clipped.toml");
+    std::fs::write(
+        &truth,
+        "[params]\nk_t = 0.045\nj_m = 2.0e-5\nn = 8.0\nj_eq = 6.0e-5\nb_eq = 1.0e-5\n\
+         tau_sf = 0.1\n\n[drive]\nkind = \"current\"\nbandwidth_hz = 300\ni_limit_a = 0.5\n",
+    )
+    .unwrap();
+    let gains = dir.path().join("gains.toml");
+    let v = run_json(&[
+        "design",
+        "--model",
+        truth.to_str().unwrap(),
+        "--overshoot",
+        "0.1",
+        "--settling-time",
+        "0.5",
+        "--step-min",
+        "0.5",
+        "--step-max",
+        "2",
+        "--json",
+        "-o",
+        gains.to_str().unwrap(),
+    ]);
+    let log = dir.path().join("step.mcap");
+    let case = v["run_check"]["cases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["start"] == "atstart" && c["step_rad"].as_f64() == Some(2.0))
+        .unwrap_or_else(|| panic!("no 2 rad case: {}", v["run_check"]))
+        .clone();
+    let (ok, out, err) = servo(&[
+        "run",
+        "--plant",
+        truth.to_str().unwrap(),
+        "--gains",
+        gains.to_str().unwrap(),
+        "--ref",
+        "step:2",
+        "--duration",
+        "5",
+        "--log",
+        log.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}\n{out}");
+    eprintln!("design's check: {case}\nservo run: {out}");
+    // `  overshoot (max)      22.7 % over 1 step(s)`: three significant digits.
+    let run_os: f64 = out
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("overshoot (max)"))
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|x| x.parse().ok())
+        .unwrap_or_else(|| panic!("no overshoot in {out}"));
+    let design_os = case["overshoot_pct"].as_f64().unwrap_or(f64::NAN);
+    assert!(
+        (design_os - run_os).abs() < 0.051 * (1.0 + run_os.abs() / 10.0),
+        "design's check {case} vs servo run overshoot {run_os} %"
+    );
+    // The clip acts here: the loop asks for more than the drive's 0.5 A.
+    let rec = servo_cli::io::read_log(&log, None).unwrap();
+    let asked = rec
+        .i_ref_a
+        .unwrap()
+        .iter()
+        .fold(0.0f64, |m, i| m.max(i.abs()));
+    assert!(
+        asked > 0.6,
+        "the loop asked for {asked} A at most: the clip did not act"
+    );
+}

@@ -33,6 +33,9 @@ pub struct TrackingRun<'a> {
     pub duration_s: f64,
     /// Ramp-in of the effects' compensation [s].
     pub ramp_s: f64,
+    /// The drive between the loop and the plant ([`RunConfig::drive`]), as `servo run --plant`
+    /// runs it.
+    pub drive: servo_core::drive::Drive,
 }
 
 /// One rung of the ladder.
@@ -92,6 +95,7 @@ pub fn tracking_rung(
         u_limit_v: run.u_limit_v,
         keep_record: false,
         feedforward: Some(comp),
+        drive: run.drive,
         ..RunConfig::closed_loop(run.program.clone(), run.pid, run.duration_s)
     };
     let out = run_loop(&mut backend, &cfg, None)?;

@@ -16,6 +16,7 @@ use crate::sim::SimBackend;
 use servo_core::control::{
     LoopCompensation, PidConfig, PlacedSegment, Program, Reference, Segment,
 };
+use servo_core::drive::Drive;
 use servo_core::sim::SensorConfig;
 use servo_core::Plant;
 
@@ -74,24 +75,32 @@ impl CaseOutcome {
     }
 }
 
-/// Runs every case of every step size on `plant` with `pid` (as `servo run` builds it: limits,
+/// The simulated rig the cases run on, as `servo run --plant` simulates it: the plant (the
+/// drive's equivalent chain), its sensors, and the drive the controller's output goes through
+/// ([`RunConfig::drive`]: a current clipped at its limit, a duty at its own, the dead time).
+#[derive(Debug, Clone, Copy)]
+pub struct CaseRig<'a> {
+    pub plant: &'a Plant,
+    pub sensors: SensorConfig,
+    pub drive: Drive,
+}
+
+/// Runs every case of every step size on `rig` with `pid` (as `servo run` builds it: limits,
 /// anti-windup, discretisation), holding each step `hold_s` [s].
 pub fn run_step_cases(
-    plant: &Plant,
-    sensors: SensorConfig,
+    rig: &CaseRig,
     pid: &PidConfig,
     u_limit_v: f64,
     steps_rad: &[f64],
     hold_s: f64,
 ) -> Result<Vec<CaseOutcome>, RunError> {
-    run_step_cases_compensated(plant, sensors, pid, u_limit_v, steps_rad, hold_s, None)
+    run_step_cases_compensated(rig, pid, u_limit_v, steps_rad, hold_s, None)
 }
 
 /// [`run_step_cases`] with `feedforward` (a model's compensation, `servo run --ff`) added to the
 /// PID as `servo run` adds it.
 pub fn run_step_cases_compensated(
-    plant: &Plant,
-    sensors: SensorConfig,
+    rig: &CaseRig,
     pid: &PidConfig,
     u_limit_v: f64,
     steps_rad: &[f64],
@@ -120,12 +129,13 @@ pub fn run_step_cases_compensated(
                     (Program::Segments(placed), 3.0 * hold_s, 0.5 * hold_s)
                 }
             };
-            let mut backend = SimBackend::new(plant, sensors, pid.ts_s)
+            let mut backend = SimBackend::new(rig.plant, rig.sensors, pid.ts_s)
                 .map_err(|e| RunError::Config(format!("simulator: {e}")))?;
             let cfg = RunConfig {
                 u_limit_v,
                 keep_record: false,
                 feedforward: feedforward.copied(),
+                drive: rig.drive,
                 ..RunConfig::closed_loop(program, *pid, duration_s)
             };
             let run = run_loop(&mut backend, &cfg, None)?;

@@ -100,6 +100,7 @@ fn ladder_on(log: &LogData, mf: &ModelFile, plant: &Plant) -> Result<Vec<Trackin
         program: servo_core::control::Program::Segments(exp.segments),
         duration_s,
         ramp_s: 0.0,
+        drive: mf.drive,
     };
     tracking_ladder(&run, choice.linear, &effects, &choice.custom).map_err(|e| format!("{e}"))
 }

@@ -11,7 +11,7 @@ use servo_core::design::verify::{loop_with_stiffness, SpringLoop};
 use servo_core::effects::{AngleFrom, Compensation, EffectKind};
 use servo_core::stiffness::{stiffness_range, StiffnessRange};
 use servo_hw::run::compensation_check::{tracking_ladder, TrackingRun, TrackingRung};
-use servo_hw::run::step_cases::{run_step_cases_compensated, CaseOutcome};
+use servo_hw::run::step_cases::{run_step_cases_compensated, CaseOutcome, CaseRig};
 use servo_io::compensation::CompensationChoice;
 
 /// Step sizes of the step check, evenly from --step-min to --step-max.
@@ -122,7 +122,12 @@ impl Design {
             })
             .collect();
         let cases = |ff: Option<&servo_core::control::LoopCompensation>| {
-            run_step_cases_compensated(&plant, sensors, &pid, u_limit_v, &steps, HOLD_S, ff)
+            let rig = CaseRig {
+                plant: &plant,
+                sensors,
+                drive: mf.drive,
+            };
+            run_step_cases_compensated(&rig, &pid, u_limit_v, &steps, HOLD_S, ff)
                 .map_err(|e| anyhow!("checking the design on {}: {e}", path.display()))
         };
         let steps_without = cases(None)?;
@@ -143,6 +148,7 @@ impl Design {
             program: servo_core::control::Program::Segments(exp.segments.clone()),
             duration_s,
             ramp_s: self.comp.ff_ramp_s,
+            drive: mf.drive,
         };
         let effects: Vec<EffectKind> = plant
             .effects

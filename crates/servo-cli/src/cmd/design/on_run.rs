@@ -4,7 +4,7 @@
 //! move (servo_hw::run::step_cases).
 
 use super::*;
-use servo_hw::run::step_cases::{run_step_cases, CaseOutcome};
+use servo_hw::run::step_cases::{run_step_cases, CaseOutcome, CaseRig};
 
 /// Step sizes of the check: the range's ends and evenly in between (0.2, 0.3, ..., 1 rad for the
 /// default range).
@@ -53,6 +53,11 @@ impl Design {
     ) -> anyhow::Result<RunCheck> {
         let (pid, u_limit_v) = servo_hw::run::pid_from_gains(gains, "the designed gains")?;
         let (plant, sensors) = self.run_plant().load()?;
+        let rig = CaseRig {
+            plant: &plant,
+            sensors,
+            drive: self.run_plant().drive()?,
+        };
         let (settling_max_s, unchecked, hold_s) = match specs.speed {
             Some(SpeedTarget::Settling { band, time_s }) if (band - 0.05).abs() < 1e-12 => {
                 (Some(time_s), None, (8.0 * time_s).max(0.8))
@@ -67,7 +72,7 @@ impl Design {
             ),
         };
         let steps = specs.grid(RUN_CHECK_STEPS);
-        let cases = run_step_cases(&plant, sensors, &pid, u_limit_v, &steps, hold_s)
+        let cases = run_step_cases(&rig, &pid, u_limit_v, &steps, hold_s)
             .map_err(|e| anyhow!("checking the design through servo run's loop: {e}"))?;
         Ok(RunCheck {
             plant: self.plant_words(),

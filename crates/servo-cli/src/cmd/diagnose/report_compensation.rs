@@ -63,6 +63,9 @@ pub(super) fn compensation_html(base: &Plant, found: &Plant) -> anyhow::Result<S
         program: servo_core::control::Program::Segments(exp.segments.clone()),
         duration_s: exp.duration_s(),
         ramp_s: 0.0,
+        // The section's PID is the handout's design on the linear part, driving the equivalent
+        // chain directly.
+        drive: servo_core::drive::Drive::VOLTAGE,
     };
     let ladder = tracking_ladder(&run, FeedforwardConfig::FULL, &comp, &[])
         .map_err(|e| anyhow!("the compensation section's tracking runs: {e}"))?;
