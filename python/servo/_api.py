@@ -432,13 +432,16 @@ def simulate(
     seed: Optional[int] = None,
     *,
     voltage: Optional[str] = None,
+    command: Optional[str] = None,
     **options: Any,
 ) -> Log:
     """Runs the loop on the simulator (``servo run``) and returns its log (MCAP kept with the
     Log, with the plant, controller and reference in its metadata). ``plant``: Model or path
     (default the lab plant); ``gains``: controller (DesignResult, Gains or path) with
     ``reference`` (``"step:1.5"``, ``"sine:amp=0.5,freq=1"`` [rad]); or open loop ``voltage``
-    (``"prbs:amp=3,bit=0.02"`` [V]). ``seed``: the sensor noise. Options as the flags
+    (``"prbs:amp=3,bit=0.02"`` [V]), or on a plant with a current or duty ``[drive]`` its open-loop
+    ``command`` in the drive's unit (``"step:0.5"``: A or duty; the log then holds ``i_ref_a`` or
+    ``duty``). ``seed``: the sensor noise. Options as the flags
     (``plant_effect="backlash:gap=0.04"``, ``current_noise_a``, ``ts``)."""
     keep = tempdir()
     tmp = keep.name
@@ -452,6 +455,8 @@ def simulate(
         args += ["--ref", reference]
     if voltage is not None:
         args += ["--voltage", voltage]
+    if command is not None:
+        args += ["--command", command]
     args += ["--duration", repr(float(duration_s))]
     if seed is not None:
         args += ["--seed", str(int(seed))]

@@ -188,7 +188,8 @@ def _digest(arrays: Mapping[str, np.ndarray]) -> str:
 class Log:
     """A log: signals as numpy arrays with SI units in their names (``time_s``, ``u_v``,
     ``theta_l_rad``, ``theta_m_rad``, ``omega_l_rad_s``, ``omega_m_rad_s``, ``i_a_a``,
-    ``ref_rad``). A log read from a file keeps its path (and its metadata: the controller and
+    ``ref_rad``; a current drive's command ``i_ref_a``, a PWM bridge's ``duty`` and its supply
+    ``v_supply_v``). A log read from a file keeps its path (and its metadata: the controller and
     reference a closed-loop run was made with) and the commands read that file."""
 
     def __init__(
@@ -230,9 +231,14 @@ class Log:
         omega_l_rad_s: Any = None,
         omega_m_rad_s: Any = None,
         ref_rad: Any = None,
+        i_ref_a: Any = None,
+        duty: Any = None,
+        v_supply_v: Any = None,
     ) -> "Log":
         """A log from arrays in SI units: sample times [s], driver input u [V] applied from
-        each row to the next, load angle [rad], armature current [A], ... (same lengths)."""
+        each row to the next (or a current drive's reference ``i_ref_a`` [A], a PWM bridge's
+        ``duty`` in [-1, 1] with its supply ``v_supply_v`` [V]), load angle [rad], armature
+        current [A], ... (same lengths)."""
         given = dict(
             time_s=time_s,
             u_v=u_v,
@@ -242,6 +248,9 @@ class Log:
             omega_l_rad_s=omega_l_rad_s,
             omega_m_rad_s=omega_m_rad_s,
             ref_rad=ref_rad,
+            i_ref_a=i_ref_a,
+            duty=duty,
+            v_supply_v=v_supply_v,
         )
         sig = {}
         for k, v in given.items():

@@ -160,7 +160,7 @@ mod anyhow_like {
     pub type Result<T> = std::result::Result<T, String>;
 }
 
-const SIGNALS: [&str; 8] = [
+const SIGNALS: [&str; 11] = [
     "time_s",
     "u_v",
     "theta_l_rad",
@@ -169,6 +169,9 @@ const SIGNALS: [&str; 8] = [
     "omega_m_rad_s",
     "i_a_a",
     "ref_rad",
+    "i_ref_a",
+    "duty",
+    "v_supply_v",
 ];
 
 fn columns_of(r: Record) -> Vec<(&'static str, Vec<f64>)> {
@@ -181,6 +184,9 @@ fn columns_of(r: Record) -> Vec<(&'static str, Vec<f64>)> {
         ("omega_m_rad_s", r.omega_m_rad_s),
         ("i_a_a", r.i_a_a),
         ("ref_rad", r.ref_rad),
+        ("i_ref_a", r.i_ref_a),
+        ("duty", r.duty),
+        ("v_supply_v", r.v_supply_v),
     ] {
         if let Some(v) = v {
             out.push((name, v));
@@ -255,6 +261,9 @@ fn write_csv(
             "omega_m_rad_s" => rec.omega_m_rad_s = Some(v),
             "i_a_a" => rec.i_a_a = Some(v),
             "ref_rad" => rec.ref_rad = Some(v),
+            "i_ref_a" => rec.i_ref_a = Some(v),
+            "duty" => rec.duty = Some(v),
+            "v_supply_v" => rec.v_supply_v = Some(v),
             other => {
                 return Ok(Some(format!(
                     "unknown signal `{other}`; expected one of {}",

@@ -130,3 +130,24 @@ def test_trend_equals_cli_and_reuses_its_cache(story, cli_json, tmp_path):
     again = servo.trend(fleet, story / "model.toml", cache=str(cache), jobs=1,
                         limits={"tau_sf": 0.05})
     assert again.cache["hits"] == 4 and again.cache["new"] == 0, again.cache
+
+
+def test_a_current_drive_run_keeps_its_command(cli_json, tmp_path):
+    """servo.simulate on a plant with a current [drive] and an open-loop ``command``: the log
+    holds the drive's reference ``i_ref_a`` [A] and no ``u_v``; identify on it equals the CLI's,
+    and the same samples as arrays (written as servo's CSV, ``i_ref_A``) identify the same."""
+    plant = tmp_path / "drive.toml"
+    plant.write_text(
+        "[params]\nk_t = 0.045\nj_m = 2.0e-5\nn = 8.0\nj_eq = 6.0e-5\nb_eq = 1.0e-5\n"
+        "tau_sf = 0.1\n\n[drive]\nkind = \"current\"\nbandwidth_hz = 300\ni_limit_a = 5.0\n"
+    )
+    log = servo.simulate(plant=plant, command="prbs:amp=1,bit=0.3", duration_s=6.0, seed=3)
+    sig = log.signals
+    assert "i_ref_a" in sig and "u_v" not in sig, list(sig)
+    assert abs(abs(sig["i_ref_a"]).max() - 1.0) < 1e-12
+    r = servo.identify(log, params=plant)
+    assert r.to_dict() == cli_json("identify", log.path, "--params", plant)
+    j = r.to_dict()["j_eq_kg_m2"]["value"]
+    assert abs(j / 6.0e-5 - 1.0) < 0.03, j
+    mem = servo.Log.from_arrays(**sig)
+    assert servo.identify(mem, params=plant).to_dict()["j_eq_kg_m2"] == r.to_dict()["j_eq_kg_m2"]
