@@ -1072,6 +1072,38 @@ fn servo_run_simulates_each_drive_and_logs_its_command() {
         ok && out.contains("i_ref RMS            1.50 A"),
         "{err}\n{out}"
     );
+    // A current drive commanded by an analog voltage (k_i_a_per_v = 0.5 A/V): its command is
+    // the voltage u, logged as u, and 2 V make 1 A.
+    let analog = d.join("analog.toml");
+    std::fs::write(
+        &analog,
+        std::fs::read_to_string(&truth)
+            .unwrap()
+            .replace("[drive]\n", "[drive]\nk_i_a_per_v = 0.5\n"),
+    )
+    .unwrap();
+    let csv = d.join("analog.csv");
+    let (ok, out, err) = servo(&[
+        "run",
+        "--plant",
+        analog.to_str().unwrap(),
+        "--voltage",
+        "step:2",
+        "--duration",
+        "0.5",
+        "--current-noise-a",
+        "0",
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(
+        ok && out.contains("u RMS                2.00 V"),
+        "{err}\n{out}"
+    );
+    let rec = servo_cli::io::read_log(&csv, None).unwrap();
+    assert!(rec.i_ref_a.is_none() && rec.u_v.is_some());
+    let i_end = *rec.i_a_a.unwrap().last().unwrap();
+    assert!((i_end - 1.0).abs() < 1e-3, "2 V at 0.5 A/V gave {i_end} A");
     // --voltage on a current drive: refused, naming --command.
     let (ok, _, err) = servo(&[
         "run",

@@ -286,6 +286,17 @@ impl Drive {
         }
     }
 
+    /// The drive whose log signal and unit carry this drive's command
+    /// ([`DriveKind::input_signal`], [`DriveKind::command_unit`]): its own kind, except a
+    /// current drive commanded by an analog voltage (`k_i_a_per_v`), whose command is a voltage
+    /// u [V] as [`Drive::prepare`] reads it.
+    pub fn command_kind(&self) -> DriveKind {
+        match self.kind {
+            DriveKind::Current if self.k_i_a_per_v.is_some() => DriveKind::Voltage,
+            k => k,
+        }
+    }
+
     /// The current loop's time constant [s] (current drive).
     pub fn loop_lag_s(&self) -> f64 {
         self.bandwidth_hz

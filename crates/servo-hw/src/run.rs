@@ -477,7 +477,8 @@ pub fn run_loop_monitored(
     // come (no allocation sized by the planned duration).
     let keep = cfg.keep_record;
     let some_if = |keep: bool| keep.then(Vec::new);
-    let command_is = |kind: DriveKind| drive.kind == kind;
+    // The log signal of the command (u for a current drive commanded by an analog voltage).
+    let command_is = |kind: DriveKind| drive.command_kind() == kind;
     let mut rec = Record {
         source: format!("servo run on {}", info.firmware),
         time_s: Vec::new(),
@@ -650,7 +651,7 @@ pub fn run_loop_monitored(
         samples: acc.samples(),
         last_time_s: last_t,
         summary: RunSummary {
-            command: drive.kind,
+            command: drive.command_kind(),
             ..acc.finish()
         },
         warnings,

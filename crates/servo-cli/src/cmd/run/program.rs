@@ -47,10 +47,11 @@ impl super::Run {
         let d = duration_s.unwrap_or(5.0);
         let open_loop = |flag: &str, text: &str| -> anyhow::Result<(Program, String)> {
             let r = Reference::parse(text).map_err(|e| anyhow!("{flag} `{text}`: {e}"))?;
+            let command = drive.command_kind();
             let what = format!(
                 "{} {text} [{}]",
-                drive.kind.input_signal(),
-                drive.kind.command_unit()
+                command.input_signal(),
+                command.command_unit()
             );
             Ok((Program::open_loop(r, d)?, what))
         };
@@ -68,7 +69,7 @@ impl super::Run {
                 r.clone(),
             )),
             (None, Some(v), None, None) => {
-                if drive.kind != DriveKind::Voltage {
+                if drive.command_kind() != DriveKind::Voltage {
                     bail!(
                         "--voltage `{v}`: the plant's drive is `{}`, whose command is {} [{}], \
                          not a voltage: give the open-loop command with --command",
