@@ -295,7 +295,7 @@ impl LoopMsg {
         if !matches!(b.len(), 101 | 110 | 119 | 128) || b[99] != 12 << 3 || b[100] > 1 {
             return None;
         }
-        let ref_omega_l_rad_s = if b.len() == 110 {
+        let ref_omega_l_rad_s = if b.len() >= 110 {
             if b[101] != (13 << 3) | 1 {
                 return None;
             }
@@ -562,6 +562,7 @@ mod tests {
                 [back.i_ref_a, back.duty].map(f64::to_bits),
                 [i_ref_a, duty].map(f64::to_bits)
             );
+            assert_eq!(back.ref_omega_l_rad_s, 12.5);
             // The general parser reads the same (the optional fields moved to the front).
             let mut moved = pb[110..].to_vec();
             moved.extend_from_slice(&pb[..110]);
