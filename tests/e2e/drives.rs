@@ -1029,6 +1029,20 @@ fn servo_run_simulates_each_drive_and_logs_its_command() {
             closed.to_str().unwrap(),
         ]);
         assert!(ok, "[{}] closed loop: {err}\n{out}", rig.name);
+        // The gains' unit is the controller's output's: amps on the current drive (its
+        // reference), volts on the bridge (sent as volts over the supply).
+        let text = std::fs::read_to_string(&gains).unwrap();
+        let unit = match rig.drive.kind {
+            DriveKind::Current => "A",
+            _ => "V",
+        };
+        assert!(
+            text.contains(&format!("# K_P [{unit}/rad]"))
+                && out.contains(&format!(" {unit}/rad, K_I"))
+                && out.contains(&format!("output limit +-10 {unit}")),
+            "[{}] {text}\n{out}",
+            rig.name
+        );
         let rec = servo_cli::io::read_log(&closed, None).unwrap();
         let (th, rf) = (rec.theta_l_rad.unwrap(), rec.ref_rad.unwrap());
         let cmd = match rig.drive.kind {

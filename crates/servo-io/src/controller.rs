@@ -340,6 +340,8 @@ pub fn pid_config(
     let (opts, logged) = (src.opts, src.logged);
     let file = src.gains_file.map(|(g, _)| g);
     let label = src.gains_file.map_or("", |(_, l)| l);
+    // The output's unit: amps for gains designed for a current drive.
+    let out = file.map_or("V", GainsFile::output_unit);
     let mut parts = Vec::new();
 
     // Gains.
@@ -373,7 +375,7 @@ pub fn pid_config(
             gains.kp, gains.ki, gains.kd, gains.tl_s
         ),
         format!(
-            "K_P = {:.5} V/rad, K_I = {:.5} V/(rad s), K_D = {:.5} V s/rad, T_L = {:.4e} s at T_s = {ts_s:.4e} s",
+            "K_P = {:.5} {out}/rad, K_I = {:.5} {out}/(rad s), K_D = {:.5} {out} s/rad, T_L = {:.4e} s at T_s = {ts_s:.4e} s",
             gains.kp, gains.ki, gains.kd, gains.tl_s
         ),
         &gains_src,
@@ -497,7 +499,7 @@ pub fn pid_config(
             parts.push(ControllerPart::new(
                 "u_limit_v",
                 l.to_string(),
-                format!("output limit +-{l} V"),
+                format!("output limit +-{l} {out}"),
                 s,
             ));
         }

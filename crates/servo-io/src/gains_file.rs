@@ -170,6 +170,22 @@ impl GainsFile {
         out
     }
 
+    /// The unit of the controller's output [V or A]: amps when `[design] drive` says the gains
+    /// were designed for a current drive (the output is the drive's current reference, the
+    /// input of its equivalent chain); volts otherwise (a duty drive's bridge voltage, which the
+    /// drive sends as the duty u / V_supply, included).
+    pub fn output_unit(&self) -> &'static str {
+        match self
+            .design
+            .as_ref()
+            .and_then(|d| d.get("drive"))
+            .and_then(|v| v.as_str())
+        {
+            Some("current") => "A",
+            _ => "V",
+        }
+    }
+
     /// Writes the file with units in comments.
     pub fn save(&self, path: &Path) -> anyhow::Result<()> {
         std::fs::write(path, self.to_toml_commented())
@@ -179,10 +195,21 @@ impl GainsFile {
     /// TOML with units in comments.
     pub fn to_toml_commented(&self) -> String {
         let p = &self.pid;
+        let output = match self
+            .design
+            .as_ref()
+            .and_then(|d| d.get("drive"))
+            .and_then(|v| v.as_str())
+        {
+            Some("current") => "the current drive's reference i_ref [A]",
+            Some("duty") => "the bridge's voltage u [V] (the duty drive sends u / V_supply)",
+            _ => "driver input u [V]",
+        };
+        let a = self.output_unit();
         let mut s = format!(
-            "# servo controller: PID on the load-angle error [rad], output driver input u [V]\n\
+            "# servo controller: PID on the load-angle error [rad], output {output}\n\
              # C(s) = kp + ki/s + kd s/(tl_s s + 1)\n[pid]\n\
-             kp = {:e}  # K_P [V/rad]\nki = {:e}  # K_I [V/(rad s)]\nkd = {:e}  # K_D [V s/rad]\n\
+             kp = {:e}  # K_P [{a}/rad]\nki = {:e}  # K_I [{a}/(rad s)]\nkd = {:e}  # K_D [{a} s/rad]\n\
              tl_s = {:e}  # real-derivative time constant T_L [s]\nts_s = {:e}  # sample period [s]\n",
             p.kp, p.ki, p.kd, p.tl_s, p.ts_s
         );
@@ -192,7 +219,7 @@ impl GainsFile {
             ));
         }
         if let Some(u) = p.u_limit_v {
-            s.push_str(&format!("u_limit_v = {u:e}  # output limit [V]\n"));
+            s.push_str(&format!("u_limit_v = {u:e}  # output limit [{a}]\n"));
         }
         if let Some(d) = p.derivative_on {
             let name = match d {

@@ -129,6 +129,13 @@ impl super::Design {
         d.insert("exact".into(), self.exact.into());
         // What the design assumed, for `servo run` to compare with what it runs.
         d.insert("plant".into(), self.plant_key().into());
+        // A drive other than a voltage amplifier: the output's unit follows it (amps on a
+        // current drive), in the file's comments and in `servo run`'s words.
+        if let Ok(drive) = self.run_plant().drive() {
+            if drive.kind != servo_core::drive::DriveKind::Voltage {
+                d.insert("drive".into(), drive.kind.name().into());
+            }
+        }
         d.insert("meet_specs".into(), self.meet_specs.into());
         if self.meet_specs {
             d.insert("translated_wgc_rad_s".into(), tr.spec.omega_gc.into());
