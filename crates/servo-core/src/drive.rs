@@ -297,6 +297,19 @@ impl Drive {
         }
     }
 
+    /// The range of the equivalent chain's input, where the drive itself clips: a duty drive's
+    /// whole bridge, duty_limit x V_supply [V]; a current drive's limit i_limit_a [A]; `None`
+    /// for a voltage amplifier (its input range is the board's or the simulator's, 10 V) and a
+    /// current drive without a limit. A simulator of the chain takes it as its input limit, and
+    /// a loop on the drive as its default output limit, instead of an amplifier's 10 V.
+    pub fn input_range(&self) -> Option<f64> {
+        match self.kind {
+            DriveKind::Duty => self.v_supply_v.map(|v| v * self.duty_limit.unwrap_or(1.0)),
+            DriveKind::Current => self.i_limit_a,
+            DriveKind::Voltage => None,
+        }
+    }
+
     /// The current loop's time constant [s] (current drive).
     pub fn loop_lag_s(&self) -> f64 {
         self.bandwidth_hz

@@ -130,7 +130,8 @@ pub struct Run {
     #[arg(long, value_name = "SECONDS")]
     pub ts: Option<f64>,
 
-    /// Driver input limit [V] (default: the gains file's u_limit_v, else 10 V).
+    /// Driver input limit [V] (default: the gains file's u_limit_v, else 10 V; on a duty or
+    /// current drive its range: duty_limit x V_supply, i_limit_a [A]).
     #[arg(long = "u-limit", value_name = "VOLTS")]
     pub u_limit: Option<f64>,
 
@@ -238,7 +239,13 @@ impl Run {
         };
         let gains_name = self.gains.as_ref().map(|p| p.display().to_string());
         let gains_src = gains.as_ref().zip(gains_name.as_deref());
-        let ctl = run_controller(gains_src, &self.pid, self.ts, self.u_limit)?;
+        // Without --u-limit or a gains file's limit, a drive's loop may use the drive's range
+        // (a duty drive's whole bridge, a current drive's limit), not an amplifier's 10 V.
+        let limit = match (self.u_limit, gains.as_ref().and_then(|g| g.pid.u_limit_v)) {
+            (None, None) => drive.input_range(),
+            _ => self.u_limit,
+        };
+        let ctl = run_controller(gains_src, &self.pid, self.ts, limit)?;
         let (ts_s, u_limit_v, pid) = (ctl.ts_s, ctl.u_limit_v, ctl.pid);
         let what = self.program_flag();
         program

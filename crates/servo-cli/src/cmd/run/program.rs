@@ -12,10 +12,18 @@ impl super::Run {
     /// The drive the run's commands go to: the `--plant` file's `[drive]` on the simulator (a
     /// voltage amplifier when it has none); a board takes volts.
     pub(super) fn drive(&self) -> anyhow::Result<Drive> {
-        match self.backend {
-            BackendKind::Sim => self.plant.drive(),
-            BackendKind::Serial => Ok(Drive::VOLTAGE),
+        let drive = match self.backend {
+            BackendKind::Sim => self.plant.drive()?,
+            BackendKind::Serial => Drive::VOLTAGE,
+        };
+        if drive.kind == DriveKind::Duty && drive.v_supply_v.is_none() {
+            bail!(
+                "--plant: a duty drive is simulated with its supply voltage: give [drive] \
+                 v_supply_v in the plant file (a log may carry it as a column; a simulation \
+                 cannot)"
+            );
         }
+        Ok(drive)
     }
 
     /// The flag that gives the program, as the messages name it (`--ref `step:1``).
