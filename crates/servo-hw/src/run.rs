@@ -479,6 +479,8 @@ pub fn run_loop_monitored(
     let some_if = |keep: bool| keep.then(Vec::new);
     // The log signal of the command (u for a current drive commanded by an analog voltage).
     let command_is = |kind: DriveKind| drive.command_kind() == kind;
+    // The command in the log field of `kind` (null in the other drives' fields).
+    let only_for = |kind: DriveKind, u: f64| if command_is(kind) { u } else { f64::NAN };
     let mut rec = Record {
         source: format!("servo run on {}", info.firmware),
         time_s: Vec::new(),
@@ -596,21 +598,9 @@ pub fn run_loop_monitored(
                     theta_l_rad: s.theta_l_rad,
                     omega_l_rad_s: omega,
                     err_rad: r - s.theta_l_rad,
-                    u_v: if command_is(DriveKind::Voltage) {
-                        u
-                    } else {
-                        f64::NAN
-                    },
-                    i_ref_a: if command_is(DriveKind::Current) {
-                        u
-                    } else {
-                        f64::NAN
-                    },
-                    duty: if command_is(DriveKind::Duty) {
-                        u
-                    } else {
-                        f64::NAN
-                    },
+                    u_v: only_for(DriveKind::Voltage, u),
+                    i_ref_a: only_for(DriveKind::Current, u),
+                    duty: only_for(DriveKind::Duty, u),
                     ff_v: terms[3],
                     p_v: terms[0],
                     i_v: terms[1],

@@ -60,6 +60,15 @@ impl SimBackend {
         self.voltage_limit_v = limit_v;
         Ok(self)
     }
+    /// Bounds the input at `drive`'s range ([`servo_core::drive::Drive::input_range`]: a duty
+    /// drive's whole bridge, a current drive's limit) when the plant is that drive's equivalent
+    /// chain, instead of an amplifier's 10 V; a voltage amplifier keeps the board's limit.
+    pub fn behind(self, drive: &servo_core::drive::Drive) -> Result<Self, HwError> {
+        match drive.input_range() {
+            Some(range) => self.with_voltage_limit(range),
+            None => Ok(self),
+        }
+    }
     /// The underlying plant simulator (true state, per-effect torques).
     /// Soft position limit: [`Backend::sample`] fails (and the run stops) when |theta_l| exceeds
     /// `limit_rad`, as a board trips its +-2 rev limit

@@ -175,15 +175,15 @@ impl GainsFile {
     /// input of its equivalent chain); volts otherwise (a duty drive's bridge voltage, which the
     /// drive sends as the duty u / V_supply, included).
     pub fn output_unit(&self) -> &'static str {
-        match self
-            .design
-            .as_ref()
-            .and_then(|d| d.get("drive"))
-            .and_then(|v| v.as_str())
-        {
+        match self.design_drive() {
             Some("current") => "A",
             _ => "V",
         }
+    }
+
+    /// `[design] drive`: the drive the gains were designed for (absent: a voltage amplifier).
+    fn design_drive(&self) -> Option<&str> {
+        self.design.as_ref()?.get("drive")?.as_str()
     }
 
     /// Writes the file with units in comments.
@@ -195,12 +195,7 @@ impl GainsFile {
     /// TOML with units in comments.
     pub fn to_toml_commented(&self) -> String {
         let p = &self.pid;
-        let output = match self
-            .design
-            .as_ref()
-            .and_then(|d| d.get("drive"))
-            .and_then(|v| v.as_str())
-        {
+        let output = match self.design_drive() {
             Some("current") => "the current drive's reference i_ref [A]",
             Some("duty") => "the bridge's voltage u [V] (the duty drive sends u / V_supply)",
             _ => "driver input u [V]",

@@ -90,11 +90,7 @@ pub fn tracking_rung(
         comp = comp.with_custom(run.model, &|n| custom.contains(&n));
     }
     let mut backend = SimBackend::new(run.truth, run.sensors, run.pid.ts_s)
-        .and_then(|b| match run.drive.input_range() {
-            // The drive's range, as `servo run --plant` simulates it.
-            Some(range) => b.with_voltage_limit(range),
-            None => Ok(b),
-        })
+        .and_then(|b| b.behind(&run.drive))
         .map_err(|e| RunError::Config(format!("simulator: {e}")))?;
     let cfg = RunConfig {
         u_limit_v: run.u_limit_v,

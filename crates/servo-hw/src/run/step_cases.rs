@@ -130,11 +130,7 @@ pub fn run_step_cases_compensated(
                 }
             };
             let mut backend = SimBackend::new(rig.plant, rig.sensors, pid.ts_s)
-                .and_then(|b| match rig.drive.input_range() {
-                    // The drive's range, as `servo run --plant` simulates it.
-                    Some(range) => b.with_voltage_limit(range),
-                    None => Ok(b),
-                })
+                .and_then(|b| b.behind(&rig.drive))
                 .map_err(|e| RunError::Config(format!("simulator: {e}")))?;
             let cfg = RunConfig {
                 u_limit_v,

@@ -21,12 +21,7 @@ impl super::Run {
                 let sim = SimBackend::new(&plant, sensors, ts_s)
                     .context("simulator")?
                     .realtime(self.realtime);
-                // Behind a duty or current drive the simulator's input is the drive's chain,
-                // whose range is the drive's, not an amplifier's 10 V.
-                let sim = match self.drive()?.input_range() {
-                    Some(range) => sim.with_voltage_limit(range).context("--plant [drive]")?,
-                    None => sim,
-                };
+                let sim = sim.behind(&self.drive()?).context("--plant [drive]")?;
                 let sim = match self.soft_limit_rev {
                     Some(rev) => sim
                         .with_position_limit(rev * std::f64::consts::TAU)
