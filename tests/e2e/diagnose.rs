@@ -1173,6 +1173,45 @@ fn a_dead_band_under_a_two_level_prbs_is_named() {
     assert!((width / 0.3 - 1.0).abs() < 0.25, "width {width} V");
 }
 
+/// The benchmark's torque ripple of 7.5 cycles per motor revolution (a user effect of the plant
+/// file, servo's own simulator, one minute of logs) through `servo diagnose --json`:
+/// "unexplained", the torque balance led by the ripple with its order in `periodic` (7.5 per
+/// motor revolution, 105 per load revolution, independent of speed), and the verdict says no set
+/// of catalogue effects was searched for it, as no catalogue torque locked to an angle takes
+/// that order (the joint search had fitted a cogging of 7 or 8 cycles that half matched it).
+#[test]
+fn a_ripple_at_no_catalogue_order_is_unexplained_without_the_joint_search() {
+    let _machine = servo_e2e::shared();
+    let dir = tempfile::tempdir().unwrap();
+    user_effect_rig(
+        dir.path(),
+        "[custom.ripple]\nacts_on = \"motor_torque\"\nexpr = \"a * sin(7.5 * theta_m + 0.3)\"\n\
+         description = \"a torque ripple of 7.5 cycles per motor revolution\"\n\
+         [custom.ripple.params]\na = { value = 4e-4, unit = \"N m\" }\n",
+    );
+    let v = diagnose_rig_json(dir.path(), "5", 1, "ripple 7.5/rev");
+    assert_eq!(v["status"], "unexplained", "{}", v["verdict"]);
+    let torque = v["balances"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|b| b["equation"] == "torque balance")
+        .unwrap_or_else(|| panic!("no torque balance: {}", v["balances"]));
+    let lead = &torque["signatures"][0];
+    assert_eq!(lead["kind"], "load_angle", "{lead}");
+    let per_motor = lead["periodic"]["cycles_per_motor_rev"].as_f64().unwrap();
+    assert!((per_motor - 7.5).abs() < 0.1, "{lead}");
+    assert_eq!(lead["periodic"]["speed_independent"], true, "{lead}");
+    let verdict = v["verdict"].as_str().unwrap();
+    assert!(
+        verdict.contains(
+            "No set of catalogue effects was searched jointly: a shape periodic in angle"
+        ),
+        "{verdict}"
+    );
+    assert!(verdict.contains("none of theirs"), "{verdict}");
+}
+
 /// A viscous friction whose slope differs between the directions: 5e-4 N m s/rad more at the
 /// load when turning forwards (2.5 times the base B_eq N^2): "unexplained" with the friction
 /// curve's "direction slopes" shape first, and `--discover` proposes b_fwd max(w_l, 0) within
@@ -1987,4 +2026,65 @@ fn cogging_below_the_noise_floor_is_complete_and_not_resolvable() {
             d.verdict
         );
     });
+}
+
+/// Writes the other simulator's logs of the benchmark's cases (`crates/servo-cli/benches/
+/// diagnose_other_sim.sh`) to `$OTHER_OUT/CASE_SEED_{open,closed}.csv`: `ripple` (a torque ripple
+/// of 7.5 cycles per motor revolution, 4e-4 N m), `encoder` (an eccentric load encoder, 0.01 rad
+/// at twice per revolution), `offset` (a current sensor offset of 0.02 A), `shaft` (a compliant
+/// shaft of 1.2 N m/rad between two halves of the inertia) and `none`, for the seeds in `$OTHER_SEEDS` (default 44 45).
+#[test]
+#[ignore = "writes the other simulator's logs to $OTHER_OUT for the diagnose benchmark"]
+fn write_other_simulator_logs() {
+    let _machine = servo_e2e::shared();
+    let out = std::path::PathBuf::from(
+        std::env::var("OTHER_OUT").unwrap_or_else(|_| "/tmp/other-sim".into()),
+    );
+    let seeds: Vec<u64> = std::env::var("OTHER_SEEDS")
+        .unwrap_or_else(|_| "44 45".into())
+        .split_whitespace()
+        .map(|s| s.parse().expect("OTHER_SEEDS: whole numbers"))
+        .collect();
+    std::fs::create_dir_all(&out).unwrap();
+    let ripple = |th_m: f64, _w: f64| 4e-4 * (7.5 * th_m + 0.3).sin();
+    let eccentric = |th_l: f64| 0.01 * (2.0 * th_l).sin();
+    let cases: [(&str, Mechanism); 5] = [
+        (
+            "ripple",
+            Mechanism {
+                motor_torque: &ripple,
+                ..Mechanism::NONE
+            },
+        ),
+        (
+            "encoder",
+            Mechanism {
+                angle_error: &eccentric,
+                ..Mechanism::NONE
+            },
+        ),
+        (
+            "offset",
+            Mechanism {
+                current_offset_a: 0.02,
+                ..Mechanism::NONE
+            },
+        ),
+        (
+            "shaft",
+            Mechanism {
+                shaft: Some((1.2, 6e-4, 0.5)),
+                ..Mechanism::NONE
+            },
+        ),
+        ("none", Mechanism::NONE),
+    ];
+    for (name, m) in &cases {
+        for &seed in &seeds {
+            let logs = other_simulator_with(m, seed);
+            for (log, part) in logs.iter().zip(["open", "closed"]) {
+                write_csv(&out.join(format!("{name}_{seed}_{part}.csv")), log);
+            }
+        }
+    }
 }

@@ -370,6 +370,16 @@ pub trait EffectModel: Sync + Send {
     fn dominant_load_candidate(&self) -> bool {
         false
     }
+    /// A torque locked to an angle (periodic in theta_m for a motor torque, in theta_l for a
+    /// load torque, its amplitude independent of speed): the orders it can take [cycles per
+    /// revolution of its side], given the search's context. The diagnosis calls a residual
+    /// periodic at any other order, or with an amplitude that changes with speed, a shape no
+    /// effect of the catalogue makes. Default `None`: not locked to an angle.
+    #[cfg(feature = "alloc")]
+    fn angle_orders(&self, ctx: &GridContext) -> Option<alloc::vec::Vec<f64>> {
+        let _ = ctx;
+        None
+    }
     /// [`SimRole::DryFriction`]: adds this effect's part to the dry friction `f` (effects are
     /// applied in registry order; a later one may replace an earlier one's levels).
     fn dry_friction(&self, v: &[f64], f: &mut torque::Friction) {

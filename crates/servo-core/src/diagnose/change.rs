@@ -132,6 +132,7 @@ impl Change {
             share: self.share_of_balance,
             explained_rms: self.explained_rms,
             on_simulation: false,
+            periodic: None,
             measured_on: alloc::format!(
                 "all {} rows of log {} (fit and held out), the base parameters refitted before and after every candidate time",
                 self.rows,

@@ -20,8 +20,8 @@ use alloc::string::String;
 use alloc::vec::Vec;
 
 /// What the verdict of `d` adds on the regimes the diagnosis judged apart: `outside`, why no
-/// set of catalogue effects was searched (a friction shape outside the catalogue), when the
-/// status is "unexplained"; `presliding`, the pre-sliding rows left out (the candidates were
+/// set of catalogue effects was searched (a shape no catalogue effect makes, [`super::outside`]),
+/// when the status is "unexplained"; `presliding`, the pre-sliding rows left out (the candidates were
 /// judged on the sliding rows), kept in `d.presliding`; `lead`, a friction the sliding rows
 /// show that only the simulation refuses, when the status is "unexplained", kept in
 /// `d.sliding_fit`; otherwise `hump`, why the breakaway friction a hump of the measured
@@ -220,6 +220,7 @@ fn attach_partial(balances: &mut [BalanceReport], ranking: &[Candidate], th: &Th
             share,
             explained_rms: c.noise_ratio * b.floor,
             on_simulation: false,
+            periodic: None,
             measured_on: alloc::format!(
                 "the held-out rows of the {} (the candidate's own judgement)",
                 c.equation.name()

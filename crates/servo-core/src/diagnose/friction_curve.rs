@@ -523,6 +523,7 @@ impl FrictionCurve {
             share: s.share,
             explained_rms: s.explained_rms,
             on_simulation: false,
+            periodic: None,
             measured_on: alloc::format!(
                 "{} sliding rows (away from standstill and velocity reversals; its share is of what the Coulomb, viscous and inertia terms refitted on them leave), {} bins of the friction curve",
                 self.sliding_rows,

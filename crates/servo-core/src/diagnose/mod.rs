@@ -43,6 +43,7 @@ mod judge;
 pub mod kinds;
 pub mod neighbours;
 mod options;
+pub mod outside;
 pub mod phrase;
 pub mod presliding;
 mod rank;
@@ -269,8 +270,13 @@ pub fn diagnose_dataset(
     // plant that changed: no model of the catalogue holds on both sides of the change).
     opts.cancel.check()?;
     let searched_first = !passed(&s);
-    let outside = friction_curve::outside_catalogue(s.curve.as_ref(), &s.survey.balances, th)
-        .filter(|_| searched_first);
+    let outside = outside::why_not_searched(
+        s.curve.as_ref(),
+        &s.survey.balances,
+        &outside::catalogue_orders(&ds.grid_context()),
+        th,
+    )
+    .filter(|_| searched_first);
     // A dynamic friction carries the residual (the lead above): what is missing is not a set of
     // catalogue effects, whose simulation has no bristles either.
     if changes.is_empty() && lead.is_none() {

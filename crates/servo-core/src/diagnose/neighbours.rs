@@ -74,6 +74,7 @@ pub(super) fn find(
                     share: 1.0 - (c / c0) * (c / c0),
                     explained_rms: math::sqrt((c0 * c0 - c * c).max(0.0)),
                     on_simulation: true,
+                    periodic: None,
                     measured_on: alloc::string::String::from(
                         "the held-out simulation error of the load angle (not the balance's residual)",
                     ),
@@ -155,6 +156,7 @@ mod tests {
             share: 0.5,
             explained_rms: 1.0,
             on_simulation: kind == "compliance",
+            periodic: None,
             measured_on: String::new(),
         }
     }

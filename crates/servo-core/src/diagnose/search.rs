@@ -20,7 +20,7 @@ use alloc::vec::Vec;
 
 /// Runs the search when it is asked for ([`DiagnoseOptions::joint_candidates`] of at least 2)
 /// and needed (no significant candidate, a balance above its floor, and not `outside`: a
-/// friction shape outside the catalogue carries the residual); `electrical_broken`: the
+/// shape no catalogue effect makes carries the residual); `electrical_broken`: the
 /// electrical veto of stage 5 holds (no torque may be named).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run(
@@ -36,8 +36,8 @@ pub(super) fn run(
 ) {
     let needed = !ranking.first().is_some_and(|c| c.significant)
         && survey.balances.iter().any(|b| b.above_noise);
-    // A friction shape outside the catalogue carries the residual: what is missing is not a set
-    // of catalogue effects ([`super::friction_curve::outside_catalogue`]).
+    // A shape no catalogue effect makes carries the residual (a friction curve's, a periodic
+    // one's): what is missing is not a set of catalogue effects ([`super::outside`]).
     if opts.joint_candidates < 2 || !needed || outside {
         return;
     }

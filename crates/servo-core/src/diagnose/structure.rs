@@ -41,6 +41,22 @@ pub struct Signature {
     /// On which rows and in which frequency band it was measured, in words (e.g. "4000 held-out
     /// rows of 2 logs at 100 rows/s, 0-25 Hz (the filter's band)").
     pub measured_on: String,
+    /// The order and modulation of a shape periodic in angle (kinds `motor_angle` and
+    /// `load_angle`); `None` for every other kind.
+    pub periodic: Option<Periodic>,
+}
+
+/// Where a residual periodic in angle sits: its order on either shaft and whether its amplitude
+/// stays the same at every speed (a torque locked to the angle) or not (an angle sensor's error
+/// grows with speed, a position-dependent friction reverses with the direction).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Periodic {
+    /// Cycles per load revolution.
+    pub cycles_per_load_rev: f64,
+    /// Cycles per motor revolution (cycles per load revolution / N).
+    pub cycles_per_motor_rev: f64,
+    /// The amplitude is independent of speed.
+    pub speed_independent: bool,
 }
 
 impl Signature {
@@ -450,6 +466,8 @@ pub fn analyse(
     let unit = sol.equation.unit();
     let measured_on = rows_phrase(ds, rows, &v);
     let mut sigs: Vec<Signature> = Vec::new();
+    // The order of the periodic shape, set on its signature once the shapes are all in.
+    let mut periodic: Option<Periodic> = None;
     let mut push = |kind: &'static str, description: String, (share, rms_x): (f64, f64)| {
         sigs.push(Signature {
             kind,
@@ -457,6 +475,7 @@ pub fn analyse(
             share,
             explained_rms: rms_x,
             on_simulation: false,
+            periodic: None,
             measured_on: measured_on.clone(),
         });
     };
@@ -624,6 +643,11 @@ pub fn analyse(
                 alloc::format!("periodic in angle at {which}, {}", mods[mi].0),
                 res,
             );
+            periodic = Some(Periodic {
+                cycles_per_load_rev: c,
+                cycles_per_motor_rev: cm,
+                speed_independent: mi == 0,
+            });
         }
     }
     // Oscillation in time (a resonance or a ripple at a fixed frequency).
@@ -725,6 +749,7 @@ pub fn analyse(
                 share: res.share,
                 explained_rms: math::sqrt(res.band_ms),
                 on_simulation: false,
+                periodic: None,
                 measured_on: alloc::format!(
                     "{} held-out rows in {} contiguous runs at {:.0} rows/s; spectrum {:.1}-{:.1} Hz with the {:.0} Hz filter's response divided out",
                     res.held_out_rows,
@@ -737,6 +762,12 @@ pub fn analyse(
             });
             resonance = Some(res);
         }
+    }
+    for s in sigs
+        .iter_mut()
+        .filter(|s| s.kind == "motor_angle" || s.kind == "load_angle")
+    {
+        s.periodic = periodic;
     }
     sigs.retain(|s| s.share >= frac(th.min_signature_share_pct) && s.explained_rms > 0.0);
     sigs.sort_by(|a, b| b.share.total_cmp(&a.share));

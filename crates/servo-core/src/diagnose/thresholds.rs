@@ -96,6 +96,15 @@ pub struct Thresholds {
     /// this share of the held-out residual of the sliding rows, and no other balance is above
     /// its floor [%].
     pub joint_skip_friction_share_pct: f64,
+    /// Nor when every balance above its floor is carried, at least this share of its held-out
+    /// residual, by a shape periodic in angle that no catalogue effect makes
+    /// ([`Thresholds::periodic_order_gap`]) [%].
+    pub joint_skip_periodic_share_pct: f64,
+    /// A shape periodic in angle this far from every order a catalogue torque locked to an
+    /// angle can take (whole cycles per motor revolution for a motor torque, per load
+    /// revolution for a load torque), or with an amplitude that changes with speed, is one no
+    /// catalogue effect makes [cycles per revolution].
+    pub periodic_order_gap: f64,
     /// A friction growing with the transmitted torque is named only below this share of
     /// |k_t i_a| (a gear that loses more of the torque it transmits is self-locking; a fit above
     /// it says the balance itself is inconsistent, e.g. the current) [%].
@@ -148,6 +157,8 @@ impl Default for Thresholds {
             friction_curve_left_pct: 50.0,
             friction_shape_min_t: 5.0,
             joint_skip_friction_share_pct: 50.0,
+            joint_skip_periodic_share_pct: 50.0,
+            periodic_order_gap: 0.25,
             max_torque_friction_share_pct: 50.0,
             change_min_noise_ratio: 1.0,
             change_min_share_pct: 50.0,
@@ -231,6 +242,10 @@ impl Thresholds {
                 why: "a shape of the measured friction curve is named only when its coefficient stands out of the noise (effective rows)" },
             Bar { name: "joint_skip_friction_share_pct", value: t.joint_skip_friction_share_pct, unit: "% of the sliding rows' residual", rule: ">=",
                 why: "a friction shape outside the catalogue that carries this much of the residual is what is missing: no set of catalogue effects is searched for it (the joint search costs most of a diagnosis)" },
+            Bar { name: "joint_skip_periodic_share_pct", value: t.joint_skip_periodic_share_pct, unit: "% of each balance's residual", rule: ">=",
+                why: "a torque or sensor error periodic in angle at an order no catalogue effect has that carries this much of every incomplete balance is what is missing: no set of catalogue effects is searched for it" },
+            Bar { name: "periodic_order_gap", value: t.periodic_order_gap, unit: "cycles per revolution", rule: ">=",
+                why: "a periodic shape this far from every order a catalogue torque locked to an angle takes (or with an amplitude that changes with speed) is none of theirs: the angle scan resolves a tenth of a cycle per load revolution" },
             Bar { name: "max_torque_friction_share_pct", value: t.max_torque_friction_share_pct, unit: "% of |k_t i_a|", rule: "<",
                 why: "a friction growing with the transmitted torque beyond this share would make the gears self-locking: the balance, not the friction, is then inconsistent" },
             Bar { name: "change_min_noise_ratio", value: t.change_min_noise_ratio, unit: "x noise floor", rule: ">=",
@@ -258,7 +273,7 @@ mod tests {
         let t = Thresholds::default();
         let table = t.table();
         // One row per field: a field added without a row (or a row twice) fails here.
-        assert_eq!(table.len(), 34);
+        assert_eq!(table.len(), 36);
         for (i, a) in table.iter().enumerate() {
             assert!(
                 table[i + 1..].iter().all(|b| b.name != a.name),

@@ -74,6 +74,10 @@ impl EffectModel for Cogging {
     fn depends_on_angle_only(&self) -> bool {
         true
     }
+    #[cfg(feature = "alloc")]
+    fn angle_orders(&self, ctx: &super::GridContext) -> Option<alloc::vec::Vec<f64>> {
+        self.search_grid("harmonic", ctx)
+    }
     fn schedule_rank(&self) -> u8 {
         // Its harmonic's search over every order is the longest fit on real logs (1.3 s of a
         // 2 x 30 s diagnosis, the others 0.1-0.5 s): started first, it ends with the rest.

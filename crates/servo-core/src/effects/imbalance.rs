@@ -60,6 +60,11 @@ impl EffectModel for Imbalance {
     fn depends_on_angle_only(&self) -> bool {
         true
     }
+    #[cfg(feature = "alloc")]
+    fn angle_orders(&self, _ctx: &super::GridContext) -> Option<alloc::vec::Vec<f64>> {
+        // m g L sin(theta_l + phi): once per load revolution.
+        Some(alloc::vec![1.0])
+    }
     fn dominant_load_candidate(&self) -> bool {
         true
     }

@@ -68,6 +68,11 @@ pub(super) fn balance_json(b: &BalanceReport) -> Value {
             "explained_rms": f(s.explained_rms),
             "measured_on": if s.on_simulation { "simulation" } else { "balance" },
             "rows_and_band": s.measured_on,
+            "periodic": s.periodic.map(|p| json!({
+                "cycles_per_load_rev": f(p.cycles_per_load_rev),
+                "cycles_per_motor_rev": f(p.cycles_per_motor_rev),
+                "speed_independent": p.speed_independent,
+            })),
         })).collect::<Vec<_>>(),
         "experiment": b.experiment,
     })
