@@ -20,6 +20,13 @@ pub struct Measured {
     pub omega_l_rad_s: Vec<f64>,
     /// True when omega_l was derived from theta_l with the zero-phase filter.
     pub speed_derived: bool,
+    /// The logged speed's lag behind the angle's derivative [samples] when it was a causal
+    /// estimate and the speed was derived from the angle instead
+    /// ([`crate::signal::lag::lagging_speed`]); `None` when no speed was logged or it was kept.
+    pub logged_speed_lag_samples: Option<f64>,
+    /// The logged speed omega_l [rad/s] when it was replaced so (the replay starts from its first
+    /// value: a zero-phase derivative is unreliable at a log's first samples).
+    pub logged_omega_l_rad_s: Option<Vec<f64>>,
     /// Armature current i_a [A], if logged.
     pub i_a_a: Option<Vec<f64>>,
     /// Position reference [rad], if logged.
@@ -89,17 +96,38 @@ impl Measured {
         if let Some(t) = &theta_l_rad {
             check("theta_l", t, n)?;
         }
-        let (omega_l_rad_s, speed_derived) =
-            match (&rec.omega_l_rad_s, &rec.omega_m_rad_s, &theta_l_rad) {
-                (Some(w), _, _) => (w.clone(), false),
-                (None, Some(wm), _) => (wm.iter().map(|v| v / n_gear).collect(), false),
-                (None, None, Some(t)) => (speed_from_position(t, dt_s, speed_filter_hz), true),
-                (None, None, None) => {
-                    return Err(CompareError::Missing(
-                        "a position or speed signal (theta_l, theta_m, omega_l or omega_m)",
-                    ))
+        let logged = match (&rec.omega_l_rad_s, &rec.omega_m_rad_s) {
+            (Some(w), _) => Some(w.clone()),
+            (None, Some(wm)) => Some(wm.iter().map(|v| v / n_gear).collect::<Vec<f64>>()),
+            (None, None) => None,
+        };
+        if let Some(w) = &logged {
+            check("omega_l", w, n)?;
+        }
+        // A logged speed that lags the angle's derivative is a causal estimate: compared with
+        // the model's speed it would count its own filter's lag as model error.
+        let derived = theta_l_rad
+            .as_ref()
+            .map(|t| speed_from_position(t, dt_s, speed_filter_hz));
+        let mut logged_speed_lag_samples = None;
+        let mut logged_omega_l_rad_s = None;
+        let (omega_l_rad_s, speed_derived) = match (logged, derived) {
+            (Some(w), Some(d)) => match crate::signal::lag::lagging_speed(&d, &w) {
+                Some(lag) => {
+                    logged_speed_lag_samples = Some(lag);
+                    logged_omega_l_rad_s = Some(w);
+                    (d, true)
                 }
-            };
+                None => (w, false),
+            },
+            (Some(w), None) => (w, false),
+            (None, Some(d)) => (d, true),
+            (None, None) => {
+                return Err(CompareError::Missing(
+                    "a position or speed signal (theta_l, theta_m, omega_l or omega_m)",
+                ))
+            }
+        };
         check("omega_l", &omega_l_rad_s, n)?;
         if let Some(i) = &rec.i_a_a {
             check("i_a", i, n)?;
@@ -114,6 +142,8 @@ impl Measured {
             theta_l_rad,
             omega_l_rad_s,
             speed_derived,
+            logged_speed_lag_samples,
+            logged_omega_l_rad_s,
             i_a_a: rec.i_a_a.clone(),
             ref_rad: rec.ref_rad.clone(),
         })

@@ -101,7 +101,12 @@ pub fn measured_state(plant: &Plant, m: &Measured, k: usize) -> PlantState {
     let p = &plant.params;
     let n = p.n;
     let theta_l = m.theta_l_rad.as_ref().map_or(0.0, |t| t[k]);
-    let omega_l = m.omega_l_rad_s[k];
+    // A logged speed replaced for its lag still holds the start, where a zero-phase derivative
+    // sees one side only: a causal estimate's first sample is the speed the log started from.
+    let omega_l = match (&m.logged_omega_l_rad_s, k) {
+        (Some(w), 0) => w.first().copied().unwrap_or(m.omega_l_rad_s[0]),
+        _ => m.omega_l_rad_s[k],
+    };
     let u_prev = if k > 0 { m.u_v[k - 1] } else { m.u_v[0] };
     let u_drv = p.k_drv * u_prev;
     let i_a = match &m.i_a_a {
@@ -135,7 +140,15 @@ const INITIAL_WINDOW_S: f64 = 0.1;
 /// section over the measured value +- 2 |omega_0| + 1 rad/s).
 pub fn initial_state(plant: &Plant, m: &Measured) -> PlantState {
     let s0 = measured_state(plant, m, 0);
-    let Some(theta) = m.theta_l_rad.as_ref().filter(|_| m.speed_derived) else {
+    let n = plant.params.n;
+    let with = |omega_l: f64| PlantState {
+        omega_l_rad_s: omega_l,
+        omega_m_rad_s: omega_l * n,
+        ..s0
+    };
+    // A logged speed replaced for its lag gave the start ([`measured_state`]).
+    let estimate = m.speed_derived && m.logged_omega_l_rad_s.is_none();
+    let Some(theta) = m.theta_l_rad.as_ref().filter(|_| estimate) else {
         return s0;
     };
     let w = ((INITIAL_WINDOW_S / m.dt_s) as usize).clamp(2, m.len().saturating_sub(1));
@@ -144,12 +157,6 @@ pub fn initial_state(plant: &Plant, m: &Measured) -> PlantState {
     }
     let Ok(mut sim) = PlantSim::new(plant, m.dt_s) else {
         return s0;
-    };
-    let n = plant.params.n;
-    let with = |omega_l: f64| PlantState {
-        omega_l_rad_s: omega_l,
-        omega_m_rad_s: omega_l * n,
-        ..s0
     };
     let mut cost = |omega_l: f64| -> f64 {
         sim.reset(with(omega_l));

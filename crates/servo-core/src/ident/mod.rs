@@ -138,16 +138,7 @@ pub struct Experiment {
     pub speed_note: Option<String>,
 }
 
-/// A logged speed lagging the derivative of the logged angle by more than this many samples is
-/// a causal estimate (servo's own runs log a 50 Hz first-order estimate: 3.2 samples at 1 kHz),
-/// and the angle's central difference, which has no lag, is used instead: a lagged speed
-/// against an unlagged torque biases J_eq and B_eq (+17 % and +10 % on a drive whose mechanical
-/// time constant is 18 ms). Half a sample: below it, the shift is within the estimate's
-/// resolution, and a speed measured without lag (a tachometer) is kept.
-pub const MAX_SPEED_LAG_SAMPLES: f64 = 0.5;
-
-/// Largest shift searched between a logged speed and the angle's derivative [samples].
-const SPEED_LAG_SEARCH_SAMPLES: usize = 50;
+pub use crate::signal::lag::MAX_SPEED_LAG_SAMPLES;
 
 impl Experiment {
     /// Prepares a record: checks finiteness and time, derives the motor speed from whatever the
@@ -197,8 +188,8 @@ impl Experiment {
                         .into_iter()
                         .map(|w| w * scale)
                         .collect();
-                    match crate::signal::lag::lag_samples(&d, &w, SPEED_LAG_SEARCH_SAMPLES) {
-                        Some(lag) if lag > MAX_SPEED_LAG_SAMPLES => {
+                    match crate::signal::lag::lagging_speed(&d, &w) {
+                        Some(lag) => {
                             speed_note = Some(alloc::format!(
                                 "{source}: the logged {name} lags the derivative of {angle_name} by \
                                  {lag:.1} samples (a causal estimate, more than \

@@ -165,6 +165,7 @@ pub(super) fn to_json(
                 "mode": r.mode.name(), "mode_reason": mc.reason,
                 "samples": r.time_s.len(), "dt_s": r.dt_s,
                 "speed_derived_from_position": l.measured.speed_derived,
+                "logged_speed_lag_samples": l.measured.logged_speed_lag_samples,
                 "controller": controller_json(l),
                 "signal": r.headline_signal().kind.name(),
                 "signals": r.signals.iter().map(|s| figures_json(s.kind, &s.figures, lin)).collect::<Vec<_>>(),

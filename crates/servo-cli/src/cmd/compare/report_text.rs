@@ -41,8 +41,18 @@ pub(super) fn print_text(
             } else {
                 "the model's speed is its state at the end of each prediction"
             };
+            let why = log
+                .measured
+                .logged_speed_lag_samples
+                .map(|lag| {
+                    format!(
+                        " (the logged speed lags the angle's derivative by {lag:.1} samples, more than {} samples: a causal estimate, whose lag would count as model error)",
+                        servo_core::signal::lag::MAX_SPEED_LAG_SAMPLES
+                    )
+                })
+                .unwrap_or_default();
             outln!(
-                "speed: derived from position (zero-phase {:.0} Hz low-pass + central differences); {model_side}",
+                "speed: derived from position (zero-phase {:.0} Hz low-pass + central differences){why}; {model_side}",
                 opts.speed_filter_hz
             );
         }
