@@ -305,6 +305,18 @@ fn compare_json(log: &Path, model: &Path, extra: &[&str]) -> Value {
     run_json(&a)
 }
 
+/// The text of `servo compare LOG --model MODEL` (it must succeed).
+fn compare_text(log: &Path, model: &Path) -> String {
+    let (ok, text, err) = servo(&[
+        "compare",
+        log.to_str().unwrap(),
+        "--model",
+        model.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    text
+}
+
 fn f(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
 }
@@ -351,13 +363,7 @@ fn closed_loop_replay_uses_the_controller_the_run_used() {
     assert!(rms < 1e-9 && check > 99.9999, "{c}");
     assert!(fit > 99.5, "fit {fit}");
     // The text says where the configuration came from.
-    let (ok, text, err) = servo(&[
-        "compare",
-        log.to_str().unwrap(),
-        "--model",
-        model.to_str().unwrap(),
-    ]);
-    assert!(ok, "{err}");
+    let text = compare_text(&log, &model);
     for part in [
         "Tustin (from the log's metadata)",
         "derivative on the measurement (from the log's metadata)",
@@ -582,13 +588,7 @@ fn a_lagging_logged_speed_is_replaced_by_the_angles_derivative() {
     };
     assert!(fit("omega_l") > 99.0, "speed fit {}", fit("omega_l"));
     assert!(fit("theta_l") > 99.5, "position fit {}", fit("theta_l"));
-    let (ok, text, err) = servo(&[
-        "compare",
-        log.to_str().unwrap(),
-        "--model",
-        model.to_str().unwrap(),
-    ]);
-    assert!(ok, "{err}");
+    let text = compare_text(&log, &model);
     assert!(
         text.contains("the logged speed lags the angle's derivative by"),
         "{text}"

@@ -2032,20 +2032,13 @@ fn cogging_below_the_noise_floor_is_complete_and_not_resolvable() {
 /// diagnose_other_sim.sh`) to `$OTHER_OUT/CASE_SEED_{open,closed}.csv`: `ripple` (a torque ripple
 /// of 7.5 cycles per motor revolution, 4e-4 N m), `encoder` (an eccentric load encoder, 0.01 rad
 /// at twice per revolution), `offset` (a current sensor offset of 0.02 A), `shaft` (a compliant
-/// shaft of 1.2 N m/rad between two halves of the inertia) and `none`, for the seeds in `$OTHER_SEEDS` (default 44 45).
+/// shaft of 1.2 N m/rad between two halves of the inertia) and `none`, for the seeds of
+/// [`bench_out_and_seeds`].
 #[test]
 #[ignore = "writes the other simulator's logs to $OTHER_OUT for the diagnose benchmark"]
 fn write_other_simulator_logs() {
     let _machine = servo_e2e::shared();
-    let out = std::path::PathBuf::from(
-        std::env::var("OTHER_OUT").unwrap_or_else(|_| "/tmp/other-sim".into()),
-    );
-    let seeds: Vec<u64> = std::env::var("OTHER_SEEDS")
-        .unwrap_or_else(|_| "44 45".into())
-        .split_whitespace()
-        .map(|s| s.parse().expect("OTHER_SEEDS: whole numbers"))
-        .collect();
-    std::fs::create_dir_all(&out).unwrap();
+    let (out, seeds) = bench_out_and_seeds();
     let ripple = |th_m: f64, _w: f64| 4e-4 * (7.5 * th_m + 0.3).sin();
     let eccentric = |th_l: f64| 0.01 * (2.0 * th_l).sin();
     let cases: [(&str, Mechanism); 5] = [
@@ -2087,4 +2080,19 @@ fn write_other_simulator_logs() {
             }
         }
     }
+}
+
+/// Where the benchmark's log writers write (`$OTHER_OUT`, default /tmp/other-sim, created) and
+/// for which seeds (`$OTHER_SEEDS`, whitespace-separated, default 44 45).
+pub(crate) fn bench_out_and_seeds() -> (std::path::PathBuf, Vec<u64>) {
+    let out = std::path::PathBuf::from(
+        std::env::var("OTHER_OUT").unwrap_or_else(|_| "/tmp/other-sim".into()),
+    );
+    std::fs::create_dir_all(&out).unwrap();
+    let seeds = std::env::var("OTHER_SEEDS")
+        .unwrap_or_else(|_| "44 45".into())
+        .split_whitespace()
+        .map(|s| s.parse().expect("OTHER_SEEDS: whole numbers"))
+        .collect();
+    (out, seeds)
 }

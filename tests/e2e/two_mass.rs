@@ -472,24 +472,17 @@ fn two_mass_inertia_change_mid_log_is_unexplained_with_its_time() {
 /// Writes the two-mass family's logs of the diagnose benchmark
 /// (`crates/servo-cli/benches/diagnose_other_sim.sh`) to `$OTHER_OUT/hump_SEED_{open,closed}.csv`:
 /// a LuGre friction with a Stribeck hump (Fs 0.02 N m, bristles of 3 N m/rad: seed 196 reads
-/// "unexplained"), 16 s open loop and 12 s closed loop per seed, for the seeds in
-/// `$OTHER_SEEDS` (default 44 45).
+/// "unexplained"), 16 s open loop and 12 s closed loop per seed, for the seeds of
+/// [`crate::diagnose::bench_out_and_seeds`].
 #[test]
 #[ignore = "writes the two-mass family's logs to $OTHER_OUT for the diagnose benchmark"]
 fn write_two_mass_logs() {
     let _machine = servo_e2e::shared();
-    let out = std::path::PathBuf::from(
-        std::env::var("OTHER_OUT").unwrap_or_else(|_| "/tmp/other-sim".into()),
-    );
-    std::fs::create_dir_all(&out).unwrap();
+    let (out, seeds) = crate::diagnose::bench_out_and_seeds();
     let mut drive = DriveTrain::null();
     drive.friction.fs = 0.02;
     drive.friction.sigma0 = 3.0;
-    for seed in std::env::var("OTHER_SEEDS")
-        .unwrap_or_else(|_| "44 45".into())
-        .split_whitespace()
-        .map(|s| s.parse::<u64>().expect("OTHER_SEEDS: whole numbers"))
-    {
+    for seed in seeds {
         for (log, part) in drive.logs(16.0, 12.0, seed).iter().zip(["open", "closed"]) {
             crate::diagnose::write_csv(&out.join(format!("hump_{seed}_{part}.csv")), log);
         }
