@@ -261,7 +261,16 @@ impl Diagnose {
             }
         }
         if let Some(path) = &self.report {
-            let html = html_report(&records, &model, first, &ladder, &diags, &opts, &self.logs)?;
+            let html = html_report(
+                &records,
+                &model,
+                first,
+                &ladder,
+                &diags,
+                &opts,
+                &self.logs,
+                &model_file.drive,
+            )?;
             std::fs::write(path, html)
                 .with_context(|| format!("writing report {}", path.display()))?;
             if !self.json {
@@ -279,7 +288,6 @@ impl Diagnose {
                 let mut mf = ModelFile::from_plant(&final_plant);
                 mf.sensors = model_file.sensors;
                 mf.transmission = model_file.transmission;
-                mf.drive = model_file.drive;
                 mf.drive = model_file.drive;
                 mf.provenance = model_file.provenance.clone();
                 if let Some(g) = gate.as_ref().filter(|_| worse) {

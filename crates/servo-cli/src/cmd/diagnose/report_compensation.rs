@@ -3,12 +3,14 @@
 //! plant; a PID designed on its linear part by the handout's Bode method (w_gc = 30 rad/s,
 //! phi_m = 60 deg, the handout's example spec) runs the standard tracking reference through
 //! `servo run`'s loop with no compensation, the linear feedforward, then each found effect's
-//! compensation added in turn (servo_hw::run::compensation_check).
+//! compensation added in turn (servo_hw::run::compensation_check), through the model file's
+//! drive as `servo run --plant` runs it (a current drive's limit, a bridge's supply).
 
 use super::*;
 use servo_core::control::FeedforwardConfig;
 use servo_core::design::controller::Discretization;
 use servo_core::design::verify::{design, DesignRequest};
+use servo_core::drive::{Drive, DriveKind};
 use servo_core::effects::Compensation;
 use servo_hw::run::compensation_check::{tracking_ladder, TrackingRun};
 use servo_io::gains_file::{GainsFile, PidSection};
@@ -16,8 +18,12 @@ use servo_io::gains_file::{GainsFile, PidSection};
 /// Control period of the section's loop [s].
 const TS_S: f64 = 1e-3;
 
-/// The section (empty when the diagnosis found no effect beyond `base`).
-pub(super) fn compensation_html(base: &Plant, found: &Plant) -> anyhow::Result<String> {
+/// The section (empty when the diagnosis found no effect beyond `base`), run through `drive`.
+pub(super) fn compensation_html(
+    base: &Plant,
+    found: &Plant,
+    drive: &Drive,
+) -> anyhow::Result<String> {
     let new: Vec<EffectKind> = found
         .effects
         .iter()
@@ -48,10 +54,13 @@ pub(super) fn compensation_html(base: &Plant, found: &Plant) -> anyhow::Result<S
     let req = DesignRequest::handout(&params, TS_S, Discretization::BackwardEuler);
     let report = design(&req).map_err(|e| anyhow!("the section's PID design: {e}"))?;
     let g = report.gains;
-    let gains = GainsFile {
-        pid: PidSection::of(&g, TS_S),
-        design: None,
-    };
+    // The loop's range is the drive's where it has one (a current drive's limit, a bridge's
+    // supply), as `servo run` takes it without a limit in the gains.
+    let mut pid = PidSection::of(&g, TS_S);
+    if let Some(range) = drive.input_range() {
+        pid.u_limit_v = Some(range);
+    }
+    let gains = GainsFile { pid, design: None };
     let (pid, u_limit_v) = servo_hw::run::pid_from_gains(&gains, "the section's gains")?;
     let exp = servo_io::reference_file::Experiment::standard_tracking()?;
     let run = TrackingRun {
@@ -63,9 +72,9 @@ pub(super) fn compensation_html(base: &Plant, found: &Plant) -> anyhow::Result<S
         program: servo_core::control::Program::Segments(exp.segments.clone()),
         duration_s: exp.duration_s(),
         ramp_s: 0.0,
-        // The section's PID is the handout's design on the linear part, driving the equivalent
-        // chain directly.
-        drive: servo_core::drive::Drive::VOLTAGE,
+        // The section's PID is the handout's design on the linear part (the drive's equivalent
+        // chain), its output sent through the drive.
+        drive: *drive,
     };
     let ladder = tracking_ladder(&run, FeedforwardConfig::FULL, &comp, &[])
         .map_err(|e| anyhow!("the compensation section's tracking runs: {e}"))?;
@@ -74,7 +83,7 @@ pub(super) fn compensation_html(base: &Plant, found: &Plant) -> anyhow::Result<S
         "<p>Predicted on the model with the effects found, a PID designed on its linear part \
          (Bode, w_gc = {:.0} rad/s, phi_m = {:.0} deg: K_P = {:.3}, K_I = {:.3}, K_D = \
          {:.4}) and the standard tracking reference (<code>experiments/tracking.toml</code>, \
-         {:.0} s), each compensation added in turn. To run it: <code>servo compare LOG --model M \
+         {:.0} s), each compensation added in turn, through the model's {}. To run it: <code>servo compare LOG --model M \
          --add EFFECT --save M2</code>, then <code>servo run --model M2 --ff all --experiment \
          experiments/tracking.toml</code>; <code>servo compare</code> on the two runs prints the \
          measured ladder.</p><table><tr><th>compensation</th><th>RMS tracking error [rad]</th>\
@@ -84,7 +93,8 @@ pub(super) fn compensation_html(base: &Plant, found: &Plant) -> anyhow::Result<S
         g.kp,
         g.ki,
         g.kd,
-        exp.duration_s()
+        exp.duration_s(),
+        drive_words(drive)
     );
     let first = ladder.first().map_or(f64::NAN, |r| r.err_rms_rad);
     for r in &ladder {
@@ -99,4 +109,21 @@ pub(super) fn compensation_html(base: &Plant, found: &Plant) -> anyhow::Result<S
     }
     h.push_str("</table>");
     Ok(h)
+}
+
+/// The drive in words, with the range the loop runs in.
+fn drive_words(drive: &Drive) -> String {
+    let range = |unit: &str| {
+        drive.input_range().map_or(String::new(), |r| {
+            format!(", the loop's output within +-{r:.3} {unit}")
+        })
+    };
+    match drive.kind {
+        DriveKind::Voltage => String::from("voltage amplifier"),
+        DriveKind::Current => format!("current drive (the PID's output in A{})", range("A")),
+        DriveKind::Duty => format!(
+            "PWM bridge (the duty is the PID's output over V_supply{})",
+            range("V")
+        ),
+    }
 }

@@ -170,6 +170,7 @@ pub(super) fn friction_chart(d: &Diagnosis) -> anyhow::Result<String> {
     Ok(h)
 }
 
+#[allow(clippy::too_many_arguments)]
 pub(super) fn html_report(
     records: &[Record],
     model: &Plant,
@@ -178,6 +179,7 @@ pub(super) fn html_report(
     diags: &[Diagnosis],
     opts: &DiagnoseOptions,
     logs: &[PathBuf],
+    drive: &servo_core::drive::Drive,
 ) -> anyhow::Result<String> {
     let last = diags.last().unwrap_or(first);
     let mut h = String::from(
@@ -269,7 +271,7 @@ pub(super) fn html_report(
     };
     if let Some(found) = found {
         h.push_str(&super::report_compensation::compensation_html(
-            model, &found,
+            model, &found, drive,
         )?);
     }
     h.push_str("</body></html>\n");
