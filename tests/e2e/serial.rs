@@ -1507,18 +1507,20 @@ mod qemu_cli {
             child.kill().unwrap(); // SIGKILL: no Stop, no 0 V from the host
             child.wait().unwrap();
             let killed = board.stats_after(Duration::from_millis(1500));
-            if !killed.contains("| u 0.000 V |") {
+            let at_zero = killed.contains("| u 0.000 V |");
+            if !at_zero && !super::board_starved(&killed, 2000) {
                 // The board's own safety: at 0 V whatever the host's load.
                 board.quit();
                 panic!("the board is not at 0 V after its host was killed: {killed}");
             }
-            if !killed.contains("last Some(Watchdog)") {
-                // At 0 V, but the run had ended otherwise before the kill (stop 54's CI: a host
-                // that missed all 304 deadlines let the motor reach its position limit): judged
-                // as any failure, retried when starved.
+            if !(at_zero && killed.contains("last Some(Watchdog)")) {
+                // Stop 54's CI runs: at 0 V but the run ended before the kill (a host that missed
+                // all 304 deadlines let the motor reach its position limit), and a board that
+                // overran its own 2 ms period 31 times (6.6 ms busy), whose statistics line of
+                // once a second had not yet caught up with the kill. Judged as any failure:
+                // retried when starved.
                 board.quit();
-                let failure =
-                    format!("the run ended before the kill, not by the watchdog: {killed}");
+                let failure = format!("the watchdog did not put the board to 0 V: {killed}");
                 return Some((Err(failure), vec![killed]));
             }
             // The next run starts cleanly and completes.
