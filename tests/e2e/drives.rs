@@ -567,24 +567,13 @@ fn each_drive_diagnoses_and_adds_a_hidden_imbalance() {
 /// section ran every drive as a voltage amplifier clipped at 10 V, whatever its own limit).
 fn check_compensation_section(rig: &Rig, report: &Path) {
     let html = std::fs::read_to_string(report).unwrap();
-    let comp = html
-        .split("<h2>Compensation</h2>")
-        .nth(1)
-        .unwrap_or_else(|| panic!("[{}] no compensation section", rig.name));
+    let (comp, rows) = crate::util::compensation_section(&html, rig.name);
     let words = match rig.drive.kind {
         DriveKind::Voltage => "through the model's voltage amplifier",
         DriveKind::Current => "through the model's current drive (the PID's output in A",
         DriveKind::Duty => "through the model's PWM bridge",
     };
     assert!(comp.contains(words), "[{}] {comp}", rig.name);
-    let rows: Vec<(String, f64)> = comp
-        .split("<tr><td>")
-        .skip(1)
-        .map(|r| {
-            let cells: Vec<&str> = r.split("</td><td>").collect();
-            (cells[0].to_string(), cells[1].parse::<f64>().unwrap())
-        })
-        .collect();
     eprintln!("[{}] compensation ladder {rows:?}", rig.name);
     assert_eq!(rows.len(), 3, "[{}] {rows:?}", rig.name);
     assert!(

@@ -390,18 +390,7 @@ fn a_three_log_diagnosis_report_shows_three_panels_of_points() {
     );
     // the compensation section (#29): the found effect's compensation, predicted on the model,
     // cuts the tracking error of the linear feedforward
-    let comp = html
-        .split("<h2>Compensation</h2>")
-        .nth(1)
-        .unwrap_or_else(|| panic!("no compensation section"));
-    let rows: Vec<(String, f64)> = comp
-        .split("<tr><td>")
-        .skip(1)
-        .map(|r| {
-            let cells: Vec<&str> = r.split("</td><td>").collect();
-            (cells[0].to_string(), cells[1].parse::<f64>().unwrap())
-        })
-        .collect();
+    let (_, rows) = crate::util::compensation_section(&html, "student");
     assert_eq!(rows.len(), 3, "{rows:?}");
     assert_eq!(rows[0].0, "no compensation", "{rows:?}");
     assert!(

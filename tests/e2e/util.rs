@@ -68,3 +68,22 @@ pub fn write_pid_gains(path: &Path) {
     .save(path)
     .unwrap();
 }
+
+/// The compensation section of a `servo diagnose --report` page (`html`): its text after the
+/// heading, and its ladder's rows as (label, RMS tracking error [rad]). Panics naming `tag`
+/// when the page has no such section.
+pub fn compensation_section(html: &str, tag: &str) -> (String, Vec<(String, f64)>) {
+    let comp = html
+        .split("<h2>Compensation</h2>")
+        .nth(1)
+        .unwrap_or_else(|| panic!("[{tag}] no compensation section"));
+    let rows = comp
+        .split("<tr><td>")
+        .skip(1)
+        .map(|r| {
+            let cells: Vec<&str> = r.split("</td><td>").collect();
+            (cells[0].to_string(), cells[1].parse::<f64>().unwrap())
+        })
+        .collect();
+    (comp.to_string(), rows)
+}
