@@ -24,9 +24,9 @@ pub struct Measured {
     /// estimate and the speed was derived from the angle instead
     /// ([`crate::signal::lag::lagging_speed`]); `None` when no speed was logged or it was kept.
     pub logged_speed_lag_samples: Option<f64>,
-    /// The logged speed omega_l [rad/s] when it was replaced so (the replay starts from its first
-    /// value: a zero-phase derivative is unreliable at a log's first samples).
-    pub logged_omega_l_rad_s: Option<Vec<f64>>,
+    /// The logged speed's first sample omega_l [rad/s] when it was replaced so (the replay starts
+    /// from it: a zero-phase derivative is unreliable at a log's first samples).
+    pub logged_omega_l0_rad_s: Option<f64>,
     /// Armature current i_a [A], if logged.
     pub i_a_a: Option<Vec<f64>>,
     /// Position reference [rad], if logged.
@@ -110,12 +110,12 @@ impl Measured {
             .as_ref()
             .map(|t| speed_from_position(t, dt_s, speed_filter_hz));
         let mut logged_speed_lag_samples = None;
-        let mut logged_omega_l_rad_s = None;
+        let mut logged_omega_l0_rad_s = None;
         let (omega_l_rad_s, speed_derived) = match (logged, derived) {
             (Some(w), Some(d)) => match crate::signal::lag::lagging_speed(&d, &w) {
                 Some(lag) => {
                     logged_speed_lag_samples = Some(lag);
-                    logged_omega_l_rad_s = Some(w);
+                    logged_omega_l0_rad_s = w.first().copied();
                     (d, true)
                 }
                 None => (w, false),
@@ -143,7 +143,7 @@ impl Measured {
             omega_l_rad_s,
             speed_derived,
             logged_speed_lag_samples,
-            logged_omega_l_rad_s,
+            logged_omega_l0_rad_s,
             i_a_a: rec.i_a_a.clone(),
             ref_rad: rec.ref_rad.clone(),
         })

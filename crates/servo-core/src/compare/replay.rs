@@ -103,8 +103,8 @@ pub fn measured_state(plant: &Plant, m: &Measured, k: usize) -> PlantState {
     let theta_l = m.theta_l_rad.as_ref().map_or(0.0, |t| t[k]);
     // A logged speed replaced for its lag still holds the start, where a zero-phase derivative
     // sees one side only: a causal estimate's first sample is the speed the log started from.
-    let omega_l = match (&m.logged_omega_l_rad_s, k) {
-        (Some(w), 0) => w.first().copied().unwrap_or(m.omega_l_rad_s[0]),
+    let omega_l = match (m.logged_omega_l0_rad_s, k) {
+        (Some(w0), 0) => w0,
         _ => m.omega_l_rad_s[k],
     };
     let u_prev = if k > 0 { m.u_v[k - 1] } else { m.u_v[0] };
@@ -147,7 +147,7 @@ pub fn initial_state(plant: &Plant, m: &Measured) -> PlantState {
         ..s0
     };
     // A logged speed replaced for its lag gave the start ([`measured_state`]).
-    let estimate = m.speed_derived && m.logged_omega_l_rad_s.is_none();
+    let estimate = m.speed_derived && m.logged_omega_l0_rad_s.is_none();
     let Some(theta) = m.theta_l_rad.as_ref().filter(|_| estimate) else {
         return s0;
     };
