@@ -213,7 +213,8 @@ mod helper {
         };
         let job: Box<dyn FnOnce() + Send + '_> = Box::new(job);
         // SAFETY: the job borrows what `fb` borrows, which lives until this function returns.
-        // The job runs at most once, on the helper, and ends by sending its result (a panic in
+        // The job runs at most once, on the helper (or below, here, if the helper were gone),
+        // and ends by sending its result (a panic in
         // `fb` is caught and sent too); this function does not return or unwind before it has
         // received that result, or learnt that the job was dropped unrun (the channel
         // disconnected). Both happen after the job's last use of anything borrowed.
