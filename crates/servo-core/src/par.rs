@@ -214,10 +214,10 @@ mod helper {
         let job: Box<dyn FnOnce() + Send + '_> = Box::new(job);
         // SAFETY: the job borrows what `fb` borrows, which lives until this function returns.
         // The job runs at most once, on the helper (or below, here, if the helper were gone),
-        // and ends by sending its result (a panic in
-        // `fb` is caught and sent too); this function does not return or unwind before it has
-        // received that result, or learnt that the job was dropped unrun (the channel
-        // disconnected). Both happen after the job's last use of anything borrowed.
+        // and ends by sending its result (a panic in `fb` is caught and sent too); this
+        // function does not return or unwind before it has received that result, or learnt
+        // that the job was dropped unrun (the channel disconnected). Both happen after the
+        // job's last use of anything borrowed.
         let job: Job = unsafe { std::mem::transmute::<Box<dyn FnOnce() + Send + '_>, Job>(job) };
         let sent = helper.send(job);
         let a = catch_unwind(AssertUnwindSafe(fa));
