@@ -227,10 +227,9 @@ pub(super) fn search(
         // The agreement across halves of the members that pass (each refitted on both halves
         // of the data: a drop-one test's cost again) only when this round's decision can
         // depend on it (see [`halves_decide`]).
-        let mut halves_checked = false;
-        if halves_decide(&judged) {
+        let halves_checked = halves_decide(&judged);
+        if halves_checked {
             check_halves(cx, &mut judged, &reduced);
-            halves_checked = true;
         }
         for (c, d) in &judged {
             trace(|| {
