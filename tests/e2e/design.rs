@@ -335,8 +335,8 @@ fn writes_gains_file_and_plots() {
         b.contains("PM =") && b.contains("w_gc ="),
         "margins marked in the Bode plot"
     );
-    // human report also works and shows the table
-    let (ok, out, err) = servo(&["design", "--wc", "30", "--pm", "60"]);
+    // the whole human report (--verbose) shows the table
+    let (ok, out, err) = servo(&["design", "--wc", "30", "--pm", "60", "--verbose"]);
     assert!(ok, "{err}");
     for n in [
         "K_P",
@@ -495,6 +495,7 @@ fn infeasible_specs_are_reported_with_the_closest_pair() {
         "--settling-time",
         "0.02",
         "--meet-specs",
+        "--verbose",
     ];
     let (ok, out, err) = servo(&args);
     assert!(ok, "{err}");
@@ -528,6 +529,7 @@ fn plain_bode_design_warns_when_the_time_specs_are_missed() {
         "--alpha",
         "6",
         "--exact",
+        "--verbose",
     ];
     let (ok, out, err) = servo(&args);
     assert!(ok, "{err}");
@@ -690,6 +692,8 @@ fn meet_specs_claim_holds_in_servo_run_at_t0_later_and_after_a_move() {
             preset,
             "-o",
             g,
+            "--force",
+            "--verbose",
         ]);
         assert!(ok, "{err}");
         let claimed = text.contains("the specs are MET");
@@ -768,6 +772,7 @@ fn run_warns_when_the_gains_were_designed_for_another_plant() {
             "60",
             "-o",
             path.to_str().unwrap(),
+            "--verbose",
         ];
         if let Some(p) = extra {
             args.extend(["--plant-preset", p]);
@@ -825,6 +830,195 @@ fn run_warns_when_the_gains_were_designed_for_another_plant() {
     assert!(
         err.contains("designed for the backward-euler discretisation")
             && err.contains("uses tustin"),
+        "{err}"
+    );
+}
+
+/// The first number on `line` before `unit` (" %", " s").
+fn number_before(line: &str, unit: &str) -> f64 {
+    let head = &line[..line
+        .find(unit)
+        .unwrap_or_else(|| panic!("no {unit:?} in {line}"))];
+    head.split_whitespace()
+        .last()
+        .and_then(|w| w.parse().ok())
+        .unwrap_or_else(|| panic!("no number before {unit:?} in {line}"))
+}
+
+/// The default text answers first: the gains, then the step response `servo run --gains` gives
+/// with them (one overshoot figure, the same as `servo run`'s within 2 points), in at most 30
+/// lines with no warning; the linear loops' table only under --verbose.
+#[test]
+fn default_text_quotes_the_overshoot_servo_run_gives() {
+    let _machine = servo_e2e::shared();
+    let dir = tempfile::tempdir().unwrap();
+    for (preset, wc, pm) in [
+        ("lab", "30", "60"),
+        ("table2", "20", "50"),
+        ("lab", "45", "70"),
+    ] {
+        let g = dir.path().join(format!("g_{preset}_{wc}.toml"));
+        let g = g.to_str().unwrap();
+        let (ok, out, err) = servo(&[
+            "design",
+            "--wc",
+            wc,
+            "--pm",
+            pm,
+            "--plant-preset",
+            preset,
+            "-o",
+            g,
+        ]);
+        assert!(ok, "{err}");
+        assert!(!err.contains("warning"), "{err}");
+        assert!(
+            out.lines().count() <= 30,
+            "{} lines:\n{out}",
+            out.lines().count()
+        );
+        let gains = out.lines().nth(1).unwrap_or_default();
+        assert!(gains.contains("K_P =") && gains.contains("V/rad"), "{out}");
+        assert!(
+            !out.contains("closed-loop poles:") && !out.contains("spec translation:"),
+            "{out}"
+        );
+        let said: Vec<&str> = out.lines().filter(|l| l.contains("overshoot")).collect();
+        assert_eq!(said.len(), 1, "one overshoot figure by default:\n{out}");
+        let designed = number_before(said[0], " %");
+        let run = [
+            "run",
+            "--gains",
+            g,
+            "--plant-preset",
+            preset,
+            "--ref",
+            "step:1",
+            "--duration",
+            "2",
+        ];
+        let (ok, run_out, err) = servo(&run);
+        assert!(ok, "{err}");
+        assert!(!err.contains("warning"), "{err}");
+        let line = run_out
+            .lines()
+            .find(|l| l.trim_start().starts_with("overshoot (max)"))
+            .unwrap_or_else(|| panic!("{run_out}"));
+        let ran = number_before(line, " %");
+        assert!(
+            (designed - ran).abs() <= 2.0,
+            "{preset} {wc}/{pm}: design says {designed} %, servo run gives {ran} %\n{out}"
+        );
+    }
+}
+
+/// Gains that miss the time-domain specs asked for are not written unless --force, and the
+/// refusal says why and how; the text says what would meet them.
+#[test]
+fn specs_not_met_write_no_gains_without_force() {
+    let _machine = servo_e2e::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let g = dir.path().join("gains.toml");
+    let g = g.to_str().unwrap();
+    for extra in [&["--meet-specs"][..], &["--alpha", "6", "--exact"][..]] {
+        let mut args = vec![
+            "design",
+            "--overshoot",
+            "0.01",
+            "--settling-time",
+            "0.02",
+            "-o",
+            g,
+        ];
+        args.extend_from_slice(extra);
+        let (ok, out, err) = servo(&args);
+        assert!(!ok, "{args:?}: missed specs must not pass silently\n{out}");
+        assert!(!std::path::Path::new(g).exists(), "{args:?} wrote {g}");
+        assert!(err.contains("NOT met") && err.contains("--force"), "{err}");
+        assert!(
+            out.contains("NOT met") && out.contains("to meet them:"),
+            "{out}"
+        );
+        args.push("--force");
+        let (ok, out, err) = servo(&args);
+        assert!(ok, "{err}");
+        assert!(out.contains(&format!("wrote controller to {g}")), "{out}");
+        let file = std::fs::read_to_string(g).unwrap();
+        assert!(file.contains("time_specs_met = false"), "{file}");
+        std::fs::remove_file(g).unwrap();
+    }
+}
+
+/// A negative gain margin on a stable loop is explained (conditionally stable, the saturating
+/// drive), not printed bare beside "stable".
+#[test]
+fn a_negative_gain_margin_is_explained() {
+    let _machine = servo_e2e::shared();
+    let (ok, out, err) = servo(&["design", "--wc", "100", "--pm", "30"]);
+    assert!(ok, "{err}");
+    let line = out
+        .lines()
+        .find(|l| l.contains("gain margin"))
+        .unwrap_or_else(|| panic!("{out}"));
+    assert!(number_before(line, " dB") < 0.0, "{line}");
+    assert!(
+        out.contains("conditionally stable") && out.contains("saturates"),
+        "{out}"
+    );
+    let (ok, out, _) = servo(&["design", "--wc", "30", "--pm", "60"]);
+    assert!(ok && !out.contains("conditionally stable"), "{out}");
+}
+
+/// A run on the plant `servo params` printed (the design's, under another name), with an effect
+/// the run adds on purpose, is not warned about: the plant check compares parameters.
+#[test]
+fn the_same_plant_under_another_name_is_no_mismatch() {
+    let _machine = servo_e2e::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let (ok, text, _) = servo(&["params"]);
+    assert!(ok);
+    let plant = dir.path().join("plant.toml");
+    std::fs::write(&plant, &text).unwrap();
+    let g = dir.path().join("gains.toml");
+    let (ok, _, err) = servo(&[
+        "design",
+        "--wc",
+        "30",
+        "--pm",
+        "60",
+        "-o",
+        g.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let run = |plant: &std::path::Path| {
+        let (ok, _, err) = servo(&[
+            "run",
+            "--plant",
+            plant.to_str().unwrap(),
+            "--plant-effect",
+            "imbalance:amplitude=0.01,phase=0.5",
+            "--gains",
+            g.to_str().unwrap(),
+            "--ref",
+            "step:0.5",
+            "--duration",
+            "0.3",
+        ]);
+        assert!(ok, "{err}");
+        err
+    };
+    let err = run(&plant);
+    assert!(!err.contains("warning"), "{err}");
+    // another motor under the same file name is warned about, naming the parameter
+    let other = text.replace("k_t = 7.682e-3", "k_t = 3.89e-2");
+    assert_ne!(
+        other, text,
+        "params output should hold `k_t = 7.682e-3`: {text}"
+    );
+    std::fs::write(&plant, &other).unwrap();
+    let err = run(&plant);
+    assert!(
+        err.contains("warning: the gains were designed") && err.contains("k_t"),
         "{err}"
     );
 }

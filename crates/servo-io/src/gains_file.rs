@@ -139,10 +139,14 @@ impl GainsFile {
 
     /// What `[design]` says the gains were designed and checked for, against what a run uses:
     /// one warning per difference. `plant_key`: the simulated plant as `[design] plant` writes it
-    /// (`lab`, `table2`, a file), `None` on a board; `discretization`: the rule the PID runs.
+    /// (`lab`, `table2`, a file), `None` on a board; `plant_params`: the simulated plant's base
+    /// parameters (without the effects a run adds on purpose), compared with `[design.plant_params]`
+    /// value by value, so that the same plant under another name (the file `servo params` printed)
+    /// is not a mismatch; `discretization`: the rule the PID runs.
     pub fn design_mismatches(
         &self,
         plant_key: Option<&str>,
+        plant_params: Option<&servo_core::PlantParams>,
         discretization: servo_core::control::Discretization,
     ) -> Vec<String> {
         let Some(d) = &self.design else {
@@ -150,9 +154,18 @@ impl GainsFile {
         };
         let mut out = Vec::new();
         if let (Some(run), Some(designed)) = (plant_key, d.get("plant").and_then(|v| v.as_str())) {
-            if run != designed {
+            let designed_params = d.get("plant_params").and_then(|v| v.as_table());
+            let differ = match (plant_params, designed_params) {
+                (Some(p), Some(t)) => params_differ(p, t),
+                // files without the parameters: the names, effects added by the run aside
+                _ => (run.trim_end_matches("+effects") != designed)
+                    .then(|| vec![format!("`{run}`")])
+                    .unwrap_or_default(),
+            };
+            if !differ.is_empty() {
                 out.push(format!(
-                    "the gains were designed and checked for the plant `{designed}` ([design] plant) but this run simulates `{run}`: the design's figures (overshoot, settling, MET) do not apply; run with the design's plant (--plant-preset/--plant) or redesign for this one"
+                    "the gains were designed and checked for the plant `{designed}` ([design] plant) but this run simulates `{run}`, another plant ({}): the design's figures (overshoot, settling, MET) do not apply; run with the design's plant (--plant-preset/--plant) or redesign for this one",
+                    differ.join(", ")
                 ));
             }
         }
@@ -226,8 +239,11 @@ impl GainsFile {
             ));
         }
         if let Some(d) = &self.design {
-            s.push_str("\n[design]\n");
-            s.push_str(&toml::to_string(d).unwrap_or_default());
+            // under [design], sub-tables ([design.plant_params]) included
+            let mut root = toml::Table::new();
+            root.insert("design".into(), toml::Value::Table(d.clone()));
+            s.push('\n');
+            s.push_str(&toml::to_string(&root).unwrap_or_default());
         }
         s
     }
@@ -289,4 +305,27 @@ mod tests {
         let g = GainsFile::parse("[pid]\nkp = 5\nki = 0\nkd = 0\n").unwrap();
         assert_eq!((g.pid.ki, g.pid.kd), (0.0, 0.0));
     }
+}
+
+/// The base parameters that differ between a run's plant and the one `[design.plant_params]`
+/// records, in words (`k_t 0.0389 here, 0.00768 designed`). Equal within 1e-9 relative: the file
+/// holds every digit.
+fn params_differ(run: &servo_core::PlantParams, designed: &toml::Table) -> Vec<String> {
+    let Ok(toml::Value::Table(here)) = toml::Value::try_from(run) else {
+        return Vec::new();
+    };
+    let num = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
+    let mut out = Vec::new();
+    for (k, v) in &here {
+        let (Some(a), Some(b)) = (num(v), designed.get(k).and_then(num)) else {
+            if num(v).is_some() != designed.get(k).and_then(num).is_some() {
+                out.push(format!("{k} given on one side only"));
+            }
+            continue;
+        };
+        if (a - b).abs() > 1e-9 * a.abs().max(b.abs()).max(f64::MIN_POSITIVE) {
+            out.push(format!("{k} {a:e} here, {b:e} designed"));
+        }
+    }
+    out
 }

@@ -10,6 +10,7 @@ mod report_text;
 mod request;
 mod spec_plot;
 mod step_plot;
+mod summary;
 mod words;
 
 use on_run::*;
@@ -162,6 +163,13 @@ pub struct Design {
     /// Print one JSON object instead of the report.
     #[arg(long)]
     pub json: bool,
+    /// The whole report: the spec translation, the reduced, full and discrete linear loops'
+    /// table and poles, every step case checked through `servo run`'s loop.
+    #[arg(short, long)]
+    pub verbose: bool,
+    /// Write the gains file (-o) even when the time-domain specs are not met.
+    #[arg(long)]
+    pub force: bool,
     /// Write the loop's Bode plot (SVG) with crossover and margins marked; with time-domain specs,
     /// also the achieved step responses of the loop that runs against the spec box.
     #[arg(long, value_name = "SVG")]
@@ -306,13 +314,17 @@ impl Design {
             }
         };
         let mut out = out;
-        if let (Some(sp), false, None) = (
-            &out.check.as_ref().map(|c| c.specs),
-            src.bare_reduced,
-            &out.run_check,
-        ) {
+        if let (false, None) = (src.bare_reduced, &out.run_check) {
+            // what `servo run` gives with the gains: the time-domain specs when given, else the
+            // default step range with nothing to meet
+            let sp = out.check.as_ref().map(|c| c.specs).unwrap_or(TimeSpecs {
+                overshoot_max: None,
+                speed: None,
+                step_min_rad: self.step_min,
+                step_max_rad: self.step_max,
+            });
             let gains = self.gains_file(&out, &tr);
-            out.run_check = Some(self.run_check(&gains, sp)?);
+            out.run_check = Some(self.run_check(&gains, &sp)?);
         }
         if self.comp.ff.is_some() {
             let gains = self.gains_file(&out, &tr);
@@ -320,8 +332,14 @@ impl Design {
         }
         let report = &out.report;
 
-        if let Some(path) = &self.output {
-            self.gains_file(&out, &tr).save(path)?;
+        let gains = self.gains_file(&out, &tr);
+        // gains that miss the specs asked for are written only when asked to (--force)
+        let withheld = self
+            .output
+            .as_ref()
+            .filter(|_| out.time_specs_met() == Some(false) && !self.force);
+        if let (Some(path), None) = (&self.output, withheld) {
+            gains.save(path)?;
         }
         if let Some(path) = &self.plot {
             let panel = match &out.check {
@@ -343,14 +361,32 @@ impl Design {
                 .map_or(Value::Null, compensated::compensated_json);
             crate::json_out::emit(&v)?;
         } else {
-            let mut text = self.text_report(&out, &tr, &translation_lines, &src);
-            if let Some(p) = &self.output {
+            let unit = gains.output_unit();
+            let mut text = if self.verbose {
+                self.text_report(&out, &tr, &translation_lines, &src, unit)
+            } else {
+                self.summary_report(&out, &src, unit)
+            };
+            if let (Some(p), None) = (&self.output, withheld) {
                 let _ = writeln!(text, "wrote controller to {}", p.display());
             }
             for p in [&self.plot, &self.step_plot].into_iter().flatten() {
                 let _ = writeln!(text, "wrote {}", p.display());
             }
+            if !self.verbose {
+                let _ = writeln!(
+                    text,
+                    "(--verbose: the spec translation, the linear loops' table and poles, every step case; --json)"
+                );
+            }
             emit(&text)?;
+        }
+        if let Some(p) = withheld {
+            bail!(
+                "the time-domain specs are NOT met: the gains were not written to {} \
+                 (--force writes them anyway)",
+                p.display()
+            );
         }
         Ok(())
     }

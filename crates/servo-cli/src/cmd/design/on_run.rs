@@ -62,6 +62,7 @@ impl Design {
             Some(SpeedTarget::Settling { band, time_s }) if (band - 0.05).abs() < 1e-12 => {
                 (Some(time_s), None, (8.0 * time_s).max(0.8))
             }
+            None => (None, None, 1.0),
             _ => (
                 None,
                 Some(
@@ -114,8 +115,12 @@ pub(super) fn run_section(s: &mut String, rc: &RunCheck) {
         .fold(0.0, f64::max);
     let _ = writeln!(
         s,
-        "  worst overshoot {worst_os:.2} % (spec {:.2} %), worst settling 5 % {} (spec {})",
-        rc.overshoot_max_pct,
+        "  worst overshoot {worst_os:.2} %{}, worst settling 5 % {} (spec {})",
+        if rc.overshoot_max_pct.is_finite() {
+            format!(" (spec {:.2} %)", rc.overshoot_max_pct)
+        } else {
+            " (no spec)".to_string()
+        },
         if worst_ts.is_finite() {
             format!("{worst_ts:.4} s")
         } else {

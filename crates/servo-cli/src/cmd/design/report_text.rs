@@ -9,6 +9,7 @@ impl super::Design {
         tr: &Translation,
         translation: &[String],
         src: &PlantSource,
+        unit: &str,
     ) -> String {
         let mut s = String::new();
         let r = &out.report;
@@ -37,8 +38,9 @@ impl super::Design {
         for l in translation {
             let _ = writeln!(s, "  {l}");
         }
-        let p_gc = model.response(w);
-        let (dk, dphi) = required_compensation(&ls, p_gc);
+        // the translation's crossover (--meet-specs moves the design's: its section says where)
+        let p_gc = model.response(tr.spec.omega_gc);
+        let (dk, dphi) = required_compensation(&tr.spec, p_gc);
         let _ = writeln!(
             s,
             "  P(j w_gc) = {:.6} {:+.6}j (|P| = {:.6}, angle {:.3} deg) -> Delta K = {:.6}, Delta phi = {:.3} deg (eq. 44)",
@@ -66,13 +68,13 @@ impl super::Design {
         );
         let _ = writeln!(
             s,
-            "  K_P = {:<12.6} V/rad        T_I = {} s",
+            "  K_P = {:<12.6} {unit}/rad        T_I = {} s",
             g.kp,
             fmt_s(g.ti_s())
         );
         let _ = writeln!(
             s,
-            "  K_I = {:<12.6} V/(rad s)    T_D = {} s",
+            "  K_I = {:<12.6} {unit}/(rad s)    T_D = {} s",
             g.ki,
             fmt_s(g.td_s())
         );
@@ -87,7 +89,7 @@ impl super::Design {
         };
         let _ = writeln!(
             s,
-            "  K_D = {:<12.6} V s/rad      T_L = {} s {tl_note}",
+            "  K_D = {:<12.6} {unit} s/rad      T_L = {} s {tl_note}",
             g.kd,
             fmt_s(g.tl_s)
         );

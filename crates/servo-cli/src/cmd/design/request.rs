@@ -129,6 +129,15 @@ impl super::Design {
         d.insert("exact".into(), self.exact.into());
         // What the design assumed, for `servo run` to compare with what it runs.
         d.insert("plant".into(), self.plant_key().into());
+        // ... and its parameters, which `servo run` compares (not the name)
+        if let Some(t) = self
+            .run_plant()
+            .load()
+            .ok()
+            .and_then(|(plant, _)| toml::Value::try_from(plant.linear_params()).ok())
+        {
+            d.insert("plant_params".into(), t);
+        }
         // A drive other than a voltage amplifier: the output's unit follows it (amps on a
         // current drive), in the file's comments and in `servo run`'s words.
         if let Ok(drive) = self.run_plant().drive() {

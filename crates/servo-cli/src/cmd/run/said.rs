@@ -26,7 +26,16 @@ impl super::Run {
         outln!("{plant}; {controller}");
         if let (Some(g), Some(p)) = (gains, pid) {
             let key = sim.then(|| self.plant.key());
-            for w in g.design_mismatches(key.as_deref(), p.discretization) {
+            // the base plant, without the effects the run adds on purpose
+            let base = crate::plant_args::PlantArgs {
+                plant_effect: Vec::new(),
+                ..self.plant.clone()
+            };
+            let params = sim
+                .then(|| base.load().ok())
+                .flatten()
+                .map(|(plant, _)| plant.linear_params());
+            for w in g.design_mismatches(key.as_deref(), params.as_ref(), p.discretization) {
                 eprintln!("warning: {w}");
             }
         }
