@@ -34,13 +34,13 @@
 use std::borrow::Cow;
 
 /// The Content-Security-Policy of every HTML report servo writes: nothing is loaded or run
-/// (no script at all, no fetch, no form, no frame, no base URL), the report's own `<style>`
+/// (no script at all, no fetch, no form, no base URL), the report's own `<style>`
 /// and `style` attributes apply, images only from `data:` URLs.
 pub const REPORT_CSP: &str = "default-src 'none'; style-src 'unsafe-inline'; img-src data:; \
-                              base-uri 'none'; form-action 'none'; frame-ancestors 'none'";
+                              base-uri 'none'; form-action 'none'";
 
 /// The `<meta>` element that sets [`REPORT_CSP`]: the first element of every report's `<head>`.
-pub const CSP_META: &str = "<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; style-src 'unsafe-inline'; img-src data:; base-uri 'none'; form-action 'none'; frame-ancestors 'none'\">";
+pub const CSP_META: &str = "<meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; style-src 'unsafe-inline'; img-src data:; base-uri 'none'; form-action 'none'\">";
 
 /// The character that replaces one XML does not allow (U+FFFD).
 const REPLACEMENT: char = '\u{FFFD}';
@@ -325,6 +325,174 @@ macro_rules! markup {
     };
 }
 
+/// Elements of HTML that have no end tag.
+const VOID: [&str; 8] = ["meta", "br", "img", "input", "link", "hr", "col", "wbr"];
+
+/// What is wrong with `doc`, an HTML report or SVG document servo wrote, read by a small
+/// tokenizer: a `<script>` element, an event-handler attribute (`on...=`), a `javascript:` (or
+/// other non-http) link, a tag that does not close, an end tag without its start, an unquoted
+/// or unterminated attribute value, a character XML forbids. Empty when none. For the tests
+/// and the fuzz targets of the report writers; a report is written, never read, by servo.
+pub fn problems(doc: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut stack: Vec<String> = Vec::new();
+    if let Some(c) = doc.chars().find(|c| !xml_allowed(*c)) {
+        out.push(format!("a character XML forbids: {c:?}"));
+    }
+    let b = doc.as_bytes();
+    let mut i = 0;
+    while let Some(k) = doc[i..].find('<') {
+        let at = i + k;
+        let rest = &doc[at..];
+        if rest.starts_with("<!--") {
+            match rest.find("-->") {
+                Some(e) => i = at + e + 3,
+                None => {
+                    out.push(format!("an unterminated comment at byte {at}"));
+                    break;
+                }
+            }
+            continue;
+        }
+        if rest.starts_with("<!") || rest.starts_with("<?") {
+            match rest.find('>') {
+                Some(e) => i = at + e + 1,
+                None => {
+                    out.push(format!("an unterminated declaration at byte {at}"));
+                    break;
+                }
+            }
+            continue;
+        }
+        let closing = rest.starts_with("</");
+        let name_start = at + if closing { 2 } else { 1 };
+        let mut j = name_start;
+        while j < b.len() && (b[j].is_ascii_alphanumeric() || b[j] == b'-' || b[j] == b':') {
+            j += 1;
+        }
+        if j == name_start {
+            // a '<' that starts no tag: text (an HTML parser reads it so), but servo escapes it
+            out.push(format!("a bare '<' at byte {at}"));
+            i = at + 1;
+            continue;
+        }
+        let name = doc[name_start..j].to_ascii_lowercase();
+        if name == "script" {
+            out.push(format!("a <script> element at byte {at}"));
+        }
+        // attributes up to the tag's end
+        let mut self_closing = false;
+        loop {
+            while j < b.len() && b[j].is_ascii_whitespace() {
+                j += 1;
+            }
+            if j >= b.len() {
+                out.push(format!("the tag <{name}> at byte {at} does not end"));
+                return out;
+            }
+            if b[j] == b'>' {
+                j += 1;
+                break;
+            }
+            if doc[j..].starts_with("/>") {
+                self_closing = true;
+                j += 2;
+                break;
+            }
+            let a0 = j;
+            while j < b.len() && !b[j].is_ascii_whitespace() && !matches!(b[j], b'=' | b'>' | b'/')
+            {
+                j += 1;
+            }
+            let attr_name = doc[a0..j].to_ascii_lowercase();
+            if attr_name.is_empty() {
+                out.push(format!("a stray '/' in <{name}> at byte {at}"));
+                j += 1;
+                continue;
+            }
+            if closing {
+                out.push(format!(
+                    "an attribute in the end tag </{name}> at byte {at}"
+                ));
+            }
+            if attr_name.starts_with("on") {
+                out.push(format!(
+                    "an event handler `{attr_name}` in <{name}> at byte {at}"
+                ));
+            }
+            if attr_name.contains(['"', '\'', '<', '`']) {
+                out.push(format!(
+                    "a broken attribute name `{attr_name}` in <{name}> at byte {at}"
+                ));
+            }
+            let mut value = "";
+            if j < b.len() && b[j] == b'=' {
+                j += 1;
+                let q = b.get(j).copied();
+                if q != Some(b'"') && q != Some(b'\'') {
+                    out.push(format!(
+                        "an unquoted value of `{attr_name}` in <{name}> at byte {at}"
+                    ));
+                    while j < b.len() && !b[j].is_ascii_whitespace() && b[j] != b'>' {
+                        j += 1;
+                    }
+                    continue;
+                }
+                let q = q.unwrap_or(b'"') as char;
+                match doc[j + 1..].find(q) {
+                    Some(e) => {
+                        value = &doc[j + 1..j + 1 + e];
+                        j = j + 1 + e + 1;
+                    }
+                    None => {
+                        out.push(format!(
+                            "an unterminated value of `{attr_name}` at byte {at}"
+                        ));
+                        return out;
+                    }
+                }
+                if value.contains('<') {
+                    out.push(format!("a '<' in the value of `{attr_name}` at byte {at}"));
+                }
+            }
+            if matches!(
+                attr_name.as_str(),
+                "href" | "src" | "xlink:href" | "action" | "formaction"
+            ) && safe_url(&value.replace("&#9;", "\t").replace("&#10;", "\n")).is_none()
+            {
+                out.push(format!("a link `{value}` in <{name}> at byte {at}"));
+            }
+        }
+        if closing {
+            match stack.pop() {
+                Some(open) if open == name => {}
+                Some(open) => {
+                    out.push(format!("</{name}> at byte {at} closes <{open}>"));
+                    return out;
+                }
+                None => {
+                    out.push(format!("</{name}> at byte {at} closes nothing"));
+                    return out;
+                }
+            }
+        } else if !self_closing && !VOID.contains(&name.as_str()) {
+            if name == "style" {
+                // raw text up to its end tag
+                match doc[j..].find("</style>") {
+                    Some(e) => j += e,
+                    None => out.push(format!("a <style> at byte {at} that does not end")),
+                }
+            }
+            stack.push(name);
+        }
+        i = j;
+    }
+    if !stack.is_empty() {
+        out.push(format!("elements left open: {stack:?}"));
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -411,6 +579,23 @@ mod tests {
     fn the_meta_element_sets_the_policy() {
         assert!(CSP_META.contains(&format!("content=\"{REPORT_CSP}\"")));
         assert!(!REPORT_CSP.contains("script-src") && REPORT_CSP.contains("default-src 'none'"));
+    }
+
+    #[test]
+    fn the_checker_finds_what_an_injection_leaves() {
+        assert!(problems("<!DOCTYPE html><html><head><meta charset=\"utf-8\"><style>a{b:c}</style></head><body><p a=\"1\">x &amp; y<br></p><svg><text x='1'/></svg></body></html>").is_empty());
+        for bad in [
+            "<div data-log=\"x\" onfocus=\"alert(1)\" y=\"\"></div>",
+            "<p>x<script>alert(1)</script></p>",
+            "<p>x<img src=x onerror=alert(1)></p>",
+            "<a href=\"javascript:alert(1)\">x</a>",
+            "<p><b>x</p></b>",
+            "<p>x",
+            "<p>a < b</p>",
+            "<p>\u{1}</p>",
+        ] {
+            assert!(!problems(bad).is_empty(), "{bad}");
+        }
     }
 
     #[test]
