@@ -114,19 +114,25 @@ pub(super) fn compensation_html(
     Ok(h)
 }
 
-/// The drive in words, with the range the loop runs in.
-fn drive_words(drive: &Drive) -> String {
-    let range = |unit: &str| {
-        drive.input_range().map_or(String::new(), |r| {
-            format!(", the loop's output within +-{r:.3} {unit}")
-        })
-    };
-    match drive.kind {
-        DriveKind::Voltage => String::from("voltage amplifier"),
-        DriveKind::Current => format!("current drive (the PID's output in A{})", range("A")),
-        DriveKind::Duty => format!(
-            "PWM bridge (the duty is the PID's output over V_supply{})",
-            range("V")
+/// The drive in words, with the range the loop runs in: servo's own wording (a template, its
+/// apostrophes as written), the range a number.
+fn drive_words(drive: &Drive) -> Markup {
+    let range = drive.input_range().map(|r| format!("{r:.3}"));
+    let mut m = Markup::new();
+    match (drive.kind, range) {
+        (DriveKind::Voltage, _) => m.lit("voltage amplifier"),
+        (DriveKind::Current, None) => m.lit("current drive (the PID's output in A)"),
+        (DriveKind::Current, Some(r)) => markup!(
+            m,
+            "current drive (the PID's output in A, the loop's output within +-{} A)",
+            r
         ),
-    }
+        (DriveKind::Duty, None) => m.lit("PWM bridge (the duty is the PID's output over V_supply)"),
+        (DriveKind::Duty, Some(r)) => markup!(
+            m,
+            "PWM bridge (the duty is the PID's output over V_supply, the loop's output within +-{} V)",
+            r
+        ),
+    };
+    m
 }
