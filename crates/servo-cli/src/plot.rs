@@ -3,6 +3,7 @@
 use anyhow::anyhow;
 use plotters::prelude::*;
 pub use servo_io::chart_axes::{decimate, log_tick_label, nice_ticks, tick_label};
+use servo_io::markup::svg_text;
 
 /// One line of a chart.
 pub struct Series<'a> {
@@ -117,8 +118,16 @@ fn runs(s: &Series, join_gaps: bool) -> Vec<Vec<(f64, f64)>> {
     out
 }
 
-/// Renders a line chart to an SVG string.
+/// Renders a line chart to an SVG string. Every text (title, axis labels, series labels) may
+/// come from input (file and column names): plotters escapes XML's five special characters,
+/// and [`svg_text`] first replaces the characters XML forbids, so the SVG stays well-formed.
 pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String> {
+    let (title, x_label, y_label) = (
+        svg_text(chart.title),
+        svg_text(chart.x_label),
+        svg_text(chart.y_label),
+    );
+    let labels: Vec<_> = series.iter().map(|s| svg_text(s.label)).collect();
     let mut svg = String::new();
     {
         let root =
@@ -132,7 +141,7 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
         let columns = chart.width.saturating_sub(80).max(50) as usize;
         let mut builder = ChartBuilder::on(&root);
         builder
-            .caption(chart.title, ("sans-serif", 16))
+            .caption(title.as_ref(), ("sans-serif", 16))
             .margin(10)
             .x_label_area_size(35)
             .y_label_area_size(70);
@@ -148,8 +157,8 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
                 };
                 let y_fmt = |v: &f64| tick_label(*v, y_step, y_max_abs);
                 let mut mesh = ctx.configure_mesh();
-                mesh.x_desc(chart.x_label)
-                    .y_desc(chart.y_label)
+                mesh.x_desc(x_label.as_ref())
+                    .y_desc(y_label.as_ref())
                     .y_labels(7)
                     .x_labels($x_labels)
                     .y_label_formatter(&y_fmt)
@@ -168,7 +177,7 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
                         let dots = ctx
                             .draw_series(pts.into_iter().map(|p| Circle::new(p, 1, color.filled())))
                             .map_err(|e| anyhow!("plot: {e}"))?;
-                        dots.label(s.label)
+                        dots.label(labels[i].as_ref())
                             .legend(move |(x, y)| Circle::new((x + 7, y), 3, color.filled()));
                         continue;
                     }
@@ -179,7 +188,7 @@ pub fn line_chart_svg(chart: &Chart, series: &[Series]) -> anyhow::Result<String
                             .draw_series(LineSeries::new(run, color.stroke_width(1)))
                             .map_err(|e| anyhow!("plot: {e}"))?;
                         if j == 0 {
-                            line.label(s.label).legend(move |(x, y)| {
+                            line.label(labels[i].as_ref()).legend(move |(x, y)| {
                                 PathElement::new(vec![(x, y), (x + 15, y)], color)
                             });
                         }

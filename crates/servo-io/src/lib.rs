@@ -19,6 +19,7 @@
 //! * [`disk`]: room on disk for a long log, checked before a run starts.
 //! * [`mat_read`], [`mat_path`], [`mat_log`]: MATLAB MAT-files (Level 5, -v6/-v7), MATLAB paths
 //!   in `--columns`, Simulink Scope structures.
+//! * [`markup`]: HTML and SVG escaped by construction (the reports and charts).
 
 pub mod chart_axes;
 pub mod columns;
@@ -32,6 +33,7 @@ pub mod error;
 pub mod gains_file;
 pub mod log_reader;
 pub mod loop_msg;
+pub mod markup;
 pub mod mat_log;
 pub mod mat_path;
 pub mod mat_read;

@@ -343,10 +343,3 @@ fn keep_freed_memory() {
         }
     }
 }
-
-/// Text escaped for HTML (the report's).
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-}

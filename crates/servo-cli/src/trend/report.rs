@@ -7,6 +7,8 @@ use crate::plot::{line_chart_svg, Chart, Series};
 use serde_json::{json, Value};
 use servo_core::effects::EffectKind;
 use servo_core::trend::{Crossing, Verdict};
+use servo_io::markup;
+use servo_io::markup::{Markup, CSP_META};
 
 /// z of a two-sided 95 % normal interval (the per-log intervals).
 const Z95: f64 = 1.96;
@@ -449,42 +451,38 @@ pub fn param_svg(a: &Actuator, p: &ParamTrend) -> anyhow::Result<String> {
     )
 }
 
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-}
-
 /// The HTML report: the counts, what changes, and per actuator its table and a chart per
 /// parameter.
 pub fn html(r: &TrendReport) -> anyhow::Result<String> {
-    let mut s = String::from("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>servo trend</title>\n<style>body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}.change{color:#b00}</style></head><body>\n<h1>servo trend</h1>\n");
-    s.push_str(&format!(
+    let mut s = Markup::new();
+    s.lit("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\">")
+        .lit(CSP_META)
+        .lit("<title>servo trend</title>\n<style>body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px;text-align:right}.change{color:#b00}</style></head><body>\n<h1>servo trend</h1>\n");
+    markup!(
+        s,
         "<p>{} logs, model <code>{}</code>: {} from the cache, {} fitted, {} failed.</p>\n",
         r.logs_found,
-        esc(&r.model.display().to_string()),
+        r.model.display().to_string(),
         r.counts.hits,
         r.counts.new,
         r.counts.failed
-    ));
+    );
     if !r.failed.is_empty() {
-        s.push_str("<h2>Skipped logs</h2><ul>\n");
+        s.lit("<h2>Skipped logs</h2><ul>\n");
         for f in &r.failed {
-            s.push_str(&format!(
+            markup!(
+                s,
                 "<li><code>{}</code>: {}</li>\n",
-                esc(&f.path.display().to_string()),
-                esc(&f.error)
-            ));
+                f.path.display().to_string(),
+                f.error
+            );
         }
-        s.push_str("</ul>\n");
+        s.lit("</ul>\n");
     }
-    s.push_str("<h2>What changes</h2><ul>\n");
+    s.lit("<h2>What changes</h2><ul>\n");
     for a in &r.actuators {
         for p in a.params.iter().filter(|p| p.trend.significant()) {
-            s.push_str(&format!(
-                "<li class=\"change\">{}.</li>\n",
-                esc(&change_words(a, p))
-            ));
+            markup!(s, "<li class=\"change\">{}.</li>\n", change_words(a, p));
         }
         let steady: Vec<&str> = a
             .params
@@ -493,58 +491,52 @@ pub fn html(r: &TrendReport) -> anyhow::Result<String> {
             .map(|p| p.parameter.as_str())
             .collect();
         if !steady.is_empty() {
-            s.push_str(&format!(
-                "<li>{}: steady: {}</li>\n",
-                esc(&a.name),
-                esc(&steady.join(", "))
-            ));
+            markup!(s, "<li>{}: steady: {}</li>\n", a.name, steady.join(", "));
         }
     }
-    s.push_str("</ul>\n");
+    s.lit("</ul>\n");
     for a in &r.actuators {
-        s.push_str(&format!(
+        markup!(
+            s,
             "<h2>{}</h2>\n<p>{} logs, grouped by {}; times from {}.</p>\n<table><tr><th>date</th><th>log</th>",
-            esc(&a.name),
+            a.name,
             a.logs.len(),
-            esc(&a.grouped_by),
-            esc(&time_sources(a))
-        ));
+            a.grouped_by,
+            time_sources(a)
+        );
         for p in &a.params {
-            s.push_str(&format!(
-                "<th>{} [{}]</th>",
-                esc(&p.parameter),
-                esc(&p.unit)
-            ));
+            markup!(s, "<th>{} [{}]</th>", p.parameter, p.unit);
         }
-        s.push_str("</tr>\n");
+        s.lit("</tr>\n");
         for (i, l) in a.logs.iter().enumerate() {
-            s.push_str(&format!(
+            markup!(
+                s,
                 "<tr><td>{}</td><td>{}</td>",
                 date_text(l.time_unix_s),
-                esc(&l
-                    .path
+                l.path
                     .file_name()
                     .map(|n| n.to_string_lossy().into_owned())
-                    .unwrap_or_default())
-            ));
+                    .unwrap_or_default()
+            );
             for p in &a.params {
-                let cell = match p.points.iter().find(|(k, _)| *k == i) {
+                match p.points.iter().find(|(k, _)| *k == i) {
                     Some((_, e)) => match e.std_err {
-                        Some(se) => format!("{} &plusmn; {}", num(e.value), num(Z95 * se)),
-                        None => num(e.value),
+                        Some(se) => {
+                            markup!(s, "<td>{} &plusmn; {}</td>", num(e.value), num(Z95 * se))
+                        }
+                        None => markup!(s, "<td>{}</td>", num(e.value)),
                     },
-                    None => "-".into(),
+                    None => s.lit("<td>-</td>"),
                 };
-                s.push_str(&format!("<td>{cell}</td>"));
             }
-            s.push_str("</tr>\n");
+            s.lit("</tr>\n");
         }
-        s.push_str("</table>\n");
+        s.lit("</table>\n");
         for p in &a.params {
-            s.push_str(&param_svg(a, p)?);
-            s.push('\n');
+            s.push(&Markup::from_rendered_svg(&param_svg(a, p)?));
+            s.lit("\n");
         }
     }
-    s.push_str("</body></html>\n");
-    Ok(s)
+    s.lit("</body></html>\n");
+    Ok(s.into_string())
 }

@@ -14,6 +14,8 @@ use servo_core::drive::{Drive, DriveKind};
 use servo_core::effects::Compensation;
 use servo_hw::run::compensation_check::{tracking_ladder, TrackingRun};
 use servo_io::gains_file::{GainsFile, PidSection};
+use servo_io::markup;
+use servo_io::markup::Markup;
 
 /// Control period of the section's loop [s].
 const TS_S: f64 = 1e-3;
@@ -23,7 +25,7 @@ pub(super) fn compensation_html(
     base: &Plant,
     found: &Plant,
     drive: &Drive,
-) -> anyhow::Result<String> {
+) -> anyhow::Result<Markup> {
     let new: Vec<EffectKind> = found
         .effects
         .iter()
@@ -31,9 +33,10 @@ pub(super) fn compensation_html(
         .filter(|k| !base.effects.contains(*k))
         .collect();
     if new.is_empty() {
-        return Ok(String::new());
+        return Ok(Markup::new());
     }
-    let mut h = String::from("<h2>Compensation</h2>");
+    let mut h = Markup::new();
+    h.lit("<h2>Compensation</h2>");
     let (comp, not): (Vec<EffectKind>, Vec<EffectKind>) = new.iter().partition(|k| {
         !matches!(
             k.model().compensation(),
@@ -45,7 +48,7 @@ pub(super) fn compensation_html(
             Compensation::Not(why) => why.to_string(),
             _ => "the linear feedforward covers it".into(),
         };
-        let _ = write!(h, "<p>{}: not compensated ({}).</p>", k.name(), esc(&why));
+        markup!(h, "<p>{}: not compensated ({}).</p>", k.name(), why);
     }
     if comp.is_empty() {
         return Ok(h);
@@ -78,52 +81,58 @@ pub(super) fn compensation_html(
     };
     let ladder = tracking_ladder(&run, FeedforwardConfig::FULL, &comp, &[])
         .map_err(|e| anyhow!("the compensation section's tracking runs: {e}"))?;
-    let _ = write!(
+    markup!(
         h,
         "<p>Predicted on the model with the effects found, a PID designed on its linear part \
-         (Bode, w_gc = {:.0} rad/s, phi_m = {:.0} deg: K_P = {:.3}, K_I = {:.3}, K_D = \
-         {:.4}) and the standard tracking reference (<code>experiments/tracking.toml</code>, \
-         {:.0} s), each compensation added in turn, through the model's {}. To run it: <code>servo compare LOG --model M \
+         (Bode, w_gc = {} rad/s, phi_m = {} deg: K_P = {}, K_I = {}, K_D = \
+         {}) and the standard tracking reference (<code>experiments/tracking.toml</code>, \
+         {} s), each compensation added in turn, through the model's {}. To run it: <code>servo compare LOG --model M \
          --add EFFECT --save M2</code>, then <code>servo run --model M2 --ff all --experiment \
          experiments/tracking.toml</code>; <code>servo compare</code> on the two runs prints the \
          measured ladder.</p><table><tr><th>compensation</th><th>RMS tracking error [rad]</th>\
          <th>change</th><th>max error [rad]</th></tr>",
-        req.spec.omega_gc,
-        req.spec.phase_margin.to_degrees(),
-        g.kp,
-        g.ki,
-        g.kd,
-        exp.duration_s(),
+        format!("{:.0}", req.spec.omega_gc),
+        format!("{:.0}", req.spec.phase_margin.to_degrees()),
+        format!("{:.3}", g.kp),
+        format!("{:.3}", g.ki),
+        format!("{:.4}", g.kd),
+        format!("{:.0}", exp.duration_s()),
         drive_words(drive)
     );
     let first = ladder.first().map_or(f64::NAN, |r| r.err_rms_rad);
     for r in &ladder {
-        let _ = write!(
+        markup!(
             h,
-            "<tr><td>{}</td><td>{:.3e}</td><td>{:+.0} %</td><td>{:.3e}</td></tr>",
-            esc(&r.label()),
-            r.err_rms_rad,
-            100.0 * (r.err_rms_rad / first - 1.0),
-            r.err_max_rad
+            "<tr><td>{}</td><td>{}</td><td>{} %</td><td>{}</td></tr>",
+            r.label(),
+            format!("{:.3e}", r.err_rms_rad),
+            format!("{:+.0}", 100.0 * (r.err_rms_rad / first - 1.0)),
+            format!("{:.3e}", r.err_max_rad)
         );
     }
-    h.push_str("</table>");
+    h.lit("</table>");
     Ok(h)
 }
 
-/// The drive in words, with the range the loop runs in.
-fn drive_words(drive: &Drive) -> String {
-    let range = |unit: &str| {
-        drive.input_range().map_or(String::new(), |r| {
-            format!(", the loop's output within +-{r:.3} {unit}")
-        })
-    };
-    match drive.kind {
-        DriveKind::Voltage => String::from("voltage amplifier"),
-        DriveKind::Current => format!("current drive (the PID's output in A{})", range("A")),
-        DriveKind::Duty => format!(
-            "PWM bridge (the duty is the PID's output over V_supply{})",
-            range("V")
+/// The drive in words, with the range the loop runs in: servo's own wording (a template, its
+/// apostrophes as written), the range a number.
+fn drive_words(drive: &Drive) -> Markup {
+    let range = drive.input_range().map(|r| format!("{r:.3}"));
+    let mut m = Markup::new();
+    match (drive.kind, range) {
+        (DriveKind::Voltage, _) => m.lit("voltage amplifier"),
+        (DriveKind::Current, None) => m.lit("current drive (the PID's output in A)"),
+        (DriveKind::Current, Some(r)) => markup!(
+            m,
+            "current drive (the PID's output in A, the loop's output within +-{} A)",
+            r
         ),
-    }
+        (DriveKind::Duty, None) => m.lit("PWM bridge (the duty is the PID's output over V_supply)"),
+        (DriveKind::Duty, Some(r)) => markup!(
+            m,
+            "PWM bridge (the duty is the PID's output over V_supply, the loop's output within +-{} V)",
+            r
+        ),
+    };
+    m
 }

@@ -1,6 +1,8 @@
 //! `servo diagnose --report`: the HTML report with its residual charts.
 
 use super::*;
+use servo_io::markup;
+use servo_io::markup::{Markup, CSP_META};
 
 /// Residual of the torque (or u-driven) balance over time and against speed, before and after
 /// the winner: one panel (`<div class="panel">`) per log.
@@ -9,7 +11,7 @@ pub(super) fn residual_charts(
     model: &Plant,
     d: &Diagnosis,
     opts: &DiagnoseOptions,
-) -> anyhow::Result<String> {
+) -> anyhow::Result<Markup> {
     let ds = Dataset::new(records, &model.params, &opts.fit).map_err(|e| anyhow!("{e}"))?;
     let base = ds.fit_config(model, &[]).map_err(|e| anyhow!("{e}"))?;
     let winner = d.winner();
@@ -30,7 +32,7 @@ pub(super) fn residual_charts(
     let label_a = winner.map_or(String::new(), |w| format!("with {}", w.effect));
     let unit_label = format!("{} residual [{}]", eq.name(), eq.unit());
     // One panel per log (small multiples): its residual over time and against speed.
-    let mut html = String::new();
+    let mut html = Markup::new();
     for (r, rec) in ds.recs.iter().enumerate() {
         let sel: Vec<usize> = (0..rows.len()).filter(|&i| rows.rec[i] == r).collect();
         if sel.is_empty() {
@@ -58,16 +60,16 @@ pub(super) fn residual_charts(
         let name = std::path::Path::new(&rec.source)
             .file_name()
             .map_or(rec.source.clone(), |n| n.to_string_lossy().into_owned());
-        let _ = write!(
+        markup!(
             html,
             "<div class=\"panel\" data-log=\"{}\"><h3>log {} of {}: {}</h3>",
-            esc(&name),
+            name,
             r + 1,
             ds.recs.len(),
-            esc(&name)
+            name
         );
         let title = format!("{} residual over time ({name})", eq.name());
-        html.push_str(&line_chart_svg(
+        html.push(&chart_markup(
             &Chart {
                 title: &title,
                 x_label: "time [s]",
@@ -92,7 +94,7 @@ pub(super) fn residual_charts(
             });
         }
         let title = format!("{} residual against motor speed ({name})", eq.name());
-        html.push_str(&line_chart_svg(
+        html.push(&chart_markup(
             &Chart {
                 title: &title,
                 x_label: "motor speed [rad/s]",
@@ -104,16 +106,16 @@ pub(super) fn residual_charts(
             },
             &series,
         )?);
-        html.push_str("</div>");
+        html.lit("</div>");
     }
     Ok(html)
 }
 
 /// The plot of the measured friction curve (the classic friction-speed plot): friction torque against log |speed| at the
 /// load, both directions, each bin's mean with its 95 % interval, beside the base model's curve.
-pub(super) fn friction_chart(d: &Diagnosis) -> anyhow::Result<String> {
+pub(super) fn friction_chart(d: &Diagnosis) -> anyhow::Result<Markup> {
     let Some(c) = &d.friction_curve else {
-        return Ok(String::new());
+        return Ok(Markup::new());
     };
     let pick = |dir: i8,
                 v: &dyn Fn(&servo_core::diagnose::friction_curve::FrictionBin) -> f64|
@@ -150,11 +152,12 @@ pub(super) fn friction_chart(d: &Diagnosis) -> anyhow::Result<String> {
                 .name()
                 .replace('_', " "))
     );
-    let mut h = String::from("<h2>Measured friction curve</h2>");
+    let mut h = Markup::new();
+    h.lit("<h2>Measured friction curve</h2>");
     if let Some(s) = &c.shape {
-        let _ = write!(h, "<p>{}</p>", esc(&s.description));
+        markup!(h, "<p>{}</p>", s.description);
     }
-    h.push_str(&line_chart_svg(
+    h.push(&chart_markup(
         &Chart {
             title: &title,
             x_label: "|speed| at the load [rad/s] (log)",
@@ -182,65 +185,81 @@ pub(super) fn html_report(
     drive: &servo_core::drive::Drive,
 ) -> anyhow::Result<String> {
     let last = diags.last().unwrap_or(first);
-    let mut h = String::from(
-        "<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>servo diagnose report</title><style>\
+    let mut h = Markup::new();
+    h.lit("<!DOCTYPE html><html><head><meta charset=\"utf-8\">")
+        .lit(CSP_META)
+        .lit(
+            "<title>servo diagnose report</title><style>\
          body{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}\
          table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:4px 8px;vertical-align:top}\
          .yes{color:#080;font-weight:bold}.no{color:#888}\
          .panel{display:flex;flex-wrap:wrap;border-top:1px solid #ccc;margin:0.5em 0}.panel h3{width:100%;margin:0.3em 0}</style></head><body>",
-    );
-    let _ = write!(
+        );
+    markup!(
         h,
         "<h1>servo diagnose</h1><p>Logs: {}</p>",
-        esc(&logs
-            .iter()
+        logs.iter()
             .map(|p| p.display().to_string())
             .collect::<Vec<_>>()
-            .join(", "))
+            .join(", ")
     );
     let effects: Vec<String> = model.effects.iter().map(|e| e.to_string()).collect();
-    let _ = write!(
+    markup!(
         h,
         "<p>Model effects: <code>{}</code></p>",
-        esc(&effects.join(" "))
+        effects.join(" ")
     );
-    let _ = write!(
+    markup!(
         h,
         "<h2>Verdict</h2><p class=\"status-{}\"><b>{}</b></p><p>{}</p>",
         last.status.name(),
-        esc(&headline(ladder, last)),
-        esc(&last.verdict)
+        headline(ladder, last),
+        last.verdict
     );
-    let _ = write!(
+    markup!(
         h,
         "<h2>The fit and where it fails</h2><pre>{}</pre>",
-        esc(&where_it_fails(first))
+        where_it_fails(first)
     );
-    h.push_str(&residual_charts(records, model, first, opts)?);
-    h.push_str(&friction_chart(first)?);
+    h.push(&residual_charts(records, model, first, opts)?);
+    h.push(&friction_chart(first)?);
     for (step, d) in diags.iter().enumerate() {
-        let _ = write!(h, "<h2>Ranking{}</h2><table><tr><th>effect</th><th>significant</th><th>{}</th><th>{}</th><th>BIC gain</th><th>evidence</th></tr>", if diags.len() > 1 { format!(", step {}", step + 1) } else { String::new() }, servo_core::diagnose::phrase::RMS_DROP, servo_core::diagnose::phrase::SIM_DROP);
+        markup!(
+            h,
+            "<h2>Ranking{}</h2><table><tr><th>effect</th><th>significant</th><th>{}</th><th>{}</th><th>BIC gain</th><th>evidence</th></tr>",
+            if diags.len() > 1 { format!(", step {}", step + 1) } else { String::new() },
+            servo_core::diagnose::phrase::RMS_DROP,
+            servo_core::diagnose::phrase::SIM_DROP
+        );
         for c in &d.ranking {
-            let _ = write!(
+            markup!(
                 h,
-                "<tr><td>{}</td><td class=\"{}\">{}</td><td>{} %</td><td>{}</td><td>{:.1}</td><td>{}{}</td></tr>",
-                c.effect,
+                "<tr><td>{}</td><td class=\"{}\">{}</td><td>{} %</td><td>{}</td><td>{}</td><td>{}",
+                c.effect.to_string(),
                 if c.significant { "yes" } else { "no" },
-                if c.significant { "yes" } else if c.resolvable { "no" } else { "not resolvable" },
+                if c.significant {
+                    "yes"
+                } else if c.resolvable {
+                    "no"
+                } else {
+                    "not resolvable"
+                },
                 servo_core::diagnose::phrase::pct(c.error_reduction_pct),
-                c.oe_reduction_pct.map_or("-".into(), |v| format!("{} %", servo_core::diagnose::phrase::pct(v))),
-                c.bic_gain,
-                esc(&c.evidence),
-                c.experiment.as_ref().map_or(String::new(), |e| format!("<br><i>To resolve: {}</i>", esc(e)))
+                c.oe_reduction_pct.map_or("-".into(), |v| format!(
+                    "{} %",
+                    servo_core::diagnose::phrase::pct(v)
+                )),
+                format!("{:.1}", c.bic_gain),
+                c.evidence
             );
+            if let Some(e) = &c.experiment {
+                markup!(h, "<br><i>To resolve: {}</i>", e);
+            }
+            h.lit("</td></tr>");
         }
-        h.push_str("</table>");
+        h.lit("</table>");
     }
-    let _ = write!(
-        h,
-        "<h2>Error ladder</h2><pre>{}</pre>",
-        esc(&ladder_text(ladder))
-    );
+    markup!(h, "<h2>Error ladder</h2><pre>{}</pre>", ladder_text(ladder));
     if ladder.len() > 1 {
         let x: Vec<f64> = (0..ladder.len()).map(|i| i as f64).collect();
         let y: Vec<f64> = ladder
@@ -249,7 +268,7 @@ pub(super) fn html_report(
             .collect();
         let unit = ladder[0].equations.first().map_or("", |e| e.0.unit());
         let y_label = format!("residual RMS [{unit}]");
-        h.push_str(&line_chart_svg(
+        h.push(&chart_markup(
             &Chart {
                 title: "equation residual RMS as effects are added",
                 x_label: "effects added",
@@ -270,10 +289,15 @@ pub(super) fn html_report(
         _ => last.winner().map(|c| c.plant),
     };
     if let Some(found) = found {
-        h.push_str(&super::report_compensation::compensation_html(
+        h.push(&super::report_compensation::compensation_html(
             model, &found, drive,
         )?);
     }
-    h.push_str("</body></html>\n");
-    Ok(h)
+    h.lit("</body></html>\n");
+    Ok(h.into_string())
+}
+
+/// A chart of the report: the SVG renderer's output (its labels escaped), inlined.
+fn chart_markup(chart: &Chart, series: &[Series]) -> anyhow::Result<Markup> {
+    Ok(Markup::from_rendered_svg(&line_chart_svg(chart, series)?))
 }
