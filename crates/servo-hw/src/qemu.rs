@@ -349,17 +349,15 @@ impl PeriodProbe {
 
 impl std::fmt::Display for PeriodProbe {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "{} ms: {} of {} deadlines missed",
-            self.period_us as f64 * 1e-3,
-            self.missed,
-            self.samples
-        )?;
-        if let Some(s) = &self.starved {
-            write!(f, " ({s})")?;
+        let ms = self.period_us as f64 * 1e-3;
+        match &self.starved {
+            Some(s) => write!(f, "{ms} ms: {s}"),
+            None => write!(
+                f,
+                "{ms} ms: {} of {} deadlines missed",
+                self.missed, self.samples
+            ),
         }
-        Ok(())
     }
 }
 
