@@ -281,6 +281,7 @@ macro_rules! on_both_boards {
 
 on_both_boards!(
     handshake_reports_the_board,
+    out_of_order_commands_get_the_promised_fault,
     a_vanished_host_trips_the_board_watchdog_within_50_ms,
     onboard_loop_tracks_the_reference,
     an_experiment_runs_over_serial,
@@ -472,6 +473,115 @@ fn handshake_reports_the_board(kind: Kind) {
     let (rep, _) = board.finish();
     assert_eq!(rep.runs, 0);
     assert!(rep.faults.is_empty());
+}
+
+/// Writes `m` to the board and returns the board's non-Sample answers within `wait` (the board
+/// answers at once: Samples of a run are skipped).
+fn exchange(host: &mut TTYPort, dec: &mut Decoder, m: Message, wait: Duration) -> Vec<Message> {
+    host.write_all(Frame::new(&m).as_bytes()).unwrap();
+    let until = Instant::now() + wait;
+    let mut got = Vec::new();
+    let mut buf = [0u8; 256];
+    while let Some(left) = until.checked_duration_since(Instant::now()) {
+        host.set_timeout(left.max(Duration::from_millis(1)))
+            .unwrap();
+        let n = match host.read(&mut buf) {
+            Ok(n) => n,
+            Err(_) => break,
+        };
+        dec.feed(&buf[..n], |r| {
+            if let Ok(msg) = r {
+                if !matches!(msg, Message::Sample(_)) {
+                    got.push(msg);
+                }
+            }
+        });
+    }
+    got
+}
+
+/// Every out-of-order command the protocol chapter lists gets its fault, on a board as a host
+/// sees it over the link: SetVoltage before Start (after the handshake, after a Stop, again and
+/// again), LoopReference without gains, invalid LoopGains; Stop while idle is answered
+/// Stopped; nothing moves.
+fn out_of_order_commands_get_the_promised_fault(kind: Kind) {
+    let _rt = realtime();
+    let cfg = BoardConfig {
+        sample_period_s: 2e-3,
+        ..tolerant()
+    };
+    let Some((mut host, board)) = direct_on(kind, cfg) else {
+        return;
+    };
+    // QEMU's board answers within its main loop's latency on a busy machine.
+    let wait = Duration::from_millis(300);
+    let mut dec = Decoder::new();
+    host.write_all(&[0]).unwrap();
+    let hello = Message::Hello {
+        protocol_version: PROTOCOL_VERSION,
+    };
+    let ack = exchange(&mut host, &mut dec, hello, Duration::from_secs(3));
+    assert!(matches!(ack[..], [Message::HelloAck(_)]), "{ack:?}");
+    let bad = |v: &[Message], what: &str| {
+        assert!(
+            matches!(v, [Message::Fault(f)] if f.code == servo_core::protocol::FaultCode::BadCommand),
+            "{kind:?}: {what}: {v:?}"
+        );
+    };
+    for seq in [0, 1, 2] {
+        let v = exchange(
+            &mut host,
+            &mut dec,
+            Message::SetVoltage { seq, u_v: 3.0 },
+            wait,
+        );
+        bad(&v, &format!("SetVoltage({seq}) before Start"));
+    }
+    let lr = Message::LoopReference {
+        seq: 0,
+        ref_rad: 1.0,
+    };
+    bad(
+        &exchange(&mut host, &mut dec, lr, wait),
+        "LoopReference without gains",
+    );
+    let nan_gains = Message::LoopGains(LoopGains {
+        kp: f32::NAN,
+        ki: 0.0,
+        kd: 0.0,
+        tau_f_s: 1e-3,
+    });
+    bad(
+        &exchange(&mut host, &mut dec, nan_gains, wait),
+        "invalid LoopGains",
+    );
+    let v = exchange(&mut host, &mut dec, Message::Stop, wait);
+    assert_eq!(v, [Message::Stopped], "{kind:?}: Stop while idle");
+    // A run, stopped by the host as servo does (0 V, then Stop): then SetVoltage is out of order
+    // again.
+    let v = exchange(
+        &mut host,
+        &mut dec,
+        Message::Start,
+        Duration::from_millis(20),
+    );
+    assert!(v.is_empty(), "{kind:?}: Start: {v:?}");
+    let stop0 = Message::SetVoltage { seq: 1, u_v: 0.0 };
+    let _ = exchange(&mut host, &mut dec, stop0, Duration::from_millis(1));
+    let v = exchange(&mut host, &mut dec, Message::Stop, wait);
+    assert_eq!(v, [Message::Stopped], "{kind:?}: Stop of the run");
+    let v = exchange(
+        &mut host,
+        &mut dec,
+        Message::SetVoltage { seq: 3, u_v: 3.0 },
+        wait,
+    );
+    bad(&v, "SetVoltage after Stop");
+    drop(host);
+    let (rep, u_end) = board.finish();
+    assert_eq!(rep.runs, 1, "{kind:?}: {rep:?}");
+    assert_eq!(rep.faults.len(), 6, "{kind:?}: {rep:?}");
+    assert_eq!(u_end, 0.0, "{kind:?}: nothing drove the motor");
 }
 
 #[test]
@@ -967,6 +1077,13 @@ mod board_proc {
             assert!(port.starts_with("/dev/"), "{port}");
             BoardProc { child, port }
         }
+        /// A board already started by the caller, its port read from path file `pf`.
+        pub fn adopt(child: Child, pf: &Path) -> BoardProc {
+            let port = std::fs::read_to_string(pf).unwrap_or_default();
+            let port = port.trim().to_string();
+            assert!(port.starts_with("/dev/"), "{port}");
+            BoardProc { child, port }
+        }
         /// Sends `sig` (e.g. "-STOP") to the board process.
         pub fn signal(&self, sig: &str) {
             let ok = Command::new("kill")
@@ -1355,6 +1472,142 @@ mod qemu_cli {
             });
             Some((verdict, vec![stats_f, stats_a]))
         });
+    }
+
+    /// `servo board --qemu` at its default period (measured at start) and the period it
+    /// announces [s]; `Err(stderr)` when it refused to start, `None` (skip) without qemu or
+    /// the image.
+    fn start_at_default_period(dir: &Path) -> Option<Result<(BoardProc, f64), String>> {
+        let elf = servo_e2e::qemu_image()?;
+        let pf = dir.join("port.txt");
+        let _ = std::fs::remove_file(&pf);
+        let mut child = std::process::Command::new(servo_e2e::servo_bin())
+            .args(["board", "--qemu", "--elf", elf.to_str()?, "--path-file"])
+            .arg(&pf)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("spawn servo board --qemu");
+        // The probes take a fraction of a second per period, more on a loaded machine.
+        let t = std::time::Instant::now();
+        while t.elapsed() < Duration::from_secs(120) {
+            if std::fs::read_to_string(&pf).is_ok_and(|p| p.ends_with('\n')) {
+                break;
+            }
+            if child.try_wait().unwrap().is_some() {
+                let out = child.wait_with_output().unwrap();
+                return Some(Err(String::from_utf8_lossy(&out.stderr).into_owned()));
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let board = BoardProc::adopt(child, &pf);
+        // The board's period, as its handshake reports it.
+        let host = servo_hw::SerialConfig {
+            port: board.port.clone(),
+            timeout_s: 1.0,
+            handshake_timeout_s: 2.0,
+            ..servo_hw::SerialConfig::default()
+        };
+        let be = servo_hw::SerialBackend::open(host).expect("handshake with the QEMU board");
+        let period_s = be.hello().sample_period_us as f64 * 1e-6;
+        drop(be);
+        Some(Ok((board, period_s)))
+    }
+
+    /// Two busy processes (`yes > /dev/null`) for at most 120 s, killed when dropped.
+    struct BusyLoops(Vec<std::process::Child>);
+
+    impl BusyLoops {
+        fn start() -> BusyLoops {
+            BusyLoops(
+                (0..2)
+                    .map(|_| {
+                        std::process::Command::new("timeout")
+                            .args(["120", "yes"])
+                            .stdout(std::process::Stdio::null())
+                            .spawn()
+                            .expect("spawn a busy loop")
+                    })
+                    .collect(),
+            )
+        }
+    }
+
+    impl Drop for BusyLoops {
+        fn drop(&mut self) {
+            for c in &mut self.0 {
+                let _ = c.kill();
+                let _ = c.wait();
+            }
+        }
+    }
+
+    /// A 1 rad step on the QEMU board at its default period with gains designed for that
+    /// period: it ends within 5 % of 1 rad, or the board refuses to start or the run stops,
+    /// saying why (the loop cannot keep the period here); never a run to the position limit.
+    fn step_at_the_default_period(busy: bool) {
+        let _rt = realtime();
+        let dir = tempfile::tempdir().unwrap();
+        let _busy = busy.then(BusyLoops::start);
+        let what = if busy { "under two busy loops" } else { "" };
+        let (board, period_s) = match start_at_default_period(dir.path()) {
+            None => return,
+            Some(Err(err)) => {
+                assert!(
+                    err.contains("the QEMU board cannot hold a period of 10 ms or less")
+                        && err.contains("deadlines missed"),
+                    "servo board --qemu failed without saying it cannot hold a period: {err}"
+                );
+                eprintln!("servo board --qemu refused {what}, saying why: {err}");
+                return;
+            }
+            Some(Ok(b)) => b,
+        };
+        let ts = format!("{period_s}");
+        let g = gains(dir.path(), &["--ts", &ts]);
+        let log = dir.path().join("step.mcap");
+        let (ok, out, err) = servo_owned(&run_args(
+            &g,
+            &board.port,
+            &log,
+            "3",
+            &["--board-timeout-ms", "1000"],
+        ));
+        let board_out = board.quit();
+        eprintln!("{board_out}\n{out}\n{err}");
+        let th = super::board_proc::theta(&log);
+        let peak = th.iter().map(|s| s.1.abs()).fold(0.0, f64::max);
+        assert!(
+            peak < 3.0,
+            "the step ran away {what} (|theta_l| up to {peak} rad): {err}"
+        );
+        if ok {
+            let n_want = (3.0 / period_s).round() as usize;
+            let (n, theta) = (th.len(), th.last().expect("samples").1);
+            eprintln!("{what} at {period_s} s: the step ends at {theta} rad ({n} samples)");
+            assert_eq!(n, n_want, "{n} samples, not {n_want} (3 s at {period_s} s)");
+            assert!(
+                (theta - 1.0).abs() < 0.05,
+                "the step {what} ends at {theta} rad, not 1 +- 0.05 rad"
+            );
+        } else {
+            assert!(
+                err.contains("the board is starved: use --period-ms ")
+                    && err.contains("board at 0 V"),
+                "the run {what} failed without saying the board is starved: {err}"
+            );
+            eprintln!("the run {what} stopped, saying why: {err}");
+        }
+    }
+
+    #[test]
+    fn a_step_at_the_default_period_settles_or_refuses_on_a_quiet_machine() {
+        step_at_the_default_period(false);
+    }
+
+    #[test]
+    fn a_step_at_the_default_period_settles_or_refuses_under_two_busy_loops() {
+        step_at_the_default_period(true);
     }
 
     #[test]

@@ -27,8 +27,11 @@
 //! # State machine (docs/protocol.md, "Session")
 //!
 //! * **Idle** (after reset, Stop, a fault): 0 V. Hello → HelloAck (or Fault(Version)); Stop →
-//!   Stopped; LoopGains → GainsAck; Start → Running (host-driven); LoopReference with valid gains
-//!   → Running (on-board PID); SetVoltage → Fault(BadCommand) (once per run).
+//!   Stopped; LoopGains → GainsAck (invalid gains → Fault(BadCommand)); Start → Running
+//!   (host-driven); LoopReference with valid gains → Running (on-board PID), without them →
+//!   Fault(BadCommand); SetVoltage → Fault(BadCommand), every time, except the late answers
+//!   to the samples of a run a fault just ended (`seq` up to one past its last sample, until the
+//!   next Hello, Start or Stop): those were sent before the host heard of the fault.
 //! * **Running**: Sample 0 at once, then one Sample per tick. SetVoltage(seq, u) with a newer seq
 //!   is clipped to the voltage limit and applied at once (and ends on-board mode); LoopReference
 //!   moves the on-board reference. A command for Sample k that has not arrived by tick k+1 sets
@@ -175,7 +178,9 @@ pub struct BoardCore {
     dec: Decoder,
     gains: Option<LoopGains>,
     run: Option<Run>,
-    bad_cmd_reported: bool,
+    /// The index of the last sample of the run a fault ended, until the next Hello, Start or
+    /// Stop: SetVoltage answers up to one past it are late, not out of order.
+    faulted_run_k: Option<u32>,
     stats: BoardStats,
     /// The compensation of the on-board loop (issue #29), set by the firmware.
     compensation: Option<LoopCompensation>,
@@ -191,7 +196,7 @@ impl BoardCore {
             dec: Decoder::new(),
             gains: None,
             run: None,
-            bad_cmd_reported: false,
+            faulted_run_k: None,
             stats: BoardStats::default(),
             compensation: None,
         })
@@ -347,7 +352,7 @@ impl BoardCore {
 
     fn start_run<H: BoardHal + ?Sized>(&mut self, hal: &mut H, onboard: Option<(Pid, f64)>) {
         self.stats.runs += 1;
-        self.bad_cmd_reported = false;
+        self.faulted_run_k = None;
         hal.set_voltage(0.0);
         hal.restart_tick();
         let now = hal.now_us();
@@ -368,10 +373,13 @@ impl BoardCore {
     fn handle<H: BoardHal + ?Sized>(&mut self, hal: &mut H, m: Message) {
         let now = hal.now_us();
         match m {
-            Message::Hello { protocol_version } => self.hello(hal, protocol_version),
+            Message::Hello { protocol_version } => {
+                self.faulted_run_k = None;
+                self.hello(hal, protocol_version)
+            }
             Message::LoopGains(g) => {
                 if self.onboard_pid(g).is_none() {
-                    self.bad_command(hal, "invalid loop gains");
+                    self.fault(hal, FaultCode::BadCommand, "invalid loop gains");
                 } else {
                     self.gains = Some(g);
                     hal.write(Frame::new(&Message::GainsAck).as_bytes());
@@ -379,6 +387,7 @@ impl BoardCore {
             }
             Message::Start => self.start_run(hal, None),
             Message::Stop => {
+                self.faulted_run_k = None;
                 if self.run.take().is_some() {
                     hal.set_voltage(0.0);
                 }
@@ -386,7 +395,14 @@ impl BoardCore {
             }
             Message::SetVoltage { seq, u_v } => {
                 let Some(r) = self.run.as_mut() else {
-                    self.bad_command(hal, "SetVoltage while not started");
+                    // A late answer to the run a fault just ended (the host's SetVoltage(0 V)
+                    // before its Stop is one past the last sample): not out of order.
+                    let late = self
+                        .faulted_run_k
+                        .is_some_and(|k| seq <= k.saturating_add(1));
+                    if !late {
+                        self.fault(hal, FaultCode::BadCommand, "SetVoltage before Start");
+                    }
                     return;
                 };
                 let newer = r
@@ -413,11 +429,7 @@ impl BoardCore {
             Message::LoopReference { ref_rad, .. } => {
                 let pid = self.gains.and_then(|g| self.onboard_pid(g));
                 let Some(pid) = pid else {
-                    if self.run.is_some() {
-                        self.fault(hal, FaultCode::BadCommand, "LoopReference without gains");
-                    } else {
-                        self.bad_command(hal, "LoopReference without valid gains");
-                    }
+                    self.fault(hal, FaultCode::BadCommand, "LoopReference without gains");
                     return;
                 };
                 if !ref_rad.is_finite() {
@@ -478,19 +490,12 @@ impl BoardCore {
         Pid::new(cfg).ok()
     }
 
-    /// A bad command while idle: reported once until the next run.
-    fn bad_command<H: BoardHal + ?Sized>(&mut self, hal: &mut H, text: &str) {
-        if !self.bad_cmd_reported {
-            self.fault(hal, FaultCode::BadCommand, text);
-        }
-    }
-
     /// 0 V, the run ends, Fault sent.
     fn fault<H: BoardHal + ?Sized>(&mut self, hal: &mut H, code: FaultCode, text: &str) {
-        if self.run.take().is_some() {
+        if let Some(r) = self.run.take() {
             hal.set_voltage(0.0);
+            self.faulted_run_k = Some(r.k);
         }
-        self.bad_cmd_reported = true;
         self.stats.faults += 1;
         hal.on_fault(code, text);
         hal.write(Frame::new(&Message::Fault(Fault::new(code, text))).as_bytes());

@@ -45,6 +45,10 @@ pub enum HwError {
     Sim(#[from] servo_core::sim::SimError),
     #[error("safety limit: {0}")]
     Safety(String),
+    /// The loop cannot keep the board's period ([`crate::starvation`]): stopped before the
+    /// error grows.
+    #[error("{0}")]
+    Starved(crate::starvation::Starved),
 }
 
 /// A board that runs a sampled position loop.

@@ -14,6 +14,7 @@ pub mod qemu;
 pub mod run;
 pub mod serial;
 pub mod sim;
+pub mod starvation;
 
 pub use backend::{Backend, BoardInfo, HwError, Sample};
 pub use board::{BoardConfig, BoardReport, VirtualBoard};

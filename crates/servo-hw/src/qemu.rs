@@ -310,3 +310,118 @@ fn bridge(
     });
     Ok(vec![down, up])
 }
+
+/// Periods `servo board --qemu` tries when none is given, shortest first [us].
+pub const PROBE_PERIODS_US: [u32; 4] = [1000, 2000, 5000, 10_000];
+/// Share of missed deadlines a probe may show for its period to count as held (after its first
+/// [`PROBE_WARMUP_SAMPLES`]): well inside the [`crate::starvation::STARVED_MISSED_FRACTION`]
+/// that stops a run, so that a run at the chosen period (which does more per sample than the
+/// probe: a PID, a log) has headroom.
+pub const PROBE_MAX_MISSED_FRACTION: f64 = 0.1;
+/// Samples at the start of a probe not judged [samples]: the emulator translates the
+/// firmware's code on its first periods.
+pub const PROBE_WARMUP_SAMPLES: u64 = 20;
+/// How long a probe runs at each period [s] (at least [`PROBE_MIN_SAMPLES`] samples).
+pub const PROBE_DURATION_S: f64 = 0.5;
+/// Fewest samples a probe judges [samples].
+pub const PROBE_MIN_SAMPLES: u64 = 150;
+
+/// What a probe of one period measured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PeriodProbe {
+    /// The period tried [us].
+    pub period_us: u32,
+    /// Samples answered and deadlines missed after the warm-up.
+    pub samples: u64,
+    pub missed: u64,
+    /// Why the loop was starved, if the host's watch stopped it.
+    pub starved: Option<String>,
+}
+
+impl PeriodProbe {
+    /// Whether the loop held the period.
+    pub fn held(&self) -> bool {
+        self.starved.is_none()
+            && self.samples >= PROBE_MIN_SAMPLES
+            && (self.missed as f64) <= PROBE_MAX_MISSED_FRACTION * self.samples as f64
+    }
+}
+
+impl std::fmt::Display for PeriodProbe {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let ms = self.period_us as f64 * 1e-3;
+        match &self.starved {
+            Some(s) => write!(f, "{ms} ms: {s}"),
+            None => write!(
+                f,
+                "{ms} ms: {} of {} deadlines missed",
+                self.missed, self.samples
+            ),
+        }
+    }
+}
+
+/// Runs the QEMU board of `cfg` at `period_us` for [`PROBE_DURATION_S`] with this process as
+/// its host, answering every sample with 0 V (nothing moves), and measures whether the loop
+/// keeps the period on this machine.
+pub fn probe_period(cfg: &QemuConfig, period_us: u32) -> Result<PeriodProbe, HwError> {
+    let qcfg = QemuConfig {
+        period_us,
+        stats_file: None,
+        ..cfg.clone()
+    };
+    let board = QemuBoard::start(&qcfg)?;
+    let host = crate::serial::SerialConfig {
+        port: board.path().to_string(),
+        timeout_s: 0.5,
+        ..crate::serial::SerialConfig::default()
+    };
+    let mut be = crate::serial::SerialBackend::open(host)?;
+    let period_s = period_us as f64 * 1e-6;
+    let n = ((PROBE_DURATION_S / period_s).ceil() as u64).max(PROBE_MIN_SAMPLES);
+    let mut starved = None;
+    let mut warm = None;
+    use crate::backend::Backend;
+    for k in 0..n + PROBE_WARMUP_SAMPLES {
+        if k == PROBE_WARMUP_SAMPLES {
+            warm = Some(be.stats());
+        }
+        match be.sample() {
+            Ok(_) => be.apply(0.0)?,
+            Err(HwError::Starved(s)) => {
+                starved = Some(s.to_string());
+                break;
+            }
+            Err(e) => {
+                let _ = be.stop();
+                return Err(e);
+            }
+        }
+    }
+    let _ = be.stop();
+    let st = be.stats();
+    drop(be);
+    drop(board);
+    let w = warm.unwrap_or(st);
+    Ok(PeriodProbe {
+        period_us,
+        samples: st.samples.saturating_sub(w.samples),
+        missed: st.missed_deadlines.saturating_sub(w.missed_deadlines),
+        starved,
+    })
+}
+
+/// The shortest of [`PROBE_PERIODS_US`] the QEMU board of `cfg` holds on this machine
+/// ([`probe_period`]), with every probe's figures; `Ok((None, probes))` when it holds none.
+pub fn choose_period(cfg: &QemuConfig) -> Result<(Option<u32>, Vec<PeriodProbe>), HwError> {
+    let mut probes = Vec::new();
+    for p in PROBE_PERIODS_US {
+        let probe = probe_period(cfg, p)?;
+        let held = probe.held();
+        probes.push(probe);
+        if held {
+            return Ok((Some(p), probes));
+        }
+    }
+    Ok((None, probes))
+}

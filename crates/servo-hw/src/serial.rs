@@ -9,11 +9,13 @@
 //!
 //! Safety: the host applies the same [`SafetyLimits`] as the board (voltage clip, over-current,
 //! soft position limits) on every sample; a trip is an error and the caller must call
-//! [`Backend::stop`] (0 V). A board that stays silent longer than `timeout_s` is an error too.
+//! [`Backend::stop`] (0 V). So is a loop that cannot keep the board's period
+//! ([`crate::starvation`], [`HwError::Starved`]): watched from the first samples of each run. A board that stays silent longer than `timeout_s` is an error too.
 //! Dropping the backend sends Stop (best effort).
 
 pub use crate::backend::LinkStats;
 use crate::backend::{Backend, BoardInfo, HwError, Sample};
+use crate::starvation::StarvationWatch;
 use serialport::{ClearBuffer, SerialPort};
 use servo_core::math;
 use servo_core::protocol::{flags, Decoder, Frame, HelloAck, Message, PROTOCOL_VERSION};
@@ -78,6 +80,8 @@ pub struct SerialBackend {
     jitter_s: Vec<f64>,
     rtt_s: Vec<f64>,
     stats: LinkStats,
+    /// Whether the run keeps the board's period (reset at each Start).
+    watch: StarvationWatch,
 }
 
 impl std::fmt::Debug for SerialBackend {
@@ -142,6 +146,7 @@ impl SerialBackend {
             jitter_s: Vec::new(),
             rtt_s: Vec::new(),
             stats: LinkStats::default(),
+            watch: StarvationWatch::new(1.0),
             cfg,
         };
         me.handshake()?;
@@ -205,6 +210,7 @@ impl SerialBackend {
             sample_period_s: h.sample_period_us as f64 * 1e-6,
         };
         self.stats.period_s = self.info.sample_period_s;
+        self.watch = StarvationWatch::new(self.info.sample_period_s);
         self.hello = h;
         Ok(())
     }
@@ -323,8 +329,13 @@ impl SerialBackend {
         if let Err(trip) = self.limits.check(theta_l_rad, i_a_a) {
             return Err(HwError::Safety(format!("host-side {trip}")));
         }
+        let time_s = (self.time_base_us + s.time_us as u64) as f64 * 1e-6;
+        let missed = s.seq != 0 && s.flags & flags::MISSED_DEADLINE != 0;
+        self.watch
+            .push(time_s, at, missed)
+            .map_err(HwError::Starved)?;
         Ok(Some(Sample {
-            time_s: (self.time_base_us + s.time_us as u64) as f64 * 1e-6,
+            time_s,
             theta_l_rad,
             encoder_count: s.encoder_count as i64,
             i_a_a,
@@ -358,6 +369,7 @@ impl Backend for SerialBackend {
         }
         if !self.started {
             self.started = true;
+            self.watch = StarvationWatch::new(self.info.sample_period_s);
             self.send(&Message::Start)?;
         }
         let timeout =

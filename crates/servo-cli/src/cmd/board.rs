@@ -54,9 +54,11 @@ pub struct Board {
     /// Also write the pty path to this file (for scripts).
     #[arg(long = "path-file", value_name = "FILE")]
     pub path_file: Option<PathBuf>,
-    /// Control (sample) period of the board [ms].
-    #[arg(long = "period-ms", default_value_t = 1.0, value_name = "MS")]
-    pub period_ms: f64,
+    /// Control (sample) period of the board [ms]. Default: 1 ms for --pty and --port; for
+    /// --qemu, the shortest of 1, 2, 5 and 10 ms that the emulated board and a host on this
+    /// machine hold (measured at start, a fraction of a second per period tried).
+    #[arg(long = "period-ms", value_name = "MS")]
+    pub period_ms: Option<f64>,
     /// Physics sub-steps of the simulated plant per period, 1..=20: the time resolution at which
     /// a command takes effect (period / N), and the plant's cost per period on the QEMU image.
     #[arg(long = "physics-substeps", default_value_t = 5, value_name = "N")]
@@ -87,10 +89,19 @@ pub struct Board {
     pub plant: PlantArgs,
 }
 
+/// The board period when --period-ms is not given (--pty, --port) [ms].
+pub const DEFAULT_PERIOD_MS: f64 = 1.0;
+
 impl Board {
+    /// The period in force [ms]: --period-ms, else [`DEFAULT_PERIOD_MS`].
+    fn period_ms(&self) -> f64 {
+        self.period_ms.unwrap_or(DEFAULT_PERIOD_MS)
+    }
+
     pub fn config(&self) -> anyhow::Result<BoardConfig> {
-        if !(self.period_ms.is_finite() && self.period_ms > 0.0) {
-            bail!("--period-ms must be > 0 ms, got {}", self.period_ms);
+        let period_ms = self.period_ms();
+        if !(period_ms.is_finite() && period_ms > 0.0) {
+            bail!("--period-ms must be > 0 ms, got {period_ms}");
         }
         if !(1..=20).contains(&self.physics_substeps) {
             bail!(
@@ -100,7 +111,7 @@ impl Board {
         }
         let cfg = BoardConfig {
             physics_substeps: self.physics_substeps,
-            sample_period_s: self.period_ms * 1e-3,
+            sample_period_s: period_ms * 1e-3,
             watchdog_s: self.watchdog_ms * 1e-3,
             limits: SafetyLimits {
                 voltage_limit_v: self.voltage_limit_v,
@@ -146,7 +157,7 @@ impl Board {
             outln!(
                 "  {} | period {} ms | watchdog {} ms | limits ±{} V, [{}, {}] rad, {} A | Ctrl-C to quit",
                 servo_hw::board::FIRMWARE,
-                self.period_ms,
+                self.period_ms(),
                 self.watchdog_ms,
                 cfg.limits.voltage_limit_v,
                 cfg.limits.theta_min_rad,
@@ -192,10 +203,10 @@ impl Board {
             .theta_min_rad
             .abs()
             .max(cfg.limits.theta_max_rad.abs());
-        let qcfg = servo_hw::qemu::QemuConfig {
+        let mut qcfg = servo_hw::qemu::QemuConfig {
             qemu: self.qemu_bin.clone(),
             elf: elf.clone(),
-            period_us: (self.period_ms * 1e3).round() as u32,
+            period_us: (self.period_ms() * 1e3).round() as u32,
             watchdog_ms: self.watchdog_ms.round() as u32,
             substeps: self.physics_substeps,
             theta_limit_mrad: (theta_limit_rad * 1e3).round().min(u32::MAX as f64) as u32,
@@ -212,6 +223,20 @@ impl Board {
             ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
                 .context("installing the Ctrl-C handler")?;
         }
+        let period_note = match self.period_ms {
+            Some(_) => "--period-ms".to_string(),
+            None => {
+                qcfg.period_us = self.measured_period_us(&qcfg)?;
+                "measured: the shortest of 1, 2, 5, 10 ms this machine holds".to_string()
+            }
+        };
+        let period_ms = qcfg.period_us as f64 * 1e-3;
+        if (qcfg.watchdog_ms as u64) * 1000 <= qcfg.period_us as u64 {
+            bail!(
+                "--watchdog-ms {} must be longer than the board's period ({period_ms} ms)",
+                self.watchdog_ms
+            );
+        }
         let mut board = servo_hw::qemu::QemuBoard::start(&qcfg)
             .with_context(|| format!("starting the QEMU board ({})", elf.display()))?;
         let path = board.path().to_string();
@@ -221,10 +246,9 @@ impl Board {
         }
         outln!("board ready on {path}");
         outln!(
-            "  QEMU mps2-an386 running {} | plant {} | period {} ms | watchdog {} ms | Ctrl-C to quit",
+            "  QEMU mps2-an386 running {} | plant {} | period {period_ms} ms ({period_note}) | watchdog {} ms | Ctrl-C to quit",
             elf.display(),
             self.qemu_plant,
-            self.period_ms,
             self.watchdog_ms
         );
         let _ = std::io::stdout().flush();
@@ -237,6 +261,35 @@ impl Board {
         board.shutdown();
         outln!("board stopped (QEMU)");
         Ok(())
+    }
+}
+
+impl Board {
+    /// The shortest period the QEMU board of `qcfg` holds here ([`servo_hw::qemu::choose_period`]),
+    /// each probe said on stderr; an error naming the figures when it holds none.
+    fn measured_period_us(&self, qcfg: &servo_hw::qemu::QemuConfig) -> anyhow::Result<u32> {
+        eprintln!("measuring the period this machine holds (no --period-ms) ...");
+        let (chosen, probes) = servo_hw::qemu::choose_period(qcfg)
+            .context("measuring the QEMU board's period (give --period-ms to skip)")?;
+        for p in &probes {
+            eprintln!("  {p}: {}", if p.held() { "held" } else { "not held" });
+        }
+        let Some(us) = chosen else {
+            let last = servo_hw::qemu::PROBE_PERIODS_US[servo_hw::qemu::PROBE_PERIODS_US.len() - 1];
+            bail!(
+                "the QEMU board cannot hold a period of {} ms or less on this machine (more than \
+                 {:.0} % of its deadlines missed: {}); free the machine or give a longer \
+                 --period-ms",
+                last as f64 * 1e-3,
+                servo_hw::qemu::PROBE_MAX_MISSED_FRACTION * 100.0,
+                probes
+                    .iter()
+                    .map(|p| p.to_string())
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            );
+        };
+        Ok(us)
     }
 }
 

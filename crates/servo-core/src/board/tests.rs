@@ -234,10 +234,11 @@ fn bad_commands_are_faults() {
     );
     assert_eq!(
         hal.faults,
-        [FaultCode::BadCommand],
-        "reported once while idle"
+        [FaultCode::BadCommand, FaultCode::BadCommand],
+        "every SetVoltage before Start is answered"
     );
     assert_eq!(hal.u_v, 0.0);
+    hal.faults.clear();
     send(&mut core, &mut hal, Message::Start);
     send(
         &mut core,
@@ -248,7 +249,7 @@ fn bad_commands_are_faults() {
         },
     );
     assert!(!core.is_running());
-    assert_eq!(hal.faults.len(), 2);
+    assert_eq!(hal.faults.len(), 1);
     send(
         &mut core,
         &mut hal,
@@ -330,4 +331,109 @@ fn invalid_configs_are_rejected() {
     for c in bad {
         assert!(BoardCore::new(c).is_err(), "{c:?}");
     }
+}
+
+/// Every out-of-order command the protocol chapter lists gets its answer, in every idle state
+/// (after reset, after Hello, after Stop, after a fault), and the late answers to a run a fault
+/// ended are not mistaken for out-of-order commands.
+#[test]
+fn out_of_order_commands_get_the_promised_fault() {
+    fn bad_command(v: &[Message]) -> bool {
+        matches!(v, [Message::Fault(f)] if f.code == FaultCode::BadCommand)
+    }
+    let mut hal = MockHal::default();
+    let mut core = BoardCore::new(cfg()).unwrap();
+    // After reset, after Hello, after a Stop that ended a run, after a Stop while idle.
+    let sv = |seq| Message::SetVoltage { seq, u_v: 2.0 };
+    for before in [
+        None,
+        Some(Message::Hello {
+            protocol_version: PROTOCOL_VERSION,
+        }),
+        Some(Message::Start),
+        Some(Message::Stop),
+    ] {
+        if let Some(m) = before {
+            send(&mut core, &mut hal, m);
+            if m == Message::Start {
+                send(&mut core, &mut hal, Message::Stop);
+            }
+            hal.sent();
+        }
+        for seq in [0, 1, 7] {
+            send(&mut core, &mut hal, sv(seq));
+            let v = hal.sent();
+            assert!(
+                bad_command(&v),
+                "after {before:?}, SetVoltage({seq}): {v:?}"
+            );
+            assert_eq!(hal.u_v, 0.0);
+            assert!(!core.is_running());
+        }
+    }
+    // LoopReference without gains, invalid gains: BadCommand each time, nothing starts.
+    for _ in 0..2 {
+        send(
+            &mut core,
+            &mut hal,
+            Message::LoopReference {
+                seq: 0,
+                ref_rad: 1.0,
+            },
+        );
+        assert!(bad_command(&hal.sent()));
+        send(
+            &mut core,
+            &mut hal,
+            Message::LoopGains(LoopGains {
+                kp: f32::NAN,
+                ki: 0.0,
+                kd: 0.0,
+                tau_f_s: 0.001,
+            }),
+        );
+        assert!(bad_command(&hal.sent()));
+        assert!(!core.is_running());
+    }
+    // A run a fault ends (the watchdog at tick 60, after sample 59): the host's answers in
+    // flight (seq up to 60, its SetVoltage(0 V) before Stop) are silent; a command from beyond that run is
+    // out of order; after the host's Stop, every SetVoltage is out of order again.
+    send(&mut core, &mut hal, Message::Start);
+    send(&mut core, &mut hal, sv(0));
+    for k in 1..=60u32 {
+        hal.now_us = k * 1000;
+        core.tick(&mut hal);
+        if k < 10 {
+            send(&mut core, &mut hal, sv(k));
+        }
+    }
+    assert!(!core.is_running());
+    assert!(matches!(hal.sent().last(), Some(Message::Fault(f)) if f.code == FaultCode::Watchdog));
+    for seq in [10, 59, 60] {
+        send(&mut core, &mut hal, sv(seq));
+        assert!(hal.sent().is_empty(), "late answer {seq} after the fault");
+    }
+    for seq in [61, 500] {
+        send(&mut core, &mut hal, sv(seq));
+        assert!(
+            bad_command(&hal.sent()),
+            "SetVoltage({seq}) after the fault"
+        );
+    }
+    send(&mut core, &mut hal, Message::Stop);
+    assert_eq!(hal.sent(), [Message::Stopped]);
+    send(&mut core, &mut hal, sv(5));
+    assert!(bad_command(&hal.sent()));
+    assert_eq!(hal.u_v, 0.0);
+    // Stop while idle: Stopped; Start while running begins a new run at sample 0.
+    send(&mut core, &mut hal, Message::Stop);
+    assert_eq!(hal.sent(), [Message::Stopped]);
+    send(&mut core, &mut hal, Message::Start);
+    send(&mut core, &mut hal, sv(0));
+    hal.now_us += 1000;
+    core.tick(&mut hal);
+    send(&mut core, &mut hal, Message::Start);
+    let s = samples(&hal.sent());
+    assert_eq!(s.last().map(|s| s.seq), Some(0));
+    assert!(core.is_running());
 }
