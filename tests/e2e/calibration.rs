@@ -339,7 +339,8 @@ fn prbs_log(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Record {
     })
 }
 
-/// A position PID on random load-angle steps (+-0.3 to +-3 rad, every 0.5-1.5 s), 20 s.
+/// A position PID tracking a reference whose speed swings around a random level without
+/// reversing (load 10-30 rad/s, +-60 % at 0.2-1 Hz, either direction), 20 s.
 fn closed_loop_log(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Record {
     let gains = PidGains {
         kp: 7.5244,
@@ -349,15 +350,14 @@ fn closed_loop_log(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Recor
     };
     let mut pid = Pid::new(PidConfig::new(gains, DT).with_symmetric_limit(10.0)).unwrap();
     let mut b = backend(sim, p, rng);
-    let mut prng = SplitMix64(rng.next_u64());
-    let (mut r, mut until) = (0.0, 0.0);
+    let sign = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
+    let w0 = sign * (10.0 + 20.0 * rng.uniform());
+    let f = 0.2 + 0.8 * rng.uniform();
+    let mut r = 0.0;
     let (mut t, mut th, mut ia, mut uv) = (vec![], vec![], vec![], vec![]);
     for k in 0..20_000 {
         let tk = k as f64 * DT;
-        if tk >= until {
-            r += (0.3 + 2.7 * prng.uniform()) * if prng.uniform() < 0.5 { -1.0 } else { 1.0 };
-            until = tk + 0.5 + prng.uniform();
-        }
+        r += w0 * (1.0 + 0.6 * (TAU * f * tk).sin()) * DT;
         let s = b.sample().unwrap();
         let u = servo_core::compare::Controller::update(&mut pid, r, s.theta_l_rad);
         let u = u.clamp(-10.0, 10.0);

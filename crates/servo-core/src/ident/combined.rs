@@ -134,6 +134,10 @@ pub fn identify_combined(
         .current_sampling
         .map(|cs| cs.inertia_offset_kg_m2(dt))
         .unwrap_or(0.0);
+    let j_offset_se = cfg
+        .current_sampling
+        .map(|cs| cs.inertia_offset_se_kg_m2(dt))
+        .unwrap_or(0.0);
     let mut j_eq = Estimate::from_fit(&fit, 0).shifted(j_offset);
     let mut b_eq = Estimate::from_fit(&fit, 1);
     let mut tau_sf = Estimate::from_fit(&fit, 2);
@@ -162,6 +166,7 @@ pub fn identify_combined(
             }
         }
     }
+    let j_eq = j_eq.widened(j_offset_se);
     let mut notes = Vec::new();
     for (name, e) in [("J_eq", &j_eq), ("B_eq", &b_eq), ("tau_sf", &tau_sf)] {
         if e.ci95.0 <= 0.0 && e.ci95.1 >= 0.0 {

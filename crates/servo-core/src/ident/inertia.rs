@@ -217,7 +217,12 @@ pub fn identify_inertia(
         dof: m - 1,
         n: m,
     }
-    .shifted(j_offset);
+    .shifted(j_offset)
+    .widened(
+        cfg.current_sampling
+            .map(|cs| cs.inertia_offset_se_kg_m2(dt))
+            .unwrap_or(0.0),
+    );
     Ok(InertiaFit {
         j_eq,
         phases,

@@ -100,6 +100,11 @@ impl CurrentSampling {
             back_emf_nm_s_rad: p.k_t * p.k_e / p.r_eq(),
         }
     }
+    /// The standard uncertainty of that correction [kg m^2]: a quarter of it, for what the log
+    /// does not tell (the current sensor's own lag, a drive that is not quite first order).
+    pub fn inertia_offset_se_kg_m2(&self, dt_s: f64) -> f64 {
+        0.25 * self.inertia_offset_kg_m2(dt_s)
+    }
     /// The inertia missing from a fit on the sampled current at sample period `dt_s` [kg m^2].
     pub fn inertia_offset_kg_m2(&self, dt_s: f64) -> f64 {
         let d = self.back_emf_nm_s_rad * (0.5 * dt_s - self.lag_s).max(0.0);
@@ -150,6 +155,20 @@ impl Estimate {
     /// Relative standard error |se / value|.
     pub fn rel_err(&self) -> f64 {
         (self.std_err / self.value).abs()
+    }
+    /// The same estimate with a further independent standard uncertainty `se` folded in (the
+    /// interval widened with the same t quantile).
+    pub fn widened(self, se: f64) -> Estimate {
+        if !(se > 0.0) || !(self.std_err > 0.0) {
+            return self;
+        }
+        let t = (self.ci95.1 - self.value) / self.std_err;
+        let s = crate::math::sqrt(self.std_err * self.std_err + se * se);
+        Estimate {
+            std_err: s,
+            ci95: (self.value - t * s, self.value + t * s),
+            ..self
+        }
     }
     /// The same estimate moved by `d` (a known bias removed).
     pub fn shifted(self, d: f64) -> Estimate {
