@@ -129,7 +129,18 @@ pub fn identify(
     p: &PlantParams,
     opts: &IdentifyOptions,
 ) -> Result<Identification, IdentError> {
-    let (fcfg, pcfg, ccfg) = (&opts.friction, &opts.phases, &opts.combined);
+    // The current is taken as sampled before each zero-order-hold command of a voltage drive
+    // (the torque aligned with the speed's derivative, J_eq corrected) unless told otherwise.
+    let sampling = Some(super::CurrentSampling::from_params(p));
+    let ccfg = &CombinedConfig {
+        current_sampling: opts.combined.current_sampling.or(sampling),
+        ..opts.combined
+    };
+    let pcfg = &PhaseConfig {
+        current_sampling: opts.phases.current_sampling.or(sampling),
+        ..opts.phases
+    };
+    let fcfg = &opts.friction;
     let mut r = Identification::default();
     let inertia =
         |exps: &[Experiment], f: Option<&FrictionFit>| -> Result<InertiaFit, IdentError> {

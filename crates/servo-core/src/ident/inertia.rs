@@ -62,9 +62,20 @@ pub fn inertia_phases(
     let mut out = Vec::new();
     for (k, e) in exps.iter().enumerate() {
         let tau = e.torque("inertia")?;
-        for p in find_phases(&e.time_s, &e.omega_m_rad_s, cfg)? {
+        let w = &e.omega_m_rad_s;
+        let wmax = w.iter().fold(0.0_f64, |m, w| m.max(w.abs()));
+        for p in find_phases(&e.time_s, w, cfg)? {
+            // A phase through or near rest is left out: the friction there (stiction, the
+            // turn of the sign) is not the fitted one, and eq. 67 would carry its error into J.
+            let w0 = w[p.start];
+            if w[p.start..p.end]
+                .iter()
+                .any(|v| v * w0 <= 0.0 || v.abs() < REST_FRAC * wmax)
+            {
+                continue;
+            }
             let tau_i: Vec<f64> = (p.start..p.end)
-                .map(|i| tau[i] - friction_torque(friction, e.omega_m_rad_s[i]))
+                .map(|i| tau[i] - friction_torque(friction, w[i]))
                 .collect();
             out.push(InertiaPhase {
                 experiment: k,
@@ -73,11 +84,43 @@ pub fn inertia_phases(
                 t_start_s: e.time_s[p.start],
                 t_end_s: e.time_s[p.end - 1],
                 accel_rad_s2: p.accel_rad_s2,
-                tau_i_nm: mean(&tau_i),
+                tau_i_nm: slope_weighted_mean(&e.time_s[p.start..p.end], &tau_i),
             });
         }
     }
     Ok(out)
+}
+
+/// Phases with a speed below this fraction of the log's largest |w_m| are left out [-].
+const REST_FRAC: f64 = 0.02;
+
+/// The mean of `x` (sampled at `t`) weighted as the straight-line slope of the phase weights the
+/// acceleration: the slope of a line fitted to w(t) is sum_j W_j (w_{j+1} - w_j) / (t_{j+1} - t_j)
+/// with parabolic weights W_j >= 0, sum W_j = 1 (largest mid-phase). The torque that causes that
+/// acceleration is the same W-weighted mean, so eq. 70 stays exact when the acceleration is not
+/// constant over the phase (a speed loop catching up with its ramp, a sine).
+pub(crate) fn slope_weighted_mean(t: &[f64], x: &[f64]) -> f64 {
+    let m = t.len().min(x.len());
+    if m < 3 {
+        return mean(&x[..m]);
+    }
+    let tm = mean(&t[..m]);
+    let sxx: f64 = t[..m].iter().map(|t| (t - tm) * (t - tm)).sum();
+    if !(sxx > 0.0) {
+        return mean(&x[..m]);
+    }
+    let (mut c, mut acc, mut wsum) = (0.0, 0.0, 0.0);
+    for j in 0..m - 1 {
+        c += (t[j] - tm) / sxx;
+        let wj = -c * (t[j + 1] - t[j]);
+        acc += wj * 0.5 * (x[j] + x[j + 1]);
+        wsum += wj;
+    }
+    if wsum > 0.0 {
+        acc / wsum
+    } else {
+        mean(&x[..m])
+    }
 }
 
 fn no_phase_error() -> IdentError {
@@ -157,6 +200,14 @@ pub fn identify_inertia(
              phases sweep the same speeds; add the friction runs for eq. 67",
         ));
     }
+    let dt = exps
+        .first()
+        .map(|e| e.sample_period_s())
+        .unwrap_or(f64::NAN);
+    let j_offset = cfg
+        .current_sampling
+        .map(|cs| cs.inertia_offset_kg_m2(dt))
+        .unwrap_or(0.0);
     let j_eq = Estimate {
         value: j_mean,
         std_err: se,
@@ -165,7 +216,13 @@ pub fn identify_inertia(
         cond: 1.0,
         dof: m - 1,
         n: m,
-    };
+    }
+    .shifted(j_offset)
+    .widened(
+        cfg.current_sampling
+            .map(|cs| cs.inertia_offset_se_kg_m2(dt))
+            .unwrap_or(0.0),
+    );
     Ok(InertiaFit {
         j_eq,
         phases,

@@ -29,6 +29,9 @@ pub struct PhaseConfig {
     /// <= 1; overrides `trim_frac`. E.g. `(0.7, 0.9)` averages the last part of each phase, after
     /// the current transient, as the padova2021-savian group did.
     pub window_frac: Option<(f64, f64)>,
+    /// How the current was sampled (voltage drive, zero-order hold): J_eq is corrected for the
+    /// samples' place in each period; `None`: the current is taken as the period's mean.
+    pub current_sampling: Option<super::CurrentSampling>,
 }
 
 impl Default for PhaseConfig {
@@ -40,6 +43,7 @@ impl Default for PhaseConfig {
             min_duration_s: 0.2,
             trim_frac: 0.1,
             window_frac: None,
+            current_sampling: None,
         }
     }
 }
