@@ -15,6 +15,7 @@ mod frf;
 mod fuzz;
 mod gravity;
 mod guide;
+mod honest;
 mod identify;
 mod layout;
 mod log_reader;

@@ -147,8 +147,13 @@ impl super::Identify {
                 outln!("{note}.");
             }
             for e in &est {
-                if let Some(why) = not_determined(e) {
-                    outln!("  {:<7}   not determined by these logs: {why}", e.key);
+                if not_determined(e).is_some() {
+                    outln!(
+                        "  {:<7}   not determined by these logs (pinned at its bound {} {}; see above)",
+                        e.key,
+                        servo_core::math::sig(e.value.max(0.0), 4),
+                        e.unit
+                    );
                     continue;
                 }
                 outln!(
@@ -236,7 +241,7 @@ fn not_determined(e: &servo_core::fit::UDrivenEstimate) -> Option<String> {
         _ => "a log that excites it",
     };
     Some(format!(
-        "the fit pinned it at its bound {} {} (a negative value is unphysical), where it has no interval; the logs hold too little of it next to the other torques. Written as {} with -o. {experiment}",
+        "the fit pinned it at its bound {} {} (a negative value is unphysical), where it has no interval; the logs hold too little of it next to the other torques. Written as {} with -o. To determine it: {experiment}",
         servo_core::math::sig(e.value.max(0.0), 4),
         e.unit,
         servo_core::math::sig(e.value.max(0.0), 4)
