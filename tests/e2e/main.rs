@@ -16,6 +16,7 @@ mod frf;
 mod fuzz;
 mod gravity;
 mod guide;
+mod honest;
 mod hostile;
 mod identify;
 mod layout;

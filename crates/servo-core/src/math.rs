@@ -195,6 +195,58 @@ pub fn sig(x: f64, digits: usize) -> alloc::string::String {
     alloc::format!("{:.*}", decimals, if x < 0.0 { -r } else { r })
 }
 
+/// A change from `before` to `after` for a person to read: `+20.9 %` (3 significant figures)
+/// when `before` is a value to compare with; `new, was 0` when it was zero (a percentage of
+/// zero is no number); `1.2e5 times` when the percentage would pass 10^4 %; `sign changed` when
+/// it crossed zero; `n/a` when either is not finite. Never more than about six significant
+/// figures, whatever the values.
+#[cfg(feature = "alloc")]
+pub fn change(before: f64, after: f64) -> alloc::string::String {
+    if !before.is_finite() || !after.is_finite() {
+        return "n/a".into();
+    }
+    if before == after {
+        return "no change".into();
+    }
+    if before == 0.0 {
+        return "new, was 0".into();
+    }
+    if after == 0.0 {
+        return "-100 %, now 0".into();
+    }
+    if (before < 0.0) != (after < 0.0) {
+        return "sign changed".into();
+    }
+    let rel = 100.0 * (after - before) / before.abs();
+    if rel.abs() >= 1e4 {
+        return alloc::format!("{} times", sig(after / before, 3));
+    }
+    alloc::format!(
+        "{}{} %",
+        if rel >= 0.0 { "+" } else { "-" },
+        sig(rel.abs(), 3)
+    )
+}
+
+#[cfg(all(test, feature = "alloc"))]
+mod change_tests {
+    use super::change;
+
+    #[test]
+    fn readable_changes() {
+        assert_eq!(change(4.6824e-7, 5.66e-7), "+20.9 %");
+        assert_eq!(change(0.0, 8.0651e-10), "new, was 0");
+        assert_eq!(change(1e-300, 8.0651e-10), "8.07e290 times");
+        assert_eq!(change(2.0, 1.0), "-50.0 %");
+        assert_eq!(change(1.0, -1.0), "sign changed");
+        assert_eq!(change(1.0, 0.0), "-100 %, now 0");
+        assert_eq!(change(f64::NAN, 1.0), "n/a");
+        for (a, b) in [(1e-300, 1.0), (3.0, 3.0000001), (-1e-9, -7e9)] {
+            assert!(change(a, b).len() < 20, "{}", change(a, b));
+        }
+    }
+}
+
 #[cfg(all(test, feature = "alloc"))]
 mod sig_tests {
     use super::sig;

@@ -135,6 +135,8 @@ impl ColumnMap {
     pub fn guess(header: &[&str]) -> anyhow::Result<(ColumnMap, Vec<String>)> {
         let mut entries: Vec<ColumnSpec> = Vec::new();
         let mut ignored = Vec::new();
+        // Columns that look like a signal already taken: guessing one would drop the other.
+        let mut twice: Vec<(Signal, String)> = Vec::new();
         for h in header {
             match guess_column(h.trim()) {
                 Some((signal, unit)) if !entries.iter().any(|e| e.signal == signal) => entries
@@ -143,8 +145,23 @@ impl ColumnMap {
                         column: h.trim().to_string(),
                         unit,
                     }),
-                _ => ignored.push(h.trim().to_string()),
+                Some((signal, _)) => twice.push((signal, h.trim().to_string())),
+                None => ignored.push(h.trim().to_string()),
             }
+        }
+        if let Some((signal, col)) = twice.first() {
+            let first = entries
+                .iter()
+                .find(|e| e.signal == *signal)
+                .map_or(String::new(), |e| e.column.clone());
+            bail!(
+                "columns `{first}` and `{col}` both look like the signal `{signal}`; servo does not \
+                 guess which one to use (the other would be dropped): give the column map, e.g. \
+                 --columns {}",
+                ColumnMap {
+                    entries: entries.clone()
+                }
+            );
         }
         let has_time = entries.iter().any(|e| e.signal == Signal::Time);
         if !has_time || entries.len() < 2 {
@@ -171,13 +188,25 @@ impl ColumnMap {
                     return Ok(1.0 / n);
                 }
                 e.unit.factor_on(axis).ok_or_else(|| {
+                    let (angle, units) = if e.signal.dimension() == super::units::Dimension::Angle {
+                        ("an angle", "rad, deg or rev")
+                    } else {
+                        ("an angular speed", "rad/s, deg/s or rpm")
+                    };
                     anyhow!(
-                        "column `{}` holds {} in {}, a linear unit, but the model is a rotary gear: \
-                         give the model file of the linear axis (a [transmission] section with kind = \"screw\" \
-                         and lead_m, or kind = \"belt\" and radius_m) with --params, --model or --plant",
+                        "column `{}` holds {} in {}, a linear unit, but the model is a rotary gear, \
+                         where {} is {angle}: if the column holds {angle}, say its unit ({units}: \
+                         --columns ...,{}={}:deg, or rename the header, e.g. `{}_rad`); if the rig is a \
+                         screw or a belt, give the model file of the linear axis (a [transmission] section \
+                         with kind = \"screw\" and lead_m, or kind = \"belt\" and radius_m) with --params, \
+                         --model or --plant",
                         e.column,
                         e.signal,
-                        e.unit
+                        e.unit,
+                        e.signal,
+                        e.signal,
+                        e.column,
+                        e.signal.name(),
                     )
                 })
             })
@@ -251,7 +280,7 @@ const SUFFIXES: [(&str, Option<&str>); 34] = [
 fn signal_from_word(word: &str) -> Option<Signal> {
     Some(match word {
         "t" | "time" => Signal::Time,
-        "u" | "v" | "volt" | "voltage" | "vin" | "uin" => Signal::U,
+        "u" | "v" | "volt" | "voltage" | "uin" => Signal::U,
         "thl" | "thetal" | "theta" | "pos" | "position" | "angle" | "ql" | "x" => Signal::ThetaL,
         "vx" | "xdot" | "vel" | "velocity" => Signal::OmegaL,
         "thm" | "thetam" => Signal::ThetaM,
@@ -282,11 +311,39 @@ pub(crate) fn guess_column(name: &str) -> Option<(Signal, Unit)> {
             "ref" | "reference" | "setpoint" | "sp" | "target" | "des" | "desired"
         )
     });
-    let mut signal =
-        signal_from_word(&joined).or_else(|| words.iter().find_map(|w| signal_from_word(w)))?;
+    // A supply voltage is never the command u: `v_supply_V`, `vin_meas_V`, `vbus_V`,
+    // `input_voltage_V`, `battery_V`.
+    let supply = words.iter().any(|w| {
+        matches!(
+            *w,
+            "supply"
+                | "sup"
+                | "vin"
+                | "vbus"
+                | "bus"
+                | "vcc"
+                | "vdd"
+                | "vbat"
+                | "bat"
+                | "battery"
+                | "input"
+                | "vsupply"
+        )
+    }) || matches!(joined.as_str(), "vsupply" | "vin" | "vbus" | "vcc" | "vdd");
+    let mut signal = if supply {
+        Signal::VSupply
+    } else {
+        signal_from_word(&joined).or_else(|| words.iter().find_map(|w| signal_from_word(w)))?
+    };
     // A length suffix (`_m`) is read as one only on a position or speed named as linear (`x_m`,
     // `pos_mm`, `v_x_m_s`): `theta_m` is the motor angle, not a load position in metres.
+    // A load position in mm or um (`theta_l_mm`) is read as a length: on a rotary rig it is
+    // then refused with what to write instead, never dropped.
     if unit.is_linear()
+        && !(matches!(
+            unit,
+            Unit::Millimetre | Unit::Micrometre | Unit::MillimetrePerS
+        ) && signal.accepts_linear(unit.dimension()))
         && !words.iter().any(|w| {
             matches!(
                 *w,
@@ -434,6 +491,55 @@ mod tests {
         let e = format!("{:#}", ColumnMap::guess(&["a", "b", "c"]).unwrap_err());
         assert!(
             e.contains("`a,b,c`") && e.contains("--columns time="),
+            "{e}"
+        );
+    }
+}
+
+#[cfg(test)]
+mod honest_tests {
+    use super::*;
+
+    #[test]
+    fn a_supply_voltage_is_never_u() {
+        for h in [
+            "v_supply_V",
+            "vin_meas_V",
+            "vbus_V",
+            "input_voltage_V",
+            "battery_V",
+        ] {
+            let (m, _) = ColumnMap::guess(&["t_s", "theta_l_rad", h]).unwrap();
+            assert!(m.get(Signal::U).is_none(), "{h}: {m}");
+            assert_eq!(m.get(Signal::VSupply).unwrap().column, h);
+        }
+        let (m, _) = ColumnMap::guess(&["t_s", "theta_l_rad", "u_V", "v_supply_V"]).unwrap();
+        assert_eq!(m.get(Signal::U).unwrap().column, "u_V");
+    }
+
+    #[test]
+    fn two_columns_of_one_signal_are_not_guessed() {
+        let e = format!(
+            "{:#}",
+            ColumnMap::guess(&["t_s", "u_V", "u_cmd_V", "theta_l_rad"]).unwrap_err()
+        );
+        assert!(
+            e.contains("`u_V` and `u_cmd_V`") && e.contains("--columns time=t_s,u=u_V"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_length_on_a_rotary_rig_is_refused_with_the_fix() {
+        let (m, ign) = ColumnMap::guess(&["t_s", "theta_l_mm", "u_V"]).unwrap();
+        assert!(ign.is_empty());
+        assert_eq!(m.get(Signal::ThetaL).unwrap().unit, Unit::Millimetre);
+        let e = format!(
+            "{:#}",
+            m.factors_on(&servo_core::Transmission::GEAR).unwrap_err()
+        );
+        assert!(
+            e.contains("theta_l=theta_l_mm:deg") && e.contains("theta_l_rad"),
             "{e}"
         );
     }

@@ -25,6 +25,7 @@ pub mod chart_axes;
 pub mod columns;
 pub mod compensation;
 pub mod controller;
+pub mod crosscheck;
 pub mod csv_read;
 pub mod csv_write;
 pub mod disk;

@@ -112,6 +112,15 @@ impl Registry {
         for r in self.readers.iter().filter(|r| r.can_read(path)) {
             match r.read(path, columns, want, axis) {
                 Err(Error::Incompatible { .. }) => continue,
+                Ok((rec, mut meta)) => {
+                    // Logs are what their headers say: the angle against the speed.
+                    let notes = crate::crosscheck::check_speed_units(
+                        &rec,
+                        meta.columns.as_deref().or(columns),
+                    )?;
+                    meta.notes.extend(notes);
+                    return Ok((rec, meta));
+                }
                 other => return other,
             }
         }

@@ -723,8 +723,20 @@ impl ModelFile {
         let p = &written;
         let mut s = String::from(
             "# servo model file: DC gearmotor parameters (handout Table 2), SI units.\n\
-             # Motor side / load side as in the handout: omega_l = omega_m / N.\n\n[params]\n",
+             # Motor side / load side as in the handout: omega_l = omega_m / N.\n",
         );
+        // Values a command took from a default, said where the file is read first.
+        if let Some(d) = self
+            .provenance
+            .as_ref()
+            .and_then(|p| p.get("defaults"))
+            .and_then(|d| d.as_str())
+        {
+            for line in d.lines() {
+                s.push_str(&format!("# NOTE: {line}\n"));
+            }
+        }
+        s.push_str("\n[params]\n");
         let rows: [(&str, f64, &str); 13] = [
             ("r_a", p.r_a, "armature resistance R_a [ohm]"),
             ("l_a", p.l_a, "armature inductance L_a [H]"),

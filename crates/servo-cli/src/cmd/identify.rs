@@ -147,9 +147,37 @@ pub type Report = Identification;
 
 impl Identify {
     pub fn run(self) -> anyhow::Result<()> {
+        // Where the motor's constants come from, said where they are used (the report and the
+        // file written): --params, the simulated motor of --ramp --plant, or Table 2.
+        let mut defaults: Option<String> = None;
         let mut params = match &self.params {
             Some(p) => ModelFile::load(p).context("--params")?,
-            None => ModelFile::default(),
+            None => match self.ramp_plant() {
+                Some(plant) => {
+                    let mut m = ModelFile::load(plant).context("--plant")?;
+                    // The constants, drive and transmission of the simulated motor; what is
+                    // identified starts unknown.
+                    m.params.j_eq = None;
+                    m.params.b_eq = None;
+                    m.params.tau_sf = None;
+                    m.effects = servo_core::effects::Effects::NONE;
+                    m.custom = servo_core::custom::CustomSlots::NONE;
+                    m.sensors = None;
+                    m.provenance = None;
+                    m.limits.clear();
+                    let note = format!(
+                        "no --params: the motor's constants (k_t, k_e, N, k_drv, R_a, R_s, L_a), drive and \
+                         transmission are those of the simulated motor, --plant {}",
+                        plant.display()
+                    );
+                    eprintln!("note: {note}");
+                    m
+                }
+                None => {
+                    defaults = Some(String::new());
+                    ModelFile::default()
+                }
+            },
         };
         for (flag, v, slot) in [
             ("--k-t", self.k_t, &mut params.params.k_t),
@@ -162,6 +190,45 @@ impl Identify {
                 }
                 *slot = v;
             }
+        }
+        if defaults.is_some() {
+            let p = &params.params;
+            let given = |v: Option<f64>| v.is_some();
+            let mut used: Vec<String> = Vec::new();
+            for (key, v, unit, flag) in [
+                ("k_t", p.k_t, "N m/A", given(self.k_t)),
+                ("k_e", p.k_e, "V s/rad", given(self.k_e)),
+                ("N", p.n, "", given(self.gear_ratio)),
+                ("k_drv", p.k_drv, "V/V", false),
+                ("R_a", p.r_a, "ohm", false),
+                ("R_s", p.r_s, "ohm", false),
+                ("L_a", p.l_a, "H", false),
+            ] {
+                if !flag {
+                    used.push(
+                        format!("{key} = {} {unit}", servo_core::math::sig(v, 4))
+                            .trim_end()
+                            .to_string(),
+                    );
+                }
+            }
+            let sim_lab = self.ramp
+                && self.ramp_args.backend == crate::cmd::run::BackendKind::Sim
+                && self.ramp_args.plant.plant.is_none();
+            defaults = Some(if sim_lab {
+                format!(
+                    "no --params: {} are the lab motor's defaults (the handout's Table 2), which the \
+                     built-in simulated plant also uses; for another motor give its model file with --params",
+                    used.join(", ")
+                )
+            } else {
+                format!(
+                    "no --params: {} are the lab motor's defaults (the handout's Table 2), not measured \
+                     on this motor; every estimate rests on them (J_eq and B_eq scale with k_t and N): \
+                     give the motor's model file with --params",
+                    used.join(", ")
+                )
+            });
         }
         if !(self.cutoff_hz > 0.0 && self.cutoff_hz.is_finite()) {
             bail!(
@@ -220,8 +287,21 @@ impl Identify {
                 servo_core::effects::EffectKind::Viscous | servo_core::effects::EffectKind::Coulomb
             )
         });
+        if let Some(d) = &defaults {
+            if self.json {
+                eprintln!("note: {d}");
+            } else {
+                outln!("note: {d}");
+            }
+        }
         if needs_u_driven_balance(&records) || (declares && records.iter().all(|r| r.u_v.is_some()))
         {
+            if let Some(d) = &defaults {
+                params
+                    .provenance
+                    .get_or_insert_with(toml::Table::new)
+                    .insert("defaults".into(), toml::Value::String(d.clone()));
+            }
             return self.run_without_current(&records, &logs, &parts, params);
         }
         let mut exps = Vec::new();
@@ -288,6 +368,9 @@ impl Identify {
                 file.params.j_eq = Some(e.value);
             }
             let mut prov = provenance(&report, &logs);
+            if let Some(d) = &defaults {
+                prov.insert("defaults".into(), toml::Value::String(d.clone()));
+            }
             report::keep_fitted(&self.keep_fitted, &report, &mut file.params, &mut prov)?;
             file.params
                 .validate()
@@ -309,6 +392,13 @@ impl Identify {
 
 /// Parses `--phase-window FROM,TO` (fractions of a phase, 0 <= FROM < TO <= 1).
 impl Identify {
+    /// The simulated motor's file of `--ramp --plant FILE` on the simulator (None otherwise).
+    fn ramp_plant(&self) -> Option<&std::path::Path> {
+        (self.ramp && self.ramp_args.backend == crate::cmd::run::BackendKind::Sim)
+            .then_some(self.ramp_args.plant.plant.as_deref())
+            .flatten()
+    }
+
     /// The library's settings from the flags.
     fn options(&self) -> IdentifyOptions {
         IdentifyOptions {

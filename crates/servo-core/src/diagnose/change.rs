@@ -97,13 +97,17 @@ impl Change {
                 s.push_str(", ");
             }
             let rel = p.relative();
+            let by = if p.before == 0.0 || rel.abs() >= 100.0 {
+                alloc::format!("({})", crate::math::change(p.before, p.after))
+            } else {
+                alloc::format!("{} %", crate::math::sig(100.0 * rel.abs(), 3))
+            };
             s.push_str(&alloc::format!(
-                "{} {} {:.0} % ({:.3e} -> {:.3e} {})",
+                "{} {} {by} ({} -> {} {})",
                 p.name,
                 if rel >= 0.0 { "rose" } else { "fell" },
-                100.0 * rel.abs(),
-                p.before,
-                p.after,
+                crate::math::sig(p.before, 4),
+                crate::math::sig(p.after, 4),
                 p.unit
             ));
         }

@@ -259,10 +259,17 @@ pub fn describe_effects(id: &UDrivenIdentification) -> Vec<String> {
                 .iter()
                 .filter(|e| e.effect == Some(k))
                 .map(|e| {
-                    format!(
-                        "{} = {:.4e} +/- {:.2e} {}",
-                        e.key, e.value, e.std_err_total, e.unit
-                    )
+                    if e.std_err_total.is_finite() {
+                        format!(
+                            "{} = {:.4e} +/- {:.2e} {}",
+                            e.key, e.value, e.std_err_total, e.unit
+                        )
+                    } else {
+                        format!(
+                            "{} = {:.4e} {} (at its bound: not determined by these logs)",
+                            e.key, e.value, e.unit
+                        )
+                    }
                 })
                 .collect();
             format!("{} ({how}): {}", k.name(), parts.join(", "))

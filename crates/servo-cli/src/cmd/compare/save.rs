@@ -190,13 +190,14 @@ pub(super) fn refitted_line(start: &Plant, end: &Plant, ladder: &[LadderStep]) -
 }
 
 fn refitted_words(r: &Refitted) -> String {
+    let num = |v: f64| servo_core::math::sig(v, 5);
     format!(
-        "{} {:.4e} -> {:.4e} {} ({:+.2} %)",
+        "{} {} -> {} {} ({})",
         r.key,
-        r.before,
-        r.after,
+        num(r.before),
+        num(r.after),
         r.unit,
-        100.0 * (r.after - r.before) / r.before.abs().max(1e-300)
+        servo_core::math::change(r.before, r.after)
     )
 }
 

@@ -98,13 +98,27 @@ pub(super) fn text_report(
     let _ = writeln!(s, "Model residual (base parameters refitted):");
     s.push_str(&where_it_fails(first));
     for b in &first.balances {
+        // A floor of 0 (no sensor noise model for this balance, e.g. no current logged) is
+        // unknown, not zero: the residual is then said in its own unit, never "inf x".
+        let level = if b.floor > 0.0 && b.floor.is_finite() && b.ratio_to_noise.is_finite() {
+            format!(
+                "noise floor {} {}, residual {} x the floor",
+                servo_core::math::sig(b.floor, 3),
+                b.equation.unit(),
+                servo_core::math::sig(b.ratio_to_noise, 3)
+            )
+        } else {
+            format!(
+                "noise floor unknown (the logs give no sensor noise for this balance, e.g. no current), \
+                 residual RMS {} {}: how much of it is structure cannot be said against noise",
+                servo_core::math::sig(b.rms, 3),
+                b.equation.unit()
+            )
+        };
         let _ = writeln!(
             s,
-            "  {}: noise floor {:.3e} {}, residual {:.1} x the floor{}",
+            "  {}: {level}{}",
             b.equation.name(),
-            b.floor,
-            b.equation.unit(),
-            b.ratio_to_noise,
             b.signatures.first().map_or(String::new(), |g| format!(
                 "; strongest shape: {} ({:.0} % of the held-out {}; measured on {})",
                 g.description,

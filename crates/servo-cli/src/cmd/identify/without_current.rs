@@ -76,6 +76,11 @@ impl super::Identify {
                 "WARNING: {key} came out negative ({v:.4e}): unphysical, written as 0 with -o; the model lacks a torque the logs hold, or the drive constants are off"
             ));
         }
+        for e in id.estimates.iter().filter(|e| e.effect.is_none()) {
+            if let Some(why) = not_determined(e) {
+                notes.push(format!("{} not determined by these logs: {why}", e.key));
+            }
+        }
         let effect_lines = describe_effects(&id);
         if self.json {
             let mut v = serde_json::json!({
@@ -142,6 +147,15 @@ impl super::Identify {
                 outln!("{note}.");
             }
             for e in &est {
+                if not_determined(e).is_some() {
+                    outln!(
+                        "  {:<7}   not determined by these logs (pinned at its bound {} {}; see above)",
+                        e.key,
+                        servo_core::math::sig(e.value.max(0.0), 4),
+                        e.unit
+                    );
+                    continue;
+                }
                 outln!(
                     "  {:<7} = {:.4e} {:<10} +/- {:.2e} (statistical) -> +/- {:.2e} with the drive-constant tolerance ({:.1}x wider)",
                     e.key,
@@ -211,4 +225,25 @@ impl super::Identify {
         }
         Ok(())
     }
+}
+
+/// Why a base estimate is not determined by the logs (None when it is): the fit pinned it at
+/// its bound (0: a negative friction or inertia is unphysical), where it has no standard error,
+/// and the experiment that would determine it.
+fn not_determined(e: &servo_core::fit::UDrivenEstimate) -> Option<String> {
+    if e.std_err.is_finite() && e.std_err_total.is_finite() {
+        return None;
+    }
+    let experiment = match e.key {
+        "b_eq" => "a torque that grows with speed needs constant-speed segments at several speeds (the friction staircase of `servo identify --ramp`, or a log of it with the current)",
+        "tau_sf" => "a Coulomb level needs slow motion in both directions (the friction staircase of `servo identify --ramp`)",
+        "j_eq" => "an inertia needs strong accelerations (the inertia ramps of `servo identify --ramp`, or a step or a sine)",
+        _ => "a log that excites it",
+    };
+    Some(format!(
+        "the fit pinned it at its bound {} {} (a negative value is unphysical), where it has no interval; the logs hold too little of it next to the other torques. Written as {} with -o. To determine it: {experiment}",
+        servo_core::math::sig(e.value.max(0.0), 4),
+        e.unit,
+        servo_core::math::sig(e.value.max(0.0), 4)
+    ))
 }
