@@ -339,11 +339,12 @@ pub(crate) fn guess_column(name: &str) -> Option<(Signal, Unit)> {
     // `pos_mm`, `v_x_m_s`): `theta_m` is the motor angle, not a load position in metres.
     // A load position in mm or um (`theta_l_mm`) is read as a length: on a rotary rig it is
     // then refused with what to write instead, never dropped.
+    let small_length = matches!(
+        unit,
+        Unit::Millimetre | Unit::Micrometre | Unit::MillimetrePerS
+    ) && signal.accepts_linear(unit.dimension());
     if unit.is_linear()
-        && !(matches!(
-            unit,
-            Unit::Millimetre | Unit::Micrometre | Unit::MillimetrePerS
-        ) && signal.accepts_linear(unit.dimension()))
+        && !small_length
         && !words.iter().any(|w| {
             matches!(
                 *w,
