@@ -189,6 +189,11 @@ impl crate::log_reader::LogReader for McapReader {
     fn extensions(&self) -> &'static [&'static str] {
         &["mcap"]
     }
+    /// `.mcap`, and `.mcap.partial`: a log still growing, or left by a run that was killed.
+    fn can_read(&self, path: &Path) -> bool {
+        let name = path.to_string_lossy().to_ascii_lowercase();
+        crate::log_reader::extension(path) == "mcap" || name.ends_with(".mcap.partial")
+    }
     /// Refuses a `--columns` map: an MCAP log names its own signals (and holds the equivalent
     /// rotation itself on a linear axis: `axis` is not used).
     fn read(
