@@ -886,10 +886,12 @@ mod tests {
             }
         }
         assert!(last > 800, "{last}");
-        // An unfinished (dropped without footer) log reads up to its last flush.
+        // An unfinished (dropped without footer) log, still under its `.partial` name, reads
+        // up to its last flush.
         let p2 = dir.path().join("u.mcap");
         write(&p2, 1000, false);
-        let run = read_mcap(&p2).unwrap();
+        assert!(!p2.exists());
+        let run = read_mcap(&dir.path().join("u.mcap.partial")).unwrap();
         assert!(!run.finished);
         assert_eq!(run.loop_msgs.len(), 1000);
         assert!(run.notes[0].contains("not finished"), "{:?}", run.notes);
