@@ -147,12 +147,17 @@ fn a_log_over_a_log_keeps_the_old_one_and_a_faulted_run_finishes_its_own() {
     let g = write_gains(d);
     let log = d.join("r.mcap");
     let run = |duration: &str, extra: &[&str]| {
+        let reference = if extra.is_empty() {
+            "step:1"
+        } else {
+            "ramp:10"
+        };
         let mut a = vec![
             "run",
             "--gains",
             s(&g),
             "--ref",
-            "step:1",
+            reference,
             "--duration",
             duration,
             "--log",
@@ -183,7 +188,7 @@ fn a_log_over_a_log_keeps_the_old_one_and_a_faulted_run_finishes_its_own() {
     assert_eq!(r.loop_msgs.len(), 1000);
     // A run that faults at its position limit: its log is finished under its name with the
     // samples before the fault (the count said is the file's), the earlier logs kept.
-    let (ok, _, err) = run("5", &["--soft-limit-rev", "0.1", "--ref", "ramp:10"]);
+    let (ok, _, err) = run("5", &["--soft-limit-rev", "0.1"]);
     assert!(!ok && err.contains("soft position limit"), "{err}");
     let line = err
         .lines()
