@@ -219,6 +219,7 @@ fn a_log_over_a_log_keeps_the_old_one_and_a_faulted_run_finishes_its_own() {
 /// reads one of the two whole files every time: never an empty or a partial one.
 #[test]
 fn a_reader_never_sees_a_partial_gains_file_while_design_rewrites_it() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path().to_path_buf();
     let gains = d.join("gains.toml");

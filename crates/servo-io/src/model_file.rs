@@ -716,7 +716,7 @@ impl ModelFile {
     /// name, the custom effects it lacks, the `[limits]` keys it lacks, and `old`'s provenance as
     /// `[provenance.previous]`. The drive, transmission, sensors and `[params]` are this file's.
     /// Nothing is carried over when the result would not be a valid model file (a friction given
-    /// twice). Returns the tables kept, as the file names them (`[effects.backlash]`, `[limits]`).
+    /// twice). Returns the tables kept, as the file names them (`[effects.<name>]`, `[limits]`).
     pub fn keep_from(&mut self, old: &ModelFile, owned: &[EffectKind]) -> Vec<String> {
         let mut merged = self.clone();
         let mut kept = Vec::new();
