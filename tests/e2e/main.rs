@@ -22,6 +22,7 @@ mod identify;
 mod layout;
 mod log_reader;
 mod mat;
+mod outputs;
 mod promises;
 mod registry;
 mod run_log;

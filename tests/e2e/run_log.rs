@@ -339,6 +339,9 @@ fn killed_run_is_readable_up_to_100ms_before_the_kill() {
         .unwrap()
         .as_nanos() as f64;
     child.wait().unwrap();
+    // Unfinished, the log keeps the name that says so; every reader opens it.
+    assert!(!log.exists());
+    let log = dir.path().join("killed.mcap.partial");
     let run = read_mcap(&log).unwrap();
     assert!(!run.finished);
     assert!(!run.notes.is_empty());

@@ -1298,7 +1298,9 @@ mod cli {
         std::thread::sleep(Duration::from_millis(300));
         let board_out = board.quit();
         assert!(board_out.contains("fault Watchdog"), "{board_out}");
-        // The unfinished log is salvaged.
+        // The unfinished log (under the name that says so) is salvaged.
+        assert!(!log.exists());
+        let log = dir.path().join("killed.mcap.partial");
         let fixed = dir.path().join("fixed.mcap");
         let (ok, out, err) = servo(&[
             "log",

@@ -33,6 +33,7 @@ pub fn install_ctrlc_handler() {
         let r = ctrlc::set_handler(|| {
             if INTERRUPTED.swap(true, Ordering::SeqCst) {
                 eprintln!("\nsecond Ctrl-C: exiting without cleanup");
+                crate::io::output::remove_temporaries();
                 std::process::exit(130);
             }
             eprintln!("\nCtrl-C: stopping the loop (0 V) and closing the log; press again to exit at once");

@@ -278,7 +278,8 @@ fn thin_points(
 /// Renders a line chart to an SVG file.
 pub fn line_chart(path: &std::path::Path, chart: &Chart, series: &[Series]) -> anyhow::Result<()> {
     let svg = line_chart_svg(chart, series)?;
-    std::fs::write(path, svg).map_err(|e| anyhow!("writing plot {}: {e}", path.display()))
+    crate::io::output::write_file(path, "plot", svg)?;
+    Ok(())
 }
 
 /// Plots reference and angle [deg] over time, and the voltage (second SVG `<stem>_u.svg`).

@@ -3,7 +3,7 @@
 //! number format.
 
 use super::units::Signal;
-use crate::error::{self as anyhow, bail, Context};
+use crate::error::{self as anyhow, bail};
 use servo_core::record::Record;
 use servo_core::Transmission;
 use std::io::Write;
@@ -107,13 +107,11 @@ pub fn write_csv(path: &Path, rec: &Record) -> anyhow::Result<()> {
 
 /// Writes `rec` to the file `path` as servo's CSV of the axis `axis` ([`write_csv_to_on`]).
 pub fn write_csv_on(path: &Path, rec: &Record, axis: &Transmission) -> anyhow::Result<()> {
-    let f =
-        std::fs::File::create(path).with_context(|| format!("creating CSV {}", path.display()))?;
-    let mut w = std::io::BufWriter::new(f);
-    write_csv_to_on(&mut w, rec, axis)
-        .with_context(|| format!("writing CSV {}", path.display()))?;
-    w.flush()
-        .with_context(|| format!("writing CSV {}", path.display()))?;
+    let mut w = crate::output::AtomicFile::create(path, "CSV")?;
+    if let Err(e) = write_csv_to_on(&mut w, rec, axis) {
+        return Err(w.error(e));
+    }
+    w.commit()?;
     Ok(())
 }
 

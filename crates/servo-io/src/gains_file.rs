@@ -199,10 +199,10 @@ impl GainsFile {
         self.design.as_ref()?.get("drive")?.as_str()
     }
 
-    /// Writes the file with units in comments.
+    /// Writes the file with units in comments, atomically ([`crate::output`]: a previous file
+    /// with other contents is kept as `NAME.N`, said on stderr).
     pub fn save(&self, path: &Path) -> anyhow::Result<()> {
-        std::fs::write(path, self.to_toml_commented())
-            .with_context(|| format!("writing gains file {}", path.display()))
+        crate::output::write_file(path, "gains file", self.to_toml_commented()).map(|_| ())
     }
 
     /// TOML with units in comments.

@@ -17,6 +17,7 @@
 //! * [`loop_msg`]: the `/servo/loop` JSON message and its JSON schema.
 //! * [`mcap_write`], [`mcap_read`]: MCAP logs (Foxglove/PlotJuggler compatible).
 //! * [`disk`]: room on disk for a long log, checked before a run starts.
+//! * [`output`]: every file servo writes: atomic replacement, numbered backups, `.partial` logs.
 //! * [`mat_read`], [`mat_path`], [`mat_log`]: MATLAB MAT-files (Level 5, -v6/-v7), MATLAB paths
 //!   in `--columns`, Simulink Scope structures.
 //! * [`markup`]: HTML and SVG escaped by construction (the reports and charts).
@@ -42,6 +43,7 @@ pub mod mcap_read;
 pub mod mcap_recover;
 pub mod mcap_write;
 pub mod model_file;
+pub mod output;
 pub mod recipe_file;
 pub mod reference_file;
 pub mod units;

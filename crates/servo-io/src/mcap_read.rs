@@ -189,6 +189,11 @@ impl crate::log_reader::LogReader for McapReader {
     fn extensions(&self) -> &'static [&'static str] {
         &["mcap"]
     }
+    /// `.mcap`, and `.mcap.partial`: a log still growing, or left by a run that was killed.
+    fn can_read(&self, path: &Path) -> bool {
+        let name = path.to_string_lossy().to_ascii_lowercase();
+        crate::log_reader::extension(path) == "mcap" || name.ends_with(".mcap.partial")
+    }
     /// Refuses a `--columns` map: an MCAP log names its own signals (and holds the equivalent
     /// rotation itself on a linear axis: `axis` is not used).
     fn read(
@@ -881,10 +886,12 @@ mod tests {
             }
         }
         assert!(last > 800, "{last}");
-        // An unfinished (dropped without footer) log reads up to its last flush.
+        // An unfinished (dropped without footer) log, still under its `.partial` name, reads
+        // up to its last flush.
         let p2 = dir.path().join("u.mcap");
         write(&p2, 1000, false);
-        let run = read_mcap(&p2).unwrap();
+        assert!(!p2.exists());
+        let run = read_mcap(&dir.path().join("u.mcap.partial")).unwrap();
         assert!(!run.finished);
         assert_eq!(run.loop_msgs.len(), 1000);
         assert!(run.notes[0].contains("not finished"), "{:?}", run.notes);

@@ -244,10 +244,26 @@ fn partial_chunk<W: std::io::Write + std::io::Seek>(
 /// Recovers `input` into `output`.
 pub fn recover(input: &Path, output: &Path) -> anyhow::Result<RecoveryReport> {
     let buf = std::fs::read(input).with_context(|| format!("reading {}", input.display()))?;
-    let file =
-        std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
-    recover_bytes(&buf, BufWriter::new(file))
-        .with_context(|| format!("recovering {} into {}", input.display(), output.display()))
+    // Atomically ([`crate::output`]): a failed recovery leaves no half-written output.
+    let (rep, file) = crate::output::Replacement::begin(output)?;
+    let mut w = BufWriter::new(file);
+    let unchanged = crate::output::unchanged_sentence(output);
+    let report = recover_bytes(&buf, &mut w).with_context(|| {
+        format!(
+            "recovering {} into {} ({unchanged})",
+            input.display(),
+            output.display()
+        )
+    })?;
+    let file = w
+        .into_inner()
+        .map_err(|e| crate::Error::Io(e.into_error()))
+        .and_then(|f| rep.commit(f))
+        .with_context(|| format!("writing {} ({unchanged})", output.display()))?;
+    if let Some(n) = file.backup_note() {
+        eprintln!("note: {n}");
+    }
+    Ok(report)
 }
 
 /// Recovers the MCAP bytes `buf` into `out` (a file, or a `Cursor<Vec<u8>>` in tests).

@@ -256,6 +256,9 @@ struct Writer {
     metadata_indexes: Vec<(u64, u64, String)>,
     /// What was being written when the first error happened, and the error.
     error: Option<(String, std::io::Error)>,
+    /// (end offset in the file, messages up to there) after each chunk handed to `out`: the
+    /// messages a cut-short file still holds in whole chunks ([`Writer::messages_in_file`]).
+    chunk_ends: Vec<(u64, u64)>,
 }
 
 impl Writer {
@@ -272,6 +275,11 @@ impl Writer {
                 Job::Chunk { mut chunk, flush } => {
                     if self.error.is_none() {
                         let r = self.write_chunk(&chunk).map_err(|e| ("writing a chunk", e));
+                        if r.is_ok() {
+                            let before = self.chunk_ends.last().map_or(0, |c| c.1);
+                            let n = (chunk.msg_index.len() / 16) as u64;
+                            self.chunk_ends.push((self.out.pos, before + n));
+                        }
                         let r = r.and_then(|()| match flush {
                             true => self.out.w.flush().map_err(|e| ("flushing", e)),
                             false => Ok(()),
@@ -313,6 +321,21 @@ impl Writer {
             }
         }
         self
+    }
+
+    /// The messages the file holds in whole chunks, from its length on disk (what a reader or
+    /// `servo log recover` finds in a file cut short by an error).
+    fn messages_in_file(&mut self) -> u64 {
+        let _ = self.out.w.flush();
+        let len = match self.out.w.get_ref().metadata() {
+            Ok(m) => m.len(),
+            Err(_) => return 0,
+        };
+        self.chunk_ends
+            .iter()
+            .take_while(|(end, _)| *end <= len)
+            .last()
+            .map_or(0, |c| c.1)
     }
 
     fn fail_on(&mut self, r: Result<(), (String, std::io::Error)>, failed: &AtomicBool) {
@@ -484,7 +507,15 @@ struct Pipe {
 /// bounded) and their buffers come back for reuse. An error of the writer is reported by the
 /// next [`McapLog::write_loop`], [`McapLog::flush`] or [`McapLog::finish`] call.
 pub struct McapLog {
+    /// The log's name once finished.
     path: PathBuf,
+    /// The file growing as `path.partial`, renamed to `path` by [`McapLog::finish`]; `None`
+    /// once renamed.
+    rep: Option<crate::output::Replacement>,
+    /// The messages the file holds, once its writer failed (whole chunks on disk).
+    in_file: Option<u64>,
+    /// The previous file at `path`, kept by [`McapLog::finish`] (`run.mcap.1`).
+    backup: Option<PathBuf>,
     opts: McapLogOptions,
     sequence: u32,
     messages: u64,
@@ -512,16 +543,17 @@ impl std::fmt::Debug for McapLog {
 }
 
 impl McapLog {
-    /// Creates `path` and writes the header, the schemas/channels and the run metadata
-    /// (`metadata`: key/value strings, see [`RUN_METADATA`]); flushes so that the metadata
-    /// survives a kill.
+    /// Creates `path.partial` ([`crate::output::Replacement::begin_partial`]: readable as it
+    /// grows, renamed to `path` by [`McapLog::finish`]) and writes the header, the
+    /// schemas/channels and the run metadata (`metadata`: key/value strings, see
+    /// [`RUN_METADATA`]); flushes so that the metadata survives a kill.
     pub fn create(
         path: &Path,
         metadata: &BTreeMap<String, String>,
         opts: McapLogOptions,
     ) -> anyhow::Result<McapLog> {
-        let file =
-            File::create(path).with_context(|| format!("creating MCAP log {}", path.display()))?;
+        let (rep, file) = crate::output::Replacement::begin_partial(path)
+            .with_context(|| format!("creating MCAP log {}", path.display()))?;
         let compressor = match (opts.compress, opts.fast_compression) {
             (false, _) => Compressor::None,
             (true, true) => Compressor::Lz4,
@@ -586,6 +618,7 @@ impl McapLog {
             chunk_indexes: Vec::new(),
             metadata_indexes: Vec::new(),
             error: None,
+            chunk_ends: Vec::new(),
         };
         let (jobs, job_rx) = mpsc::sync_channel(QUEUED_CHUNKS);
         let (free_tx, free) = mpsc::channel();
@@ -598,6 +631,9 @@ impl McapLog {
 
         let mut log = McapLog {
             path: path.to_path_buf(),
+            rep: Some(rep),
+            in_file: None,
+            backup: None,
             opts,
             sequence: 0,
             messages: 0,
@@ -622,14 +658,36 @@ impl McapLog {
         Ok(log)
     }
 
-    /// The file being written.
+    /// The log's name (once finished: [`McapLog::writing`] is the file while it grows).
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// The file on disk now: `NAME.partial` while the log grows and after a failed finish
+    /// (keep it for `servo log recover`), `NAME` once finished.
+    pub fn writing(&self) -> &Path {
+        self.rep.as_ref().map_or(&self.path, |r| r.writing())
+    }
+
+    /// Whether [`McapLog::finish`] renamed the finished log to its name.
+    pub fn is_finished(&self) -> bool {
+        self.rep.is_none()
+    }
+
+    /// The previous file at [`McapLog::path`], kept beside the finished log (`run.mcap.1`).
+    pub fn backup(&self) -> Option<&Path> {
+        self.backup.as_deref()
     }
 
     /// Messages written so far.
     pub fn messages(&self) -> u64 {
         self.messages
+    }
+
+    /// The messages the file holds: all of them while it works, and after its writer failed
+    /// (a full disk) those in the whole chunks that reached the file.
+    pub fn messages_in_file(&self) -> u64 {
+        self.in_file.unwrap_or(self.messages)
     }
 
     /// The error of a log that cannot take more records: finished, or its writer failed (the
@@ -639,7 +697,10 @@ impl McapLog {
             // The writer failed: stop it and take its error.
             drop(p.jobs);
             let what = match p.thread.join() {
-                Ok(w) => w.error,
+                Ok(mut w) => {
+                    self.in_file = Some(w.messages_in_file());
+                    w.error
+                }
                 Err(_) => None,
             };
             let e = match what {
@@ -811,17 +872,46 @@ impl McapLog {
             .join()
             .map_err(|_| anyhow!("MCAP log {path}: its writer thread panicked"))?;
         if let Some((what, e)) = w.error.take() {
+            self.in_file = Some(w.messages_in_file());
             let e = self.io_error(&what, e);
             self.failed = Some(format!("{e:#}"));
             return Err(e);
         }
-        w.summary_section(
+        let ended = w.summary_section(
             &self.schema_record,
             &self.channel_record,
             self.messages,
             self.times,
-        )
-        .with_context(|| format!("MCAP log {path}: finishing"))
+        );
+        if let Err(e) = ended {
+            self.in_file = Some(w.messages_in_file());
+            let e = self.io_error("finishing", e);
+            self.failed = Some(format!("{e:#}"));
+            return Err(e);
+        }
+        // Finished: the file takes the log's name (a previous file there is kept as NAME.N).
+        let Some(rep) = self.rep.take() else {
+            return Ok(());
+        };
+        let file = w
+            .out
+            .w
+            .into_inner()
+            .map_err(|e| self.io_error("finishing", e.into_error()))?;
+        let done = rep.commit(file);
+        match done {
+            Ok(written) => {
+                if let Some(n) = written.backup_note() {
+                    eprintln!("note: {n}");
+                }
+                self.backup = written.backup;
+                Ok(())
+            }
+            Err(e) => {
+                self.failed = Some(format!("{e:#}"));
+                Err(e)
+            }
+        }
     }
 }
 

@@ -711,10 +711,90 @@ impl ModelFile {
         }
     }
 
-    /// Writes the file.
+    /// Carries over from `old`, the model file this one is about to replace, what the command
+    /// writing this one does not own: the effects of kinds this one lacks and `owned` does not
+    /// name, the custom effects it lacks, the `[limits]` keys it lacks, and `old`'s provenance as
+    /// `[provenance.previous]`. The drive, transmission, sensors and `[params]` are this file's.
+    /// Nothing is carried over when the result would not be a valid model file (a friction given
+    /// twice). Returns the tables kept, as the file names them (`[effects.<name>]`, `[limits]`).
+    pub fn keep_from(&mut self, old: &ModelFile, owned: &[EffectKind]) -> Vec<String> {
+        let mut merged = self.clone();
+        let mut kept = Vec::new();
+        for e in old.effects.iter() {
+            let kind = e.kind;
+            if !owned.contains(&kind) && !merged.effects.contains(kind) {
+                merged.effects.insert(*e);
+                kept.push(format!("[effects.{}]", kind.name()));
+            }
+        }
+        for c in old.custom.iter() {
+            if merged.custom.get(c.name()).is_none() && merged.custom.insert(*c).is_ok() {
+                kept.push(format!("[custom.{}]", c.name()));
+            }
+        }
+        let mut limits = false;
+        for (k, v) in &old.limits {
+            if !merged.limits.contains_key(k) {
+                merged.limits.insert(k.clone(), *v);
+                limits = true;
+            }
+        }
+        if limits {
+            kept.push("[limits]".to_string());
+        }
+        if let Some(prev) = &old.provenance {
+            let mut prev = prev.clone();
+            prev.remove("previous");
+            if !prev.is_empty() {
+                merged
+                    .provenance
+                    .get_or_insert_with(Default::default)
+                    .insert("previous".into(), toml::Value::Table(prev));
+                kept.push("[provenance.previous]".to_string());
+            }
+        }
+        let valid = merged
+            .to_toml()
+            .ok()
+            .is_some_and(|t| ModelFile::parse(&t).is_ok());
+        if !valid {
+            return Vec::new();
+        }
+        *self = merged;
+        kept
+    }
+
+    /// Saves over `path`: when a model file is there, first keeps its tables this command does
+    /// not own ([`ModelFile::keep_from`], `owned` the effect kinds the command fits or removes)
+    /// and says so on stderr; then [`ModelFile::save`] (which keeps the previous file as
+    /// `NAME.N`). Returns the tables kept.
+    pub fn save_over(&mut self, path: &Path, owned: &[EffectKind]) -> anyhow::Result<Vec<String>> {
+        let kept = match std::fs::read_to_string(path)
+            .ok()
+            .map(|t| ModelFile::parse(&t))
+        {
+            Some(Ok(old)) => self.keep_from(&old, owned),
+            _ => Vec::new(),
+        };
+        if !kept.is_empty() {
+            eprintln!(
+                "note: kept {} of the previous {} (tables this command does not write)",
+                kept.join(", "),
+                path.display()
+            );
+        }
+        self.save(path)?;
+        Ok(kept)
+    }
+
+    /// The effect kinds every command that writes a model owns: the friction of `[params]`
+    /// (`b_eq`, `tau_sf`), which `[effects.viscous]` / `[effects.coulomb]` would override.
+    pub const FRICTION_KINDS: [EffectKind; 2] = [EffectKind::Viscous, EffectKind::Coulomb];
+
+    /// Writes the file atomically ([`crate::output`]: a previous file with other contents is
+    /// kept as `NAME.N`, said on stderr).
     pub fn save(&self, path: &Path) -> anyhow::Result<()> {
-        let text = self.to_toml_commented();
-        std::fs::write(path, text).with_context(|| format!("writing model file {}", path.display()))
+        crate::output::write_file(path, "model file", self.to_toml_commented()).map(|_| ())
     }
 
     /// TOML with units and meanings in comments (what `servo params` prints).

@@ -150,8 +150,7 @@ impl Board {
                 serialport::TTYPort::pair().context("creating a pseudo-terminal")?;
             let path = slave.name().context("the pseudo-terminal has no path")?;
             if let Some(f) = &self.path_file {
-                std::fs::write(f, format!("{path}\n"))
-                    .with_context(|| format!("--path-file {}", f.display()))?;
+                write_path_file(f, &path)?;
             }
             outln!("board ready on {path}");
             outln!(
@@ -241,8 +240,7 @@ impl Board {
             .with_context(|| format!("starting the QEMU board ({})", elf.display()))?;
         let path = board.path().to_string();
         if let Some(f) = &self.path_file {
-            std::fs::write(f, format!("{path}\n"))
-                .with_context(|| format!("--path-file {}", f.display()))?;
+            write_path_file(f, &path)?;
         }
         outln!("board ready on {path}");
         outln!(
@@ -307,4 +305,16 @@ fn print_report(r: &BoardReport) {
     for (code, text) in &r.faults {
         outln!("  fault {code:?}: {text}");
     }
+}
+
+/// Writes the board's device path to `--path-file`, atomically: a script polling the file reads
+/// a whole path or none. The file only ever holds a transient path: replaced, not kept.
+fn write_path_file(f: &std::path::Path, path: &str) -> anyhow::Result<()> {
+    crate::io::output::write_file_with(
+        f,
+        "--path-file",
+        format!("{path}\n"),
+        crate::io::output::Previous::Replace,
+    )?;
+    Ok(())
 }

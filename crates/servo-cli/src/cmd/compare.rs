@@ -338,8 +338,7 @@ impl Compare {
                     panels.push(svg);
                 }
             }
-            std::fs::write(path, stack_svg(&panels))
-                .with_context(|| format!("writing plot {}", path.display()))?;
+            crate::io::output::write_file(path, "plot", stack_svg(&panels))?;
         }
         if self.json {
             let mut v = to_json(&logs, &modes, &current, &ladder, &opts);

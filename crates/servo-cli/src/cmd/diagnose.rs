@@ -271,8 +271,7 @@ impl Diagnose {
                 &self.logs,
                 &model_file.drive,
             )?;
-            std::fs::write(path, html)
-                .with_context(|| format!("writing report {}", path.display()))?;
+            crate::io::output::write_file(path, "report", html)?;
             if !self.json {
                 outln!("report written to {}", path.display());
             }
@@ -295,7 +294,8 @@ impl Diagnose {
                         .get_or_insert_with(Default::default)
                         .insert("diagnose_forced".into(), toml::Value::String(g.sentence()));
                 }
-                mf.save(path)?;
+                mf.limits = model_file.limits.clone();
+                mf.save_over(path, &ModelFile::FRICTION_KINDS)?;
             }
             if !self.json {
                 outln!(

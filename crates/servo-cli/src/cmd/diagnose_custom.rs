@@ -157,7 +157,13 @@ impl UserFindings {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => text,
             Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
         };
-        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+        // The previous library is the new file's beginning: replaced, nothing lost.
+        crate::io::output::write_file_with(
+            path,
+            "effects file",
+            text,
+            crate::io::output::Previous::Replace,
+        )?;
         Ok(SavedEffect {
             path: path.to_path_buf(),
             written: true,

@@ -196,8 +196,7 @@ impl Frf {
             print_text(&a, logs.len());
         }
         if let Some(path) = &self.plot {
-            std::fs::write(path, plot(&a)?)
-                .with_context(|| format!("writing {}", path.display()))?;
+            crate::io::output::write_file(path, "--plot", plot(&a)?)?;
             if !self.json {
                 outln!("plot: {}", path.display());
             }

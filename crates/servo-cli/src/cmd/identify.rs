@@ -323,8 +323,7 @@ impl Identify {
             out!("{}", self.text_report(&report, &logs, &params));
         }
         if let Some(path) = &self.plot {
-            std::fs::write(path, plot_svg(&report, &exps)?)
-                .with_context(|| format!("writing --plot {}", path.display()))?;
+            crate::io::output::write_file(path, "--plot", plot_svg(&report, &exps)?)?;
         }
         if let Some(out) = &self.output {
             let mut file = params.clone();
@@ -376,7 +375,7 @@ impl Identify {
                 .validate()
                 .map_err(|e| anyhow!("identified parameters are not physical: {e}"))?;
             file.provenance = Some(prov);
-            file.save(out)?;
+            file.save_over(out, &ModelFile::FRICTION_KINDS)?;
             if !self.json {
                 let kept = if self.keep_fitted.is_empty() {
                     String::new()

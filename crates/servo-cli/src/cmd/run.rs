@@ -329,12 +329,8 @@ impl Run {
                     eprintln!("{ls}");
                 }
                 if let Some(l) = log.as_mut() {
-                    let _ = close_log(l, Err(&e), link.as_ref(), duration_s);
-                    eprintln!(
-                        "log {} finished with the {} samples before the fault",
-                        l.path().display(),
-                        l.messages()
-                    );
+                    let closed = close_log(l, Err(&e), link.as_ref(), duration_s);
+                    eprintln!("{}", log_end(l, closed.err(), "the fault"));
                 }
                 if let Some(StopOutcome::Failed(why)) = e.stop_outcome() {
                     eprintln!(
@@ -350,11 +346,14 @@ impl Run {
             outln!("{ls}");
         }
         if let Some(l) = log.as_mut() {
-            close_log(l, Ok(&out), link.as_ref(), duration_s)?;
+            if let Err(e) = close_log(l, Ok(&out), link.as_ref(), duration_s) {
+                eprintln!("{}", log_end(l, Some(e), "the end"));
+                bail!("the log {} could not be finished", l.path().display());
+            }
             outln!(
                 "log: {} ({} samples, MCAP: open in Foxglove/PlotJuggler, or `servo export`)",
                 l.path().display(),
-                l.messages()
+                l.messages_in_file()
             );
         }
         if let Some(p) = &self.csv {
@@ -369,5 +368,27 @@ impl Run {
             output: out,
             summary,
         })
+    }
+}
+
+/// The line that says where a run's log ended up after [`close_log`] (`closed`: its error) and
+/// how many samples the file holds: finished under its name, or left as `NAME.partial` (a full
+/// disk) with the samples that reached it and the previous log untouched. `until`: "the fault".
+fn log_end(l: &McapLog, closed: Option<servo_io::Error>, until: &str) -> String {
+    match closed {
+        None => format!(
+            "log {} finished with the {} samples before {until}",
+            l.path().display(),
+            l.messages_in_file()
+        ),
+        Some(e) => format!(
+            "the log could not be finished ({e:#}): {} holds the first {} samples (of {} \
+             taken); `servo log recover {} -o FIXED.mcap` makes it a finished log; {}",
+            l.writing().display(),
+            l.messages_in_file(),
+            l.messages(),
+            l.writing().display(),
+            servo_io::output::unchanged_sentence(l.path())
+        ),
     }
 }

@@ -7,7 +7,7 @@
 //! The work is the library's ([`crate::trend`]): this file parses the flags, calls it and prints.
 
 use crate::trend::{self, GroupBy, TimeFrom, TrendConfig};
-use anyhow::{bail, Context};
+use anyhow::bail;
 use servo_core::trend::TrendOptions;
 use std::path::PathBuf;
 
@@ -92,8 +92,7 @@ impl Trend {
         };
         let report = trend::run(&cfg)?;
         if let Some(path) = &self.report {
-            std::fs::write(path, trend::report::html(&report)?)
-                .with_context(|| format!("writing --report {}", path.display()))?;
+            crate::io::output::write_file(path, "--report", trend::report::html(&report)?)?;
         }
         if self.json {
             crate::json_out::emit(&trend::report::to_json(&report))?;

@@ -131,7 +131,8 @@ pub fn run_experiment(
             let _ = log.finish();
             return Err(ExperimentError::Run {
                 name,
-                log: path,
+                // Unfinished (a full disk): the `.partial` file that holds the samples.
+                log: log.writing().to_path_buf(),
                 link: link.map(Box::new),
                 source: Box::new(e),
             });

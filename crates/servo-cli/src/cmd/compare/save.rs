@@ -160,7 +160,8 @@ pub(super) fn gate_and_save(
                 }
             }
         }
-        mf.save(path)?;
+        mf.limits = model_file.limits.clone();
+        mf.save_over(path, &ModelFile::FRICTION_KINDS)?;
     }
     Ok(SaveOutcome {
         path: path.to_path_buf(),

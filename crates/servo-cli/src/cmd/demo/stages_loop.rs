@@ -221,7 +221,7 @@ pub(super) fn stage_excite(ctx: &mut DemoContext) -> anyhow::Result<(String, Vec
             )?,
             panel("load angle", "theta_l [rad]", "theta_l [rad]", th)?,
         ]);
-        std::fs::write(&plot, svg).with_context(|| format!("writing {}", plot.display()))?;
+        crate::io::output::write_file(&plot, "plot", svg)?;
     }
     ctx.ident_log = Some(path.clone());
     Ok((

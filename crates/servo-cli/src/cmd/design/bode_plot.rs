@@ -19,7 +19,8 @@ pub fn write(
     steps: Option<&super::spec_plot::SpecPanel>,
 ) -> anyhow::Result<()> {
     let svg = render(r, steps)?;
-    std::fs::write(path, svg).map_err(|e| anyhow!("writing {}: {e}", path.display()))
+    crate::io::output::write_file(path, "plot", svg)?;
+    Ok(())
 }
 
 struct Curve {

@@ -218,7 +218,7 @@ impl super::Identify {
                 .params
                 .validate()
                 .map_err(|e| anyhow!("identified parameters are not physical: {e}"))?;
-            params.save(out)?;
+            params.save_over(out, &crate::model_file::ModelFile::FRICTION_KINDS)?;
             if !self.json {
                 outln!("wrote {}", out.display());
             }
