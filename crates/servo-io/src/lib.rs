@@ -29,6 +29,7 @@ pub mod csv_write;
 pub mod disk;
 pub mod effects_file;
 pub mod error;
+pub mod excerpt;
 pub mod gains_file;
 pub mod log_reader;
 pub mod loop_msg;

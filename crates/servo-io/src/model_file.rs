@@ -595,6 +595,56 @@ impl ModelFile {
         })
     }
 
+    /// What the file leaves to a default of zero friction, one sentence each starting with
+    /// `what` (how the user named the file: `--plant model.toml`), with the key (`tau_sf`,
+    /// `b_eq`): no Coulomb friction (no `tau_sf`, no `[effects.coulomb]`), no viscous friction
+    /// (no `b_eq`, no `[effects.viscous]`, and B_m = B_l = 0). Every motor has both: a file
+    /// without them is a datasheet's (Table 2 has neither) or one that lost its lines; a command
+    /// that simulates or compares with it says so ([`ModelFile::warn_defaults`]). Writing
+    /// `tau_sf = 0` or `b_eq = 0` says that zero is meant.
+    pub fn friction_defaults(&self, what: &str) -> Vec<(&'static str, String)> {
+        let p = &self.params;
+        let linear = self.transmission.is_linear();
+        let (coulomb, viscous) = if linear {
+            ("[transmission] f_c_n", "[transmission] b_eq_n_s_m")
+        } else {
+            ("[params] tau_sf", "[params] b_eq")
+        };
+        let mut out = Vec::new();
+        if p.tau_sf.is_none() && !self.effects.contains(EffectKind::Coulomb) {
+            out.push((
+                "tau_sf",
+                format!(
+                    "{what}: no {coulomb}: the model has no Coulomb friction (tau_sf = 0 N m); \
+                     write `{} = 0` if that is meant, or identify it (`servo identify`)",
+                    if linear { "f_c_n" } else { "tau_sf" }
+                ),
+            ));
+        }
+        if p.b_eq.is_none() && !self.effects.contains(EffectKind::Viscous) && p.b_eq() == 0.0 {
+            out.push((
+                "b_eq",
+                format!(
+                    "{what}: no {viscous}, and b_m = b_l = 0: the model has no viscous friction \
+                     (B_eq = 0 N m s/rad); write `{} = 0` if that is meant, or identify it \
+                     (`servo identify`)",
+                    if linear { "b_eq_n_s_m" } else { "b_eq" }
+                ),
+            ));
+        }
+        out
+    }
+
+    /// Prints [`ModelFile::friction_defaults`] to stderr as warnings, but for the keys in
+    /// `given` (friction given elsewhere, e.g. `--plant-effect coulomb:...`).
+    pub fn warn_defaults(&self, what: &str, given: &[&str]) {
+        for (key, w) in self.friction_defaults(what) {
+            if !given.contains(&key) {
+                eprintln!("warning: {w}");
+            }
+        }
+    }
+
     /// The plant: friction from the params (B_eq, tau_sf), then the file's effects on top (an
     /// explicit `[effects.viscous]` or `[effects.coulomb]` replaces the params' value).
     pub fn plant(&self) -> anyhow::Result<Plant> {
