@@ -42,6 +42,7 @@ pub mod mcap_write;
 pub mod model_file;
 pub mod recipe_file;
 pub mod reference_file;
+pub mod text_file;
 pub mod units;
 
 pub use loop_msg::LoopMsg;

@@ -516,14 +516,15 @@ impl Default for ModelFile {
 impl ModelFile {
     /// Reads and validates `path`; errors name the file, the key and what was expected.
     pub fn load(path: &Path) -> anyhow::Result<ModelFile> {
-        let text = std::fs::read_to_string(path)
+        let text = crate::text_file::read_text(path)
             .with_context(|| format!("reading model file {}", path.display()))?;
         Self::parse(&text).with_context(|| format!("in model file {}", path.display()))
     }
 
     /// Parses and validates TOML text.
     pub fn parse(text: &str) -> anyhow::Result<ModelFile> {
-        let raw: Raw = toml::from_str(text).map_err(|e| anyhow!("{}", e.to_string().trim_end()))?;
+        let raw: Raw =
+            toml::from_str(text).map_err(|e| anyhow!("{}", crate::text_file::toml_error(&e)))?;
         Self::from_raw(raw)
     }
 
