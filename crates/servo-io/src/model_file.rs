@@ -1104,6 +1104,41 @@ mod tests {
     }
 
     #[test]
+    fn friction_left_to_zero_is_said_naming_the_key() {
+        let lab = ModelFile::from_plant(&Plant::from_params(PlantParams::LAB).unwrap());
+        assert!(lab.friction_defaults("m.toml").is_empty());
+        let text = lab.to_toml_commented();
+        let cut: String = text
+            .lines()
+            .filter(|l| !l.starts_with("b_eq") && !l.starts_with("tau_sf"))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        let m = ModelFile::parse(&cut).unwrap();
+        let said = m.friction_defaults("--plant m.toml");
+        let keys: Vec<&str> = said.iter().map(|(k, _)| *k).collect();
+        assert_eq!(keys, ["tau_sf", "b_eq"]);
+        assert!(
+            said[0].1.starts_with("--plant m.toml: no [params] tau_sf"),
+            "{said:?}"
+        );
+        // Zero written is zero meant; B_m > 0 gives a viscous friction.
+        let zeros = cut.replacen("[params]\n", "[params]\ntau_sf = 0\nb_eq = 0\n", 1);
+        assert!(ModelFile::parse(&zeros)
+            .unwrap()
+            .friction_defaults("m")
+            .is_empty());
+        let bm = cut.replace("b_m = 0e0", "b_m = 1e-7");
+        assert_ne!(bm, cut);
+        let keys: Vec<&str> = ModelFile::parse(&bm)
+            .unwrap()
+            .friction_defaults("m")
+            .iter()
+            .map(|(k, _)| *k)
+            .collect();
+        assert_eq!(keys, ["tau_sf"]);
+    }
+
+    #[test]
     fn default_file_round_trips() {
         let text = ModelFile::default().to_toml_commented();
         let back = ModelFile::parse(&text).unwrap();
