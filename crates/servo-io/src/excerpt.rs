@@ -36,9 +36,8 @@ fn head(bytes: &[u8], max_chars: usize) -> (String, bool) {
         .min(max_chars.saturating_mul(4).saturating_add(4))];
     let text = String::from_utf8_lossy(head);
     let mut out = String::new();
-    let mut chars = 0usize;
     let mut cut = head.len() < bytes.len();
-    for c in text.chars() {
+    for (chars, c) in text.chars().enumerate() {
         if chars >= max_chars {
             cut = true;
             break;
@@ -48,7 +47,6 @@ fn head(bytes: &[u8], max_chars: usize) -> (String, bool) {
             c if c.is_control() => out.extend(c.escape_default()),
             c => out.push(c),
         }
-        chars += 1;
     }
     (out, cut)
 }
