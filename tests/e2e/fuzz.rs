@@ -9,7 +9,10 @@
 use servo_cli::fuzz::{check_reader, FuzzConfig, TrackingAlloc};
 use servo_cli::gains_file::GainsFile;
 use servo_cli::io::mcap_read::parse_mcap;
-use servo_cli::io::{csv_read::parse_csv, LoopMsg, McapLog, McapLogOptions};
+use servo_cli::io::{
+    csv_read::{parse_csv, parse_csv_capped},
+    LoopMsg, McapLog, McapLogOptions,
+};
 use servo_cli::model_file::ModelFile;
 use servo_cli::reference_file::Experiment;
 use std::collections::BTreeMap;
@@ -140,6 +143,16 @@ fn fuzz_csv_reader() {
             "fuzz.csv",
             Some("time=t_ms:ms,theta_l=pos_deg:deg,i_a=I_mA:mA,u=u_V"),
         )
+    });
+    // Lines capped at 48 bytes, so that mutated small inputs reach the cap: refused with a
+    // message that quotes excerpts, never the whole input.
+    fuzz("csv, lines capped", &seeds, 5000, |b| {
+        let r = parse_csv_capped(text(b)?, "fuzz.csv", None, 48);
+        if let Err(e) = &r {
+            let m = format!("{e:#}");
+            assert!(m.len() < 2000, "{} bytes of message: {m}", m.len());
+        }
+        r
     });
 }
 

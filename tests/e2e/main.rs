@@ -3,6 +3,7 @@
 //! and, for those that build logs with the core's types, in `util`.
 //! Run one area with `cargo test --release --test e2e diagnose::`.
 
+mod bounded;
 mod calibration;
 mod compare;
 mod compensation;

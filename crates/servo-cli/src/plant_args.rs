@@ -168,7 +168,20 @@ impl PlantArgs {
     pub fn load(&self) -> anyhow::Result<(Plant, SensorConfig)> {
         let preset = self.plant_preset.unwrap_or(DEFAULT_PLANT);
         let file = match &self.plant {
-            Some(path) => ModelFile::load(path).context("--plant")?,
+            Some(path) => {
+                let file = ModelFile::load(path).context("--plant")?;
+                let given: Vec<&str> = self
+                    .plant_effect
+                    .iter()
+                    .filter_map(|e| match e.kind {
+                        servo_core::effects::EffectKind::Coulomb => Some("tau_sf"),
+                        servo_core::effects::EffectKind::Viscous => Some("b_eq"),
+                        _ => None,
+                    })
+                    .collect();
+                file.warn_defaults(&format!("--plant {}", path.display()), &given);
+                file
+            }
             None => preset.model_file(),
         };
         let mut plant = file.plant().with_context(|| match &self.plant {

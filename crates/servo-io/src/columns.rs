@@ -169,7 +169,7 @@ impl ColumnMap {
                 "cannot tell which column holds which signal from the header `{}`; give a column map, e.g. \
                  --columns {EXAMPLE} (signals: {}; units after a colon: s, ms, rad, deg, rev, counts:4096, rad/s, \
                  deg/s, rpm, V, A, mA)",
-                header.join(","),
+                crate::excerpt::join_excerpt(header, ",", crate::excerpt::HEADER_CHARS),
                 Signal::name_list()
             );
         }

@@ -16,20 +16,217 @@ pub struct CsvImport {
     pub notes: Vec<String>,
 }
 
+/// Longest line of a CSV log servo reads [bytes]: 1 MiB (a header of 10 000 columns of 30
+/// characters is 300 kB). A longer line, or a quoted record spanning lines beyond it, is refused
+/// with the file, the line and a short excerpt: memory stays bounded whatever the file holds
+/// (a file of NUL bytes, a header that is one 64 MB line).
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+
+/// Bytes a record may exceed [`MAX_LINE_BYTES`] by before it is refused, for the readers'
+/// buffers ahead of the record being parsed.
+const RECORD_SLACK_BYTES: u64 = 128 << 10;
+
 /// Picks the delimiter from the first non-comment line: `,` unless only `;` or tabs appear.
-fn sniff_delimiter(text: &str) -> u8 {
-    let line = text
-        .lines()
-        .find(|l| !l.trim_start().starts_with('#') && !l.trim().is_empty())
-        .unwrap_or("");
-    if line.contains(',') {
+fn sniff_delimiter(line: &[u8]) -> u8 {
+    if line.contains(&b',') {
         b','
-    } else if line.contains(';') {
+    } else if line.contains(&b';') {
         b';'
-    } else if line.contains('\t') {
+    } else if line.contains(&b'\t') {
         b'\t'
     } else {
         b','
+    }
+}
+
+/// Whether a line is a comment or blank (not the header).
+fn skipped_line(line: &[u8]) -> bool {
+    let t = line.trim_ascii_start();
+    t.is_empty() || t[0] == b'#'
+}
+
+/// Where the record being read starts: (byte offset, line number), set by the parser after
+/// each record.
+type RecordStart = std::rc::Rc<std::cell::Cell<(u64, u64)>>;
+
+/// A reader that refuses a line longer than `max` bytes, and a record (quoted fields may span
+/// lines) longer than `max` plus the buffers' slack, with an I/O error naming the line and
+/// quoting its start; nothing is buffered here beyond the line's first bytes.
+struct LineCapped<R> {
+    inner: R,
+    max: usize,
+    /// Lines read so far (the line being read is `line + 1`).
+    line: u64,
+    /// Bytes of the line being read so far.
+    line_len: usize,
+    /// Its first bytes, for the message.
+    head: Vec<u8>,
+    /// Bytes read in all.
+    read: u64,
+    record_start: RecordStart,
+}
+
+impl<R: std::io::Read> LineCapped<R> {
+    const HEAD: usize = 4 * crate::excerpt::CELL_CHARS + 4;
+
+    fn keep_head(&mut self, bytes: &[u8]) {
+        let room = Self::HEAD.saturating_sub(self.head.len());
+        self.head.extend_from_slice(&bytes[..bytes.len().min(room)]);
+    }
+
+    fn too_long(&self) -> std::io::Error {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "line {} is longer than {} bytes (it starts `{}`), beyond any line of a servo log; \
+                 is this a CSV log?",
+                self.line + 1,
+                self.max,
+                crate::excerpt::excerpt_start(&self.head, crate::excerpt::CELL_CHARS)
+            ),
+        )
+    }
+}
+
+impl<R: std::io::Read> std::io::Read for LineCapped<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        let mut rest = &buf[..n];
+        while let Some(i) = rest.iter().position(|&b| b == b'\n') {
+            if self.line_len + i > self.max {
+                self.keep_head(&rest[..i]);
+                return Err(self.too_long());
+            }
+            self.line += 1;
+            self.line_len = 0;
+            self.head.clear();
+            rest = &rest[i + 1..];
+        }
+        self.keep_head(rest);
+        self.line_len += rest.len();
+        if self.line_len > self.max {
+            return Err(self.too_long());
+        }
+        self.read += n as u64;
+        let (start, line) = self.record_start.get();
+        if self.read.saturating_sub(start) > self.max as u64 + RECORD_SLACK_BYTES {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!(
+                    "the record starting at line {line} spans more than {} bytes (a quoted field \
+                     never closed?), beyond any record of a servo log",
+                    self.max
+                ),
+            ));
+        }
+        Ok(n)
+    }
+}
+
+/// A CSV reader over `input` with its header read: lines capped at `max_line` bytes
+/// ([`LineCapped`]), the delimiter sniffed from the first line that is not a comment.
+#[allow(clippy::type_complexity)]
+fn open_csv<'a, R: std::io::Read + 'a>(
+    input: R,
+    source: &str,
+    max_line: usize,
+) -> anyhow::Result<(
+    csv::Reader<Box<dyn std::io::Read + 'a>>,
+    Vec<String>,
+    RecordStart,
+)> {
+    use std::io::BufRead;
+    let record_start: RecordStart = Default::default();
+    let capped = LineCapped {
+        inner: input,
+        max: max_line,
+        line: 0,
+        line_len: 0,
+        head: Vec::new(),
+        read: 0,
+        record_start: record_start.clone(),
+    };
+    let mut rest = std::io::BufReader::with_capacity(64 << 10, capped);
+    // The lines before the header (comments, blanks) and the header, read to sniff the
+    // delimiter, then handed to the CSV reader ahead of the rest.
+    let mut pre = Vec::new();
+    let mut delimiter = b',';
+    let mut lines = 0u64;
+    loop {
+        let start = pre.len();
+        record_start.set((start as u64, lines + 1));
+        let n = rest
+            .read_until(b'\n', &mut pre)
+            .map_err(|e| anyhow!("{source}: {e}"))?;
+        if n == 0 {
+            break;
+        }
+        if !skipped_line(&pre[start..]) {
+            delimiter = sniff_delimiter(&pre[start..]);
+            record_start.set((start as u64, lines + 1));
+            break;
+        }
+        lines += 1;
+        if pre.len() > max_line {
+            // Comment lines without end: the CSV reader reads them as comments.
+            break;
+        }
+    }
+    let stream: Box<dyn std::io::Read + 'a> =
+        Box::new(std::io::Read::chain(std::io::Cursor::new(pre), rest));
+    let mut rdr = csv::ReaderBuilder::new()
+        .delimiter(delimiter)
+        .comment(Some(b'#'))
+        .trim(csv::Trim::Headers)
+        .has_headers(true)
+        .from_reader(stream);
+    let header: Vec<String> = rdr
+        .headers()
+        .map_err(|e| {
+            anyhow!(
+                "{source}: cannot read the CSV header: {}",
+                csv_error_text(&e)
+            )
+        })?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    if header.iter().all(|h| h.is_empty()) {
+        bail!("{source}: the file is empty or has no header line (expected e.g. `time_s,u_V,theta_l_rad,i_a_A`)");
+    }
+    let p = rdr.position();
+    record_start.set((p.byte(), p.line()));
+    Ok((rdr, header, record_start))
+}
+
+/// The header and the number of data rows of a CSV (`servo inspect`), read as a stream with
+/// lines capped at `max_line` bytes; an error when the file is not a readable CSV (no header,
+/// rows of another length than the header, a line beyond the cap).
+pub fn scan_csv<R: std::io::Read>(
+    input: R,
+    source: &str,
+    max_line: usize,
+) -> anyhow::Result<(Vec<String>, u64)> {
+    let (mut rdr, header, record_start) = open_csv(input, source, max_line)?;
+    let mut row = csv::ByteRecord::new();
+    let mut rows = 0u64;
+    loop {
+        match rdr.read_byte_record(&mut row) {
+            Ok(true) => rows += 1,
+            Ok(false) => break,
+            Err(e) => bail!("{}", row_error(source, &e)),
+        }
+        let p = rdr.position();
+        record_start.set((p.byte(), p.line()));
+    }
+    Ok((header, rows))
+}
+
+/// The message of an error reading a data row.
+fn row_error(source: &str, e: &csv::Error) -> String {
+    match (e.kind(), e.position()) {
+        (_, Some(p)) => format!("{source}: line {}: {}", p.line(), csv_error_text(e)),
+        _ => format!("{source}: {}", csv_error_text(e)),
     }
 }
 
@@ -58,9 +255,16 @@ pub fn read_csv_on(
     want: Option<&[Signal]>,
     axis: &Transmission,
 ) -> anyhow::Result<CsvImport> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading CSV log {}", path.display()))?;
-    parse_csv_on(&text, &path.display().to_string(), columns, want, axis)
+    let file =
+        std::fs::File::open(path).with_context(|| format!("reading CSV log {}", path.display()))?;
+    parse_reader(
+        file,
+        &path.display().to_string(),
+        columns,
+        want,
+        axis,
+        MAX_LINE_BYTES,
+    )
 }
 
 /// servo's reader of CSV logs (`.csv`, `.txt`, `.tsv`; `,`, `;` or tab separated).
@@ -90,19 +294,20 @@ impl crate::log_reader::LogReader for CsvReader {
             },
         ))
     }
-    /// The header columns, the number of data rows and the map servo would guess.
+    /// The header columns, the number of data rows and the map servo would guess; an error
+    /// when the file is not a readable CSV (read as a stream, lines capped at
+    /// [`MAX_LINE_BYTES`]).
     fn inspect(&self, path: &Path) -> anyhow::Result<Vec<String>> {
         let source = path.display().to_string();
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {source}"))?;
-        let mut lines = text
-            .lines()
-            .filter(|l| !l.trim_start().starts_with('#') && !l.trim().is_empty());
-        let header = lines.next().unwrap_or("");
-        let rows = lines.count();
+        let file = std::fs::File::open(path).with_context(|| format!("reading {source}"))?;
+        let (header, rows) = scan_csv(file, &source, MAX_LINE_BYTES)?;
         Ok(vec![
             format!("{source}: CSV, {rows} data rows"),
-            format!("  columns: {header}"),
-            crate::log_reader::guessed(parse_csv(&text, &source, None).map(|i| i.map.to_string())),
+            format!(
+                "  columns: {}",
+                crate::excerpt::join_excerpt(&header, ",", 4 * crate::excerpt::HEADER_CHARS)
+            ),
+            crate::log_reader::guessed(read_csv(path, None).map(|i| i.map.to_string())),
         ])
     }
 }
@@ -136,22 +341,39 @@ pub fn parse_csv_on(
     want: Option<&[Signal]>,
     axis: &Transmission,
 ) -> anyhow::Result<CsvImport> {
-    let mut rdr = csv::ReaderBuilder::new()
-        .delimiter(sniff_delimiter(text))
-        .comment(Some(b'#'))
-        .trim(csv::Trim::Headers)
-        .has_headers(true)
-        .from_reader(text.as_bytes());
-    let header: Vec<String> = rdr
-        .headers()
-        .map_err(|e| anyhow!("{source}: cannot read the CSV header: {e}"))?
-        .iter()
-        .map(str::to_string)
-        .collect();
+    parse_reader(text.as_bytes(), source, columns, want, axis, MAX_LINE_BYTES)
+}
+
+/// [`parse_csv`] with lines capped at `max_line` bytes instead of [`MAX_LINE_BYTES`] (the fuzz
+/// targets reach the cap with small inputs).
+pub fn parse_csv_capped(
+    text: &str,
+    source: &str,
+    columns: Option<&str>,
+    max_line: usize,
+) -> anyhow::Result<CsvImport> {
+    parse_reader(
+        text.as_bytes(),
+        source,
+        columns,
+        None,
+        &Transmission::GEAR,
+        max_line,
+    )
+}
+
+/// Reads a CSV log from `input` as a stream (see [`read_csv_on`]): memory holds one record and
+/// the columns read, never the file; a line beyond `max_line` bytes is refused.
+pub fn parse_reader<R: std::io::Read>(
+    input: R,
+    source: &str,
+    columns: Option<&str>,
+    want: Option<&[Signal]>,
+    axis: &Transmission,
+    max_line: usize,
+) -> anyhow::Result<CsvImport> {
+    let (mut rdr, header, record_start) = open_csv(input, source, max_line)?;
     let header_refs: Vec<&str> = header.iter().map(String::as_str).collect();
-    if header.iter().all(|h| h.is_empty()) {
-        bail!("{source}: the file is empty or has no header line (expected e.g. `time_s,u_V,theta_l_rad,i_a_A`)");
-    }
     let mut notes = Vec::new();
     let map = match columns {
         Some(c) => ColumnMap::parse(c)?,
@@ -162,7 +384,10 @@ pub fn parse_csv_on(
                     ColumnMap::guess(&header_refs).with_context(|| source.to_string())?;
                 let mut note = format!("{source}: guessed the column map --columns {m}");
                 if !ignored.is_empty() {
-                    note.push_str(&format!(" (ignored: {})", ignored.join(", ")));
+                    note.push_str(&format!(
+                        " (ignored: {})",
+                        crate::excerpt::join_excerpt(&ignored, ", ", crate::excerpt::HEADER_CHARS)
+                    ));
                 }
                 notes.push(note);
                 m
@@ -177,7 +402,7 @@ pub fn parse_csv_on(
                 "{source}: no column `{}` (for signal `{}`); the header is `{}`",
                 e.column,
                 e.signal,
-                header.join(",")
+                crate::excerpt::join_excerpt(&header, ",", crate::excerpt::HEADER_CHARS)
             )
         })?;
         idx.push(i);
@@ -202,10 +427,11 @@ pub fn parse_csv_on(
         match rdr.read_byte_record(&mut row) {
             Ok(true) => {}
             Ok(false) => break,
-            Err(e) => {
-                let line = e.position().map(|p| p.line()).unwrap_or(0);
-                bail!("{source}: line {line}: {}", csv_error_text(&e));
-            }
+            Err(e) => bail!("{}", row_error(source, &e)),
+        }
+        {
+            let p = rdr.position();
+            record_start.set((p.byte(), p.line()));
         }
         for (e, i, col, nans, factor) in cols.iter_mut() {
             let i = *i;
@@ -222,14 +448,14 @@ pub fn parse_csv_on(
                         e.column,
                         e.signal,
                         e.unit,
-                        String::from_utf8_lossy(cell)
+                        crate::excerpt::excerpt(cell, crate::excerpt::CELL_CHARS)
                     ),
                 }
             };
             if e.signal == Signal::Time {
                 let t = e.unit.to_si(v);
                 if !t.is_finite() {
-                    bail!("{source}: line {}, column {} (`{}`): time must be a finite number, got `{}`", line_of(&row), i + 1, e.column, String::from_utf8_lossy(cell));
+                    bail!("{source}: line {}, column {} (`{}`): time must be a finite number, got `{}`", line_of(&row), i + 1, e.column, crate::excerpt::excerpt(cell, crate::excerpt::CELL_CHARS));
                 }
                 if t <= last_t {
                     bail!(
@@ -255,7 +481,7 @@ pub fn parse_csv_on(
                         i + 1,
                         e.column,
                         e.signal,
-                        String::from_utf8_lossy(cell),
+                        crate::excerpt::excerpt(cell, crate::excerpt::CELL_CHARS),
                         e.unit,
                         e.signal,
                         plausible_limit(e.signal)
@@ -281,7 +507,7 @@ pub fn parse_csv_on(
     if rec.time_s.is_empty() {
         bail!(
             "{source}: no data rows after the header `{}`",
-            header.join(",")
+            crate::excerpt::join_excerpt(&header, ",", crate::excerpt::HEADER_CHARS)
         );
     }
     check_sample_period(&rec.time_s, &map, source)?;
@@ -465,6 +691,55 @@ mod tests {
             parse_csv("time_s,u_V\n", "empty.csv", None).unwrap_err()
         );
         assert!(e.contains("no data rows"), "{e}");
+    }
+
+    #[test]
+    fn lines_and_records_beyond_the_cap_are_refused_with_an_excerpt() {
+        let ok = "# a comment with a \" quote\ntime_s,u_V\n0,1\n0.001,2\n0.002,3\n";
+        let r = parse_csv_capped(ok, "ok.csv", None, 40).unwrap();
+        assert_eq!(r.record.time_s.len(), 3);
+        // A data line beyond the cap: its number and its start, not the whole line.
+        let long = format!("time_s,u_V\n0,1\n0.001,{}\n", "7".repeat(5000));
+        let e = format!(
+            "{:#}",
+            parse_csv_capped(&long, "long.csv", None, 1000).unwrap_err()
+        );
+        assert!(
+            e.starts_with("long.csv: line 3 is longer than 1000 bytes (it starts `0.001,777"),
+            "{e}"
+        );
+        assert!(e.len() < 300, "{e}");
+        // The header itself, and a file without any newline.
+        let e = format!(
+            "{:#}",
+            parse_csv_capped(&"a,".repeat(3000), "h.csv", None, 1000).unwrap_err()
+        );
+        assert!(e.contains("h.csv") && e.contains("line 1 is longer"), "{e}");
+        let nul = "\0".repeat(5000);
+        let e = format!(
+            "{:#}",
+            parse_csv_capped(&nul, "nul.csv", None, 1000).unwrap_err()
+        );
+        assert!(
+            e.contains("line 1 is longer") && e.contains("\\0\\0"),
+            "{e}"
+        );
+        assert!(e.len() < 400, "{e}");
+        // A quoted field never closed: short lines, one endless record.
+        let mut q = String::from("time_s,u_V\n0,\"1\n");
+        for _ in 0..40_000 {
+            q.push_str("2,3\n");
+        }
+        let e = format!(
+            "{:#}",
+            parse_csv_capped(&q, "q.csv", None, 1000).unwrap_err()
+        );
+        assert!(
+            e.contains("q.csv") && e.contains("record starting at line 2"),
+            "{e}"
+        );
+        // At the default cap, the same files read as before.
+        assert!(parse_csv(&long, "long.csv", None).is_ok());
     }
 
     #[test]

@@ -109,7 +109,7 @@ pub struct EffectsFile {
 impl EffectsFile {
     /// Reads and compiles `path`; errors name the file, the section and the column.
     pub fn load(path: &Path) -> anyhow::Result<EffectsFile> {
-        let text = std::fs::read_to_string(path)
+        let text = crate::text_file::read_text(path)
             .with_context(|| format!("reading effects file {}", path.display()))?;
         Self::parse(&text).with_context(|| format!("in effects file {}", path.display()))
     }
@@ -117,7 +117,7 @@ impl EffectsFile {
     /// Parses and compiles TOML text.
     pub fn parse(text: &str) -> anyhow::Result<EffectsFile> {
         let raw: RawFile =
-            toml::from_str(text).map_err(|e| anyhow!("{}", e.to_string().trim_end()))?;
+            toml::from_str(text).map_err(|e| anyhow!("{}", crate::text_file::toml_error(&e)))?;
         if raw.custom.is_empty() {
             return Err(anyhow!(
                 "no [custom.NAME] section: an effects file defines user effects (see docs/custom-effects.md)"

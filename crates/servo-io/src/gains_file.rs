@@ -79,7 +79,7 @@ pub struct GainsFile {
 impl GainsFile {
     /// Reads and validates a gains file.
     pub fn load(path: &Path) -> anyhow::Result<GainsFile> {
-        let text = std::fs::read_to_string(path)
+        let text = crate::text_file::read_text(path)
             .with_context(|| format!("reading gains file {}", path.display()))?;
         Self::parse(&text).with_context(|| format!("in gains file {}", path.display()))
     }
@@ -105,7 +105,7 @@ impl GainsFile {
             }
         }
         let g: GainsFile =
-            toml::from_str(text).map_err(|e| anyhow!("{}", e.to_string().trim_end()))?;
+            toml::from_str(text).map_err(|e| anyhow!("{}", crate::text_file::toml_error(&e)))?;
         g.validate()?;
         Ok(g)
     }

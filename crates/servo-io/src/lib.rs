@@ -32,6 +32,7 @@ pub mod csv_write;
 pub mod disk;
 pub mod effects_file;
 pub mod error;
+pub mod excerpt;
 pub mod gains_file;
 pub mod log_reader;
 pub mod loop_msg;
@@ -46,6 +47,7 @@ pub mod model_file;
 pub mod output;
 pub mod recipe_file;
 pub mod reference_file;
+pub mod text_file;
 pub mod units;
 
 pub use loop_msg::LoopMsg;

@@ -186,12 +186,41 @@ impl MatFile {
     }
 }
 
-/// Reads the MAT-file at `path`.
+/// Largest MAT-file servo reads [bytes]: 1 GiB (its numbers are limited to [`MAX_NUMBERS`],
+/// 256 MB of doubles, and its inflated data to [`MAX_DECOMPRESSED_BYTES`]).
+pub const MAX_FILE_BYTES: u64 = 1 << 30;
+
+/// Reads the MAT-file at `path`: its header is checked before the rest is read (a large file
+/// that is not a MAT-file is refused after its first bytes), a file beyond
+/// [`MAX_FILE_BYTES`] is refused before it is read.
 pub fn read_mat_file(path: &Path) -> Result<MatFile, MatError> {
-    let bytes = std::fs::read(path).map_err(|source| MatError::Io {
+    use std::io::Read;
+    let io = |source| MatError::Io {
         path: path.display().to_string(),
         source,
-    })?;
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let mut head = Vec::new();
+    (&file).take(520).read_to_end(&mut head).map_err(io)?;
+    let header_ok = head.len() >= 128
+        && matches!(&head[126..128], b"IM" | b"MI")
+        && !head.starts_with(b"\x89HDF")
+        && head.get(512..516) != Some(b"\x89HDF");
+    if !header_ok {
+        return parse_mat(&head);
+    }
+    let size = file.metadata().map_err(io)?.len();
+    if size > MAX_FILE_BYTES {
+        return Err(MatError::TooLarge {
+            what: "bytes",
+            limit: MAX_FILE_BYTES as usize,
+        });
+    }
+    let mut bytes = head;
+    (&file)
+        .take(MAX_FILE_BYTES)
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
     parse_mat(&bytes)
 }
 

@@ -223,8 +223,9 @@ impl crate::log_reader::LogReader for McapReader {
     /// (samples, duration, signals, metadata keys, notes) or why it cannot.
     fn inspect(&self, path: &Path) -> anyhow::Result<Vec<String>> {
         let source = path.display().to_string();
-        let bytes = std::fs::read(path).with_context(|| format!("reading {source}"))?;
+        let bytes = read_mcap_bytes(path)?;
         let mut out = vec![format!("{source}: MCAP")];
+        let mut topics = Vec::new();
         match mcap::read::Summary::read(&bytes) {
             Ok(Some(s)) => {
                 let counts = s.stats.as_ref().map(|st| st.channel_message_counts.clone());
@@ -234,6 +235,7 @@ impl crate::log_reader::LogReader for McapReader {
                         .and_then(|m| m.get(id))
                         .map(|n| format!(", {n} messages"))
                         .unwrap_or_default();
+                    topics.push(c.topic.clone());
                     out.push(format!(
                         "  channel {}: encoding {}, schema {}{n}",
                         c.topic,
@@ -245,39 +247,82 @@ impl crate::log_reader::LogReader for McapReader {
             Ok(None) => out.push("  (no summary section: an unfinished log?)".to_string()),
             Err(e) => out.push(format!("  (summary unreadable: {e})")),
         }
-        match crate::log_reader::LogReader::read(
-            self,
-            path,
-            None,
-            None,
-            &servo_core::Transmission::GEAR,
-        ) {
-            Ok((rec, meta)) => {
-                out.push(format!(
-                    "  {} samples, {:.3} s, signals {}",
-                    rec.len(),
-                    rec.time_s.last().copied().unwrap_or(0.0)
-                        - rec.time_s.first().copied().unwrap_or(0.0),
-                    rec.signals().join(", ")
-                ));
-                if !meta.entries.is_empty() {
-                    let keys: Vec<&str> = meta.entries.keys().map(String::as_str).collect();
-                    out.push(format!("  metadata: {}", keys.join(", ")));
-                }
-                for n in &meta.notes {
-                    out.push(format!("  note: {n}"));
-                }
-            }
-            Err(e) => out.push(format!("  not readable as a servo log: {e:#}")),
+        let (rec, meta) = parse_mcap_signals(&bytes, &source, None)
+            .map(|run| {
+                let meta = crate::LogMeta {
+                    columns: None,
+                    entries: run.metadata,
+                    summary: run.summary,
+                    notes: run.notes,
+                    feedforward_v: run.feedforward_v,
+                };
+                (run.record, meta)
+            })
+            .with_context(|| {
+                format!(
+                    "{source}: an MCAP file{}, not readable as a servo log",
+                    if topics.is_empty() {
+                        String::new()
+                    } else {
+                        format!(
+                            " with channels {}",
+                            crate::excerpt::join_excerpt(
+                                &topics,
+                                ", ",
+                                crate::excerpt::HEADER_CHARS
+                            )
+                        )
+                    }
+                )
+            })?;
+        out.push(format!(
+            "  {} samples, {:.3} s, signals {}",
+            rec.len(),
+            rec.time_s.last().copied().unwrap_or(0.0) - rec.time_s.first().copied().unwrap_or(0.0),
+            rec.signals().join(", ")
+        ));
+        if !meta.entries.is_empty() {
+            let keys: Vec<&str> = meta.entries.keys().map(String::as_str).collect();
+            out.push(format!("  metadata: {}", keys.join(", ")));
+        }
+        for n in &meta.notes {
+            out.push(format!("  note: {n}"));
         }
         Ok(out)
     }
 }
 
+/// The bytes of the MCAP file `path`, read after its first 8 bytes were found to be the MCAP
+/// magic (a large file that is not an MCAP is refused after its first bytes).
+pub fn read_mcap_bytes(path: &Path) -> anyhow::Result<Vec<u8>> {
+    use std::io::Read;
+    let source = path.display();
+    let file = std::fs::File::open(path).with_context(|| format!("reading MCAP log {source}"))?;
+    let mut bytes = Vec::new();
+    (&file)
+        .take(mcap::MAGIC.len() as u64)
+        .read_to_end(&mut bytes)
+        .with_context(|| format!("reading MCAP log {source}"))?;
+    if bytes != mcap::MAGIC {
+        bail!("{source}: not an MCAP file (bad magic bytes at the start)");
+    }
+    (&file)
+        .read_to_end(&mut bytes)
+        .with_context(|| format!("reading MCAP log {source}"))?;
+    Ok(bytes)
+}
+
+/// The notes servo's reader gives on MCAP `bytes` (the log was not finished, what was lost),
+/// without keeping its samples; none when the bytes are not a servo log.
+pub fn notes_of(bytes: &[u8], source: &str) -> Vec<String> {
+    walk_mcap(bytes, source, &mut |_| {})
+        .map(|run| run.notes)
+        .unwrap_or_default()
+}
+
 /// Reads the MCAP file `path`.
 pub fn read_mcap(path: &Path) -> anyhow::Result<McapRun> {
-    let bytes =
-        std::fs::read(path).with_context(|| format!("reading MCAP log {}", path.display()))?;
+    let bytes = read_mcap_bytes(path)?;
     parse_mcap(&bytes, &path.display().to_string())
 }
 
@@ -296,8 +341,7 @@ pub fn parse_mcap(bytes: &[u8], source: &str) -> anyhow::Result<McapRun> {
 /// signal and the feedforward). [`McapRun::loop_msgs`] stays empty: the fast path of the
 /// commands that read a log (`servo frf` reads 10 minutes at 1 kHz in about 0.1 s).
 pub fn read_mcap_signals(path: &Path, want: Option<&[Signal]>) -> anyhow::Result<McapRun> {
-    let bytes =
-        std::fs::read(path).with_context(|| format!("reading MCAP log {}", path.display()))?;
+    let bytes = read_mcap_bytes(path)?;
     parse_mcap_signals(&bytes, &path.display().to_string(), want)
 }
 
@@ -553,6 +597,13 @@ impl Walk<'_, '_> {
                         }
                         McapRecord::Metadata(m) if m.name == SUMMARY_METADATA => {
                             self.run.summary = m.metadata
+                        }
+                        McapRecord::Metadata(m)
+                            if m.name == crate::mcap_recover::RECOVERY_METADATA =>
+                        {
+                            self.run
+                                .notes
+                                .push(crate::mcap_recover::recovery_note(self.source, &m.metadata))
                         }
                         McapRecord::DataEnd(_) => self.data_end = true,
                         McapRecord::Footer(_) => {

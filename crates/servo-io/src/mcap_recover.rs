@@ -35,6 +35,37 @@ pub struct RecoveryReport {
     pub was_complete: bool,
     /// Why reading stopped before the end, if it did.
     pub stopped_because: Option<String>,
+    /// The notes servo's reader gives on the input (the run was killed, what was lost), kept
+    /// in the output's [`RECOVERY_METADATA`] record.
+    pub notes: Vec<String>,
+}
+
+/// Name of the metadata record a recovery of an unfinished log adds to its output:
+/// `recovered_from` (the input file), `read_bytes` (`N of M`), `stopped_because`, and `note_1`,
+/// `note_2`, ... (what servo's reader said of the input: the run was killed, what was lost).
+/// Servo's reader turns it into a note on the recovered log.
+pub const RECOVERY_METADATA: &str = "servo_recovery";
+
+/// The note servo's reader gives on a recovered log, from its [`RECOVERY_METADATA`] record.
+pub fn recovery_note(source: &str, m: &std::collections::BTreeMap<String, String>) -> String {
+    let from = m
+        .get("recovered_from")
+        .map_or("an unfinished log", String::as_str);
+    let mut note = format!("{source}: recovered by `servo log recover` from {from}");
+    if let Some(r) = m.get("read_bytes") {
+        note.push_str(&format!(" (read {r} bytes"));
+        if let Some(w) = m.get("stopped_because") {
+            note.push_str(&format!("; stopped: {w}"));
+        }
+        note.push(')');
+    }
+    for k in 1.. {
+        match m.get(&format!("note_{k}")) {
+            Some(n) => note.push_str(&format!("; {n}")),
+            None => break,
+        }
+    }
+    note
 }
 
 impl RecoveryReport {
@@ -248,7 +279,7 @@ pub fn recover(input: &Path, output: &Path) -> anyhow::Result<RecoveryReport> {
     let (rep, file) = crate::output::Replacement::begin(output)?;
     let mut w = BufWriter::new(file);
     let unchanged = crate::output::unchanged_sentence(output);
-    let report = recover_bytes(&buf, &mut w).with_context(|| {
+    let report = recover_noting(&buf, &mut w, &input.display().to_string()).with_context(|| {
         format!(
             "recovering {} into {} ({unchanged})",
             input.display(),
@@ -266,6 +297,17 @@ pub fn recover(input: &Path, output: &Path) -> anyhow::Result<RecoveryReport> {
     Ok(report)
 }
 
+/// [`recover_bytes`] that keeps, in a [`RECOVERY_METADATA`] record of the output, where the
+/// log came from (`source`, the input's name) and the notes servo's reader gives on it.
+pub fn recover_noting<W: std::io::Write + std::io::Seek>(
+    buf: &[u8],
+    out: W,
+    source: &str,
+) -> anyhow::Result<RecoveryReport> {
+    let notes = crate::mcap_read::notes_of(buf, source);
+    recover_inner(buf, out, Some((source, notes)))
+}
+
 /// Recovers the MCAP bytes `buf` into `out` (a file, or a `Cursor<Vec<u8>>` in tests).
 ///
 /// Never panics and allocates nothing sized by the input's length fields beyond the input's
@@ -274,6 +316,14 @@ pub fn recover(input: &Path, output: &Path) -> anyhow::Result<RecoveryReport> {
 pub fn recover_bytes<W: std::io::Write + std::io::Seek>(
     buf: &[u8],
     out: W,
+) -> anyhow::Result<RecoveryReport> {
+    recover_inner(buf, out, None)
+}
+
+fn recover_inner<W: std::io::Write + std::io::Seek>(
+    buf: &[u8],
+    out: W,
+    noting: Option<(&str, Vec<String>)>,
 ) -> anyhow::Result<RecoveryReport> {
     if buf.len() < MAGIC.len() || &buf[..MAGIC.len()] != MAGIC {
         bail!("not an MCAP file (no MCAP magic at its start)");
@@ -293,6 +343,27 @@ pub fn recover_bytes<W: std::io::Write + std::io::Seek>(
     sink.report.good_bytes = (MAGIC.len() + n) as u64;
     sink.report.was_complete = data_end && buf.ends_with(MAGIC) && buf.len() > 2 * MAGIC.len();
     sink.report.stopped_because = why;
+    if let (Some((source, notes)), false) = (noting, sink.report.was_complete) {
+        let mut m = std::collections::BTreeMap::new();
+        m.insert("recovered_from".to_string(), source.to_string());
+        m.insert(
+            "read_bytes".to_string(),
+            format!("{} of {}", sink.report.good_bytes, sink.report.total_bytes),
+        );
+        if let Some(w) = &sink.report.stopped_because {
+            m.insert("stopped_because".to_string(), w.clone());
+        }
+        for (k, n) in notes.iter().enumerate() {
+            m.insert(format!("note_{}", k + 1), n.clone());
+        }
+        sink.w
+            .write_metadata(&mcap::records::Metadata {
+                name: RECOVERY_METADATA.to_string(),
+                metadata: m,
+            })
+            .context("writing the recovery's metadata")?;
+        sink.report.notes = notes;
+    }
     sink.w.finish().context("finishing the recovered file")?;
     Ok(sink.report)
 }

@@ -516,14 +516,15 @@ impl Default for ModelFile {
 impl ModelFile {
     /// Reads and validates `path`; errors name the file, the key and what was expected.
     pub fn load(path: &Path) -> anyhow::Result<ModelFile> {
-        let text = std::fs::read_to_string(path)
+        let text = crate::text_file::read_text(path)
             .with_context(|| format!("reading model file {}", path.display()))?;
         Self::parse(&text).with_context(|| format!("in model file {}", path.display()))
     }
 
     /// Parses and validates TOML text.
     pub fn parse(text: &str) -> anyhow::Result<ModelFile> {
-        let raw: Raw = toml::from_str(text).map_err(|e| anyhow!("{}", e.to_string().trim_end()))?;
+        let raw: Raw =
+            toml::from_str(text).map_err(|e| anyhow!("{}", crate::text_file::toml_error(&e)))?;
         Self::from_raw(raw)
     }
 
@@ -593,6 +594,56 @@ impl ModelFile {
             provenance: raw.provenance,
             limits: parse_limits(raw.limits.as_ref())?,
         })
+    }
+
+    /// What the file leaves to a default of zero friction, one sentence each starting with
+    /// `what` (how the user named the file: `--plant model.toml`), with the key (`tau_sf`,
+    /// `b_eq`): no Coulomb friction (no `tau_sf`, no `[effects.coulomb]`), no viscous friction
+    /// (no `b_eq`, no `[effects.viscous]`, and B_m = B_l = 0). Every motor has both: a file
+    /// without them is a datasheet's (Table 2 has neither) or one that lost its lines; a command
+    /// that simulates or compares with it says so ([`ModelFile::warn_defaults`]). Writing
+    /// `tau_sf = 0` or `b_eq = 0` says that zero is meant.
+    pub fn friction_defaults(&self, what: &str) -> Vec<(&'static str, String)> {
+        let p = &self.params;
+        let linear = self.transmission.is_linear();
+        let (coulomb, viscous) = if linear {
+            ("[transmission] f_c_n", "[transmission] b_eq_n_s_m")
+        } else {
+            ("[params] tau_sf", "[params] b_eq")
+        };
+        let mut out = Vec::new();
+        if p.tau_sf.is_none() && !self.effects.contains(EffectKind::Coulomb) {
+            out.push((
+                "tau_sf",
+                format!(
+                    "{what}: no {coulomb}: the model has no Coulomb friction (tau_sf = 0 N m); \
+                     write `{} = 0` if that is meant, or identify it (`servo identify`)",
+                    if linear { "f_c_n" } else { "tau_sf" }
+                ),
+            ));
+        }
+        if p.b_eq.is_none() && !self.effects.contains(EffectKind::Viscous) && p.b_eq() == 0.0 {
+            out.push((
+                "b_eq",
+                format!(
+                    "{what}: no {viscous}, and b_m = b_l = 0: the model has no viscous friction \
+                     (B_eq = 0 N m s/rad); write `{} = 0` if that is meant, or identify it \
+                     (`servo identify`)",
+                    if linear { "b_eq_n_s_m" } else { "b_eq" }
+                ),
+            ));
+        }
+        out
+    }
+
+    /// Prints [`ModelFile::friction_defaults`] to stderr as warnings, but for the keys in
+    /// `given` (friction given elsewhere, e.g. `--plant-effect coulomb:...`).
+    pub fn warn_defaults(&self, what: &str, given: &[&str]) {
+        for (key, w) in self.friction_defaults(what) {
+            if !given.contains(&key) {
+                eprintln!("warning: {w}");
+            }
+        }
     }
 
     /// The plant: friction from the params (B_eq, tau_sf), then the file's effects on top (an
@@ -1142,6 +1193,41 @@ mod tests {
             ModelFile::parse(&format!("{twice}{SCREW}")).unwrap_err()
         );
         assert!(e.contains("twice") && e.contains("m_eq_kg"), "{e}");
+    }
+
+    #[test]
+    fn friction_left_to_zero_is_said_naming_the_key() {
+        let lab = ModelFile::from_plant(&Plant::from_params(PlantParams::LAB).unwrap());
+        assert!(lab.friction_defaults("m.toml").is_empty());
+        let text = lab.to_toml_commented();
+        let cut: String = text
+            .lines()
+            .filter(|l| !l.starts_with("b_eq") && !l.starts_with("tau_sf"))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        let m = ModelFile::parse(&cut).unwrap();
+        let said = m.friction_defaults("--plant m.toml");
+        let keys: Vec<&str> = said.iter().map(|(k, _)| *k).collect();
+        assert_eq!(keys, ["tau_sf", "b_eq"]);
+        assert!(
+            said[0].1.starts_with("--plant m.toml: no [params] tau_sf"),
+            "{said:?}"
+        );
+        // Zero written is zero meant; B_m > 0 gives a viscous friction.
+        let zeros = cut.replacen("[params]\n", "[params]\ntau_sf = 0\nb_eq = 0\n", 1);
+        assert!(ModelFile::parse(&zeros)
+            .unwrap()
+            .friction_defaults("m")
+            .is_empty());
+        let bm = cut.replace("b_m = 0e0", "b_m = 1e-7");
+        assert_ne!(bm, cut);
+        let keys: Vec<&str> = ModelFile::parse(&bm)
+            .unwrap()
+            .friction_defaults("m")
+            .iter()
+            .map(|(k, _)| *k)
+            .collect();
+        assert_eq!(keys, ["tau_sf"]);
     }
 
     #[test]

@@ -70,10 +70,12 @@ fn load_toml<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> anyhow:
             _ => INERTIA_RECIPE.to_string(),
         }
     } else {
-        std::fs::read_to_string(path)
+        crate::text_file::read_text(path)
             .with_context(|| format!("reading {what} recipe {}", path.display()))?
     };
-    toml::from_str(&text).with_context(|| format!("in {what} recipe {}", path.display()))
+    toml::from_str(&text)
+        .map_err(|e| crate::Error::Invalid(crate::text_file::toml_error(&e)))
+        .with_context(|| format!("in {what} recipe {}", path.display()))
 }
 
 impl FrictionRecipe {

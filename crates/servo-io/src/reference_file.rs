@@ -154,8 +154,8 @@ impl Experiment {
         origin: &str,
         metres_per_rad: Option<f64>,
     ) -> anyhow::Result<Experiment> {
-        let file: FileToml =
-            toml::from_str(text).map_err(|e| anyhow!("{origin}: {}", e.to_string().trim_end()))?;
+        let file: FileToml = toml::from_str(text)
+            .map_err(|e| anyhow!("{origin}: {}", crate::text_file::toml_error(&e)))?;
         let line_of = |span: core::ops::Range<usize>| {
             text[..span.start.min(text.len())].lines().count().max(1)
         };
@@ -250,7 +250,7 @@ pub fn load_experiment(path: &Path) -> anyhow::Result<Experiment> {
 
 /// Reads an experiment file of a linear axis ([`Experiment::parse_on`]).
 pub fn load_experiment_on(path: &Path, metres_per_rad: Option<f64>) -> anyhow::Result<Experiment> {
-    let text = std::fs::read_to_string(path)
+    let text = crate::text_file::read_text(path)
         .with_context(|| format!("reading experiment file {}", path.display()))?;
     Experiment::parse_on(&text, &path.display().to_string(), metres_per_rad)
 }

@@ -179,6 +179,7 @@ impl Compare {
     /// error ladder and the comparison of the final model (used by `servo demo`).
     pub fn run_report(self) -> anyhow::Result<(Vec<LadderStep>, ModelComparison)> {
         let model_file = ModelFile::load(&self.model)?;
+        model_file.warn_defaults(&format!("--model {}", self.model.display()), &[]);
         let plant = model_file.plant()?;
         let start = plant;
         let gains = match &self.gains {

@@ -110,6 +110,7 @@ impl Diagnose {
             );
         }
         let model_file = ModelFile::load(&self.model)?;
+        model_file.warn_defaults(&format!("--model {}", self.model.display()), &[]);
         let model = model_file.plant()?;
         let mut records = Vec::new();
         self.part.check(self.logs.len())?;

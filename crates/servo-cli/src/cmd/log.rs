@@ -70,6 +70,9 @@ impl Recover {
             (Some(why), _) => outln!("stopped at byte {}: {why}", r.good_bytes),
             (None, _) => outln!("the input ended cleanly between records but had no footer"),
         }
+        for n in &r.notes {
+            outln!("kept the log's note in the recovered log: {n}");
+        }
         outln!("wrote {}", self.output.display());
         Ok(())
     }
