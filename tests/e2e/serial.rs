@@ -1514,7 +1514,8 @@ mod qemu_cli {
         Some(Ok((board, period_s)))
     }
 
-    /// Two busy processes (`yes > /dev/null`) for at most 120 s, killed when dropped.
+    /// Two busy processes (`yes > /dev/null` under `timeout 120`), ended when dropped (SIGTERM
+    /// to `timeout`, which passes it on: a SIGKILL would leave `yes` running).
     struct BusyLoops(Vec<std::process::Child>);
 
     impl BusyLoops {
@@ -1536,7 +1537,9 @@ mod qemu_cli {
     impl Drop for BusyLoops {
         fn drop(&mut self) {
             for c in &mut self.0 {
-                let _ = c.kill();
+                let _ = std::process::Command::new("kill")
+                    .args(["-TERM", &c.id().to_string()])
+                    .status();
                 let _ = c.wait();
             }
         }
