@@ -37,6 +37,9 @@ pub struct SerialConfig {
     pub handshake_timeout_s: f64,
     /// Host-side limits; the voltage limit is further reduced to the board's.
     pub limits: SafetyLimits,
+    /// Stop a run whose loop cannot keep the board's period ([`crate::starvation`]); on by
+    /// default (off only for tests of the link itself, which lose frames on purpose).
+    pub watch_starvation: bool,
 }
 
 impl Default for SerialConfig {
@@ -47,6 +50,7 @@ impl Default for SerialConfig {
             timeout_s: 0.25,
             handshake_timeout_s: 0.5,
             limits: SafetyLimits::default(),
+            watch_starvation: true,
         }
     }
 }
@@ -331,9 +335,11 @@ impl SerialBackend {
         }
         let time_s = (self.time_base_us + s.time_us as u64) as f64 * 1e-6;
         let missed = s.seq != 0 && s.flags & flags::MISSED_DEADLINE != 0;
-        self.watch
-            .push(time_s, at, missed)
-            .map_err(HwError::Starved)?;
+        if self.cfg.watch_starvation {
+            self.watch
+                .push(time_s, at, missed)
+                .map_err(HwError::Starved)?;
+        }
         Ok(Some(Sample {
             time_s,
             theta_l_rad,
