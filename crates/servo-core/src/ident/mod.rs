@@ -100,10 +100,10 @@ impl CurrentSampling {
             back_emf_nm_s_rad: p.k_t * p.k_e / p.r_eq(),
         }
     }
-    /// The standard uncertainty of that correction [kg m^2]: a quarter of it, for what the log
+    /// The standard uncertainty of that correction [kg m^2]: 10 % of it, for what the log
     /// does not tell (the current sensor's own lag, a drive that is not quite first order).
     pub fn inertia_offset_se_kg_m2(&self, dt_s: f64) -> f64 {
-        0.25 * self.inertia_offset_kg_m2(dt_s)
+        0.1 * self.inertia_offset_kg_m2(dt_s)
     }
     /// The inertia missing from a fit on the sampled current at sample period `dt_s` [kg m^2].
     pub fn inertia_offset_kg_m2(&self, dt_s: f64) -> f64 {
