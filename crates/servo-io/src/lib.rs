@@ -41,6 +41,7 @@ pub mod mcap_write;
 pub mod model_file;
 pub mod recipe_file;
 pub mod reference_file;
+pub mod smart_log;
 pub mod units;
 
 pub use loop_msg::LoopMsg;
