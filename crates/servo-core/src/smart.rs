@@ -104,6 +104,9 @@ pub struct SmartParams {
     pub b_eq: f64,
     /// Coulomb friction [N m].
     pub tau_sf: f64,
+    /// Load-dependent gearbox friction: the Coulomb friction grows by this fraction of the
+    /// motor's torque (a gear efficiency of 1 - load_friction; 0: none).
+    pub load_friction: f64,
     /// Motor constant ratio k_t / R [N m/V]: torque per volt across the motor at stall.
     pub k_t_per_r: f64,
     /// Back-EMF constant [V s/rad] at the output.
@@ -332,19 +335,20 @@ pub fn replay(
         let mut d_row = 0.0;
         for s in 0..subs {
             let t = log.time_s[k] + s as f64 * h;
-            let (drive_nm, c) = if on {
+            let (drive_nm, c, motor_nm) = if on {
                 let d = drive.duty(goal_at(log, t0, dt, t - p.latency_s), th);
                 if s == 0 {
                     d_row = d;
                 }
-                (p.k_t_per_r * d * v, damping_on)
+                let u = p.k_t_per_r * d * v;
+                (u, damping_on, u - p.k_t_per_r * p.k_e * w)
             } else {
-                (0.0, p.b_eq)
+                (0.0, p.b_eq, 0.0)
             };
             let ext = drive_nm - p.gravity_nm * libm::sin(th + p.phase_rad);
             let den = j + h * c;
             let w_free = (j * w + h * ext) / den;
-            let stop = h * p.tau_sf / den;
+            let stop = h * (p.tau_sf + p.load_friction * motor_nm.abs()) / den;
             w = if w_free.abs() <= stop {
                 0.0
             } else {
@@ -385,6 +389,9 @@ pub struct SmartPrior {
     pub j_min: f64,
     /// The latency's search range [s] (0 to this).
     pub latency_max_s: f64,
+    /// Fit a load-dependent gearbox friction (the Coulomb friction growing with the motor's
+    /// torque) beside the Coulomb and viscous ones.
+    pub load_friction: bool,
 }
 
 /// The equation-error estimate: least squares of the torque balance on the logged duty,
@@ -443,6 +450,7 @@ pub fn equation_error(
         j_eq: x[0],
         b_eq: x[1],
         tau_sf: x[2],
+        load_friction: 0.0,
         k_t_per_r: prior.k_t_per_r,
         k_e: prior.k_e,
         gravity_nm: libm::hypot(ga, gb),
@@ -632,7 +640,7 @@ fn physical(p: &SmartParams, prior: &SmartPrior) -> SmartParams {
 
 /// The search coordinates of the output-error fit: J_eq = J_min + e^x0, B_eq = e^x1,
 /// tau_sf = e^x2, k_t/R = e^x3, m g L = e^x4, phase = x5, latency = L_max / (1 + e^-x6).
-fn to_x(p: &SmartParams, prior: &SmartPrior) -> [f64; 7] {
+fn to_x(p: &SmartParams, prior: &SmartPrior) -> [f64; 8] {
     let lat = (p.latency_s / prior.latency_max_s).clamp(0.02, 0.98);
     [
         libm::log((p.j_eq - prior.j_min).max(1e-4 * p.j_eq.max(1e-9))),
@@ -642,6 +650,10 @@ fn to_x(p: &SmartParams, prior: &SmartPrior) -> [f64; 7] {
         libm::log(p.gravity_nm.max(1e-6)),
         p.phase_rad,
         libm::log(lat / (1.0 - lat)),
+        {
+            let m = p.load_friction.clamp(0.01, 0.99);
+            libm::log(m / (1.0 - m))
+        },
     ]
 }
 
@@ -650,6 +662,11 @@ fn from_x(x: &[f64], prior: &SmartPrior, k_e: f64) -> SmartParams {
         j_eq: prior.j_min + libm::exp(x[0]),
         b_eq: libm::exp(x[1]),
         tau_sf: libm::exp(x[2]),
+        load_friction: if prior.load_friction {
+            1.0 / (1.0 + libm::exp(-x[7]))
+        } else {
+            0.0
+        },
         k_t_per_r: libm::exp(x[3]),
         k_e,
         gravity_nm: libm::exp(x[4]),
@@ -681,6 +698,7 @@ pub fn fit(
         j_eq: (prior.j_min * 1.5).max(1e-6),
         b_eq: 0.01,
         tau_sf: 0.01,
+        load_friction: 0.0,
         k_t_per_r: prior.k_t_per_r,
         k_e: prior.k_e,
         gravity_nm: 0.1,
@@ -712,12 +730,17 @@ pub fn fit(
     let mut x = to_x(
         &SmartParams {
             latency_s: 0.5 * prior.latency_max_s,
+            load_friction: 0.05,
             ..start
         },
         prior,
     )
     .to_vec();
-    let step = [0.5, 0.7, 0.7, 0.3, 0.3, 0.05, 1.0];
+    let mut step = alloc::vec![0.5, 0.7, 0.7, 0.3, 0.3, 0.05, 1.0, 1.0];
+    if !prior.load_friction {
+        x.truncate(7);
+        step.truncate(7);
+    }
     let per = (max_evals / 3).max(50);
     let mut best = f64::INFINITY;
     for round in 0..3 {
@@ -804,6 +827,7 @@ impl SmartParams {
             j_eq: p.j_eq() * n * n,
             b_eq: p.b_eq() * n * n,
             tau_sf: p.tau_sf(),
+            load_friction: 0.0,
             k_t_per_r: p.k_t * n / (p.r_a + p.r_s),
             k_e: p.k_e * n,
             gravity_nm: effects
