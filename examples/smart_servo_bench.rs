@@ -62,6 +62,12 @@ fn main() -> anyhow::Result<()> {
         k_e: kp.k_e * kp.n,
         j_min: kp.j_d,
         latency_max_s: 0.15,
+        gravity_nm: Some(
+            published
+                .effects
+                .value(servo_core::effects::EffectKind::Imbalance, "amplitude")
+                .unwrap_or(f64::NAN),
+        ),
         load_friction: envf("SM_LOAD", 1.0) > 0.5,
     };
     println!(

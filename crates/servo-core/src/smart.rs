@@ -15,7 +15,8 @@
 //!   torque-enable column reads 0, the bridge is open: no drive torque and no back-EMF braking,
 //!   only friction and gravity act (an arm dropped with the torque off swings freely).
 //! * [`fit`]: the output-error fit on whole trajectories: the parameters that make the replayed
-//!   position follow the measured one, searched by Nelder-Mead from the equation-error estimate
+//!   position follow the measured one (one known torque, k_t / R or m g L, sets the torques'
+//!   scale, which positions alone do not determine), searched by Nelder-Mead from the equation-error estimate
 //!   ([`equation_error`]), with the user's lower bound on the inertia (a known load's m L^2)
 //!   respected. It keeps the fit that predicts held-out logs better, and says so.
 
@@ -389,6 +390,9 @@ pub struct SmartPrior {
     pub j_min: f64,
     /// The latency's search range [s] (0 to this).
     pub latency_max_s: f64,
+    /// The gravity amplitude m g L when known [N m] (a pendulum bench's mass and length): it
+    /// sets the torques' scale and k_t / R is fitted; `None`: k_t / R sets it.
+    pub gravity_nm: Option<f64>,
     /// Fit a load-dependent gearbox friction (the Coulomb friction growing with the motor's
     /// torque) beside the Coulomb and viscous ones.
     pub load_friction: bool,
@@ -639,9 +643,10 @@ fn physical(p: &SmartParams, prior: &SmartPrior) -> SmartParams {
 }
 
 /// The search coordinates of the output-error fit: J_eq = J_min + e^x0, B_eq = e^x1,
-/// tau_sf = e^x2, k_t/R = e^x3, m g L = e^x4, phase = x5, latency = L_max / (1 + e^-x6).
+/// tau_sf = e^x2, k_t/R = e^x3, m g L = e^x4, phase = x5, latency = L_max (1 + sin x6) / 2
+/// (no flat end where the search could stall), the load friction 1 / (1 + e^-x7).
 fn to_x(p: &SmartParams, prior: &SmartPrior) -> [f64; 8] {
-    let lat = (p.latency_s / prior.latency_max_s).clamp(0.02, 0.98);
+    let lat = (p.latency_s / prior.latency_max_s).clamp(0.0, 1.0);
     [
         libm::log((p.j_eq - prior.j_min).max(1e-4 * p.j_eq.max(1e-9))),
         libm::log(p.b_eq.max(1e-6)),
@@ -649,7 +654,7 @@ fn to_x(p: &SmartParams, prior: &SmartPrior) -> [f64; 8] {
         libm::log(p.k_t_per_r.max(1e-9)),
         libm::log(p.gravity_nm.max(1e-6)),
         p.phase_rad,
-        libm::log(lat / (1.0 - lat)),
+        libm::asin(2.0 * lat - 1.0),
         {
             let m = p.load_friction.clamp(0.01, 0.99);
             libm::log(m / (1.0 - m))
@@ -667,17 +672,27 @@ fn from_x(x: &[f64], prior: &SmartPrior, k_e: f64) -> SmartParams {
         } else {
             0.0
         },
-        k_t_per_r: libm::exp(x[3]),
+        // The scale: one of the two is known and not searched (its step is 0), see [`fit`].
+        k_t_per_r: if prior.gravity_nm.is_some() {
+            libm::exp(x[3])
+        } else {
+            prior.k_t_per_r
+        },
         k_e,
-        gravity_nm: libm::exp(x[4]),
+        gravity_nm: prior.gravity_nm.unwrap_or(libm::exp(x[4])),
         phase_rad: x[5],
-        latency_s: prior.latency_max_s / (1.0 + libm::exp(-x[6])),
+        latency_s: prior.latency_max_s * 0.5 * (1.0 + libm::sin(x[6])),
     }
 }
 
 /// Fits the model on `fit_logs` (equation error, then output error on the whole trajectories
 /// from its physical neighbour) and keeps the candidate that predicts `held_out` best (the
 /// output-error one when nothing is held out or the equation-error one is unphysical).
+///
+/// A log of positions driven by the firmware's loop cannot tell the scale of the torques from
+/// the inertia (every torque and J_eq times the same factor give the same trajectory): one
+/// known torque sets it. With a known gravity amplitude (`prior.gravity_nm`, a bench's m g L)
+/// k_t / R is searched and the gravity kept; otherwise k_t / R stays the prior's.
 pub fn fit(
     prior: &SmartPrior,
     drive_of: &dyn Fn(&SmartLog) -> PositionLoop,
@@ -736,7 +751,11 @@ pub fn fit(
         prior,
     )
     .to_vec();
-    let mut step = alloc::vec![0.5, 0.7, 0.7, 0.3, 0.3, 0.05, 1.0, 1.0];
+    let mut step = alloc::vec![0.5, 0.7, 0.7, 0.0, 0.3, 0.05, 1.0, 1.0];
+    if prior.gravity_nm.is_some() {
+        step[3] = 0.3;
+        step[4] = 0.0;
+    }
     if !prior.load_friction {
         x.truncate(7);
         step.truncate(7);
