@@ -609,7 +609,7 @@ impl SmartFit {
 /// The unphysical parts of a parameter set (empty: physical).
 pub fn unphysical(p: &SmartParams, prior: &SmartPrior) -> Vec<String> {
     let mut why = Vec::new();
-    if !(p.j_eq > 0.0) || p.j_eq < prior.j_min {
+    if p.j_eq.is_nan() || p.j_eq <= 0.0 || p.j_eq < prior.j_min {
         why.push(alloc::format!(
             "J_eq = {} kg m^2 is below the known inertia {} kg m^2",
             math::Num(p.j_eq),
@@ -617,7 +617,7 @@ pub fn unphysical(p: &SmartParams, prior: &SmartPrior) -> Vec<String> {
         ));
     }
     for (name, v) in [("B_eq", p.b_eq), ("tau_sf", p.tau_sf)] {
-        if !(v >= 0.0) {
+        if v.is_nan() || v < 0.0 {
             why.push(alloc::format!("{name} = {} is negative", math::Num(v)));
         }
     }
