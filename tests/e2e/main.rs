@@ -30,6 +30,7 @@ mod run_log;
 mod schemas;
 mod serial;
 mod sim;
+mod smart_servo;
 mod student;
 mod transmission;
 mod trend;

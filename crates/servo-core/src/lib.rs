@@ -61,6 +61,8 @@ pub mod safety;
 #[cfg(feature = "alloc")]
 pub mod signal;
 pub mod sim;
+#[cfg(feature = "alloc")]
+pub mod smart;
 pub mod stiffness;
 pub mod transmission;
 #[cfg(feature = "alloc")]

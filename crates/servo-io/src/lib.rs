@@ -47,6 +47,7 @@ pub mod model_file;
 pub mod output;
 pub mod recipe_file;
 pub mod reference_file;
+pub mod smart_log;
 pub mod text_file;
 pub mod units;
 

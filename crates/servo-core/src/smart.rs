@@ -1,0 +1,859 @@
+//! Smart servos: a gearmotor whose firmware closes its own position loop (Dynamixel, Feetech,
+//! Herkulex). The host commands a goal position; the firmware computes a PWM duty from the
+//! error between the goal and its encoder, clips it, and switches the supply across the motor.
+//!
+//! * [`PositionLoop`]: the firmware's loop as a drive: duty = kp_fw x duty_per_rad_per_kp x
+//!   (goal(t - latency) - theta_q), theta_q the angle on the encoder's grid, |duty| <=
+//!   duty_limit, the bridge voltage duty x V_supply (the supply from the log's column, else a
+//!   value). The latency is the firmware's and the bus's: the goal reaches the loop that much
+//!   later than the log says it was written.
+//! * [`SmartParams`]: everything at the output shaft: J_eq, B_eq, the Coulomb friction tau_sf,
+//!   the motor constant ratio k_t / R (N m per V across the motor) and k_e (the back-EMF
+//!   damping is k_t k_e / R), the gravity amplitude m g L and its phase (the resisting torque
+//!   amplitude sin(theta + phase), as the `imbalance` effect), and the latency.
+//! * [`replay`]: the closed-loop replay of a log from its goal positions. Where the log's
+//!   torque-enable column reads 0, the bridge is open: no drive torque and no back-EMF braking,
+//!   only friction and gravity act (an arm dropped with the torque off swings freely).
+//! * [`fit`]: the output-error fit on whole trajectories: the parameters that make the replayed
+//!   position follow the measured one (one known torque, k_t / R or m g L, sets the torques'
+//!   scale, which positions alone do not determine), searched by Nelder-Mead from the equation-error estimate
+//!   ([`equation_error`]), with the user's lower bound on the inertia (a known load's m L^2)
+//!   respected. It keeps the fit that predicts held-out logs better, and says so.
+
+use crate::math;
+use alloc::{string::String, vec::Vec};
+
+/// The firmware's position loop (the drive of a smart servo).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PositionLoop {
+    /// The firmware's proportional gain in the vendor's units (e.g. Dynamixel's Position P Gain).
+    pub kp_fw: f64,
+    /// Duty per rad of error per unit of kp_fw (XL330: 4096 / (2 pi 256 885) = 2.877378e-3).
+    pub duty_per_rad_per_kp: f64,
+    /// The largest duty magnitude (1: the whole supply).
+    pub duty_limit: f64,
+    /// The supply [V] where the log has no supply column.
+    pub v_supply_v: f64,
+    /// Use the log's supply column when it has one (false: always `v_supply_v`).
+    pub supply_from_log: bool,
+    /// Counts per turn of the firmware's encoder (its angle is on this grid); `None`: exact.
+    pub encoder_counts: Option<u32>,
+    /// The firmware's loop period [s] (the replay's integration step, at most the log's period).
+    pub period_s: f64,
+}
+
+impl PositionLoop {
+    /// Dynamixel XL330's loop: ERROR_GAIN = 4096 / (2 pi 256 885) duty per rad per kp unit, a
+    /// 7.4 V supply, a 4096-count encoder, a 1 ms loop.
+    pub fn xl330(kp_fw: f64) -> PositionLoop {
+        PositionLoop {
+            kp_fw,
+            duty_per_rad_per_kp: 4096.0 / (math::TAU * 256.0 * 885.0),
+            duty_limit: 1.0,
+            v_supply_v: 7.4,
+            supply_from_log: false,
+            encoder_counts: Some(4096),
+            period_s: 1e-3,
+        }
+    }
+
+    /// The loop's duty for a goal and a measured angle (clipped).
+    pub fn duty(&self, goal_rad: f64, theta_rad: f64) -> f64 {
+        let th = match self.encoder_counts {
+            Some(n) if n > 0 => {
+                let q = math::TAU / n as f64;
+                libm::round(theta_rad / q) * q
+            }
+            _ => theta_rad,
+        };
+        (self.kp_fw * self.duty_per_rad_per_kp * (goal_rad - th))
+            .clamp(-self.duty_limit, self.duty_limit)
+    }
+
+    /// Checks the values (positive, finite; duty limit in (0, 1]).
+    pub fn validate(&self) -> Result<(), SmartError> {
+        let checks = [
+            ("kp_fw", self.kp_fw, self.kp_fw >= 0.0),
+            (
+                "duty_per_rad_per_kp",
+                self.duty_per_rad_per_kp,
+                self.duty_per_rad_per_kp > 0.0,
+            ),
+            (
+                "duty_limit",
+                self.duty_limit,
+                self.duty_limit > 0.0 && self.duty_limit <= 1.0,
+            ),
+            ("v_supply_v", self.v_supply_v, self.v_supply_v > 0.0),
+            ("period_s", self.period_s, self.period_s > 0.0),
+        ];
+        for (key, v, ok) in checks {
+            if !(ok && v.is_finite()) {
+                return Err(SmartError::BadValue { key, value: v });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The model of a smart servo and its load, at the output shaft.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SmartParams {
+    /// Inertia at the output [kg m^2] (rotor through the gear plus the load).
+    pub j_eq: f64,
+    /// Viscous friction [N m s/rad].
+    pub b_eq: f64,
+    /// Coulomb friction [N m].
+    pub tau_sf: f64,
+    /// Load-dependent gearbox friction: the Coulomb friction grows by this fraction of the
+    /// motor's torque (a gear efficiency of 1 - load_friction; 0: none).
+    pub load_friction: f64,
+    /// Motor constant ratio k_t / R [N m/V]: torque per volt across the motor at stall.
+    pub k_t_per_r: f64,
+    /// Back-EMF constant [V s/rad] at the output.
+    pub k_e: f64,
+    /// Gravity amplitude m g L [N m] (resisting torque amplitude x sin(theta + phase)).
+    pub gravity_nm: f64,
+    /// Gravity phase [rad] (the bottom at theta = -phase).
+    pub phase_rad: f64,
+    /// The firmware's and the bus's latency between the logged goal and the loop [s].
+    pub latency_s: f64,
+}
+
+/// Why a smart-servo computation was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SmartError {
+    #[error("smart servo: `{key}` must be a positive finite number, got {}", math::Num(*.value))]
+    BadValue { key: &'static str, value: f64 },
+    #[error("{log}: {why}")]
+    Log { log: String, why: String },
+    #[error("{log}: the replay diverged at row {row} (the model's parameters are not physical)")]
+    Diverged { log: String, row: usize },
+    #[error("no log to fit on: give at least one log with a goal position and the measured angle")]
+    NoLogs,
+}
+
+/// A smart servo's log on a uniform grid.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SmartLog {
+    /// The log's name (for messages).
+    pub name: String,
+    pub time_s: Vec<f64>,
+    /// The goal position the host wrote [rad].
+    pub goal_rad: Vec<f64>,
+    /// The measured output angle [rad].
+    pub theta_rad: Vec<f64>,
+    /// The servo's speed estimate [rad/s], when logged.
+    pub omega_rad_s: Option<Vec<f64>>,
+    /// The logged duty (the firmware's PWM, signed fraction), when logged.
+    pub duty: Option<Vec<f64>>,
+    /// The measured supply [V], when logged.
+    pub v_supply_v: Option<Vec<f64>>,
+    /// Torque enable (false: the bridge is open), when logged.
+    pub torque_enable: Option<Vec<bool>>,
+}
+
+impl SmartLog {
+    /// Checks lengths, a uniform increasing time and finite values.
+    pub fn validate(&self) -> Result<(), SmartError> {
+        let err = |why: String| SmartError::Log {
+            log: self.name.clone(),
+            why,
+        };
+        let n = self.time_s.len();
+        if n < 3 {
+            return Err(err(alloc::format!("{n} rows: a replay needs at least 3")));
+        }
+        let lens = [
+            ("goal", Some(self.goal_rad.len())),
+            ("theta", Some(self.theta_rad.len())),
+            ("omega", self.omega_rad_s.as_ref().map(Vec::len)),
+            ("duty", self.duty.as_ref().map(Vec::len)),
+            ("v_supply", self.v_supply_v.as_ref().map(Vec::len)),
+            ("torque_enable", self.torque_enable.as_ref().map(Vec::len)),
+        ];
+        for (name, l) in lens {
+            if let Some(l) = l {
+                if l != n {
+                    return Err(err(alloc::format!(
+                        "column `{name}` has {l} rows, the time {n}"
+                    )));
+                }
+            }
+        }
+        let dt = self.dt_s();
+        if !(dt > 0.0 && dt.is_finite()) {
+            return Err(err(String::from("the time does not increase")));
+        }
+        for (k, w) in self.time_s.windows(2).enumerate() {
+            let d = w[1] - w[0];
+            if !(d > 0.5 * dt && d < 1.5 * dt) {
+                return Err(err(alloc::format!(
+                    "row {}: the time step {} s is not the log's period {} s (resample the log onto a uniform grid)",
+                    k + 1,
+                    math::Num(d),
+                    math::Num(dt)
+                )));
+            }
+        }
+        let finite = |v: &[f64]| v.iter().position(|x| !x.is_finite());
+        for (name, v) in [("goal", &self.goal_rad), ("theta", &self.theta_rad)] {
+            if let Some(k) = finite(v) {
+                return Err(err(alloc::format!(
+                    "row {k}: `{name}` is not a finite number"
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The mean sample period [s].
+    pub fn dt_s(&self) -> f64 {
+        let n = self.time_s.len();
+        if n < 2 {
+            return f64::NAN;
+        }
+        (self.time_s[n - 1] - self.time_s[0]) / (n - 1) as f64
+    }
+
+    fn enabled(&self, k: usize) -> bool {
+        match &self.torque_enable {
+            Some(e) => e[k],
+            None => true,
+        }
+    }
+}
+
+/// The replayed trajectory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SmartReplay {
+    /// The model's angle at each row [rad].
+    pub theta_rad: Vec<f64>,
+    /// The model's speed at each row [rad/s].
+    pub omega_rad_s: Vec<f64>,
+    /// The firmware's duty at each row (0 with the torque off).
+    pub duty: Vec<f64>,
+}
+
+/// Position errors of a replay against the log.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PositionError {
+    /// Mean absolute error [rad].
+    pub mae_rad: f64,
+    /// Root-mean-square error [rad].
+    pub rmse_rad: f64,
+    /// Rows compared.
+    pub rows: usize,
+}
+
+impl PositionError {
+    /// The error of `model` against `measured`.
+    pub fn of(model: &[f64], measured: &[f64]) -> PositionError {
+        let (mut a, mut s) = (0.0, 0.0);
+        let n = model.len().min(measured.len());
+        for (m, y) in model.iter().zip(measured) {
+            let e = m - y;
+            a += e.abs();
+            s += e * e;
+        }
+        let d = n.max(1) as f64;
+        PositionError {
+            mae_rad: a / d,
+            rmse_rad: libm::sqrt(s / d),
+            rows: n,
+        }
+    }
+
+    /// The errors of several logs pooled (each row weighs the same).
+    pub fn pooled(parts: &[PositionError]) -> PositionError {
+        let n: usize = parts.iter().map(|p| p.rows).sum();
+        let d = n.max(1) as f64;
+        PositionError {
+            mae_rad: parts.iter().map(|p| p.mae_rad * p.rows as f64).sum::<f64>() / d,
+            rmse_rad: libm::sqrt(
+                parts
+                    .iter()
+                    .map(|p| p.rmse_rad * p.rmse_rad * p.rows as f64)
+                    .sum::<f64>()
+                    / d,
+            ),
+            rows: n,
+        }
+    }
+}
+
+/// The goal at time `t` by linear interpolation on the log's grid (held before the start and
+/// after the end).
+fn goal_at(log: &SmartLog, t0: f64, dt: f64, t: f64) -> f64 {
+    let g = &log.goal_rad;
+    let x = (t - t0) / dt;
+    if x <= 0.0 {
+        return g[0];
+    }
+    let i = x as usize;
+    if i + 1 >= g.len() {
+        return g[g.len() - 1];
+    }
+    let f = x - i as f64;
+    g[i] + f * (g[i + 1] - g[i])
+}
+
+/// Replays `log` on the model in closed loop through the firmware's loop, from the measured
+/// angle and speed at row 0 and the logged goals. Row k of the replay is the state at t_k.
+///
+/// The mechanics are integrated at the loop's period with the viscous and back-EMF damping
+/// implicit and the Coulomb friction as a stick/slip step (the speed stops at zero when the
+/// other torques cannot overcome tau_sf), stable at any step.
+pub fn replay(
+    p: &SmartParams,
+    drive: &PositionLoop,
+    log: &SmartLog,
+) -> Result<SmartReplay, SmartError> {
+    drive.validate()?;
+    log.validate()?;
+    let n = log.time_s.len();
+    let dt = log.dt_s();
+    let t0 = log.time_s[0];
+    let subs = libm::ceil(dt / drive.period_s).max(1.0) as usize;
+    let h = dt / subs as f64;
+    let mut th = log.theta_rad[0];
+    let mut w = log.omega_rad_s.as_ref().map_or(0.0, |o| o[0]);
+    let mut out = SmartReplay {
+        theta_rad: Vec::with_capacity(n),
+        omega_rad_s: Vec::with_capacity(n),
+        duty: Vec::with_capacity(n),
+    };
+    let j = p.j_eq;
+    let damping_on = p.b_eq + p.k_t_per_r * p.k_e;
+    for k in 0..n {
+        let on = log.enabled(k);
+        let v = match (&log.v_supply_v, drive.supply_from_log) {
+            (Some(vs), true) if vs[k].is_finite() && vs[k] > 0.0 => vs[k],
+            _ => drive.v_supply_v,
+        };
+        out.theta_rad.push(th);
+        out.omega_rad_s.push(w);
+        let mut d_row = 0.0;
+        for s in 0..subs {
+            let t = log.time_s[k] + s as f64 * h;
+            let (drive_nm, c, motor_nm) = if on {
+                let d = drive.duty(goal_at(log, t0, dt, t - p.latency_s), th);
+                if s == 0 {
+                    d_row = d;
+                }
+                let u = p.k_t_per_r * d * v;
+                (u, damping_on, u - p.k_t_per_r * p.k_e * w)
+            } else {
+                (0.0, p.b_eq, 0.0)
+            };
+            let ext = drive_nm - p.gravity_nm * libm::sin(th + p.phase_rad);
+            let den = j + h * c;
+            let w_free = (j * w + h * ext) / den;
+            let stop = h * (p.tau_sf + p.load_friction * motor_nm.abs()) / den;
+            w = if w_free.abs() <= stop {
+                0.0
+            } else {
+                w_free - stop * w_free.signum()
+            };
+            th += h * w;
+        }
+        if !(th.is_finite() && w.is_finite()) {
+            return Err(SmartError::Diverged {
+                log: log.name.clone(),
+                row: k,
+            });
+        }
+        out.duty.push(d_row);
+    }
+    Ok(out)
+}
+
+/// The position error of the model on each log (closed-loop replay from the goals).
+pub fn errors(
+    p: &SmartParams,
+    drive_of: &dyn Fn(&SmartLog) -> PositionLoop,
+    logs: &[SmartLog],
+) -> Result<Vec<PositionError>, SmartError> {
+    logs.iter()
+        .map(|l| replay(p, &drive_of(l), l).map(|r| PositionError::of(&r.theta_rad, &l.theta_rad)))
+        .collect()
+}
+
+/// What the user knows before fitting.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SmartPrior {
+    /// A starting value of k_t / R [N m/V] (the datasheet's k_t over R).
+    pub k_t_per_r: f64,
+    /// k_e [V s/rad] at the output (kept: the back-EMF damping scales with the fitted k_t / R).
+    pub k_e: f64,
+    /// The least inertia the model may have [kg m^2] (a known load's m L^2; 0 when unknown).
+    pub j_min: f64,
+    /// The latency's search range [s] (0 to this).
+    pub latency_max_s: f64,
+    /// The gravity amplitude m g L when known [N m] (a pendulum bench's mass and length): it
+    /// sets the torques' scale and k_t / R is fitted; `None`: k_t / R sets it.
+    pub gravity_nm: Option<f64>,
+    /// Fit a load-dependent gearbox friction (the Coulomb friction growing with the motor's
+    /// torque) beside the Coulomb and viscous ones.
+    pub load_friction: bool,
+}
+
+/// The equation-error estimate: least squares of the torque balance on the logged duty,
+/// J alpha + B omega + tau_sf sign(omega) + a sin(theta) + b cos(theta) = (k_t/R)(V d - k_e omega),
+/// with k_t / R from the prior, on the rows with the torque on. The speed is the logged one
+/// (else the central difference of the angle) and the acceleration its central difference.
+/// `None` when no log has a logged duty or the system is singular.
+pub fn equation_error(
+    prior: &SmartPrior,
+    drive_of: &dyn Fn(&SmartLog) -> PositionLoop,
+    logs: &[SmartLog],
+) -> Option<SmartParams> {
+    use nalgebra::{DMatrix, DVector};
+    let mut rows: Vec<[f64; 6]> = Vec::new();
+    for l in logs {
+        let Some(d) = &l.duty else { continue };
+        let dt = l.dt_s();
+        let n = l.time_s.len();
+        let drive = drive_of(l);
+        let w: Vec<f64> = match &l.omega_rad_s {
+            Some(o) => o.clone(),
+            None => (0..n)
+                .map(|k| {
+                    let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
+                    (l.theta_rad[b] - l.theta_rad[a]) / ((b - a).max(1) as f64 * dt)
+                })
+                .collect(),
+        };
+        for k in 1..n.saturating_sub(1) {
+            if !(l.enabled(k) && l.enabled(k - 1) && l.enabled(k + 1)) {
+                continue;
+            }
+            let v = match (&l.v_supply_v, drive.supply_from_log) {
+                (Some(vs), true) => vs[k],
+                _ => drive.v_supply_v,
+            };
+            let alpha = (w[k + 1] - w[k - 1]) / (2.0 * dt);
+            let th = l.theta_rad[k];
+            let y = prior.k_t_per_r * (v * d[k] - prior.k_e * w[k]);
+            let sg = if w[k].abs() > 1e-3 {
+                w[k].signum()
+            } else {
+                0.0
+            };
+            rows.push([alpha, w[k], sg, libm::sin(th), libm::cos(th), y]);
+        }
+    }
+    if rows.len() < 10 {
+        return None;
+    }
+    let a = DMatrix::from_fn(rows.len(), 5, |i, j| rows[i][j]);
+    let y = DVector::from_fn(rows.len(), |i, _| rows[i][5]);
+    let x = (a.transpose() * &a).lu().solve(&(a.transpose() * y))?;
+    let (ga, gb) = (x[3], x[4]);
+    Some(SmartParams {
+        j_eq: x[0],
+        b_eq: x[1],
+        tau_sf: x[2],
+        load_friction: 0.0,
+        k_t_per_r: prior.k_t_per_r,
+        k_e: prior.k_e,
+        gravity_nm: libm::hypot(ga, gb),
+        phase_rad: libm::atan2(gb, ga),
+        latency_s: 0.0,
+    })
+}
+
+/// A Nelder-Mead simplex search of `f` from `x0` with initial steps `step`, at most `max_evals`
+/// evaluations; returns the best point and its value.
+pub fn nelder_mead(
+    f: &mut dyn FnMut(&[f64]) -> f64,
+    x0: &[f64],
+    step: &[f64],
+    max_evals: usize,
+    f_tol: f64,
+) -> (Vec<f64>, f64) {
+    let n = x0.len();
+    let mut pts: Vec<Vec<f64>> = Vec::with_capacity(n + 1);
+    pts.push(x0.to_vec());
+    for i in 0..n {
+        let mut p = x0.to_vec();
+        p[i] += step[i];
+        pts.push(p);
+    }
+    let mut vals: Vec<f64> = pts.iter().map(|p| f(p)).collect();
+    let mut evals = n + 1;
+    let sane = |v: f64| if v.is_finite() { v } else { f64::INFINITY };
+    for v in vals.iter_mut() {
+        *v = sane(*v);
+    }
+    while evals < max_evals {
+        let mut idx: Vec<usize> = (0..=n).collect();
+        idx.sort_by(|&a, &b| vals[a].total_cmp(&vals[b]));
+        pts = idx.iter().map(|&i| pts[i].clone()).collect();
+        vals = idx.iter().map(|&i| vals[i]).collect();
+        if (vals[n] - vals[0]).abs() <= f_tol * (vals[0].abs() + 1e-300) {
+            break;
+        }
+        let mut c = alloc::vec![0.0; n];
+        for p in &pts[..n] {
+            for (ci, pi) in c.iter_mut().zip(p) {
+                *ci += pi / n as f64;
+            }
+        }
+        let along = |t: f64| -> Vec<f64> {
+            c.iter()
+                .zip(&pts[n])
+                .map(|(ci, wi)| ci + t * (wi - ci))
+                .collect()
+        };
+        let xr = along(-1.0);
+        let fr = sane(f(&xr));
+        evals += 1;
+        if fr < vals[0] {
+            let xe = along(-2.0);
+            let fe = sane(f(&xe));
+            evals += 1;
+            if fe < fr {
+                pts[n] = xe;
+                vals[n] = fe;
+            } else {
+                pts[n] = xr;
+                vals[n] = fr;
+            }
+        } else if fr < vals[n - 1] {
+            pts[n] = xr;
+            vals[n] = fr;
+        } else {
+            let (xc, fc) = if fr < vals[n] {
+                let x = along(-0.5);
+                let v = sane(f(&x));
+                (x, v)
+            } else {
+                let x = along(0.5);
+                let v = sane(f(&x));
+                (x, v)
+            };
+            evals += 1;
+            if fc < vals[n].min(fr) {
+                pts[n] = xc;
+                vals[n] = fc;
+            } else {
+                for i in 1..=n {
+                    let p: Vec<f64> = pts[0]
+                        .iter()
+                        .zip(&pts[i])
+                        .map(|(b, x)| b + 0.5 * (x - b))
+                        .collect();
+                    vals[i] = sane(f(&p));
+                    pts[i] = p;
+                }
+                evals += n;
+            }
+        }
+    }
+    let best = (0..=n)
+        .min_by(|&a, &b| vals[a].total_cmp(&vals[b]))
+        .unwrap_or(0);
+    (pts[best].clone(), vals[best])
+}
+
+/// Which fit [`fit`] kept.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FitKind {
+    /// The equation-error least squares on the logged duty.
+    EquationError,
+    /// The output-error fit on the replayed trajectories.
+    OutputError,
+}
+
+impl FitKind {
+    pub const fn name(self) -> &'static str {
+        match self {
+            FitKind::EquationError => "equation error",
+            FitKind::OutputError => "output error",
+        }
+    }
+}
+
+/// One candidate fit and how it predicts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Candidate {
+    pub kind: FitKind,
+    pub params: SmartParams,
+    /// Why the candidate is not physical (an inertia below the known part, a negative
+    /// friction), empty when it is.
+    pub unphysical: Vec<String>,
+    /// The pooled position error on the logs it was fitted on.
+    pub fit_error: PositionError,
+    /// The pooled position error on the held-out logs (`None` without held-out logs).
+    pub held_out_error: Option<PositionError>,
+}
+
+/// The result of [`fit`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SmartFit {
+    /// The candidate kept (its index in `candidates`).
+    pub kept: usize,
+    pub candidates: Vec<Candidate>,
+    /// Replays run by the output-error search.
+    pub evaluations: usize,
+}
+
+impl SmartFit {
+    /// The parameters kept.
+    pub fn params(&self) -> SmartParams {
+        self.candidates[self.kept].params
+    }
+}
+
+/// The unphysical parts of a parameter set (empty: physical).
+pub fn unphysical(p: &SmartParams, prior: &SmartPrior) -> Vec<String> {
+    let mut why = Vec::new();
+    if p.j_eq.is_nan() || p.j_eq <= 0.0 || p.j_eq < prior.j_min {
+        why.push(alloc::format!(
+            "J_eq = {} kg m^2 is below the known inertia {} kg m^2",
+            math::Num(p.j_eq),
+            math::Num(prior.j_min)
+        ));
+    }
+    for (name, v) in [("B_eq", p.b_eq), ("tau_sf", p.tau_sf)] {
+        if v.is_nan() || v < 0.0 {
+            why.push(alloc::format!("{name} = {} is negative", math::Num(v)));
+        }
+    }
+    why
+}
+
+/// The physical parameters nearest to `p` (inertia at least the known part, frictions >= 0),
+/// where an output-error search can start.
+fn physical(p: &SmartParams, prior: &SmartPrior) -> SmartParams {
+    let j_floor = (prior.j_min * 1.2).max(1e-9);
+    SmartParams {
+        j_eq: if p.j_eq.is_finite() {
+            p.j_eq.max(j_floor)
+        } else {
+            j_floor
+        },
+        b_eq: p.b_eq.max(1e-4),
+        tau_sf: p.tau_sf.max(1e-4),
+        gravity_nm: p.gravity_nm.max(1e-4),
+        latency_s: p.latency_s.clamp(0.0, prior.latency_max_s),
+        ..*p
+    }
+}
+
+/// The search coordinates of the output-error fit: J_eq = J_min + e^x0, B_eq = e^x1,
+/// tau_sf = e^x2, k_t/R = e^x3, m g L = e^x4, phase = x5, latency = L_max (1 + sin x6) / 2
+/// (no flat end where the search could stall), the load friction 1 / (1 + e^-x7).
+fn to_x(p: &SmartParams, prior: &SmartPrior) -> [f64; 8] {
+    let lat = (p.latency_s / prior.latency_max_s).clamp(0.0, 1.0);
+    [
+        libm::log((p.j_eq - prior.j_min).max(1e-4 * p.j_eq.max(1e-9))),
+        libm::log(p.b_eq.max(1e-6)),
+        libm::log(p.tau_sf.max(1e-6)),
+        libm::log(p.k_t_per_r.max(1e-9)),
+        libm::log(p.gravity_nm.max(1e-6)),
+        p.phase_rad,
+        libm::asin(2.0 * lat - 1.0),
+        {
+            let m = p.load_friction.clamp(0.01, 0.99);
+            libm::log(m / (1.0 - m))
+        },
+    ]
+}
+
+fn from_x(x: &[f64], prior: &SmartPrior, k_e: f64) -> SmartParams {
+    SmartParams {
+        j_eq: prior.j_min + libm::exp(x[0]),
+        b_eq: libm::exp(x[1]),
+        tau_sf: libm::exp(x[2]),
+        load_friction: if prior.load_friction {
+            1.0 / (1.0 + libm::exp(-x[7]))
+        } else {
+            0.0
+        },
+        // The scale: one of the two is known and not searched (its step is 0), see [`fit`].
+        k_t_per_r: if prior.gravity_nm.is_some() {
+            libm::exp(x[3])
+        } else {
+            prior.k_t_per_r
+        },
+        k_e,
+        gravity_nm: prior.gravity_nm.unwrap_or(libm::exp(x[4])),
+        phase_rad: x[5],
+        latency_s: prior.latency_max_s * 0.5 * (1.0 + libm::sin(x[6])),
+    }
+}
+
+/// Fits the model on `fit_logs` (equation error, then output error on the whole trajectories
+/// from its physical neighbour) and keeps the candidate that predicts `held_out` best (the
+/// output-error one when nothing is held out or the equation-error one is unphysical).
+///
+/// A log of positions driven by the firmware's loop cannot tell the scale of the torques from
+/// the inertia (every torque and J_eq times the same factor give the same trajectory): one
+/// known torque sets it. With a known gravity amplitude (`prior.gravity_nm`, a bench's m g L)
+/// k_t / R is searched and the gravity kept; otherwise k_t / R stays the prior's.
+pub fn fit(
+    prior: &SmartPrior,
+    drive_of: &dyn Fn(&SmartLog) -> PositionLoop,
+    fit_logs: &[SmartLog],
+    held_out: &[SmartLog],
+    max_evals: usize,
+) -> Result<SmartFit, SmartError> {
+    if fit_logs.is_empty() {
+        return Err(SmartError::NoLogs);
+    }
+    for l in fit_logs.iter().chain(held_out) {
+        l.validate()?;
+    }
+    let pooled = |p: &SmartParams, logs: &[SmartLog]| -> Result<PositionError, SmartError> {
+        Ok(PositionError::pooled(&errors(p, drive_of, logs)?))
+    };
+    let default_start = SmartParams {
+        j_eq: (prior.j_min * 1.5).max(1e-6),
+        b_eq: 0.01,
+        tau_sf: 0.01,
+        load_friction: 0.0,
+        k_t_per_r: prior.k_t_per_r,
+        k_e: prior.k_e,
+        gravity_nm: 0.1,
+        phase_rad: 0.0,
+        latency_s: 0.0,
+    };
+    let ee = equation_error(prior, drive_of, fit_logs);
+    let start = physical(ee.as_ref().unwrap_or(&default_start), prior);
+    let mut evals = 0usize;
+    let mut cost = |x: &[f64]| -> f64 {
+        evals += 1;
+        let p = from_x(x, prior, prior.k_e);
+        let mut s = 0.0;
+        let mut n = 0usize;
+        for l in fit_logs {
+            match replay(&p, &drive_of(l), l) {
+                Ok(r) => {
+                    for (a, b) in r.theta_rad.iter().zip(&l.theta_rad) {
+                        s += (a - b) * (a - b);
+                    }
+                    n += l.theta_rad.len();
+                }
+                Err(_) => return f64::INFINITY,
+            }
+        }
+        s / n.max(1) as f64
+    };
+    // Latency from the middle of its range, the phase from the estimate.
+    let mut x = to_x(
+        &SmartParams {
+            latency_s: 0.5 * prior.latency_max_s,
+            load_friction: 0.05,
+            ..start
+        },
+        prior,
+    )
+    .to_vec();
+    let mut step = alloc::vec![0.5, 0.7, 0.7, 0.0, 0.3, 0.05, 1.0, 1.0];
+    if prior.gravity_nm.is_some() {
+        step[3] = 0.3;
+        step[4] = 0.0;
+    }
+    if !prior.load_friction {
+        x.truncate(7);
+        step.truncate(7);
+    }
+    let per = (max_evals / 3).max(50);
+    let mut best = f64::INFINITY;
+    for round in 0..3 {
+        let scale = if round == 0 { 1.0 } else { 0.3 };
+        let st: Vec<f64> = step.iter().map(|s| s * scale).collect();
+        let (xb, fb) = nelder_mead(&mut cost, &x, &st, per, 1e-7);
+        let done = fb >= best * (1.0 - 1e-4);
+        if fb < best {
+            best = fb;
+            x = xb;
+        }
+        if done {
+            break;
+        }
+    }
+    let oe = from_x(&x, prior, prior.k_e);
+    let mut candidates = Vec::new();
+    if let Some(p) = ee {
+        let why = unphysical(&p, prior);
+        // An unphysical estimate may not even replay: its errors are then infinite.
+        let e = pooled(&p, fit_logs).unwrap_or(PositionError {
+            mae_rad: f64::INFINITY,
+            rmse_rad: f64::INFINITY,
+            rows: 0,
+        });
+        let h = if held_out.is_empty() {
+            None
+        } else {
+            Some(pooled(&p, held_out).unwrap_or(PositionError {
+                mae_rad: f64::INFINITY,
+                rmse_rad: f64::INFINITY,
+                rows: 0,
+            }))
+        };
+        candidates.push(Candidate {
+            kind: FitKind::EquationError,
+            params: p,
+            unphysical: why,
+            fit_error: e,
+            held_out_error: h,
+        });
+    }
+    candidates.push(Candidate {
+        kind: FitKind::OutputError,
+        params: oe,
+        unphysical: unphysical(&oe, prior),
+        fit_error: pooled(&oe, fit_logs)?,
+        held_out_error: if held_out.is_empty() {
+            None
+        } else {
+            Some(pooled(&oe, held_out)?)
+        },
+    });
+    let score = |c: &Candidate| -> f64 {
+        if !c.unphysical.is_empty() {
+            return f64::INFINITY;
+        }
+        c.held_out_error.unwrap_or(c.fit_error).rmse_rad
+    };
+    // Ties (both unphysical) keep the output-error fit: the later candidate.
+    let kept = (0..candidates.len())
+        .rev()
+        .min_by(|&a, &b| score(&candidates[a]).total_cmp(&score(&candidates[b])))
+        .unwrap_or(candidates.len() - 1);
+    Ok(SmartFit {
+        kept,
+        candidates,
+        evaluations: evals,
+    })
+}
+
+impl SmartParams {
+    /// The output-shaft parameters of a servo model (eqs. 10-20 at the load: J_eq N^2,
+    /// B_eq N^2, k_t N / (R_a + R_s), k_e N) with the `imbalance` effect as the gravity
+    /// (amplitude and phase; none when absent) and the given latency.
+    pub fn from_model(
+        p: &crate::params::PlantParams,
+        effects: &crate::effects::Effects,
+        latency_s: f64,
+    ) -> SmartParams {
+        use crate::effects::EffectKind;
+        let n = p.n;
+        SmartParams {
+            j_eq: p.j_eq() * n * n,
+            b_eq: p.b_eq() * n * n,
+            tau_sf: p.tau_sf(),
+            load_friction: 0.0,
+            k_t_per_r: p.k_t * n / (p.r_a + p.r_s),
+            k_e: p.k_e * n,
+            gravity_nm: effects
+                .value(EffectKind::Imbalance, "amplitude")
+                .unwrap_or(0.0),
+            phase_rad: effects.value(EffectKind::Imbalance, "phase").unwrap_or(0.0),
+            latency_s,
+        }
+    }
+}
