@@ -21,6 +21,9 @@
 //!   coverage and the median relative half-width per parameter, simulator and input:
 //!   `cargo test --release --test e2e calibration::calibration_benchmark -- --ignored --nocapture`.
 
+// Per-parameter loops index the parallel arrays of a tally.
+#![allow(clippy::needless_range_loop)]
+
 use servo_core::control::{Pid, PidConfig, PidGains, SpeedLoopConfig, SpeedProfile};
 use servo_core::ident::auto::{identify, IdentifyOptions};
 use servo_core::ident::{Estimate, Experiment};
