@@ -27,7 +27,10 @@ fn every_realdata_csv_imports() {
     let mut files = Vec::new();
     csv_files(&dir, &mut files);
     // the Padova lab motors' logs (1 kHz); the smart servo's logs have their own tests
-    files.retain(|f| f.components().any(|c| c.as_os_str().to_string_lossy().starts_with("padova")));
+    files.retain(|f| {
+        f.components()
+            .any(|c| c.as_os_str().to_string_lossy().starts_with("padova"))
+    });
     files.sort();
     assert!(
         files.len() >= 12,
