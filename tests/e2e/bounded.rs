@@ -193,6 +193,8 @@ fn write_log(p: &Path, n: usize, finish: bool) {
         // As a killed run leaves it: flushed, never finished (dropping it would finish it).
         log.flush().unwrap();
         std::mem::forget(log);
+        // a killed run's log keeps its growing name, NAME.partial: give it the test's name
+        std::fs::rename(format!("{}.partial", p.display()), p).unwrap();
     }
 }
 

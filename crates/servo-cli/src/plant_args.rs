@@ -164,6 +164,16 @@ impl PlantArgs {
         }
     }
 
+    /// The base plant's linear parameters (the file or preset, without `--plant-effect`),
+    /// read without a word: what a gains file's `[design.plant_params]` is compared with.
+    pub fn base_params(&self) -> Option<servo_core::PlantParams> {
+        let file = match &self.plant {
+            Some(path) => ModelFile::load(path).ok()?,
+            None => self.plant_preset.unwrap_or(DEFAULT_PLANT).model_file(),
+        };
+        file.plant().ok().map(|p| p.linear_params())
+    }
+
     /// The plant and sensor configuration these options describe.
     pub fn load(&self) -> anyhow::Result<(Plant, SensorConfig)> {
         let preset = self.plant_preset.unwrap_or(DEFAULT_PLANT);

@@ -132,9 +132,8 @@ impl super::Design {
         // ... and its parameters, which `servo run` compares (not the name)
         if let Some(t) = self
             .run_plant()
-            .load()
-            .ok()
-            .and_then(|(plant, _)| toml::Value::try_from(plant.linear_params()).ok())
+            .base_params()
+            .and_then(|p| toml::Value::try_from(p).ok())
         {
             d.insert("plant_params".into(), t);
         }

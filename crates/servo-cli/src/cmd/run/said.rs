@@ -27,14 +27,7 @@ impl super::Run {
         if let (Some(g), Some(p)) = (gains, pid) {
             let key = sim.then(|| self.plant.key());
             // the base plant, without the effects the run adds on purpose
-            let base = crate::plant_args::PlantArgs {
-                plant_effect: Vec::new(),
-                ..self.plant.clone()
-            };
-            let params = sim
-                .then(|| base.load().ok())
-                .flatten()
-                .map(|(plant, _)| plant.linear_params());
+            let params = sim.then(|| self.plant.base_params()).flatten();
             for w in g.design_mismatches(key.as_deref(), params.as_ref(), p.discretization) {
                 eprintln!("warning: {w}");
             }
