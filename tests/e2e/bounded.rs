@@ -69,6 +69,7 @@ const MB: u64 = 1 << 20;
 /// line, with a message under 20 kB, in under 300 MB.
 #[test]
 fn a_64_mb_line_is_refused_in_bounded_memory_with_a_short_message() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let header = dir.path().join("header.csv");
     let mut text = vec![b'a'; 64 << 20];
@@ -115,6 +116,7 @@ fn a_64_mb_line_is_refused_in_bounded_memory_with_a_short_message() {
 /// `servo identify` in bounded memory (under 100 MB) and time (under 10 s).
 #[test]
 fn a_2_gb_file_of_nuls_is_refused_in_bounded_memory_and_time() {
+    let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     for ext in ["csv", "mcap", "mat"] {
         let p = dir.path().join(format!("nul.{ext}"));

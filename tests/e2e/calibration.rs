@@ -551,6 +551,7 @@ pub fn run_grid(per: u64, seed0: u64) -> Vec<Outcome> {
 #[test]
 #[ignore]
 fn calibration_benchmark() {
+    let _machine = servo_e2e::shared();
     let per = std::env::var("SERVO_CALIBRATION_SEEDS")
         .ok()
         .and_then(|s| s.parse().ok())

@@ -1228,6 +1228,8 @@ fn design_checks_gains_through_the_drive_servo_run_simulates() {
         "--json",
         "-o",
         gains.to_str().unwrap(),
+        // the specs are missed on this clipped drive: the gains are written all the same
+        "--force",
     ]);
     let log = dir.path().join("step.mcap");
     let case = v["run_check"]["cases"]

@@ -92,6 +92,7 @@ fn lab_model(dir: &Path) -> PathBuf {
 /// log is read.
 #[test]
 fn wrong_units_under_rad_headers_are_named_with_the_fix() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let run = sine_csv(tmp.path(), "run.csv", &[]);
     let model = lab_model(tmp.path());
@@ -170,6 +171,7 @@ fn err_map(log: &Path, model: &Path) -> String {
 /// made compare replay the speed alone).
 #[test]
 fn a_length_on_a_rotary_rig_is_refused() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let run = sine_csv(tmp.path(), "run.csv", &[]);
     let model = lab_model(tmp.path());
@@ -195,6 +197,7 @@ fn a_length_on_a_rotary_rig_is_refused() {
 /// whose only voltage is the supply does not fit J_eq to it.
 #[test]
 fn a_supply_column_is_never_u() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let run = sine_csv(tmp.path(), "run.csv", &[]);
     for header in ["v_supply_V", "vin_V", "vbus_V", "input_voltage_V"] {
@@ -228,6 +231,7 @@ fn a_supply_column_is_never_u() {
 /// output and in the file.
 #[test]
 fn another_motor_ramp_uses_its_own_constants() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let (_, lab, _) = servo(&["params"]);
     let set = |text: &str, key: &str, v: &str| -> String {
@@ -322,6 +326,7 @@ fn another_motor_ramp_uses_its_own_constants() {
 /// of `compare --add` carries more than about six significant figures.
 #[test]
 fn a_parameter_added_from_zero_prints_no_long_number() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let run = sine_csv(
         tmp.path(),
@@ -378,6 +383,7 @@ fn a_parameter_added_from_zero_prints_no_long_number() {
 /// logs" with the experiment that would, never "0 +/- NaN".
 #[test]
 fn a_parameter_at_its_bound_is_not_determined() {
+    let _machine = servo_e2e::shared();
     let tmp = tempfile::tempdir().unwrap();
     let run = run_csv(
         tmp.path(),

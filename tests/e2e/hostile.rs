@@ -115,6 +115,7 @@ fn all_problems(doc: &str) -> Vec<String> {
 
 #[test]
 fn random_strings_in_every_chart_text_leave_well_formed_svg_and_their_text() {
+    let _machine = servo_e2e::shared();
     let mut rng = Rng::new(0x4057_11e5);
     let x: Vec<f64> = (0..50).map(|k| k as f64 * 0.01).collect();
     let y: Vec<f64> = x.iter().map(|t| (3.0 * t).sin()).collect();
@@ -170,6 +171,7 @@ fn random_strings_in_every_chart_text_leave_well_formed_svg_and_their_text() {
 
 #[test]
 fn random_strings_in_every_markup_context_round_trip_as_values() {
+    let _machine = servo_e2e::shared();
     let mut rng = Rng::new(0x0e5c_a9e5);
     for case in 0..2000 {
         let (a, b, c, d) = (

@@ -441,6 +441,12 @@ fn keep_fitted_k_drv_writes_the_fitted_gain_and_compare_uses_it() {
         .save(&d("truth.toml"))
         .unwrap();
     let truth = d("truth.toml");
+    // what the user knows: the datasheet's 0.60 (without --params, `--ramp --plant` would take
+    // the simulated motor's own constants)
+    ModelFile::from_plant(&lab(1.0e-6, 9.0e-3, 0.60))
+        .save(&d("datasheet.toml"))
+        .unwrap();
+    let datasheet = d("datasheet.toml");
     let ident = |out: &str, extra: &[&str]| {
         let o = d(out);
         let mut args = vec![
@@ -448,6 +454,8 @@ fn keep_fitted_k_drv_writes_the_fitted_gain_and_compare_uses_it() {
             "--ramp",
             "--plant",
             p(&truth),
+            "--params",
+            p(&datasheet),
             "--log-dir",
             p(dir.path()),
             "--progress",

@@ -95,6 +95,7 @@ fn every_command_output_follows_its_schema() {
         "--meet-specs",
         "-o",
         &gains,
+        "--force",
         "--json",
     ]);
     // a closed-loop step and a chirp on the simulator

@@ -96,7 +96,11 @@ fn judged_unless_starved(
 ) {
     judged_unless(what, || {
         let (verdict, stats) = try_once()?;
-        let starved = stats.iter().any(|s| run_starved(s, 2000));
+        // a run that servo itself stopped as starved is a starved try too
+        let stopped_starved = verdict
+            .as_ref()
+            .is_err_and(|e| e.contains("the board is starved"));
+        let starved = stopped_starved || stats.iter().any(|s| run_starved(s, 2000));
         Some((verdict, starved, stats.join("; ")))
     });
 }

@@ -125,6 +125,7 @@ fn xl330_held_out_logs_are_predicted_better_than_bam_m1() {
 #[test]
 #[ignore = "the Nelder-Mead search can stop in a local minimum that splits the friction between tau_sf and the load-dependent part wrongly (held-out RMSE 74 mrad); needs restarts from several friction splits"]
 fn a_simulated_smart_servo_is_identified_from_its_goal_positions() {
+    let _machine = servo_e2e::shared();
     let truth = SmartParams {
         j_eq: 0.01,
         b_eq: 0.02,

@@ -718,6 +718,10 @@ catalogue! {
     delay::Delay => Delay,
 }
 
+/// The catalogue effect that carries a gravity load on an arm: a resisting torque amplitude
+/// sin(theta + phase) (the smart-servo model reads a pendulum's m g L from it).
+pub const GRAVITY: EffectKind = EffectKind::Imbalance;
+
 /// Total number of slots of an [`Effects`] set: the catalogue and the user effects.
 pub const MAX_EFFECTS: usize = CATALOGUE_LEN + MAX_USER_EFFECTS;
 

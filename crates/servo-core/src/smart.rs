@@ -10,7 +10,7 @@
 //! * [`SmartParams`]: everything at the output shaft: J_eq, B_eq, the Coulomb friction tau_sf,
 //!   the motor constant ratio k_t / R (N m per V across the motor) and k_e (the back-EMF
 //!   damping is k_t k_e / R), the gravity amplitude m g L and its phase (the resisting torque
-//!   amplitude sin(theta + phase), as the `imbalance` effect), and the latency.
+//!   amplitude sin(theta + phase), as the catalogue's gravity effect, `effects::GRAVITY`), and the latency.
 //! * [`replay`]: the closed-loop replay of a log from its goal positions. Where the log's
 //!   torque-enable column reads 0, the bridge is open: no drive torque and no back-EMF braking,
 //!   only friction and gravity act (an arm dropped with the torque off swings freely).
@@ -833,14 +833,13 @@ pub fn fit(
 
 impl SmartParams {
     /// The output-shaft parameters of a servo model (eqs. 10-20 at the load: J_eq N^2,
-    /// B_eq N^2, k_t N / (R_a + R_s), k_e N) with the `imbalance` effect as the gravity
+    /// B_eq N^2, k_t N / (R_a + R_s), k_e N) with the catalogue's gravity effect (`effects::GRAVITY`) as the gravity
     /// (amplitude and phase; none when absent) and the given latency.
     pub fn from_model(
         p: &crate::params::PlantParams,
         effects: &crate::effects::Effects,
         latency_s: f64,
     ) -> SmartParams {
-        use crate::effects::EffectKind;
         let n = p.n;
         SmartParams {
             j_eq: p.j_eq() * n * n,
@@ -850,9 +849,11 @@ impl SmartParams {
             k_t_per_r: p.k_t * n / (p.r_a + p.r_s),
             k_e: p.k_e * n,
             gravity_nm: effects
-                .value(EffectKind::Imbalance, "amplitude")
+                .value(crate::effects::GRAVITY, "amplitude")
                 .unwrap_or(0.0),
-            phase_rad: effects.value(EffectKind::Imbalance, "phase").unwrap_or(0.0),
+            phase_rad: effects
+                .value(crate::effects::GRAVITY, "phase")
+                .unwrap_or(0.0),
             latency_s,
         }
     }

@@ -302,6 +302,13 @@ pub(crate) fn guess_column(name: &str) -> Option<(Signal, Unit)> {
     // Joined forms first (`theta_l`, `omega_m`, `i_a`), then single words.
     let joined = lower.replace('_', "");
     let words: Vec<&str> = lower.split('_').filter(|w| !w.is_empty()).collect();
+    // a date stamp (`unix_time_s`, `epoch_s`) says when, not the log's time axis
+    if words
+        .iter()
+        .any(|w| matches!(*w, "unix" | "epoch" | "posix" | "utc"))
+    {
+        return None;
+    }
     if words.iter().any(|w| matches!(*w, "err" | "error" | "e")) {
         return None;
     }

@@ -598,12 +598,8 @@ impl Walk<'_, '_> {
                         McapRecord::Metadata(m) if m.name == SUMMARY_METADATA => {
                             self.run.summary = m.metadata
                         }
-                        McapRecord::Metadata(m)
-                            if m.name == crate::mcap_recover::RECOVERY_METADATA =>
-                        {
-                            self.run
-                                .notes
-                                .push(crate::mcap_recover::recovery_note(self.source, &m.metadata))
+                        McapRecord::Metadata(m) if m.name == RECOVERY_METADATA => {
+                            self.run.notes.push(recovery_note(self.source, &m.metadata))
                         }
                         McapRecord::DataEnd(_) => self.data_end = true,
                         McapRecord::Footer(_) => {
@@ -832,6 +828,34 @@ pub fn loop_msgs_of(rec: &Record) -> Vec<LoopMsg> {
             }
         })
         .collect()
+}
+
+/// Name of the metadata record a recovery of an unfinished log adds to its output:
+/// `recovered_from` (the input file), `read_bytes` (`N of M`), `stopped_because`, and `note_1`,
+/// `note_2`, ... (what servo's reader said of the input: the run was killed, what was lost).
+/// Servo's reader turns it into a note on the recovered log.
+pub const RECOVERY_METADATA: &str = "servo_recovery";
+
+/// The note servo's reader gives on a recovered log, from its [`RECOVERY_METADATA`] record.
+pub fn recovery_note(source: &str, m: &std::collections::BTreeMap<String, String>) -> String {
+    let from = m
+        .get("recovered_from")
+        .map_or("an unfinished log", String::as_str);
+    let mut note = format!("{source}: recovered by `servo log recover` from {from}");
+    if let Some(r) = m.get("read_bytes") {
+        note.push_str(&format!(" (read {r} bytes"));
+        if let Some(w) = m.get("stopped_because") {
+            note.push_str(&format!("; stopped: {w}"));
+        }
+        note.push(')');
+    }
+    for k in 1.. {
+        match m.get(&format!("note_{k}")) {
+            Some(n) => note.push_str(&format!("; {n}")),
+            None => break,
+        }
+    }
+    note
 }
 
 #[cfg(test)]

@@ -4,6 +4,7 @@
 mod bode_plot;
 mod compensated;
 mod on_run;
+mod outcome;
 mod report_json;
 mod report_specs;
 mod report_text;
@@ -14,6 +15,7 @@ mod summary;
 mod words;
 
 use on_run::*;
+use outcome::*;
 use report_specs::*;
 use report_text::*;
 use request::parse_design_model;
@@ -389,38 +391,5 @@ impl Design {
             );
         }
         Ok(())
-    }
-}
-
-/// A design and what it achieves on the loop that runs.
-struct Outcome {
-    report: DesignReport,
-    /// The controller structure around the gains (given, or chosen by --meet-specs).
-    structure: LoopStructure,
-    /// The check of the time-domain specs, when the design comes from them.
-    check: Option<RangeCheck>,
-    /// The --meet-specs search and its run time [ms].
-    meet: Option<(MeetResult, f64)>,
-    /// The time-domain specs checked through `servo run`'s loop on the design's plant.
-    run_check: Option<RunCheck>,
-    /// `--ff`: the design verified on the model without and with its compensation.
-    compensated: Option<compensated::CompensatedCheck>,
-}
-
-impl Outcome {
-    /// Whether the time-domain specs are met: on the design's loop model and through `servo run`.
-    fn time_specs_met(&self) -> Option<bool> {
-        let c = self.check.as_ref()?;
-        Some(c.met() && self.run_check.as_ref().is_none_or(RunCheck::met))
-    }
-}
-
-/// Writes to stdout; a closed pipe (`servo design | head`) is not an error.
-fn emit(text: &str) -> anyhow::Result<()> {
-    use std::io::Write;
-    let mut out = std::io::stdout().lock();
-    match out.write_all(text.as_bytes()).and_then(|_| out.flush()) {
-        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
-        r => r.context("writing to stdout"),
     }
 }
