@@ -158,9 +158,13 @@ impl GainsFile {
             let differ = match (plant_params, designed_params) {
                 (Some(p), Some(t)) => params_differ(p, t),
                 // files without the parameters: the names, effects added by the run aside
-                _ => (run.trim_end_matches("+effects") != designed)
-                    .then(|| vec![format!("`{run}`")])
-                    .unwrap_or_default(),
+                _ => {
+                    if run.trim_end_matches("+effects") != designed {
+                        vec![format!("`{run}`")]
+                    } else {
+                        Vec::new()
+                    }
+                }
             };
             if !differ.is_empty() {
                 out.push(format!(
@@ -249,6 +253,29 @@ impl GainsFile {
     }
 }
 
+/// The base parameters that differ between a run's plant and the one `[design.plant_params]`
+/// records, in words (`k_t 0.0389 here, 0.00768 designed`). Equal within 1e-9 relative: the file
+/// holds every digit.
+fn params_differ(run: &servo_core::PlantParams, designed: &toml::Table) -> Vec<String> {
+    let Ok(toml::Value::Table(here)) = toml::Value::try_from(run) else {
+        return Vec::new();
+    };
+    let num = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
+    let mut out = Vec::new();
+    for (k, v) in &here {
+        let (Some(a), Some(b)) = (num(v), designed.get(k).and_then(num)) else {
+            if num(v).is_some() != designed.get(k).and_then(num).is_some() {
+                out.push(format!("{k} given on one side only"));
+            }
+            continue;
+        };
+        if (a - b).abs() > 1e-9 * a.abs().max(b.abs()).max(f64::MIN_POSITIVE) {
+            out.push(format!("{k} {a:e} here, {b:e} designed"));
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -305,27 +332,4 @@ mod tests {
         let g = GainsFile::parse("[pid]\nkp = 5\nki = 0\nkd = 0\n").unwrap();
         assert_eq!((g.pid.ki, g.pid.kd), (0.0, 0.0));
     }
-}
-
-/// The base parameters that differ between a run's plant and the one `[design.plant_params]`
-/// records, in words (`k_t 0.0389 here, 0.00768 designed`). Equal within 1e-9 relative: the file
-/// holds every digit.
-fn params_differ(run: &servo_core::PlantParams, designed: &toml::Table) -> Vec<String> {
-    let Ok(toml::Value::Table(here)) = toml::Value::try_from(run) else {
-        return Vec::new();
-    };
-    let num = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
-    let mut out = Vec::new();
-    for (k, v) in &here {
-        let (Some(a), Some(b)) = (num(v), designed.get(k).and_then(num)) else {
-            if num(v).is_some() != designed.get(k).and_then(num).is_some() {
-                out.push(format!("{k} given on one side only"));
-            }
-            continue;
-        };
-        if (a - b).abs() > 1e-9 * a.abs().max(b.abs()).max(f64::MIN_POSITIVE) {
-            out.push(format!("{k} {a:e} here, {b:e} designed"));
-        }
-    }
-    out
 }
