@@ -126,18 +126,7 @@ pub fn identify_combined(
     check_excitation(&ca, &cw, &cs)?;
     let blocks = (rows / 500).clamp(2, 40);
     let fit = ls::fit(&[&ca, &cw, &cs], &y, Covariance::Blocks(blocks))?;
-    let dt = exps
-        .first()
-        .map(|e| e.sample_period_s())
-        .unwrap_or(f64::NAN);
-    let j_offset = cfg
-        .current_sampling
-        .map(|cs| cs.inertia_offset_kg_m2(dt))
-        .unwrap_or(0.0);
-    let j_offset_se = cfg
-        .current_sampling
-        .map(|cs| cs.inertia_offset_se_kg_m2(dt))
-        .unwrap_or(0.0);
+    let (j_offset, j_offset_se) = super::CurrentSampling::offsets_for(cfg.current_sampling, exps);
     let mut j_eq = Estimate::from_fit(&fit, 0).shifted(j_offset);
     let mut b_eq = Estimate::from_fit(&fit, 1);
     let mut tau_sf = Estimate::from_fit(&fit, 2);

@@ -200,14 +200,7 @@ pub fn identify_inertia(
              phases sweep the same speeds; add the friction runs for eq. 67",
         ));
     }
-    let dt = exps
-        .first()
-        .map(|e| e.sample_period_s())
-        .unwrap_or(f64::NAN);
-    let j_offset = cfg
-        .current_sampling
-        .map(|cs| cs.inertia_offset_kg_m2(dt))
-        .unwrap_or(0.0);
+    let (j_offset, j_offset_se) = super::CurrentSampling::offsets_for(cfg.current_sampling, exps);
     let j_eq = Estimate {
         value: j_mean,
         std_err: se,
@@ -218,11 +211,7 @@ pub fn identify_inertia(
         n: m,
     }
     .shifted(j_offset)
-    .widened(
-        cfg.current_sampling
-            .map(|cs| cs.inertia_offset_se_kg_m2(dt))
-            .unwrap_or(0.0),
-    );
+    .widened(j_offset_se);
     Ok(InertiaFit {
         j_eq,
         phases,

@@ -105,6 +105,14 @@ impl CurrentSampling {
     pub fn inertia_offset_se_kg_m2(&self, dt_s: f64) -> f64 {
         0.1 * self.inertia_offset_kg_m2(dt_s)
     }
+    /// The inertia offset [kg m^2] and its standard error for the logs `exps` (their first log's
+    /// sample period), none when the sampling is not known.
+    pub fn offsets_for(sampling: Option<CurrentSampling>, exps: &[Experiment]) -> (f64, f64) {
+        let dt = exps.first().map_or(f64::NAN, |e| e.sample_period_s());
+        sampling.map_or((0.0, 0.0), |cs| {
+            (cs.inertia_offset_kg_m2(dt), cs.inertia_offset_se_kg_m2(dt))
+        })
+    }
     /// The inertia missing from a fit on the sampled current at sample period `dt_s` [kg m^2].
     pub fn inertia_offset_kg_m2(&self, dt_s: f64) -> f64 {
         let d = self.back_emf_nm_s_rad * (0.5 * dt_s - self.lag_s).max(0.0);
