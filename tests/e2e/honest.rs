@@ -225,6 +225,47 @@ fn a_supply_column_is_never_u() {
     );
 }
 
+/// A current in milliamperes under an ampere header, or of the other sign: identify, compare and
+/// diagnose refuse the log naming the unit (with the `--columns` to write) or the sign; with
+/// the named map the log is read; the log as written passes without a word on the current.
+#[test]
+fn a_current_that_disagrees_with_its_voltage_balance_is_named() {
+    let _machine = servo_e2e::shared();
+    let tmp = tempfile::tempdir().unwrap();
+    let run = sine_csv(tmp.path(), "run.csv", &[]);
+    let model = lab_model(tmp.path());
+    let m = model.to_str().unwrap();
+    let ma = tmp.path().join("ma.csv");
+    rewrite(&run, &ma, &[], Some(("i_a_A", 1000.0)), &[]);
+    let neg = tmp.path().join("neg.csv");
+    rewrite(&run, &neg, &[], Some(("i_a_A", -1.0)), &[]);
+    for (log, words) in [(&ma, "milliamperes"), (&neg, "other sign")] {
+        let l = log.to_str().unwrap();
+        for args in [
+            vec!["identify", l, "--params", m],
+            vec!["compare", "--model", m, l],
+            vec!["diagnose", "--model", m, l],
+        ] {
+            let (ok, out, err) = servo(&args);
+            assert!(!ok, "{args:?} accepted {}:\n{out}", log.display());
+            assert!(err.contains(words), "{args:?}: {err}");
+        }
+    }
+    let map = err_map(&ma, &model);
+    assert!(map.contains("i_a=i_a_A:mA"), "{map}");
+    let (ok, _, err) = servo(&[
+        "compare",
+        "--model",
+        m,
+        ma.to_str().unwrap(),
+        "--columns",
+        &map,
+    ]);
+    assert!(ok && !err.contains("voltage balance"), "{map}: {err}");
+    let (ok, _, err) = servo(&["identify", run.to_str().unwrap(), "--params", m]);
+    assert!(ok && !err.contains("voltage balance"), "{err}");
+}
+
 /// Another motor (24 V drive, k_t 0.0389, N = 10) with `--ramp --plant` and no `--params`:
 /// identified with that motor's constants (J_eq within 10 % of its truth, the model written
 /// keeps its k_t, N and drive gain); without `--plant` the Table 2 constants are said in the

@@ -239,6 +239,157 @@ pub fn check_speed_units(rec: &Record, columns: Option<&str>) -> Result<Vec<Stri
     Ok(notes)
 }
 
+/// Ratios of the logged current to the voltage balance's within this factor of 1 are consistent:
+/// the model's R_eq, k_e and k_drv (often a datasheet's) may be off by tens of per cent.
+pub const CURRENT_OK_RATIO: f64 = 3.0;
+
+/// A ratio within this relative distance of a unit's factor (1000, -1) is named as that unit:
+/// wider than [`MATCH_TOL`], since the balance rests on the model's electrical constants.
+pub const CURRENT_MATCH_TOL: f64 = 0.15;
+
+/// The motor speed of `rec` [rad/s]: logged, or from the load speed, or the angles' derivative.
+fn motor_speed(rec: &Record, n: f64) -> Option<Vec<f64>> {
+    if let Some(w) = &rec.omega_m_rad_s {
+        return Some(w.clone());
+    }
+    if let Some(w) = &rec.omega_l_rad_s {
+        return Some(w.iter().map(|v| v * n).collect());
+    }
+    let (angle, scale) = match (&rec.theta_m_rad, &rec.theta_l_rad) {
+        (Some(a), _) => (a, 1.0),
+        (None, Some(a)) => (a, n),
+        _ => return None,
+    };
+    let t = &rec.time_s;
+    let len = t.len().min(angle.len());
+    if len < 3 {
+        return None;
+    }
+    Some(
+        (0..len)
+            .map(|k| {
+                let (a, b) = (k.saturating_sub(1), (k + 1).min(len - 1));
+                let dt = t[b] - t[a];
+                if dt > 0.0 {
+                    scale * (angle[b] - angle[a]) / dt
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+    )
+}
+
+/// The logged armature current against the current the armature's voltage balance gives
+/// (handout eq. 1 at the scale of windows of [`WINDOW_S`], where L_a di/dt averages out):
+/// i = (k_drv u - k_e w_m) / R_eq with the model's constants. Returns the ratio (logged /
+/// balance, least squares through the origin) and the R^2 of that fit; `None` without u,
+/// current or a speed, or when too few windows carry current.
+pub fn current_ratio(rec: &Record, params: &servo_core::PlantParams) -> Option<(f64, f64)> {
+    let (u, i) = (rec.u_v.as_ref()?, rec.i_a_a.as_ref()?);
+    let w = motor_speed(rec, params.n)?;
+    let r = params.r_eq();
+    if !(r > 0.0 && r.is_finite() && params.k_e.is_finite() && params.k_drv.is_finite()) {
+        return None;
+    }
+    let t = &rec.time_s;
+    let n = t.len().min(u.len()).min(i.len()).min(w.len());
+    if n < 3 {
+        return None;
+    }
+    let dt = (t[n - 1] - t[0]) / (n - 1) as f64;
+    if !(dt > 0.0 && dt.is_finite()) {
+        return None;
+    }
+    let m = ((WINDOW_S / dt).round() as usize).clamp(1, (n / (2 * MIN_WINDOWS)).max(1));
+    let mut pairs = Vec::new();
+    let mut k = 0;
+    while k + m <= n {
+        let mean = |v: &[f64]| v[k..k + m].iter().sum::<f64>() / m as f64;
+        let implied = (params.k_drv * mean(u) - params.k_e * mean(&w)) / r;
+        let logged = mean(i);
+        if implied.is_finite() && logged.is_finite() {
+            pairs.push((implied, logged));
+        }
+        k += m;
+    }
+    let scale = pairs.iter().map(|(x, _)| x.abs()).fold(0.0, f64::max);
+    if scale <= 0.0 {
+        return None;
+    }
+    let (mut sxy, mut sxx, mut syy, mut count) = (0.0, 0.0, 0.0, 0usize);
+    for &(x, y) in pairs.iter().filter(|(x, _)| x.abs() > 0.05 * scale) {
+        sxy += x * y;
+        sxx += x * x;
+        syy += y * y;
+        count += 1;
+    }
+    if count < MIN_WINDOWS || sxx <= 0.0 || syy <= 0.0 {
+        return None;
+    }
+    let ratio = sxy / sxx;
+    let rss = syy - 2.0 * ratio * sxy + ratio * ratio * sxx;
+    Some((ratio, 1.0 - rss / syy))
+}
+
+/// Checks a voltage drive's logged current against its voltage balance ([`current_ratio`]):
+/// a factor of about 1000 is a current in mA read as A, about -1 a current of the other sign;
+/// both are refused with the fix. Another large disagreement is a note (the model's electrical
+/// constants or the current's unit). `columns`: the column map the log was read with.
+pub fn check_current_units(
+    rec: &Record,
+    params: &servo_core::PlantParams,
+    columns: Option<&str>,
+) -> Result<Vec<String>> {
+    let Some((r, r2)) = current_ratio(rec, params) else {
+        return Ok(Vec::new());
+    };
+    if !r.is_finite() || r2 < 0.5 {
+        return Ok(Vec::new());
+    }
+    if r > 0.0 && r.ln().abs() <= CURRENT_OK_RATIO.ln() {
+        return Ok(Vec::new());
+    }
+    let map = columns.and_then(|c| ColumnMap::parse(c).ok());
+    let entry = map.as_ref().and_then(|m| m.get(Signal::IA));
+    let (name, unit) = match entry {
+        Some(e) => (format!("`{}` (i_a, read as {})", e.column, e.unit), e.unit),
+        None => ("i_a (in A)".to_string(), Unit::Ampere),
+    };
+    let said = format!(
+        "{}: the logged current {name} is {} times the current the armature's voltage balance gives          (k_drv u - k_e w_m) / R_eq with the model's k_drv = {}, k_e = {} V s/rad, R_eq = {} ohm",
+        rec.source,
+        servo_core::math::sig(r, 3),
+        servo_core::math::sig(params.k_drv, 4),
+        servo_core::math::sig(params.k_e, 4),
+        servo_core::math::sig(params.r_eq(), 4)
+    );
+    let near = |pred: f64| (r / pred - 1.0).abs() < CURRENT_MATCH_TOL;
+    if unit == Unit::Ampere && near(1e3) {
+        let fix = match &map {
+            Some(m) => {
+                let mut m = m.clone();
+                if let Some(e) = m.entries.iter_mut().find(|e| e.signal == Signal::IA) {
+                    e.unit = Unit::Milliampere;
+                }
+                format!("--columns {m}")
+            }
+            None => "a column map that gives i_a in mA (--columns ...,i_a=COLUMN:mA)".to_string(),
+        };
+        return Err(crate::error::anyhow!(
+            "{said}: the current is in milliamperes, not amperes. Every number computed from it              (R_eq, k_drv, J_eq, the friction) would be wrong by that factor; say its unit: {fix}"
+        ));
+    }
+    if near(-1.0) {
+        return Err(crate::error::anyhow!(
+            "{said}: the current has the other sign than u and the speed (a sensor or shunt wired              the other way). servo takes positive current as driving the motor forward, with              positive u and speed: negate the column before reading it"
+        ));
+    }
+    Ok(vec![format!(
+        "{said}: check the current's unit and sign, and the model's electrical constants          (R_a, R_s, k_e, k_drv; --params): the electrical balance and every estimate that uses          the current rest on them"
+    )])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -331,5 +482,74 @@ mod tests {
         let mut r = rec(1.0, 1.0);
         r.omega_l_rad_s = Some(vec![0.0; r.time_s.len()]);
         assert!(check_speed_units(&r, None).unwrap().is_empty());
+    }
+
+    /// A voltage-driven motor (handout eq. 1 with L_a di/dt, a first-order mechanical load and
+    /// a sensor lag left out): its current scaled by `scale`, with a model whose R_eq is off by
+    /// `r_err` (a datasheet's constants are not the motor's).
+    fn electrical(scale: f64, r_err: f64) -> (Record, servo_core::PlantParams) {
+        let p = servo_core::PlantParams::default();
+        let (k_e, k_t, n) = (p.k_e, p.k_t, p.n);
+        let dt = 1e-3;
+        let (mut w, mut i, mut th) = (0.0f64, 0.0f64, 0.0f64);
+        let (mut ts, mut us, mut is, mut ths) = (vec![], vec![], vec![], vec![]);
+        for k in 0..4000 {
+            let t = k as f64 * dt;
+            let u = 4.0 * (2.1 * t).sin() + 1.5 * (7.3 * t).sin();
+            let di = (p.k_drv * u - p.r_eq() * i - k_e * w) / p.l_a;
+            // Implicit enough for the 1 ms step: the electrical pole is fast.
+            i += di * dt / (1.0 + p.r_eq() * dt / p.l_a);
+            let dw = (k_t * i - 2e-6 * w) / 4e-6;
+            w += dw * dt;
+            th += w / n * dt;
+            ts.push(t);
+            us.push(u);
+            is.push(scale * i);
+            ths.push(th);
+        }
+        let rec = Record {
+            source: "elec.csv".into(),
+            time_s: ts,
+            u_v: Some(us),
+            i_a_a: Some(is),
+            theta_l_rad: Some(ths),
+            ..Record::default()
+        };
+        let mut model = p;
+        model.r_a *= r_err;
+        model.r_s *= r_err;
+        (rec, model)
+    }
+
+    #[test]
+    fn a_current_consistent_with_its_voltage_balance_passes() {
+        for r_err in [1.0, 0.7, 1.4] {
+            let (rec, p) = electrical(1.0, r_err);
+            let (ratio, r2) = current_ratio(&rec, &p).expect("a ratio");
+            assert!(r2 > 0.9, "R^2 {r2}");
+            assert!(
+                (ratio / r_err - 1.0).abs() < 0.1,
+                "ratio {ratio} for R off by {r_err}"
+            );
+            assert!(check_current_units(&rec, &p, None).unwrap().is_empty());
+        }
+    }
+
+    #[test]
+    fn a_current_in_milliamperes_or_of_the_other_sign_is_named_with_the_fix() {
+        let (rec, p) = electrical(1000.0, 1.1);
+        let e = check_current_units(&rec, &p, Some("time=t,u=u_V,i_a=cur_A,theta_l=q"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("milliamperes"), "{e}");
+        assert!(e.contains("i_a=cur_A:mA"), "{e}");
+        let (rec, p) = electrical(-1.0, 0.9);
+        let e = check_current_units(&rec, &p, None).unwrap_err().to_string();
+        assert!(e.contains("other sign"), "{e}");
+        // A factor that is no unit's is a note naming the constants it rests on.
+        let (rec, p) = electrical(8.0, 1.0);
+        let notes = check_current_units(&rec, &p, None).unwrap();
+        assert_eq!(notes.len(), 1, "{notes:?}");
+        assert!(notes[0].contains("R_eq"), "{}", notes[0]);
     }
 }

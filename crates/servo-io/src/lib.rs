@@ -209,6 +209,21 @@ pub fn read_log_axis(
     Ok(rec)
 }
 
+/// Logs are what their headers say, where the model tells what they should hold: a voltage
+/// drive's logged current against its voltage balance
+/// ([`crate::crosscheck::check_current_units`]). Notes, or the refusal naming the fix;
+/// `columns` is the column map the log was read with.
+pub fn check_against_model(
+    rec: &Record,
+    columns: Option<&str>,
+    model: &crate::model_file::ModelFile,
+) -> anyhow::Result<Vec<String>> {
+    if model.drive.kind != servo_core::drive::DriveKind::Voltage {
+        return Ok(Vec::new());
+    }
+    crate::crosscheck::check_current_units(rec, &model.params, columns)
+}
+
 /// [`read_log_axis`] on the axis and the drive of `model`: the log's input column (`u`,
 /// `i_ref`, `duty` with `v_supply`) is checked against the model's drive and turned into the
 /// input of its equivalent voltage chain ([`servo_core::drive::Drive::prepare`]).
@@ -217,7 +232,13 @@ pub fn read_log_model(
     columns: Option<&str>,
     model: &crate::model_file::ModelFile,
 ) -> anyhow::Result<Record> {
-    let mut rec = read_log_axis(path, columns, &model.transmission)?;
+    let (mut rec, meta) = read_log_on(path, columns, None, &model.transmission)?;
+    for n in &meta.notes {
+        eprintln!("note: {n}");
+    }
+    for n in check_against_model(&rec, meta.columns.as_deref().or(columns), model)? {
+        eprintln!("note: {n}");
+    }
     model
         .drive
         .prepare(&mut rec)

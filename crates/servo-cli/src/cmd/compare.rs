@@ -218,6 +218,10 @@ impl Compare {
                 &model_file.transmission,
             )
             .with_context(|| format!("reading log {}", path.display()))?;
+            let checked =
+                crate::io::check_against_model(&record, meta.columns.as_deref(), &model_file)
+                    .with_context(|| format!("reading log {}", path.display()))?;
+            meta.notes.extend(checked);
             model_file
                 .drive
                 .prepare(&mut record)

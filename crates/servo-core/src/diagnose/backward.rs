@@ -806,7 +806,8 @@ fn on_tuned_cost(
         return;
     }
     c.bic_gain = bic;
-    let found = super::checks::constraints(cx.ds, c.effect, &c.params, full, reduced);
+    let found =
+        super::checks::constraints(cx.ds, c.effect, &c.params, full, reduced, &opts.thresholds);
     c.significant = found.iter().all(|k| k.passed);
     c.checks.extend(found);
 }

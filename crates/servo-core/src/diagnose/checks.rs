@@ -9,7 +9,7 @@
 
 use super::thresholds::{frac, Thresholds};
 use super::Candidate;
-use crate::effects::EffectKind;
+use crate::effects::{EffectKind, GridContext, NoEffectAt, SearchScale};
 use crate::fit::{Dataset, EffectToFit, ParamEstimate};
 use crate::math;
 use crate::plant::Plant;
@@ -19,17 +19,93 @@ use alloc::vec::Vec;
 
 /// The effect's constraints and the physical meaning of the fitted parameters in these data
 /// ([`crate::effects::FitHooks::constraints`]).
+///
+/// Every searched parameter is also checked against its search range ([`search_bounds`]).
 pub fn constraints(
     ds: &Dataset,
     kind: EffectKind,
     params: &[ParamEstimate],
     cand: &Plant,
     base: &Plant,
+    th: &Thresholds,
 ) -> Vec<Check> {
-    kind.model()
+    let mut out: Vec<Check> = kind
+        .model()
         .fit_hooks()
         .map(|h| h.constraints(ds, params, cand, base))
-        .unwrap_or_default()
+        .unwrap_or_default();
+    out.extend(search_bounds(ds, kind, params, th));
+    out
+}
+
+/// One check per searched parameter of `kind` whose best fit sits at a bound of its search grid
+/// ([`crate::effects::EffectModel::search_grid`]) that is not the effect's "no effect" end
+/// ([`NoEffectAt`]): within [`Thresholds::search_bound_margin_pct`] of the range (of its
+/// logarithm on a log grid) or beyond it. Such a value is not determined by these logs: the
+/// optimum may lie past the bound, or the effect is bent to soak up another mechanism. Integer
+/// searches (a harmonic order) are hypotheses each, not a range, and are not checked.
+pub fn search_bounds(
+    ds: &Dataset,
+    kind: EffectKind,
+    params: &[ParamEstimate],
+    th: &Thresholds,
+) -> Vec<Check> {
+    search_bounds_in(&ds.grid_context(), kind, params, th)
+}
+
+/// [`search_bounds`] on the grids that `ctx` gives.
+fn search_bounds_in(
+    ctx: &GridContext,
+    kind: EffectKind,
+    params: &[ParamEstimate],
+    th: &Thresholds,
+) -> Vec<Check> {
+    let model = kind.model();
+    let mut out = Vec::new();
+    for spec in model.params().iter().filter(|p| p.nonlinear) {
+        let search = model.search(spec.key);
+        if search.scale == SearchScale::Integer {
+            continue;
+        }
+        let Some(grid) = model.search_grid(spec.key, ctx).filter(|g| g.len() >= 2) else {
+            continue;
+        };
+        let Some(v) = get(params, spec.key).filter(|v| v.is_finite()) else {
+            continue;
+        };
+        let (lo, hi) = (
+            grid[0].min(grid[grid.len() - 1]),
+            grid[0].max(grid[grid.len() - 1]),
+        );
+        let log = search.scale == SearchScale::Log && lo > 0.0 && v > 0.0;
+        let map = |x: f64| if log { math::ln(x) } else { x };
+        let margin = frac(th.search_bound_margin_pct) * (map(hi) - map(lo));
+        if !(margin > 0.0) {
+            continue;
+        }
+        let at_low = search.no_effect_at != NoEffectAt::First && map(v) <= map(lo) + margin;
+        let at_high = search.no_effect_at != NoEffectAt::Last && map(v) >= map(hi) - margin;
+        if !(at_low || at_high) {
+            continue;
+        }
+        let (edge, which) = if at_high { (hi, "top") } else { (lo, "bottom") };
+        out.push(Check {
+            name: "inside its search range",
+            passed: false,
+            detail: alloc::format!(
+                "{} = {} {} sits at the {which} of its search ({} to {} {}, bound {}): not determined by these logs (the best fit may lie beyond it, or the effect stands in for another mechanism); to determine it: {}",
+                spec.key,
+                math::sig(v, 4),
+                spec.unit,
+                math::sig(lo, 4),
+                math::sig(hi, 4),
+                spec.unit,
+                math::sig(edge, 4),
+                model.experiment()
+            ),
+        });
+    }
+    out
 }
 
 /// The parameters compared across parts of the data.
@@ -370,5 +446,70 @@ mod tests {
         );
         assert!(!far.passed, "{}", far.detail);
         assert!(far.detail.contains("differs"), "{}", far.detail);
+    }
+
+    /// Every searched parameter of the catalogue: a best fit in the middle of its grid passes,
+    /// at a bound that is not the effect's "no effect" end (or past it) it is not determined.
+    #[test]
+    fn a_searched_parameter_at_its_search_bound_is_not_determined() {
+        let ctx = GridContext {
+            omega_l_max_rad_s: 20.0,
+            u_max_v: 6.0,
+            dt_s: 1e-3,
+            max_delay_s: 0.02,
+            max_harmonic: 12,
+        };
+        let th = Thresholds::default();
+        let mut checked = 0;
+        for kind in EffectKind::ALL {
+            let model = kind.model();
+            for spec in model.params().iter().filter(|p| p.nonlinear) {
+                let search = model.search(spec.key);
+                let Some(grid) = model.search_grid(spec.key, &ctx) else {
+                    continue;
+                };
+                if search.scale == SearchScale::Integer || grid.len() < 2 {
+                    continue;
+                }
+                let at = |v: f64| {
+                    let p = [ParamEstimate {
+                        effect: Some(kind),
+                        key: spec.key,
+                        unit: spec.unit,
+                        value: v,
+                        std_err: None,
+                        fitted: true,
+                    }];
+                    search_bounds_in(&ctx, kind, &p, &th)
+                };
+                let (lo, hi) = (grid[0], grid[grid.len() - 1]);
+                let mid = if search.scale == SearchScale::Log {
+                    math::sqrt(lo * hi)
+                } else {
+                    0.5 * (lo + hi)
+                };
+                assert!(at(mid).is_empty(), "{kind}.{} = {mid}", spec.key);
+                for (v, no_effect) in [
+                    (hi, NoEffectAt::Last),
+                    (1.05 * hi, NoEffectAt::Last),
+                    (lo, NoEffectAt::First),
+                ] {
+                    let found = at(v);
+                    if search.no_effect_at == no_effect {
+                        assert!(found.is_empty(), "{kind}.{} = {v}: {found:?}", spec.key);
+                    } else {
+                        assert_eq!(found.len(), 1, "{kind}.{} = {v}", spec.key);
+                        assert!(!found[0].passed);
+                        assert!(
+                            found[0].detail.contains("not determined"),
+                            "{}",
+                            found[0].detail
+                        );
+                        checked += 1;
+                    }
+                }
+            }
+        }
+        assert!(checked >= 5, "only {checked} bounds checked");
     }
 }

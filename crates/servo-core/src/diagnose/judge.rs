@@ -400,6 +400,7 @@ pub(super) fn judge(
             &params,
             &cand.plant,
             &base.plant,
+            th,
         ));
         // A friction is judged against the friction curve the logs show (sliding rows). Not a
         // member of a joint model: the curve is the base's, which the other members (a play's

@@ -85,7 +85,7 @@ pub(super) fn find(
                 return false;
             };
             curve.equation == eq
-                && checks::constraints(ds2, c.effect, &c.params, &cand.plant, &base.plant)
+                && checks::constraints(ds2, c.effect, &c.params, &cand.plant, &base.plant, th)
                     .iter()
                     .all(|k| k.passed)
                 && friction_curve::check(curve, b, e, &base.plant, &cand.plant, th).passed

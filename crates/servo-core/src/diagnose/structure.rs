@@ -883,15 +883,26 @@ pub fn describe(b: &BalanceReport) -> String {
     if b.equation.name() != alloc::format!("{} balance", b.balance.name()) {
         let _ = write!(s, " ({})", b.equation.name());
     }
-    let _ = write!(
-        s,
-        " leaves {:.2e} {} RMS, {:.1} times its noise floor ({:.2e} {})",
-        b.rms,
-        b.equation.unit(),
-        b.ratio_to_noise,
-        b.floor,
-        b.equation.unit()
-    );
+    if b.floor > 0.0 && b.floor.is_finite() && b.ratio_to_noise.is_finite() {
+        let _ = write!(
+            s,
+            " leaves {:.2e} {} RMS, {:.1} times its noise floor ({:.2e} {})",
+            b.rms,
+            b.equation.unit(),
+            b.ratio_to_noise,
+            b.floor,
+            b.equation.unit()
+        );
+    } else {
+        // No sensor noise model for this balance (no current logged, an angle that is not on
+        // an encoder's grid): the floor is unknown, not zero.
+        let _ = write!(
+            s,
+            " leaves {:.2e} {} RMS against a noise floor these logs do not give (no current logged, or an angle that is not on an encoder's grid): how much of it is structure rather than noise is not determined",
+            b.rms,
+            b.equation.unit()
+        );
+    }
     if b.signatures.is_empty() {
         s.push_str("; no simple shape of speed, angle, time, current or voltage carries it");
     } else {

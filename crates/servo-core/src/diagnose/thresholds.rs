@@ -125,6 +125,10 @@ pub struct Thresholds {
     /// its own regime when its torque-balance residual is this many times the sliding rows'
     /// (RMS); the candidates are then judged again on the sliding rows [x].
     pub presliding_min_ratio: f64,
+    /// A searched parameter whose best fit lies within this share of its search range from a
+    /// bound that is not the effect's "no effect" end is at its search bound: not determined by
+    /// these logs, so the effect is not named [% of the range; of its logarithm on a log grid].
+    pub search_bound_margin_pct: f64,
 }
 
 impl Default for Thresholds {
@@ -166,6 +170,7 @@ impl Default for Thresholds {
             change_max_further_pct: 15.0,
             change_margin_pct: 10.0,
             presliding_min_ratio: 2.0,
+            search_bound_margin_pct: 5.0,
         }
     }
 }
@@ -260,6 +265,8 @@ impl Thresholds {
                 why: "each side of a change must be this long for its parameters to be refitted" },
             Bar { name: "presliding_min_ratio", value: t.presliding_min_ratio, unit: "x the sliding rows' RMS", rule: ">=",
                 why: "rows near reversals (few counts of travel) carrying this much more residual are a pre-sliding regime of their own (a dynamic friction's bristles): friction shapes are then judged on the sliding rows" },
+            Bar { name: "search_bound_margin_pct", value: t.search_bound_margin_pct, unit: "% of the searched range", rule: ">",
+                why: "a searched parameter whose best fit sits this close to a bound of its search (not the effect's 'no effect' end) is not determined by these logs: the optimum may lie beyond it, or another mechanism bends the effect" },
         ]
     }
 }
