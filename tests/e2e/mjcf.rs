@@ -193,7 +193,10 @@ fn an_arm_with_gravity_follows_servo_in_mujoco() {
     // Gravity 9 times the Coulomb friction, off the vertical by 0.3 rad at theta_l = 0.
     let text = format!("{LAB}\n[effects.imbalance]\namplitude = 0.08\nphase = 0.3\n");
     let out = check_follows("arm with gravity", &text, "u_V");
-    assert!(out.contains("gravity: servo identifies m g L = 0.08 N m"), "{out}");
+    assert!(
+        out.contains("gravity: servo identifies m g L = 0.08 N m"),
+        "{out}"
+    );
 }
 
 #[test]
@@ -201,9 +204,8 @@ fn what_mujoco_cannot_express_is_listed_with_its_error() {
     let _machine = servo_e2e::shared();
     let dir = tempfile::tempdir().unwrap();
     let model = dir.path().join("model.toml");
-    let text = format!(
-        "{LAB}\n[effects.deadzone]\nwidth = 0.5\n\n[effects.delay]\ndelay = 0.004\n"
-    );
+    let text =
+        format!("{LAB}\n[effects.deadzone]\nwidth = 0.5\n\n[effects.delay]\ndelay = 0.004\n");
     std::fs::write(&model, text).unwrap();
     let xml = dir.path().join("dz.xml");
     let (ok, out, err) = servo(&["export", s(&model), "-o", s(&xml)]);
@@ -217,7 +219,10 @@ fn what_mujoco_cannot_express_is_listed_with_its_error() {
         // "  NAME: RMSE rad (P % of the travel): why"
         let rmse: f64 = line.split_whitespace().nth(1).unwrap().parse().unwrap();
         assert!(rmse > 0.0, "{line}");
-        assert!(body.contains(line.trim()), "{line} not in the XML comment:\n{body}");
+        assert!(
+            body.contains(line.trim()),
+            "{line} not in the XML comment:\n{body}"
+        );
     }
     assert!(out.contains("all of them:"), "{out}");
     // A log's options are refused for a model file, and a non-XML output too.

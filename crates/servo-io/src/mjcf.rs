@@ -495,10 +495,19 @@ pub fn to_mjcf(model: &ModelFile, name: &str, source: &str) -> Result<Mjcf> {
             act.ctrl_unit
         ),
         format!(
-            "gear = N{} = {}; gainprm: motor torque per unit of ctrl; biasprm[2]: the back-EMF's \
-             torque per motor rad/s; dynprm: the drive's lag [s]",
+            "gear = N{} = {}; gainprm: motor torque per unit of ctrl [N m]{}{}",
             if linear { " / s" } else { "" },
-            num(n / per)
+            short(n / per),
+            if act.bias_v != 0.0 {
+                "; biasprm[2]: the back-EMF's torque per motor rad/s"
+            } else {
+                ""
+            },
+            if act.lag_s >= NO_LAG_S {
+                "; dynprm: the drive's lag [s]"
+            } else {
+                ""
+            }
         ),
     ];
     head.extend(notes.iter().cloned());
@@ -592,6 +601,8 @@ pub fn export(model_path: &Path, out: &Path) -> Result<(Mjcf, crate::output::Wri
 #[cfg(test)]
 mod tests {
     use super::*;
+    use servo_core::effects::Effect;
+    use servo_core::PlantParams;
 
     fn lab() -> ModelFile {
         ModelFile::from_plant(&Plant::lab())
@@ -665,8 +676,6 @@ mod tests {
         assert!(m.left_out.is_empty());
     }
 
-    use servo_core::PlantParams;
-
     #[test]
     fn names_and_comments_are_escaped() {
         let m = to_mjcf(&lab(), "a<b>&\"c'--", "x--y.toml").unwrap();
@@ -687,9 +696,7 @@ mod tests {
     fn what_mujoco_cannot_express_is_listed_with_its_error() {
         let mut model = lab();
         let delay = EffectKind::from_name("delay").unwrap();
-        model
-            .effects
-            .insert(servo_core::effects::Effect::new(delay, &[0.02]).unwrap());
+        model.effects.insert(Effect::new(delay, &[0.02]).unwrap());
         let m = to_mjcf(&model, "d", "d.toml").unwrap();
         assert_eq!(m.left_out.len(), 1, "{:?}", m.left_out);
         assert_eq!(m.left_out[0].name, "delay");
@@ -704,5 +711,74 @@ mod tests {
         model.drive = Drive::duty(None, None);
         let e = to_mjcf(&model, "d", "d.toml").unwrap_err().to_string();
         assert!(e.contains("v_supply_v"), "{e}");
+    }
+
+    #[test]
+    fn a_screw_is_a_slide_in_metres() {
+        use servo_core::transmission::{EncoderSide, Transmission, TransmissionKind};
+        let mut model = lab();
+        let lead = 0.012;
+        model.transmission = Transmission {
+            kind: TransmissionKind::Screw { lead_m: lead },
+            encoder: EncoderSide::Load,
+        };
+        let gravity = Effect::new(effects::GRAVITY, &[0.05, 0.0]).unwrap();
+        model.effects.insert(gravity);
+        let m = to_mjcf(&model, "screw", "s.toml").unwrap();
+        let s = lead / std::f64::consts::TAU;
+        let n = PlantParams::LAB.n;
+        assert_eq!((m.joint, m.position_unit), ("slide", "m"));
+        assert!(m.xml.contains(r#"type="slide""#));
+        assert!((attr_of(&m.xml, "gear") / (n / s) - 1.0).abs() < 1e-12);
+        assert!((attr_of(&m.xml, "frictionloss") / (9e-3 / s) - 1.0).abs() < 1e-12);
+        assert!((attr_of(&m.xml, "damping") / (n * n * 1e-6 / (s * s)) - 1.0).abs() < 1e-12);
+        let mass = attr_of(&m.xml, "mass") + attr_of(&m.xml, "armature");
+        assert!(
+            (mass / (n * n * 7e-7 / (s * s)) - 1.0).abs() < 1e-12,
+            "{mass}"
+        );
+        // Gravity on a linear axis is a constant force, not this periodic torque: left out.
+        assert_eq!(m.left_out.len(), 1, "{:?}", m.left_out);
+        assert_eq!(m.left_out[0].name, effects::GRAVITY.name());
+    }
+
+    #[test]
+    fn a_current_drive_is_a_torque_source_in_amps() {
+        let mut model = lab();
+        model.drive = Drive {
+            i_limit_a: Some(2.0),
+            ..Drive::current(Some(200.0))
+        };
+        let m = to_mjcf(&model, "c", "c.toml").unwrap();
+        let k_t = PlantParams::LAB.k_t;
+        assert_eq!(m.ctrl_unit, "A");
+        assert_eq!(attr_of(&m.xml, "gainprm"), k_t);
+        assert!(!m.xml.contains("biasprm="), "{}", m.xml);
+        assert_eq!(attr_of(&m.xml, "ctrlrange"), 2.0);
+        assert_eq!(attr_of(&m.xml, "forcerange"), k_t * 2.0);
+        let lag = 1.0 / (std::f64::consts::TAU * 200.0);
+        assert!((attr_of(&m.xml, "dynprm") / lag - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn gravity_is_a_point_mass_whose_m_g_l_is_the_amplitude() {
+        let mut model = lab();
+        let (a, phi) = (0.08, 0.3);
+        model
+            .effects
+            .insert(Effect::new(effects::GRAVITY, &[a, phi]).unwrap());
+        let m = to_mjcf(&model, "arm", "a.toml").unwrap();
+        let mass = attr_of(&m.xml, "mass");
+        let k = " pos=\"0 ";
+        let i = m.xml.find(k).unwrap() + k.len();
+        let yz: Vec<f64> = m.xml[i..i + m.xml[i..].find('"').unwrap()]
+            .split_whitespace()
+            .map(|v| v.parse().unwrap())
+            .collect();
+        let l = yz[0].hypot(yz[1]);
+        assert!((mass * G_M_S2 * l / a - 1.0).abs() < 1e-9);
+        // theta_l = 0 is phi past the bottom: y = L sin(phi), z = -L cos(phi).
+        assert!((yz[0].atan2(-yz[1]) - phi).abs() < 1e-9, "{yz:?}");
+        assert!(m.left_out.is_empty());
     }
 }
