@@ -36,12 +36,17 @@ for k in range(len(t)):
 print((sq / len(t)) ** 0.5, max(th) - min(th), m.njnt, m.nu)
 "#;
 
-/// A Python with `mujoco`, or None (the reason printed).
+/// A Python with `mujoco`, or None (the reason printed). A Python named by `SERVO_MUJOCO_PYTHON` must have it (CI's venv: the test fails there).
 fn mujoco_python() -> Option<String> {
-    let py = std::env::var("SERVO_MUJOCO_PYTHON").unwrap_or_else(|_| "python3".to_string());
+    let given = std::env::var("SERVO_MUJOCO_PYTHON").ok();
+    let py = given.clone().unwrap_or_else(|| "python3".to_string());
     match Command::new(&py).args(["-c", "import mujoco"]).output() {
         Ok(o) if o.status.success() => Some(py),
-        _ => {
+        other => {
+            assert!(
+                given.is_none(),
+                "SERVO_MUJOCO_PYTHON={py} cannot import mujoco: {other:?}"
+            );
             eprintln!(
                 "SKIPPED the MuJoCo replay: `{py} -c 'import mujoco'` failed (pip install mujoco, \
                  or set SERVO_MUJOCO_PYTHON to a Python that has it)"
