@@ -781,4 +781,26 @@ mod tests {
         assert!((yz[0].atan2(-yz[1]) - phi).abs() < 1e-9, "{yz:?}");
         assert!(m.left_out.is_empty());
     }
+
+    #[test]
+    fn a_duty_drive_takes_the_duty_and_lists_its_dead_time() {
+        let mut model = lab();
+        model.drive = Drive {
+            t_dead_s: Some(2e-6),
+            f_pwm_hz: Some(20e3),
+            duty_limit: Some(0.95),
+            ..Drive::duty(Some(12.0), None)
+        };
+        let m = to_mjcf(&model, "d", "d.toml").unwrap();
+        let p = PlantParams::LAB;
+        assert_eq!(m.ctrl_unit, "duty (fraction)");
+        assert_eq!(
+            attr_of(&m.xml, "gainprm"),
+            p.k_t * p.k_drv * 12.0 / p.r_eq()
+        );
+        assert_eq!(attr_of(&m.xml, "ctrlrange"), 0.95);
+        assert_eq!(m.left_out.len(), 1, "{:?}", m.left_out);
+        assert!(m.left_out[0].name.contains("dead-time"));
+        assert!(m.left_out[0].rmse > 0.0);
+    }
 }
