@@ -27,8 +27,8 @@
 //!   product m g L and the total inertia, not m and L apart, so L is chosen so that the point
 //!   mass carries 99 % of the body's inertia (a simple pendulum), and the comment says so.
 //!
-//! Everything else (dead band, delay, Stribeck, cogging, play, asymmetric friction, user-defined
-//! effects, a duty drive's dead-time loss) is left out, listed in an XML comment and in
+//! Everything else (a dead band, a delay, friction laws other than Coulomb and viscous, periodic
+//! torques, play, user-defined effects, a duty drive's dead-time loss) is left out, listed in an XML comment and in
 //! [`Mjcf::left_out`] with the error it leaves: servo's simulator drives the model with and
 //! without it, open loop, on random command steps ([`PROBE_S`] s, levels of 10 % to 100 % of
 //! the command's range), and the RMSE of the load position is given with the travel.
