@@ -23,6 +23,7 @@ mod identify;
 mod layout;
 mod log_reader;
 mod mat;
+mod mjcf;
 mod outputs;
 mod promises;
 mod registry;

@@ -21,6 +21,7 @@
 //! * [`mat_read`], [`mat_path`], [`mat_log`]: MATLAB MAT-files (Level 5, -v6/-v7), MATLAB paths
 //!   in `--columns`, Simulink Scope structures.
 //! * [`markup`]: HTML and SVG escaped by construction (the reports and charts).
+//! * [`mjcf`]: a model file as a MuJoCo model (MJCF), with what MuJoCo cannot express.
 
 pub mod chart_axes;
 pub mod columns;
@@ -43,6 +44,7 @@ pub mod mat_read;
 pub mod mcap_read;
 pub mod mcap_recover;
 pub mod mcap_write;
+pub mod mjcf;
 pub mod model_file;
 pub mod output;
 pub mod recipe_file;

@@ -1,6 +1,7 @@
-//! `servo export`: convert a log between MCAP and servo's CSV.
+//! `servo export`: convert a log between MCAP and servo's CSV, or a model file to MuJoCo.
 //!
 //! ```text
+//! servo export model.toml -o arm.xml          model file -> MuJoCo MJCF (servo_io::mjcf)
 //! servo export run.mcap -o run.csv            MCAP -> CSV (time_s,u_V,theta_l_rad,i_a_A,ref_rad,omega_l_rad_s)
 //! servo export lab.csv -o lab.mcap --columns time=t_s,theta_l=thl_meas_deg:deg,u=u_V
 //! ```
@@ -15,10 +16,10 @@ use std::path::PathBuf;
 /// Convert a log: MCAP -> CSV, or CSV (servo's or foreign with --columns) -> MCAP/CSV.
 #[derive(Debug, clap::Parser)]
 pub struct Export {
-    /// Input log (.mcap, .csv or MATLAB .mat).
+    /// Input log (.mcap, .csv or MATLAB .mat), or a model file (.toml) to write as MuJoCo MJCF.
     pub input: PathBuf,
-    /// Output file; the format follows the extension (.csv or .mcap). Default: the input with
-    /// .csv (or .mcap for a CSV input).
+    /// Output file; the format follows the extension (.csv or .mcap; .xml for a model file).
+    /// Default: the input with .csv (or .mcap for a CSV input, .xml for a model file).
     #[arg(short = 'o', long = "output", value_name = "FILE")]
     pub output: Option<PathBuf>,
     /// Column map of a foreign CSV input, e.g. `time=t_s,theta_l=thl_meas_deg:deg,u=u_V,i_a=ia_A`,
@@ -32,6 +33,13 @@ pub struct Export {
 
 impl Export {
     pub fn run(self) -> anyhow::Result<()> {
+        if self
+            .input
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
+        {
+            return self.model();
+        }
         let registry = Registry::built_in();
         let format = |path: &std::path::Path| -> anyhow::Result<&'static str> {
             let reader = registry.reader_for(path)?;
@@ -100,6 +108,45 @@ impl Export {
             rec.len(),
             rec.time_s.last().copied().unwrap_or(0.0) - rec.time_s.first().copied().unwrap_or(0.0),
             rec.signals().join(", ")
+        );
+        Ok(())
+    }
+
+    /// A model file to MuJoCo MJCF: the writer is `servo_io::mjcf`.
+    fn model(self) -> anyhow::Result<()> {
+        if self.columns.is_some() || !self.part.window.is_empty() {
+            bail!(
+                "--columns and the part options apply to a log; {} is a model file",
+                self.input.display()
+            );
+        }
+        let output = self
+            .output
+            .clone()
+            .unwrap_or_else(|| self.input.with_extension("xml"));
+        if !output
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("xml"))
+        {
+            bail!(
+                "{}: a model file exports to MuJoCo's MJCF; give an .xml output (-o NAME.xml)",
+                output.display()
+            );
+        }
+        let (m, _) = crate::io::mjcf::export(&self.input, &output)?;
+        for n in &m.notes {
+            outln!("note: {n}");
+        }
+        for l in m.summary() {
+            outln!("{l}");
+        }
+        outln!(
+            "{} -> {}: MuJoCo MJCF, one {} joint (position in {}), one actuator whose ctrl is the command [{}]",
+            self.input.display(),
+            output.display(),
+            m.joint,
+            m.position_unit,
+            m.ctrl_unit
         );
         Ok(())
     }
