@@ -157,12 +157,7 @@ pub(super) fn print_text(
                 e.def.acts_on().unit()
             );
         }
-        outln!(
-            "  base        J_eq = {:.4e} kg m^2, R_eq = {:.4} ohm, k_drv = {:.4}",
-            c.plant.params.j_eq(),
-            c.plant.params.r_eq(),
-            c.plant.params.k_drv
-        );
+        outln!("  base        {}", base_words(logs, &c.plant.params));
         if let Some(a) = axis {
             out!(
                 "  base      {}",
@@ -254,6 +249,27 @@ pub fn controller_description(log: &LogData) -> Option<String> {
     log.controller
         .as_ref()
         .map(|c| format!("controller: {}", c.describe()))
+}
+
+/// The refitted base in the drive's own terms: a current drive's logs (i_ref) have no electrical
+/// constants (the model's R_eq and k_drv are its internal current source), a duty drive's have
+/// no driver gain (its R_eq is the bridge's: R_a + R_s + the supply's).
+fn base_words(logs: &[LogData], p: &servo_core::PlantParams) -> String {
+    let sig = |v: f64| servo_core::math::sig(v, 5);
+    let j = format!("J_eq = {:.4e} kg m^2", p.j_eq());
+    if logs.iter().any(|l| l.record.i_ref_a.is_some()) {
+        format!(
+            "{j}, k_t = {} N m/A (a current drive: nothing electrical is fitted)",
+            sig(p.k_t)
+        )
+    } else if logs.iter().any(|l| l.record.duty.is_some()) {
+        format!(
+            "{j}, R_eq = {} ohm (the bridge's R_a + R_s + supply)",
+            sig(p.r_eq())
+        )
+    } else {
+        format!("{j}, R_eq = {:.4} ohm, k_drv = {:.4}", p.r_eq(), p.k_drv)
+    }
 }
 
 /// The check of each effect a run compensated against its log: the suspect first, in words.
