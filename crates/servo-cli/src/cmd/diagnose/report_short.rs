@@ -58,7 +58,7 @@ pub(super) fn short_report(
     let _ = writeln!(s, "Verdict: {}", last.verdict);
     let _ = writeln!(s, "{}", headline(ladder, last));
     let _ = writeln!(s, "{next}");
-    let _ = writeln!(s, "\nWhy: {plant_line}");
+    let _ = writeln!(s, "\nWhy:\n{plant_line}");
     let _ = writeln!(s, "Model residual (base parameters refitted):");
     s.push_str(&where_it_fails(first));
     s.push_str(&balances_text(first));
