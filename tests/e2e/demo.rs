@@ -38,6 +38,23 @@ fn demo_tells_the_whole_story() {
     let (ok, stdout, stderr) = servo(&["demo", "--out", out.to_str().unwrap()]);
     println!("{stdout}");
     assert!(ok, "servo demo failed: {stderr}\n{stdout}");
+    // The default text is the story, short: each step's command and its one-line result, and
+    // its normal path says nothing that reads as an error.
+    let lines = stdout.lines().count();
+    assert!(lines <= 40, "the demo prints {lines} lines:\n{stdout}");
+    for l in stdout.lines().chain(stderr.lines()) {
+        let low = l.to_ascii_lowercase();
+        for word in [
+            "error:",
+            "warning",
+            "not identified",
+            "negative",
+            "unphysical",
+            "failed",
+        ] {
+            assert!(!low.contains(word), "the demo says `{word}`: {l}");
+        }
+    }
 
     for f in [
         "gains.toml",

@@ -1278,3 +1278,115 @@ fn design_checks_gains_through_the_drive_servo_run_simulates() {
         "the loop asked for {asked} A at most: the clip did not act\n{out}"
     );
 }
+
+/// A current drive's user output says the drive's own terms: gains in A/rad in the design and
+/// in the run's controller line, never V/rad; no internal equivalent constant (the current
+/// source's R_eq and k_drv of 500) given a value in the text of design, run, identify,
+/// compare --add and diagnose; no number printed with more than 6 significant figures.
+#[test]
+fn a_current_drive_says_amps_and_no_internal_constants() {
+    let _machine = servo_e2e::shared();
+    let dir = tempfile::tempdir().unwrap();
+    let p = |f: &str| dir.path().join(f).to_str().unwrap().to_string();
+    let rig = current_rig();
+    std::fs::write(p("truth.toml"), true_base(&rig)).unwrap();
+    std::fs::write(p("drive.toml"), rig.params_toml("")).unwrap();
+    let mut said = Vec::new();
+    let mut ok = |args: &[&str]| -> String {
+        let (ok, out, err) = servo(args);
+        assert!(ok, "servo {args:?}: {err}\n{out}");
+        said.push((args.join(" "), format!("{out}{err}")));
+        out
+    };
+    let design = ok(&[
+        "design",
+        "--model",
+        &p("drive.toml"),
+        "--wc",
+        "20",
+        "--pm",
+        "60",
+        "-o",
+        &p("g.toml"),
+    ]);
+    assert!(
+        design.contains("A/rad") && !design.contains("V/rad"),
+        "{design}"
+    );
+    let run = ok(&[
+        "run",
+        "--plant",
+        &p("truth.toml"),
+        "--gains",
+        &p("g.toml"),
+        "--ref",
+        "square:amp=0.5,period=2",
+        "--duration",
+        "6",
+        "--seed",
+        "3",
+        "--log",
+        &p("cl.mcap"),
+    ]);
+    assert!(
+        run.contains("K_P = ") && run.contains("A/rad") && !run.contains("V/rad"),
+        "{run}"
+    );
+    ok(&[
+        "run",
+        "--plant",
+        &p("truth.toml"),
+        "--command",
+        "prbs:amp=0.5,bit=0.3",
+        "--duration",
+        "8",
+        "--seed",
+        "4",
+        "--log",
+        &p("open.mcap"),
+    ]);
+    ok(&[
+        "identify",
+        &p("open.mcap"),
+        "--params",
+        &p("drive.toml"),
+        "-o",
+        &p("id.toml"),
+    ]);
+    ok(&[
+        "compare",
+        &p("cl.mcap"),
+        &p("open.mcap"),
+        "--model",
+        &p("id.toml"),
+        "--add",
+        "imbalance",
+    ]);
+    ok(&[
+        "diagnose",
+        &p("cl.mcap"),
+        &p("open.mcap"),
+        "--model",
+        &p("id.toml"),
+    ]);
+    let long = |w: &str| {
+        let digits: String = w
+            .chars()
+            .take_while(|c| c.is_ascii_digit() || *c == '.')
+            .collect();
+        digits.contains('.') && digits.chars().filter(char::is_ascii_digit).count() > 12
+    };
+    for (cmd, text) in &said {
+        for bad in [
+            "R_eq =", "k_drv =", "R_eq,", "k_drv,", "500.0000", "500 ohm",
+        ] {
+            assert!(!text.contains(bad), "servo {cmd} says `{bad}`:\n{text}");
+        }
+        for w in text.split(|c: char| c.is_whitespace() || c == '(' || c == ',') {
+            assert!(
+                !long(w.trim_start_matches('-')),
+                "servo {cmd} prints `{w}`:\n{text}"
+            );
+        }
+    }
+}

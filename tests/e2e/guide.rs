@@ -502,12 +502,13 @@ fn the_readme_story_runs_as_written() {
             .output()
             .expect("spawn servo");
         let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
         assert!(
             out.status.success(),
-            "servo {} failed:\n{stdout}\n{}",
+            "servo {} failed:\n{stdout}\n{stderr}",
             cmd.args.join(" "),
-            String::from_utf8_lossy(&out.stderr)
         );
+        says_only_what_is_so(&cmd.args, &stdout, &stderr);
         eprintln!(
             "servo {}: {:.1} s",
             cmd.args.join(" "),
@@ -569,6 +570,191 @@ fn the_readme_story_runs_as_written() {
         second[0].contains("Status: complete"),
         "the second diagnosis is not complete:\n{}",
         second[0]
+    );
+}
+
+/// A warning line: something the user should fix.
+fn is_warning(line: &str) -> bool {
+    let l = line.trim_start().to_ascii_lowercase();
+    l.starts_with("warning") || l.contains(" warning:")
+}
+
+/// The default text of a documented command: no warning (the README's story and the guide's
+/// commands do nothing wrong), and the answer first within its line budget: diagnose at most
+/// 40 lines with the verdict in the first 10, design at most 30, identify at most 25.
+fn says_only_what_is_so(args: &[String], stdout: &str, stderr: &str) {
+    let cmd = format!("servo {}", args.join(" "));
+    for l in stdout.lines().chain(stderr.lines()) {
+        assert!(!is_warning(l), "{cmd} warns: {l}\n{stdout}\n{stderr}");
+    }
+    if args.iter().any(|a| a == "--json" || a == "--verbose") {
+        return;
+    }
+    let lines: Vec<&str> = stdout.lines().collect();
+    let budget = match args[0].as_str() {
+        "diagnose" => {
+            let at = lines.iter().position(|l| l.starts_with("Verdict: "));
+            assert!(
+                at.is_some_and(|i| i < 10),
+                "{cmd}: the verdict is not within the first 10 lines:\n{stdout}"
+            );
+            40
+        }
+        "design" => 30,
+        "identify" => 25,
+        _ => return,
+    };
+    assert!(
+        lines.len() <= budget,
+        "{cmd} prints {} lines (at most {budget}):\n{stdout}",
+        lines.len()
+    );
+}
+
+#[test]
+fn the_output_checker_sees_warnings_and_budgets() {
+    let _machine = servo_e2e::shared();
+    assert!(is_warning(
+        "WARNING: these gains do not reproduce the logged u"
+    ));
+    assert!(is_warning(
+        "  warning: the gains were designed for another plant"
+    ));
+    assert!(!is_warning(
+        "note: kept the previous run.mcap as run.mcap.1"
+    ));
+    let args = |a: &[&str]| a.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+    let long = "x\n".repeat(26);
+    let caught = |f: &dyn Fn()| std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).is_err();
+    assert!(caught(&|| says_only_what_is_so(
+        &args(&["identify"]),
+        &long,
+        ""
+    )));
+    assert!(!caught(&|| says_only_what_is_so(
+        &args(&["design"]),
+        &long,
+        ""
+    )));
+    let late = format!("{}Verdict: missing\n", "x\n".repeat(10));
+    assert!(caught(&|| says_only_what_is_so(
+        &args(&["diagnose"]),
+        &late,
+        ""
+    )));
+    assert!(caught(&|| says_only_what_is_so(
+        &args(&["run"]),
+        "",
+        "WARNING: x"
+    )));
+}
+
+/// The first number in `s` (a table cell such as `7.165e-7 (published ...)`).
+fn first_number(s: &str) -> f64 {
+    s.split(|c: char| !(c.is_ascii_digit() || c == '.' || c == 'e' || c == '-' || c == '+'))
+        .filter_map(|t| t.parse::<f64>().ok())
+        .next()
+        .unwrap_or_else(|| panic!("no number in {s:?}"))
+}
+
+/// The cells of the table row of `doc` that starts with `| {first}`.
+fn row<'a>(doc: &'a str, first: &str) -> Vec<&'a str> {
+    let l = doc
+        .lines()
+        .find(|l| l.starts_with(&format!("| {first}")))
+        .unwrap_or_else(|| panic!("the lab-data chapter has no row {first:?}"));
+    l.trim_matches('|').split('|').map(str::trim).collect()
+}
+
+/// `a` equals `documented` at the precision it is printed with (its last digit), 2 % when the
+/// documentation rounds coarser than that.
+fn as_documented(a: f64, documented: f64, digits: usize, what: &str) {
+    let tol = documented.abs() * 0.5 * 10f64.powi(1 - digits as i32);
+    assert!(
+        (a - documented).abs() <= tol * 1.0001,
+        "{what}: servo gives {a}, the lab-data chapter documents {documented}"
+    );
+}
+
+/// The lab-data chapter's commands run as written (its ```sh blocks, in order, with `servo` on
+/// the path and `../shared/realdata` where it is) and give the numbers it documents: the
+/// identified friction and inertia of padova2021-jacopisky, the fit of the frictionless nominal
+/// model on the real Bode-PID steps and after `--add coulomb`, and the diagnosis' error ladder.
+#[test]
+fn the_lab_data_chapter_reproduces_its_numbers() {
+    let _machine = servo_e2e::shared();
+    let Some(real) = servo_e2e::realdata_dir() else {
+        eprintln!("skipped: no ../shared/realdata (the lab data are not part of the repository)");
+        return;
+    };
+    let docs = docs();
+    let chapter = docs
+        .iter()
+        .find(|d| d.path.ends_with("lab-data.md"))
+        .expect("lab-data.md");
+    let dir = tempfile::tempdir().unwrap();
+    let bin = dir.path().join("bin");
+    std::fs::create_dir(&bin).unwrap();
+    std::os::unix::fs::symlink(servo_bin(), bin.join("servo")).unwrap();
+    let path = format!(
+        "{}:{}",
+        bin.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    let mut outputs = String::new();
+    for b in blocks(&chapter.text)
+        .into_iter()
+        .filter(|b| is_checked_sh(&b.info))
+    {
+        let script = b
+            .lines
+            .join("\n")
+            .replace("../shared/realdata", &real.display().to_string());
+        let out = Command::new("bash")
+            .args(["-eu", "-c", &script])
+            .env("PATH", &path)
+            .current_dir(dir.path())
+            .output()
+            .expect("spawn bash");
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(
+            out.status.success(),
+            "lab-data.md line {}: the block failed:\n{script}\n{stdout}\n{}",
+            b.line,
+            String::from_utf8_lossy(&out.stderr)
+        );
+        outputs.push_str(&stdout);
+    }
+    let text = &chapter.text;
+    // identify: the jacopisky row (B_eq, tau_sf, J_eq) from the model it wrote
+    let model: toml::Table =
+        toml::from_str(&std::fs::read_to_string(dir.path().join("jacopisky.toml")).unwrap())
+            .unwrap();
+    let cells = row(text, "padova2021-jacopisky");
+    for (cell, key) in cells[1..4].iter().zip(["b_eq", "tau_sf", "j_eq"]) {
+        let doc = first_number(cell);
+        let got = model["params"][key].as_float().unwrap();
+        let mantissa = cell.split_whitespace().next().unwrap();
+        let digits = mantissa
+            .split('e')
+            .next()
+            .unwrap()
+            .replace(['.', '-'], "")
+            .len();
+        as_documented(got, doc, digits, &format!("identify {key}"));
+    }
+    // compare: the frictionless nominal model, then `--add coulomb`
+    let ladders: Vec<Vec<f64>> = outputs
+        .match_indices("error ladder")
+        .map(|(i, _)| ladder_fits(&outputs[i..]))
+        .collect();
+    let nominal = first_number(row(text, "nominal datasheet (no friction)")[1]);
+    let added = first_number(row(text, "`--add coulomb`")[1]);
+    assert!(
+        ladders.iter().any(|f| f.len() == 2
+            && (f[0] - nominal).abs() < 0.006
+            && (f[1] - added).abs() < 0.006),
+        "compare: the chapter documents {nominal} % -> {added} %, servo gives the ladders {ladders:?}"
     );
 }
 

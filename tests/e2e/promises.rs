@@ -210,6 +210,7 @@ fn diagnose_auto_saves_only_a_model_that_does_not_predict_worse() {
         "--save",
         p(&out),
         "--force",
+        "--verbose",
     ]);
     assert!(
         text.contains("min_bic_gain"),

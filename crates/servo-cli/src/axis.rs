@@ -108,7 +108,7 @@ impl Axis {
     pub fn effect_text(&self, e: &Effect) -> String {
         self.effect_params(e)
             .iter()
-            .map(|(k, v, u)| format!("{k} = {} {u}", servo_core::math::Num(*v)))
+            .map(|(k, v, u)| format!("{k} = {} {u}", crate::cmd::design::sig6(*v)))
             .collect::<Vec<_>>()
             .join(", ")
     }

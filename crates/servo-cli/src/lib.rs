@@ -3,14 +3,19 @@
 
 /// `println!` that never panics: when stdout is closed (`servo ... | head`), the line is dropped
 /// and the command goes on (a run still finishes its log). Plain `println!` would panic.
+/// Prints nothing while [`quiet`] (the commands `servo demo` runs for its short story).
 macro_rules! outln {
     () => {{
         use std::io::Write as _;
-        let _ = writeln!(std::io::stdout());
+        if !$crate::quiet() {
+            let _ = writeln!(std::io::stdout());
+        }
     }};
     ($($arg:tt)*) => {{
         use std::io::Write as _;
-        let _ = writeln!(std::io::stdout(), $($arg)*);
+        if !$crate::quiet() {
+            let _ = writeln!(std::io::stdout(), $($arg)*);
+        }
     }};
 }
 
@@ -18,8 +23,24 @@ macro_rules! outln {
 macro_rules! out {
     ($($arg:tt)*) => {{
         use std::io::Write as _;
-        let _ = write!(std::io::stdout(), $($arg)*);
+        if !$crate::quiet() {
+            let _ = write!(std::io::stdout(), $($arg)*);
+        }
     }};
+}
+
+/// While set, `outln!` and `out!` print nothing: `servo demo` runs its commands this way and
+/// prints each one's headline (its `--verbose` prints every command's full text).
+static QUIET: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Whether the commands' text is muted (see [`QUIET`]).
+pub fn quiet() -> bool {
+    QUIET.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// Mutes (`true`) or restores (`false`) the commands' text; returns the previous state.
+pub fn set_quiet(on: bool) -> bool {
+    QUIET.swap(on, std::sync::atomic::Ordering::Relaxed)
 }
 
 pub mod axis;

@@ -498,7 +498,9 @@ pub fn parse_reader<R: std::io::Read>(
     for (e, _, col, nans, _) in cols {
         if nans > 0 {
             notes.push(format!(
-                "{source}: column `{}` has {nans} empty or non-finite values (kept as NaN)",
+                "{source}: column `{}` has {nans} empty or non-finite values (kept as NaN; \
+                 a command that needs the signal there refuses the log: fill or drop those \
+                 rows, or take a part of the log without them with --window START..END)",
                 e.column
             ));
         }

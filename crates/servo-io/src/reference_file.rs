@@ -47,6 +47,10 @@ struct HeaderToml {
     name: Option<String>,
     description: Option<String>,
     repeat: Option<u32>,
+    /// What the closed-loop references are: `"rad"`, load angles on any axis (on a linear axis
+    /// the load shaft's angle, which its transmission turns into a travel), or `"m"`, lengths
+    /// on a linear axis (the default there).
+    units: Option<String>,
 }
 
 #[derive(Debug, serde::Deserialize)]
@@ -167,6 +171,17 @@ impl Experiment {
         if file.segments.is_empty() {
             bail!("{origin}: no [[segment]]; expected at least one with `ref = \"...\"` or `u = \"...\"` and `duration_s`");
         }
+        let angles = match header.as_ref().and_then(|h| h.units.as_deref()) {
+            None => false,
+            Some("rad") => true,
+            Some("m") if metres_per_rad.is_none() => bail!(
+                "{origin}: [experiment] units = \"m\": its references are lengths, and this plant is rotary (no linear [transmission]); use a recipe in rad"
+            ),
+            Some("m") => false,
+            Some(other) => bail!(
+                "{origin}: [experiment] units = \"{other}\": expected \"rad\" (load angles, on any axis; on a linear axis the load shaft's angle) or \"m\" (lengths on a linear axis)"
+            ),
+        };
         let mut one_pass = Vec::with_capacity(file.segments.len());
         for (i, s) in file.segments.iter().enumerate() {
             let n = i + 1;
@@ -180,7 +195,7 @@ impl Experiment {
                 (None, None) => bail!("{origin}: segment {n} needs `ref = \"...\"` (closed loop, rad) or `u = \"...\"` (open loop, V)"),
             };
             let line = line_of(text_sp.span());
-            let on = metres_per_rad.filter(|_| target == Target::Position);
+            let on = metres_per_rad.filter(|_| target == Target::Position && !angles);
             let reference = Reference::parse_on(text_sp.get_ref(), on).map_err(|e| {
                 anyhow!(
                     "{origin}:{line}: segment {n}, `{key} = \"{}\"`: {e}",
@@ -273,6 +288,35 @@ mod tests {
 
     fn experiments_dir() -> std::path::PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments")
+    }
+
+    /// A recipe in load angles (`units = "rad"`) on a linear axis moves the load shaft by those
+    /// angles (the transmission sets the travel), never by as many metres; one without `units`
+    /// is in metres there; `units = "m"` on a rotary plant and an unknown unit are refused.
+    #[test]
+    fn recipe_units_scale_to_the_rig_or_refuse() {
+        let text = std::fs::read_to_string(experiments_dir().join("tracking.toml")).unwrap();
+        let lead_m_per_rad = 0.010 / (2.0 * PI);
+        let on_screw = Experiment::parse_on(&text, "tracking.toml", Some(lead_m_per_rad)).unwrap();
+        let rotary = Experiment::parse(&text, "tracking.toml").unwrap();
+        for t in [0.5, 1.0, 1.9, 3.0, 9.0] {
+            assert_eq!(
+                pos(on_screw.at(t)).pos_rad,
+                pos(rotary.at(t)).pos_rad,
+                "t = {t}"
+            );
+        }
+        assert!((pos(rotary.at(1.99)).pos_rad - 1.5).abs() < 1e-9);
+        let metres = text.replace("units = \"rad\"", "units = \"m\"");
+        let in_m = Experiment::parse_on(&metres, "x.toml", Some(lead_m_per_rad)).unwrap();
+        assert!((pos(in_m.at(1.99)).pos_rad - 1.5 / lead_m_per_rad).abs() < 1e-6);
+        let e = Experiment::parse(&metres, "x.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("units = \"m\"") && e.contains("rotary"), "{e}");
+        let odd = text.replace("units = \"rad\"", "units = \"furlong\"");
+        let e = Experiment::parse(&odd, "x.toml").unwrap_err().to_string();
+        assert!(e.contains("furlong") && e.contains("expected"), "{e}");
     }
 
     #[test]

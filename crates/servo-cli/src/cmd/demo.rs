@@ -47,6 +47,10 @@ pub struct Demo {
     /// the story must find.
     #[arg(long, value_name = "EFFECT", default_value = HIDDEN_EFFECT)]
     pub hidden: String,
+    /// Print each command's full text and every file written (default: each step's command
+    /// line and its one-line result).
+    #[arg(long)]
+    pub verbose: bool,
 }
 
 /// What the stages share.
@@ -192,7 +196,10 @@ fn main_unit(kind: EffectKind) -> &'static str {
 /// Prints the command line a user would type for a stage, and parses it with the command's own
 /// parser.
 fn command<T: clap::Parser>(args: &[String]) -> anyhow::Result<T> {
+    // Printed in the short story too (the command is what a user takes away from it).
+    let was = crate::set_quiet(false);
     outln!("   $ servo {}", args.join(" "));
+    crate::set_quiet(was);
     T::try_parse_from(args).map_err(|e| anyhow!("demo command `servo {}`: {e}", args.join(" ")))
 }
 
@@ -249,24 +256,36 @@ impl Demo {
         let mut story = Vec::new();
         for (i, st) in all.iter().enumerate() {
             outln!("== [{}/{}] {}: {}", i + 1, all.len(), st.name, st.what);
+            let was = crate::set_quiet(!self.verbose);
+            let result = (st.run)(&mut ctx);
+            crate::set_quiet(was);
             let (headline, written) =
-                (st.run)(&mut ctx).with_context(|| format!("demo stage `{}`", st.name))?;
+                result.with_context(|| format!("demo stage `{}`", st.name))?;
             outln!("   -> {headline}");
-            for f in written.iter().filter(|f| !ctx.announced.contains(f)) {
-                outln!("      wrote {}", f.display());
+            if self.verbose {
+                for f in written.iter().filter(|f| !ctx.announced.contains(f)) {
+                    outln!("      wrote {}", f.display());
+                }
             }
             files.extend(written);
             story.push((st.name, headline));
         }
-        outln!("== the story");
-        for (name, headline) in &story {
-            outln!("  {name:<12} {headline}");
+        if self.verbose {
+            outln!("== the story");
+            for (name, headline) in &story {
+                outln!("  {name:<12} {headline}");
+            }
         }
         outln!(
-            "demo done in {:.1} s; {} files in {}",
+            "demo done in {:.1} s; {} files in {}{}",
             t0.elapsed().as_secs_f64(),
             files.len(),
-            display_dir(&self.out)
+            display_dir(&self.out),
+            if self.verbose {
+                ""
+            } else {
+                " (--verbose: each command's full text and every file it wrote)"
+            }
         );
         Ok(())
     }

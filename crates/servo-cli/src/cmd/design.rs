@@ -12,6 +12,8 @@ mod request;
 mod spec_plot;
 mod step_plot;
 mod summary;
+/// A number to six significant figures at most, without trailing zeros.
+pub(crate) use summary::sig as sig6;
 mod words;
 
 use on_run::*;

@@ -7,10 +7,12 @@
 mod report_compensation;
 mod report_html;
 mod report_json;
+mod report_short;
 mod report_text;
 
 use report_html::*;
 use report_json::*;
+use report_short::*;
 use report_text::*;
 
 use crate::model_file::ModelFile;
@@ -44,6 +46,9 @@ pub struct Diagnose {
     /// Print one JSON object `{ "ranking": [...], "verdict": ... }` instead of text.
     #[arg(long)]
     pub json: bool,
+    /// The full text report: every candidate, the measured friction curve, the bars.
+    #[arg(long)]
+    pub verbose: bool,
     /// Write a self-contained HTML report (inline SVG) to this file.
     #[arg(long)]
     pub report: Option<PathBuf>,
@@ -251,14 +256,25 @@ impl Diagnose {
             crate::json_out::emit(&v)?;
         } else {
             out!("{}", crate::log_part::text(&parts));
-            outln!("{}", plant_and_controller(&self.model, &model, &opts));
-            out!("{}", text_report(first, &ladder, &diags, self.auto, &opts));
+            let plant_line = plant_and_controller(&self.model, &model, &opts);
+            if self.verbose {
+                outln!("{plant_line}");
+                out!("{}", text_report(first, &ladder, &diags, self.auto, &opts));
+            } else {
+                let next = next_step(last, &self.logs, &self.model);
+                let short =
+                    short_report(first, &ladder, &diags, self.auto, &opts, &next, &plant_line);
+                out!("{short}");
+            }
             if let Some(axis) = crate::axis::Axis::of(&model_file) {
                 out!("{}", linear_text(&axis, last, &ladder));
             }
             out!("{}", user.text());
             if let Some(sv) = &saved {
                 outln!("{}", sv.text());
+            }
+            if !self.verbose {
+                outln!("(--verbose: every candidate, the measured friction curve, the bars; --report FILE.html; --json)");
             }
         }
         if let Some(path) = &self.report {

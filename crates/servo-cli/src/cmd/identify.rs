@@ -119,6 +119,10 @@ pub struct Identify {
     #[arg(long = "json")]
     pub json: bool,
 
+    /// Print every friction segment and inertia pair the estimates rest on.
+    #[arg(long)]
+    pub verbose: bool,
+
     /// Write a model file with the identified j_eq, b_eq, tau_sf and a [provenance] table.
     #[arg(short = 'o', long = "output", value_name = "MODEL_TOML")]
     pub output: Option<PathBuf>,
@@ -339,13 +343,7 @@ impl Identify {
             let mut clamped: Vec<String> = Vec::new();
             for (name, unit, est) in [("B_eq", "N m s/rad", b), ("tau_sf", "N m", t)] {
                 if let Some((e, _)) = est.filter(|(e, _)| e.value < 0.0) {
-                    clamped.push(format!(
-                        "{name} came out negative ({} {unit}): unphysical, written as 0 in {}; \
-                         the logs hold too little of that friction to measure it, or a torque \
-                         the model lacks",
-                        servo_core::math::sig(e.value, 3),
-                        out.display()
-                    ));
+                    clamped.push(clamp_note(name, unit, &e, out));
                 }
             }
             for c in &clamped {

@@ -53,6 +53,27 @@ pub struct IdentifyOptions {
     pub combined: CombinedConfig,
 }
 
+/// The `skipped` line of a run without the friction staircase (no log has one).
+pub const NO_STAIRCASE: &str =
+    "friction: no log has constant-speed segments at two or more speeds (handout 4.1 staircase)";
+/// The `skipped` line of a run without the inertia ramps (no log has them).
+pub const NO_RAMPS: &str =
+    "inertia: no log has constant acceleration/deceleration phases (handout 4.2)";
+
+/// For a `skipped` line that says an experiment was not in the logs (not that it failed): the
+/// experiment, in words. `None` for a method that ran and failed.
+pub fn absent_experiment(skipped: &str) -> Option<&'static str> {
+    match skipped {
+        NO_STAIRCASE => Some(
+            "the friction staircase (handout 4.1; no log has constant-speed segments at two or more speeds)",
+        ),
+        NO_RAMPS => Some(
+            "the inertia ramps (handout 4.2; no log has constant acceleration/deceleration phases)",
+        ),
+        _ => None,
+    }
+}
+
 /// What the methods gave, and why the others did not run.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Identification {
@@ -180,9 +201,7 @@ pub fn identify(
                     }
                 }
             } else {
-                r.skipped.push(String::from(
-                    "friction: no log has constant-speed segments at two or more speeds (handout 4.1 staircase)",
-                ));
+                r.skipped.push(String::from(NO_STAIRCASE));
             }
             if !ir.is_empty() {
                 match inertia(&ir, r.friction.as_ref()) {
@@ -190,9 +209,7 @@ pub fn identify(
                     Err(e) => r.skipped.push(format!("inertia: {e}")),
                 }
             } else {
-                r.skipped.push(String::from(
-                    "inertia: no log has constant acceleration/deceleration phases (handout 4.2)",
-                ));
+                r.skipped.push(String::from(NO_RAMPS));
             }
             if r.friction.is_none() || r.inertia.is_none() {
                 match identify_combined(exps, p.n, ccfg) {

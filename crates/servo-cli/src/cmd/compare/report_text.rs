@@ -157,12 +157,7 @@ pub(super) fn print_text(
                 e.def.acts_on().unit()
             );
         }
-        outln!(
-            "  base        J_eq = {:.4e} kg m^2, R_eq = {:.4} ohm, k_drv = {:.4}",
-            c.plant.params.j_eq(),
-            c.plant.params.r_eq(),
-            c.plant.params.k_drv
-        );
+        outln!("  base        {}", base_words(model, &c.plant.params));
         if let Some(a) = axis {
             out!(
                 "  base      {}",
@@ -254,6 +249,28 @@ pub fn controller_description(log: &LogData) -> Option<String> {
     log.controller
         .as_ref()
         .map(|c| format!("controller: {}", c.describe()))
+}
+
+/// The refitted base in the drive's own terms (the drive of the model file `model`): a current
+/// drive has no electrical constants (the model's R_eq and k_drv are its internal current
+/// source), a duty drive no driver gain (its R_eq is the bridge's: R_a + R_s + the supply's).
+fn base_words(model: &Path, p: &servo_core::PlantParams) -> String {
+    use servo_core::drive::DriveKind;
+    let sig = crate::cmd::design::sig6;
+    let j = format!("J_eq = {:.4e} kg m^2", p.j_eq());
+    let kind =
+        crate::model_file::ModelFile::load(model).map_or(DriveKind::Voltage, |m| m.drive.kind);
+    match kind {
+        DriveKind::Current => format!(
+            "{j}, k_t = {} N m/A (a current drive: nothing electrical is fitted)",
+            sig(p.k_t)
+        ),
+        DriveKind::Duty => format!(
+            "{j}, R_eq = {} ohm (the bridge's R_a + R_s + supply)",
+            sig(p.r_eq())
+        ),
+        _ => format!("{j}, R_eq = {:.4} ohm, k_drv = {:.4}", p.r_eq(), p.k_drv),
+    }
 }
 
 /// The check of each effect a run compensated against its log: the suspect first, in words.

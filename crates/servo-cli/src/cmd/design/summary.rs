@@ -223,7 +223,7 @@ fn margins_lines(s: &mut String, r: &DesignReport) {
 }
 
 /// A number to six significant figures at most, without trailing zeros.
-pub(super) fn sig(x: f64) -> String {
+pub(crate) fn sig(x: f64) -> String {
     if !x.is_finite() {
         return if x.is_infinite() { "inf" } else { "none" }.into();
     }

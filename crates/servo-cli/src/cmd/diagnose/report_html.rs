@@ -259,6 +259,19 @@ pub(super) fn html_report(
         }
         h.lit("</table>");
     }
+    let friction = friction_text(first);
+    if !friction.is_empty() {
+        markup!(
+            h,
+            "<h2>Measured friction curve</h2><pre>{}</pre>",
+            friction.trim()
+        );
+    }
+    markup!(
+        h,
+        "<h2>Bars (thresholds that can refuse an effect or a verdict)</h2><pre>{}</pre>",
+        bars_text(opts)
+    );
     markup!(h, "<h2>Error ladder</h2><pre>{}</pre>", ladder_text(ladder));
     if ladder.len() > 1 {
         let x: Vec<f64> = (0..ladder.len()).map(|i| i as f64).collect();

@@ -97,82 +97,14 @@ pub(super) fn text_report(
     let mut s = String::new();
     let _ = writeln!(s, "Model residual (base parameters refitted):");
     s.push_str(&where_it_fails(first));
-    for b in &first.balances {
-        // A floor of 0 (no sensor noise model for this balance, e.g. no current logged) is
-        // unknown, not zero: the residual is then said in its own unit, never "inf x".
-        let level = if b.floor > 0.0 && b.floor.is_finite() && b.ratio_to_noise.is_finite() {
-            format!(
-                "noise floor {} {}, residual {} x the floor",
-                servo_core::math::sig(b.floor, 3),
-                b.equation.unit(),
-                servo_core::math::sig(b.ratio_to_noise, 3)
-            )
-        } else {
-            format!(
-                "noise floor unknown (the logs give no sensor noise for this balance, e.g. no current), \
-                 residual RMS {} {}: how much of it is structure cannot be said against noise",
-                servo_core::math::sig(b.rms, 3),
-                b.equation.unit()
-            )
-        };
-        let _ = writeln!(
-            s,
-            "  {}: {level}{}",
-            b.equation.name(),
-            b.signatures.first().map_or(String::new(), |g| format!(
-                "; strongest shape: {} ({:.0} % of the held-out {}; measured on {})",
-                g.description,
-                100.0 * g.share,
-                g.share_of(),
-                g.measured_on
-            ))
-        );
-    }
+    s.push_str(&balances_text(first));
     s.push_str(&friction_text(first));
     for (step, d) in diags.iter().enumerate() {
         if auto {
             let _ = writeln!(s, "\nStep {}:", step + 1);
         }
         let _ = writeln!(s, "\nCandidates, best first:");
-        let _ = writeln!(
-            s,
-            "  {:<11} {:>11} {:>12} {:>10} {:>9}  refused by",
-            "effect",
-            "significant",
-            servo_core::diagnose::phrase::RMS_DROP_COLUMN,
-            "sim. drop",
-            "BIC gain"
-        );
-        for c in &d.ranking {
-            let refused = if c.significant {
-                String::new()
-            } else {
-                servo_core::diagnose::bars::refused_by(c, opts)
-                    .or_else(|| {
-                        c.failed_check()
-                            .map(|k| format!("{}: {}", k.name, k.detail))
-                    })
-                    .unwrap_or_default()
-            };
-            let _ = writeln!(
-                s,
-                "  {:<11} {:>11} {:>11}% {:>10} {:>9.1}  {refused}",
-                c.effect.name(),
-                if c.significant {
-                    "YES"
-                } else if c.resolvable {
-                    "no"
-                } else {
-                    "unresolved"
-                },
-                servo_core::diagnose::phrase::pct(c.error_reduction_pct),
-                c.oe_reduction_pct.map_or("-".to_string(), |v| format!(
-                    "{}%",
-                    servo_core::diagnose::phrase::pct(v)
-                )),
-                c.bic_gain
-            );
-        }
+        s.push_str(&candidates_table(&d.ranking, opts));
         if let Some(w) = d.ranking.first() {
             let _ = writeln!(s, "\nBest candidate: {}", w.evidence);
         }
@@ -182,13 +114,7 @@ pub(super) fn text_report(
         s,
         "\nBars (thresholds that can refuse an effect or a verdict):"
     );
-    for b in servo_core::diagnose::bars::bars(opts) {
-        let _ = writeln!(
-            s,
-            "  {:<27} {} {} {:<14} {}",
-            b.name, b.rule, b.value, b.unit, b.why
-        );
-    }
+    s.push_str(&bars_text(opts));
     if auto {
         let _ = writeln!(s, "\nError ladder:");
         s.push_str(&ladder_text(ladder));
@@ -291,6 +217,102 @@ pub(super) fn friction_text(d: &Diagnosis) -> String {
                 "  No shape beyond the model's Coulomb and viscous friction stands out."
             );
         }
+    }
+    s
+}
+
+/// The residual of each balance against its noise floor, one line each, with its strongest
+/// shape (the "Model residual" block of the verbose report).
+pub(super) fn balances_text(first: &Diagnosis) -> String {
+    let mut s = String::new();
+    for b in &first.balances {
+        // A floor of 0 (no sensor noise model for this balance, e.g. no current logged) is
+        // unknown, not zero: the residual is then said in its own unit, never "inf x".
+        let level = if b.floor > 0.0 && b.floor.is_finite() && b.ratio_to_noise.is_finite() {
+            format!(
+                "noise floor {} {}, residual {} x the floor",
+                servo_core::math::sig(b.floor, 3),
+                b.equation.unit(),
+                servo_core::math::sig(b.ratio_to_noise, 3)
+            )
+        } else {
+            format!(
+                "noise floor unknown (the logs give no sensor noise for this balance, e.g. no current), \
+                 residual RMS {} {}: how much of it is structure cannot be said against noise",
+                servo_core::math::sig(b.rms, 3),
+                b.equation.unit()
+            )
+        };
+        let _ = writeln!(
+            s,
+            "  {}: {level}{}",
+            b.equation.name(),
+            b.signatures.first().map_or(String::new(), |g| format!(
+                "; strongest shape: {} ({:.0} % of the held-out {}; measured on {})",
+                g.description,
+                100.0 * g.share,
+                g.share_of(),
+                g.measured_on
+            ))
+        );
+    }
+    s
+}
+
+/// The candidates table: header and one row per candidate.
+pub(super) fn candidates_table(ranking: &[Candidate], opts: &DiagnoseOptions) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "  {:<11} {:>11} {:>12} {:>10} {:>9}  refused by",
+        "effect",
+        "significant",
+        servo_core::diagnose::phrase::RMS_DROP_COLUMN,
+        "sim. drop",
+        "BIC gain"
+    );
+    for c in ranking {
+        let refused = if c.significant {
+            String::new()
+        } else {
+            servo_core::diagnose::bars::refused_by(c, opts)
+                .or_else(|| {
+                    c.failed_check()
+                        .map(|k| format!("{}: {}", k.name, k.detail))
+                })
+                .unwrap_or_default()
+        };
+        let _ = writeln!(
+            s,
+            "  {:<11} {:>11} {:>11}% {:>10} {:>9.1}  {refused}",
+            c.effect.name(),
+            if c.significant {
+                "YES"
+            } else if c.resolvable {
+                "no"
+            } else {
+                "unresolved"
+            },
+            servo_core::diagnose::phrase::pct(c.error_reduction_pct),
+            c.oe_reduction_pct.map_or("-".to_string(), |v| format!(
+                "{}%",
+                servo_core::diagnose::phrase::pct(v)
+            )),
+            c.bic_gain
+        );
+    }
+    s
+}
+
+/// The bars (every threshold that can refuse an effect or a verdict), one row each.
+pub(super) fn bars_text(opts: &DiagnoseOptions) -> String {
+    let mut s = String::new();
+    for b in servo_core::diagnose::bars::bars(opts) {
+        let _ = writeln!(
+            s,
+            "  {:<27} {} {} {:<14} {}",
+            b.name, b.rule, b.value, b.unit, b.why
+        );
     }
     s
 }

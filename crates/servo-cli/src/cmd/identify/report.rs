@@ -20,6 +20,84 @@ impl super::Identify {
                 e.value, e.std_err, e.ci95.0, e.ci95.1, e.residual_rms, e.cond, e.dof
             )
         };
+        s.push_str("estimates (B_eq, J_eq motor side; tau_sf load side):\n");
+        if let Some((e, how)) = r.b_eq() {
+            s.push_str(&line("B_eq", "N m s/rad", &e, how));
+        }
+        if let Some((e, how)) = r.tau_sf() {
+            s.push_str(&line("tau_sf", "N m", &e, how));
+        }
+        if let Some((e, how)) = r.j_eq() {
+            s.push_str(&line("J_eq", "kg m^2", &e, how));
+        }
+        if let Some(axis) = crate::axis::Axis::of(model) {
+            s.push_str(&format!("{}; at the load:\n", axis.describe()));
+            let (m, f) = (axis.mass_per_j(), axis.force_per_tau());
+            if let Some((e, how)) = r.j_eq() {
+                s.push_str(&line("m_eq", "kg", &scaled(&e, m), how));
+            }
+            if let Some((e, how)) = r.b_eq() {
+                s.push_str(&line("b_eq", "N s/m", &scaled(&e, m), how));
+            }
+            if let Some((e, how)) = r.tau_sf() {
+                s.push_str(&line("F_c", "N", &scaled(&e, f), how));
+            }
+        }
+        if let Some(el) = &r.electrical {
+            s.push_str(&line("k_drv", "V/V", &el.k_drv, "electrical"));
+            s.push_str(&line("R_eq", "ohm", &el.r_eq, "electrical"));
+            s.push_str(&format!(
+                "    datasheet: k_drv = {:.4}, R_eq = {:.4} ohm\n",
+                el.nominal_k_drv, el.nominal_r_eq
+            ));
+            for w in &el.warnings {
+                s.push_str(&format!("  WARNING: {w}\n"));
+            }
+        }
+        s.push_str(&self.evidence_text(r));
+        for n in notes(r) {
+            s.push_str(&format!("  note: {n}\n"));
+        }
+        for k in &r.skipped {
+            match servo_core::ident::auto::absent_experiment(k) {
+                Some(what) => s.push_str(&format!("  not part of this run: {what}\n")),
+                None => s.push_str(&format!("  not identified: {k}\n")),
+            }
+        }
+        s
+    }
+
+    /// What the estimates rest on: one line by default (segments, pairs, samples); with
+    /// `--verbose` every constant-speed segment and acceleration/deceleration pair.
+    fn evidence_text(&self, r: &Report) -> String {
+        let mut s = String::new();
+        if !self.verbose {
+            let mut parts = Vec::new();
+            if let Some(f) = &r.friction {
+                parts.push(format!(
+                    "friction (4.1) on {} constant-speed segments",
+                    f.points.len()
+                ));
+            }
+            if let Some(i) = &r.inertia {
+                parts.push(format!(
+                    "inertia (4.2) on {} acceleration/deceleration pairs",
+                    i.pairs.len()
+                ));
+            }
+            if let Some(c) = &r.combined {
+                parts.push(format!("combined LS (4.3) on {} samples", c.rows));
+            }
+            if !parts.is_empty() {
+                let rows = if r.friction.is_some() || r.inertia.is_some() {
+                    " (--verbose: each segment and pair)"
+                } else {
+                    ""
+                };
+                s.push_str(&format!("from: {}{rows}\n", parts.join("; ")));
+            }
+            return s;
+        }
         if let Some(f) = &r.friction {
             s.push_str(&format!(
                 "friction (4.1): {} constant-speed segments\n",
@@ -53,45 +131,8 @@ impl super::Identify {
         if let Some(c) = &r.combined {
             s.push_str(&format!("combined LS (4.3): {} samples\n", c.rows));
         }
-        s.push_str("estimates (B_eq, J_eq motor side; tau_sf load side):\n");
-        if let Some((e, how)) = r.b_eq() {
-            s.push_str(&line("B_eq", "N m s/rad", &e, how));
-        }
-        if let Some((e, how)) = r.tau_sf() {
-            s.push_str(&line("tau_sf", "N m", &e, how));
-        }
-        if let Some((e, how)) = r.j_eq() {
-            s.push_str(&line("J_eq", "kg m^2", &e, how));
-        }
-        if let Some(axis) = crate::axis::Axis::of(model) {
-            s.push_str(&format!("{} (load side):\n", axis.describe()));
-            let (m, f) = (axis.mass_per_j(), axis.force_per_tau());
-            if let Some((e, how)) = r.j_eq() {
-                s.push_str(&line("m_eq", "kg", &scaled(&e, m), how));
-            }
-            if let Some((e, how)) = r.b_eq() {
-                s.push_str(&line("b_eq", "N s/m", &scaled(&e, m), how));
-            }
-            if let Some((e, how)) = r.tau_sf() {
-                s.push_str(&line("F_c", "N", &scaled(&e, f), how));
-            }
-        }
-        if let Some(el) = &r.electrical {
-            s.push_str(&line("k_drv", "V/V", &el.k_drv, "electrical"));
-            s.push_str(&line("R_eq", "ohm", &el.r_eq, "electrical"));
-            s.push_str(&format!(
-                "    datasheet: k_drv = {:.4}, R_eq = {:.4} ohm\n",
-                el.nominal_k_drv, el.nominal_r_eq
-            ));
-            for w in &el.warnings {
-                s.push_str(&format!("  WARNING: {w}\n"));
-            }
-        }
-        for n in notes(r) {
-            s.push_str(&format!("  note: {n}\n"));
-        }
-        for k in &r.skipped {
-            s.push_str(&format!("  not identified: {k}\n"));
+        if let Some(c) = &r.combined {
+            s.push_str(&format!("combined LS (4.3): {} samples\n", c.rows));
         }
         s
     }
@@ -144,6 +185,26 @@ impl super::Identify {
             v["f_c_n"] = est(sc(r.tau_sf(), f), "N", "load");
         }
         v
+    }
+}
+
+/// What is said of a negative friction estimate written as 0 to `out`: zero within its 95 %
+/// interval (the logs do not measure it), or unphysical (its whole interval below zero).
+pub(super) fn clamp_note(name: &str, unit: &str, e: &Estimate, out: &std::path::Path) -> String {
+    let v = servo_core::math::sig(e.value, 3);
+    if e.ci95.1 >= 0.0 {
+        format!(
+            "{name} = {v} {unit} is zero within its 95 % interval: written as 0 in {} \
+             (the logs hold too little of that friction to measure it)",
+            out.display()
+        )
+    } else {
+        format!(
+            "{name} came out negative ({v} {unit}): unphysical, written as 0 in {}; \
+             the logs hold too little of that friction to measure it, or a torque \
+             the model lacks",
+            out.display()
+        )
     }
 }
 

@@ -34,24 +34,24 @@ impl super::Identify {
         } else if params.drive.kind == servo_core::drive::DriveKind::Current {
             format!(
                 "current drive: J_eq, B_eq and tau_sf were estimated from the current reference and the angle, with the torque balance k_t i_ref = J_eq dw/dt + B_eq w + tau_sf/N sign(w), the reference through the current loop's lag ({} s) and clipped at its limit, k_t = {} from the params file (nothing electrical is fitted; a measured current is not used); its {tol_pct:.0} % tolerance is added to the intervals",
-                params.drive.loop_lag_s(),
-                params.params.k_t
+                crate::cmd::design::sig6(params.drive.loop_lag_s()),
+                crate::cmd::design::sig6(params.params.k_t)
             )
         } else if params.drive.kind == servo_core::drive::DriveKind::Duty {
             format!(
                 "duty drive: J_eq, B_eq and tau_sf were estimated from the duty and the angle, with the input balance k_t u / R_eq = J_eq dw/dt + (B_eq + k_t k_e / R_eq) w + tau_sf/N sign(w) on the bridge's voltage u = duty x V_supply - dead-time loss, R_eq = {} ohm (R_a + R_s + the supply's {} ohm), k_e = {}, k_t = {} from the params file; their {tol_pct:.0} % tolerance each is added to the intervals",
-                params.params.r_eq(),
-                params.drive.r_supply(),
-                params.params.k_e,
-                params.params.k_t
+                crate::cmd::design::sig6(params.params.r_eq()),
+                crate::cmd::design::sig6(params.drive.r_supply()),
+                crate::cmd::design::sig6(params.params.k_e),
+                crate::cmd::design::sig6(params.params.k_t)
             )
         } else {
             format!(
             "no log records the armature current: J_eq, B_eq and tau_sf were estimated from u and the angle alone, with the u-driven balance k_drv k_t u / R_eq = J_eq dw/dt + (B_eq + k_t k_e / R_eq) w + tau_sf/N sign(w), taking k_drv = {}, R_eq = {} ohm, k_e = {}, k_t = {} from the params file; their {tol_pct:.0} % tolerance each is added to the intervals",
-            params.params.k_drv,
-            params.params.r_eq(),
-            params.params.k_e,
-            params.params.k_t
+            crate::cmd::design::sig6(params.params.k_drv),
+            crate::cmd::design::sig6(params.params.r_eq()),
+            crate::cmd::design::sig6(params.params.k_e),
+            crate::cmd::design::sig6(params.params.k_t)
         )
         }];
         if !id.declared.is_empty() {
