@@ -39,6 +39,20 @@ pub const STARVED_BACKLOG_PERIODS: f64 = 10.0;
 pub const STARVED_BACKLOG_MIN_S: f64 = 0.02;
 /// The suggested period is this multiple of the time a sample really took (headroom).
 pub const SUGGESTED_HEADROOM: f64 = 2.0;
+/// How long the host answers 0 V after Start, watching the loop, before a run's first sample
+/// [s] ([`settle_samples`]): a loop that cannot keep its period is refused before any voltage.
+pub const SETTLE_S: f64 = 0.2;
+
+/// Samples of the 0 V settle phase at period `period_s` [s]: [`SETTLE_S`] worth, at least twice
+/// [`MIN_SAMPLES`] (two verdicts) and at most one [`WINDOW_SAMPLES`] window.
+pub fn settle_samples(period_s: f64) -> usize {
+    let n = if period_s.is_finite() && period_s > 0.0 {
+        (SETTLE_S / period_s).ceil()
+    } else {
+        0.0
+    };
+    (n.min(WINDOW_SAMPLES as f64) as usize).max(2 * MIN_SAMPLES)
+}
 
 /// Why the loop is starved, with the figures measured.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,6 +70,9 @@ pub struct Starved {
     pub time_per_sample_s: f64,
     /// A period the loop can hold here [ms].
     pub suggested_period_ms: f64,
+    /// Whether the watch tripped in the settle phase, while the host answered 0 V: the loop
+    /// never moved.
+    pub at_rest: bool,
 }
 
 impl std::fmt::Display for Starved {
@@ -64,14 +81,20 @@ impl std::fmt::Display for Starved {
             f,
             "the board is starved: use --period-ms {} (at {} ms, {} of the last {} samples missed \
              their deadline and answers lagged {:.1} ms behind the board's clock; a sample took \
-             {:.2} ms; stopped at sample {} before the error grew)",
+             {:.2} ms; {} at sample {} {})",
             self.suggested_period_ms,
             self.period_s * 1e3,
             self.missed_in_window,
             self.window,
             self.backlog_s * 1e3,
             self.time_per_sample_s * 1e3,
-            self.samples
+            if self.at_rest { "refused" } else { "stopped" },
+            self.samples,
+            if self.at_rest {
+                "of the 0 V settle phase, before the loop moved"
+            } else {
+                "before the error grew"
+            }
         )
     }
 }
@@ -161,6 +184,7 @@ impl StarvationWatch {
             backlog_s,
             time_per_sample_s,
             suggested_period_ms: nice_period_ms(SUGGESTED_HEADROOM * needed_s * 1e3),
+            at_rest: false,
         })
     }
 }
@@ -169,6 +193,15 @@ impl StarvationWatch {
 mod tests {
     use super::*;
     use std::time::Duration;
+
+    #[test]
+    fn the_settle_phase_gives_the_watch_two_verdicts_within_a_window() {
+        let got: Vec<usize> = [1e-3, 2e-3, 5e-3, 10e-3, 0.1, f64::NAN]
+            .iter()
+            .map(|&p| settle_samples(p))
+            .collect();
+        assert_eq!(got, [100, 100, 40, 40, 40, 40]);
+    }
 
     #[test]
     fn nice_periods() {
