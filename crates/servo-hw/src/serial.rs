@@ -89,6 +89,9 @@ pub struct SerialBackend {
     stats: LinkStats,
     /// Whether the run keeps the board's period (reset at each Start).
     watch: StarvationWatch,
+    /// Board time at the end of the run's 0 V settle phase [s]: the caller's samples are timed
+    /// from there.
+    settle_end_s: f64,
 }
 
 impl std::fmt::Debug for SerialBackend {
@@ -154,6 +157,7 @@ impl SerialBackend {
             rtt_s: Vec::new(),
             stats: LinkStats::default(),
             watch: StarvationWatch::new(1.0),
+            settle_end_s: 0.0,
             cfg,
         };
         me.handshake()?;
@@ -358,9 +362,13 @@ impl SerialBackend {
     /// with 0 V while the watch judges the loop, so that a loop that cannot keep the board's
     /// period is refused before the host commands any voltage ([`Starved::at_rest`]).
     fn settle(&mut self) -> Result<(), HwError> {
+        self.settle_end_s = 0.0;
         for _ in 0..crate::starvation::settle_samples(self.info.sample_period_s) {
             match self.next_sample() {
-                Ok(_) => self.apply(0.0)?,
+                Ok(s) => {
+                    self.apply(0.0)?;
+                    self.settle_end_s = s.time_s + self.info.sample_period_s;
+                }
                 Err(HwError::Starved(s)) => {
                     return Err(HwError::Starved(Starved { at_rest: true, ..s }))
                 }
@@ -454,11 +462,14 @@ impl Backend for SerialBackend {
             self.started = true;
             self.watch = StarvationWatch::new(self.info.sample_period_s);
             self.send(&Message::Start)?;
+            self.settle_end_s = 0.0;
             if self.cfg.watch_starvation {
                 self.settle()?;
             }
         }
-        self.next_sample()
+        let mut s = self.next_sample()?;
+        s.time_s -= self.settle_end_s;
+        Ok(s)
     }
 
     fn apply(&mut self, u_v: f64) -> Result<(), HwError> {
@@ -555,9 +566,13 @@ mod tests {
         be.stop().unwrap();
         let st = be.stats();
         eprintln!("{st}\nlast {last:?}");
-        // After the 0 V settle phase, on the board's clock.
-        let settle_s = crate::starvation::settle_samples(1e-3) as f64 * 1e-3;
-        assert!((last.time_s - 0.299 - settle_s).abs() < 1e-9, "{last:?}");
+        // Timed from the end of the 0 V settle phase.
+        assert!((last.time_s - 0.299).abs() < 1e-9, "{last:?}");
+        assert!(
+            be.stats().samples as usize >= 300 + crate::starvation::settle_samples(1e-3),
+            "{:?}",
+            be.stats()
+        );
         assert!(last.theta_l_rad > 0.3, "{last:?}");
         stop.store(true, std::sync::atomic::Ordering::Relaxed);
         let rep = h.join().unwrap();
