@@ -383,7 +383,9 @@ impl SerialBackend {
                 Err(e) => return Err(e),
             }
         }
-        Ok(())
+        self.watch
+            .settle_verdict()
+            .map_err(|s| HwError::Starved(Starved { at_rest: true, ..s }))
     }
 
     /// The board's next sample, answered by the caller (the body of [`Backend::sample`]).

@@ -43,6 +43,11 @@ pub const SUGGESTED_HEADROOM: f64 = 2.0;
 /// [s] ([`settle_samples`]): a loop that cannot keep its period is refused before any voltage.
 pub const SETTLE_S: f64 = 0.2;
 
+/// Share of missed deadlines in the 0 V settle phase above which a run is refused before it
+/// moves: a loop that misses this many at rest, with nothing to compute, has no room left for
+/// a busier moment (the share a QEMU period probe allows, `qemu::PROBE_MAX_MISSED_FRACTION`).
+pub const SETTLE_MAX_MISSED_FRACTION: f64 = 0.1;
+
 /// Samples of the 0 V settle phase at period `period_s` [s]: [`SETTLE_S`] worth, at least twice
 /// [`MIN_SAMPLES`] (two verdicts) and at most one [`WINDOW_SAMPLES`] window.
 pub fn settle_samples(period_s: f64) -> usize {
@@ -122,6 +127,8 @@ pub struct StarvationWatch {
     first_arrival: Option<Instant>,
     /// Smallest (arrival - board time) so far [s].
     min_age_s: f64,
+    /// The last sample's (arrival - board time) [s].
+    last_age_s: f64,
     samples: u64,
 }
 
@@ -133,6 +140,7 @@ impl StarvationWatch {
             window: VecDeque::with_capacity(WINDOW_SAMPLES + 1),
             first_arrival: None,
             min_age_s: f64::INFINITY,
+            last_age_s: 0.0,
             samples: 0,
         }
     }
@@ -149,6 +157,7 @@ impl StarvationWatch {
         let arrival_s = at.duration_since(first).as_secs_f64();
         let age_s = arrival_s - board_time_s;
         self.min_age_s = self.min_age_s.min(age_s);
+        self.last_age_s = age_s;
         self.samples += 1;
         self.window.push_back((arrival_s, missed));
         if self.window.len() > WINDOW_SAMPLES {
@@ -157,11 +166,23 @@ impl StarvationWatch {
         if (self.samples as usize) < MIN_SAMPLES {
             return Ok(());
         }
+        self.verdict(STARVED_MISSED_FRACTION, age_s)
+    }
+
+    /// The verdict at the end of the 0 V settle phase ([`settle_samples`]): stricter than a
+    /// running loop's, at most [`SETTLE_MAX_MISSED_FRACTION`] of the samples so far missed, so
+    /// that a loop that only just keeps its period at rest is refused before it moves.
+    pub fn settle_verdict(&self) -> Result<(), Starved> {
+        let age_s = self.last_age_s;
+        self.verdict(SETTLE_MAX_MISSED_FRACTION, age_s)
+    }
+
+    fn verdict(&self, max_missed_fraction: f64, age_s: f64) -> Result<(), Starved> {
         let missed_n = self.window.iter().filter(|w| w.1).count();
         let n = self.window.len();
         let backlog_s = age_s - self.min_age_s;
         let backlog_limit_s = (STARVED_BACKLOG_PERIODS * self.period_s).max(STARVED_BACKLOG_MIN_S);
-        let missed_too_often = missed_n as f64 > STARVED_MISSED_FRACTION * n as f64;
+        let missed_too_often = missed_n as f64 > max_missed_fraction * n as f64;
         if !(missed_too_often || backlog_s > backlog_limit_s) {
             return Ok(());
         }
@@ -201,6 +222,25 @@ mod tests {
             .map(|&p| settle_samples(p))
             .collect();
         assert_eq!(got, [100, 100, 40, 40, 40, 40]);
+    }
+
+    #[test]
+    fn a_settle_phase_with_a_few_misses_too_many_is_refused() {
+        let t0 = Instant::now();
+        let mut w = StarvationWatch::new(1e-3);
+        // One in five missed: a running loop goes on, a loop at rest is refused.
+        for k in 0..100 {
+            let at = t0 + Duration::from_secs_f64(k as f64 * 1e-3);
+            assert!(w.push(k as f64 * 1e-3, at, k % 5 == 1).is_ok());
+        }
+        let s = w.settle_verdict().unwrap_err();
+        assert_eq!((s.missed_in_window, s.window), (20, 100), "{s}");
+        let mut quiet = StarvationWatch::new(1e-3);
+        for k in 0..100 {
+            let at = t0 + Duration::from_secs_f64(k as f64 * 1e-3);
+            assert!(quiet.push(k as f64 * 1e-3, at, k % 20 == 1).is_ok());
+        }
+        assert!(quiet.settle_verdict().is_ok());
     }
 
     #[test]
