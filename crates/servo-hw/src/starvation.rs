@@ -44,9 +44,11 @@ pub const SUGGESTED_HEADROOM: f64 = 2.0;
 pub const SETTLE_S: f64 = 0.2;
 
 /// Share of missed deadlines in the 0 V settle phase above which a run is refused before it
-/// moves: a loop that misses this many at rest, with nothing to compute, has no room left for
-/// a busier moment (the share a QEMU period probe allows, `qemu::PROBE_MAX_MISSED_FRACTION`).
-pub const SETTLE_MAX_MISSED_FRACTION: f64 = 0.1;
+/// moves: a loop that misses this many at rest, with nothing to compute, has little room left
+/// for a busier moment. Half the running watch's [`STARVED_MISSED_FRACTION`]; a loop under a
+/// passing load (the odd scheduler hiccup: a tenth of the deadlines on a busy 2-core machine)
+/// still runs.
+pub const SETTLE_MAX_MISSED_FRACTION: f64 = 0.25;
 
 /// Samples of the 0 V settle phase at period `period_s` [s]: [`SETTLE_S`] worth, at least twice
 /// [`MIN_SAMPLES`] (two verdicts) and at most one [`WINDOW_SAMPLES`] window.
@@ -228,19 +230,21 @@ mod tests {
     fn a_settle_phase_with_a_few_misses_too_many_is_refused() {
         let t0 = Instant::now();
         let mut w = StarvationWatch::new(1e-3);
-        // One in five missed: a running loop goes on, a loop at rest is refused.
-        for k in 0..100 {
+        // One in three missed: a running loop goes on, a loop at rest is refused.
+        for k in 0..99 {
             let at = t0 + Duration::from_secs_f64(k as f64 * 1e-3);
-            assert!(w.push(k as f64 * 1e-3, at, k % 5 == 1).is_ok());
+            assert!(w.push(k as f64 * 1e-3, at, k % 3 == 1).is_ok());
         }
         let s = w.settle_verdict().unwrap_err();
-        assert_eq!((s.missed_in_window, s.window), (20, 100), "{s}");
-        let mut quiet = StarvationWatch::new(1e-3);
+        assert_eq!((s.missed_in_window, s.window), (33, 99), "{s}");
+        assert!(s.at_rest || s.to_string().contains("--period-ms"), "{s}");
+        // One in five: a busy machine's hiccups, not a starved loop.
+        let mut busy = StarvationWatch::new(1e-3);
         for k in 0..100 {
             let at = t0 + Duration::from_secs_f64(k as f64 * 1e-3);
-            assert!(quiet.push(k as f64 * 1e-3, at, k % 20 == 1).is_ok());
+            assert!(busy.push(k as f64 * 1e-3, at, k % 5 == 1).is_ok());
         }
-        assert!(quiet.settle_verdict().is_ok());
+        assert!(busy.settle_verdict().is_ok());
     }
 
     #[test]
