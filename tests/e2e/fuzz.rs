@@ -486,3 +486,78 @@ e = { value = 0.0, min = -0.05, max = 0.05, unit = "rad" }
         servo_cli::effects_file::EffectsFile::parse(text).map_err(|e| format!("{e:#}"))
     });
 }
+
+/// Hostile names for the report writers' seeds: quotes breaking out of attributes, tags,
+/// `javascript:` links, entities, CDATA ends, control characters, non-characters.
+const HOSTILE_NAMES: &[&str] = &[
+    "x\" tabindex=\"1\" autofocus onfocus=\"alert(1)\" y=\".csv",
+    "<script>alert(1)</script>",
+    "javascript:alert(1)",
+    " JaVaScRiPt:alert(1)",
+    "data:text/html,<svg onload=alert(1)>",
+    "</svg><svg onload=alert(1)>",
+    "' onmouseover='alert(1)",
+    "a & b &amp; &lt; &#x3c; ]]> <!-- -->",
+    "ctrl \u{0}\u{7}\u{b}\u{1b}[31m \u{7f}\u{85} \u{fffe}\u{ffff}",
+    "θ_l [rad] ω_l ✓ \u{202e}gnp.exe",
+    "https://example.org/a?b=1&c=\"2\"#x",
+    "{} {{}} %s \\ \r\n\t",
+];
+
+/// The report and chart writers (`servo_cli::fuzz::check_report_writers`, the `report` fuzz
+/// target's check) over mutated hostile names: no panic, no handler, no script, no broken
+/// markup, and the charts parse as XML.
+#[test]
+fn fuzz_report_writers() {
+    let _machine = servo_e2e::shared();
+    let mut seeds: Vec<Vec<u8>> = Vec::new();
+    for (k, _) in HOSTILE_NAMES.iter().enumerate() {
+        let fields: Vec<&str> = (0..8)
+            .map(|i| HOSTILE_NAMES[(k + i) % HOSTILE_NAMES.len()])
+            .collect();
+        let mut s = fields.join("\u{1f}").into_bytes();
+        s.insert(0, k as u8); // the chart's flags (log x, scatter)
+        seeds.push(s);
+    }
+    seeds.push(Vec::new());
+    let rep = check_reader("report writers", &seeds, FuzzConfig::new(3000, SEED), |b| {
+        let [svg, stacked, _page] = servo_cli::fuzz::check_report_writers(b);
+        roxmltree::Document::parse(&svg).map_err(|e| format!("the chart is not XML: {e}"))?;
+        roxmltree::Document::parse(&stacked)
+            .map_err(|e| format!("the stacked charts are not XML: {e}"))?;
+        Ok::<(), String>(())
+    });
+    eprintln!("{rep}");
+    assert!(rep.failures.is_empty(), "{rep}");
+    assert_eq!(rep.refused, 0, "an SVG that is not XML: {rep}");
+}
+
+/// The atomic writer every output goes through (`servo_io::output::check_atomic_writer`, the
+/// `atomic_writer` fuzz target's check) over mutated cases: previous file or not, older backup
+/// or not, committed or abandoned, through each of its three ways of writing. The target is
+/// the old or the new bytes, a previous file is kept once under the first free `NAME.N`, an
+/// older backup is untouched, no temporary file is left.
+#[test]
+fn fuzz_atomic_writer() {
+    let _machine = servo_e2e::shared();
+    let body = b"[pid]\nkp = 7.0\nki = 86.1\n# a hand-made comment\n".to_vec();
+    // flags: bit 0 a previous file, bit 1 commit, bit 2 the same bytes, bit 3 an older
+    // backup, bits 4.. the writer (write_file, AtomicFile, Replacement).
+    let seeds: Vec<Vec<u8>> = (0u8..48)
+        .map(|flags| {
+            let mut s = vec![flags, (flags as usize * 7 % body.len()) as u8];
+            s.extend_from_slice(&body);
+            s
+        })
+        .collect();
+    let rep = check_reader("atomic writer", &seeds, FuzzConfig::new(1500, SEED), |b| {
+        if servo_cli::io::output::check_atomic_writer(b) {
+            Ok(())
+        } else {
+            Err("no temporary folder for the case")
+        }
+    });
+    eprintln!("{rep}");
+    assert!(rep.failures.is_empty(), "{rep}");
+    assert_eq!(rep.refused, 0, "cases not set up: {rep}");
+}

@@ -1559,14 +1559,34 @@ mod qemu_cli {
         }
     }
 
+    /// The (theta_l [rad], command u [V]) of every sample `log` holds; none when servo wrote
+    /// no log.
+    fn logged_theta_u(log: &Path) -> Vec<(f64, f64)> {
+        if !log.exists() {
+            return Vec::new();
+        }
+        let run = servo_cli::io::mcap_read::read_mcap(log)
+            .unwrap_or_else(|e| panic!("{}: {e:#}", log.display()));
+        run.loop_msgs
+            .iter()
+            .map(|m| (m.theta_l_rad, m.u_v))
+            .collect()
+    }
+
     /// A 1 rad step on the QEMU board at its default period with gains designed for that
-    /// period: it ends within 5 % of 1 rad, or the board refuses to start or the run stops,
-    /// saying why (the loop cannot keep the period here); never a run to the position limit.
+    /// period: it ends within 5 % of 1 rad, or servo refuses before the loop moves, saying why
+    /// (the board refuses to start: no period held here; or the run stops in its 0 V settle
+    /// phase: starved, or the board's watchdog fired), with no sample commanded off 0 V; never
+    /// a run to the position limit.
     fn step_at_the_default_period(busy: bool) {
         let _rt = realtime();
         let dir = tempfile::tempdir().unwrap();
         let _busy = busy.then(BusyLoops::start);
-        let what = if busy { "under two busy loops" } else { "" };
+        let what = if busy {
+            "under two busy loops"
+        } else {
+            "on this machine"
+        };
         let (board, period_s) = match start_at_default_period(dir.path()) {
             None => return,
             Some(Err(err)) => {
@@ -1592,15 +1612,16 @@ mod qemu_cli {
         ));
         let board_out = board.quit();
         eprintln!("{board_out}\n{out}\n{err}");
-        let th = super::board_proc::theta(&log);
-        let peak = th.iter().map(|s| s.1.abs()).fold(0.0, f64::max);
+        let partial = dir.path().join("step.mcap.partial");
+        let logged = logged_theta_u(if log.exists() { &log } else { &partial });
+        let peak = logged.iter().map(|s| s.0.abs()).fold(0.0, f64::max);
         assert!(
             peak < 3.0,
             "the step ran away {what} (|theta_l| up to {peak} rad): {err}"
         );
         if ok {
             let n_want = (3.0 / period_s).round() as usize;
-            let (n, theta) = (th.len(), th.last().expect("samples").1);
+            let (n, theta) = (logged.len(), logged.last().expect("samples").0);
             eprintln!("{what} at {period_s} s: the step ends at {theta} rad ({n} samples)");
             assert_eq!(n, n_want, "{n} samples, not {n_want} (3 s at {period_s} s)");
             assert!(
@@ -1608,12 +1629,22 @@ mod qemu_cli {
                 "the step {what} ends at {theta} rad, not 1 +- 0.05 rad"
             );
         } else {
+            let starved = err.contains("the board is starved: use --period-ms ");
+            let watchdog = err.contains("watchdog");
             assert!(
-                err.contains("the board is starved: use --period-ms ")
+                (starved || watchdog)
+                    && err.contains("before the loop moved")
                     && err.contains("board at 0 V"),
-                "the run {what} failed without saying the board is starved: {err}"
+                "the run {what} failed, not refused before the loop moved saying why: {err}"
             );
-            eprintln!("the run {what} stopped, saying why: {err}");
+            let moved = logged.iter().filter(|s| s.1 != 0.0).count();
+            assert_eq!(
+                moved,
+                0,
+                "{moved} of {} logged samples commanded a voltage: {err}",
+                logged.len()
+            );
+            eprintln!("the run {what} was refused before the loop moved, saying why: {err}");
         }
     }
 

@@ -351,6 +351,71 @@ fn note(size: usize) {
     });
 }
 
+/// The report and chart writers on arbitrary names (the `report` fuzz target and the seeded
+/// corpus of `tests/e2e/fuzz.rs`): `data`'s UTF-8 text (lossy), split at `\u{1f}` (unit
+/// separator), fills a chart's title, axis labels and series labels and values placed in text,
+/// attribute and URL contexts of a report page (with the report's Content-Security-Policy and
+/// the chart inlined). Panics when a chart does not render or any document has
+/// [`servo_io::markup::problems`] (an event handler, a script, broken markup); returns the
+/// chart, the stacked charts and the page, for the caller to parse as XML.
+pub fn check_report_writers(data: &[u8]) -> [String; 3] {
+    use crate::plot::{line_chart_svg, Chart, Series};
+    use servo_io::markup::{problems, Attr, Markup, Url, CSP_META};
+    let text = String::from_utf8_lossy(data);
+    let mut f: Vec<&str> = text.split('\u{1f}').collect();
+    f.resize(8, "");
+    let x = [0.1, 0.2, 0.5, 1.0, 2.0];
+    let y = [1.0, -1.0, 0.5, f64::NAN, 2.0];
+    let chart = Chart {
+        title: f[0],
+        x_label: f[1],
+        y_label: f[2],
+        log_x: data.first().is_some_and(|b| b & 1 == 1),
+        scatter: data.first().is_some_and(|b| b & 2 == 2),
+        ..Chart::default()
+    };
+    let series = [
+        Series {
+            label: f[3],
+            x: &x,
+            y: &y,
+        },
+        Series {
+            label: f[4],
+            x: &x,
+            y: &x,
+        },
+    ];
+    let svg = match line_chart_svg(&chart, &series) {
+        Ok(svg) => svg,
+        Err(e) => panic!("the chart does not render: {e:#}"),
+    };
+    let p = problems(&svg);
+    assert!(p.is_empty(), "the chart: {p:?}");
+    let stacked = crate::cmd::compare::stack_svg(&[svg.clone(), svg.clone()]);
+    let p = problems(&stacked);
+    assert!(p.is_empty(), "the stacked charts: {p:?}");
+    let mut h = Markup::new();
+    h.lit("<!DOCTYPE html><html><head>")
+        .lit(CSP_META)
+        .lit("</head><body>");
+    servo_io::markup!(
+        h,
+        "<div class=\"panel\" data-log=\"{}\" title='{}'><h3>{}</h3><a href=\"{}\">{}</a>",
+        f[5],
+        Attr(f[6]),
+        f[5],
+        Url(f[7]),
+        f[6]
+    );
+    h.push(&Markup::from_rendered_svg(&svg))
+        .lit("</div></body></html>");
+    let page = h.into_string();
+    let p = problems(&page);
+    assert!(p.is_empty(), "the report page: {p:?}");
+    [svg, stacked, page]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -16,7 +16,8 @@ pub struct BoardInfo {
 /// One sample of the board's sensors.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Sample {
-    /// Board time of the sample [s] since the start of the run.
+    /// Board time of the sample [s] since the start of the run (on a serial board, the end of
+    /// its 0 V settle phase).
     pub time_s: f64,
     /// Load angle from the encoder [rad].
     pub theta_l_rad: f64,

@@ -318,6 +318,9 @@ pub const PROBE_PERIODS_US: [u32; 4] = [1000, 2000, 5000, 10_000];
 /// that stops a run, so that a run at the chosen period (which does more per sample than the
 /// probe: a PID, a log) has headroom.
 pub const PROBE_MAX_MISSED_FRACTION: f64 = 0.1;
+/// Share of the period the 99th percentile of the host's round trip may take for the period to
+/// count as held: the room a run needs under load, beyond the probe's 0 V answers.
+pub const PROBE_MAX_RTT_FRACTION: f64 = 0.5;
 /// Samples at the start of a probe not judged [samples]: the emulator translates the
 /// firmware's code on its first periods.
 pub const PROBE_WARMUP_SAMPLES: u64 = 20;
@@ -334,6 +337,9 @@ pub struct PeriodProbe {
     /// Samples answered and deadlines missed after the warm-up.
     pub samples: u64,
     pub missed: u64,
+    /// The board-measured round trip (sample out, command in) of the answers in time, 99th
+    /// percentile [s]: how much of the period the host's answer takes.
+    pub rtt_p99_s: f64,
     /// Why the loop was starved, if the host's watch stopped it.
     pub starved: Option<String>,
 }
@@ -344,6 +350,7 @@ impl PeriodProbe {
         self.starved.is_none()
             && self.samples >= PROBE_MIN_SAMPLES
             && (self.missed as f64) <= PROBE_MAX_MISSED_FRACTION * self.samples as f64
+            && self.rtt_p99_s <= PROBE_MAX_RTT_FRACTION * self.period_us as f64 * 1e-6
     }
 }
 
@@ -354,8 +361,10 @@ impl std::fmt::Display for PeriodProbe {
             Some(s) => write!(f, "{ms} ms: {s}"),
             None => write!(
                 f,
-                "{ms} ms: {} of {} deadlines missed",
-                self.missed, self.samples
+                "{ms} ms: {} of {} deadlines missed, round trip p99 {:.2} ms",
+                self.missed,
+                self.samples,
+                self.rtt_p99_s * 1e3
             ),
         }
     }
@@ -388,8 +397,10 @@ pub fn probe_period(cfg: &QemuConfig, period_us: u32) -> Result<PeriodProbe, HwE
         }
         match be.sample() {
             Ok(_) => be.apply(0.0)?,
-            Err(HwError::Starved(s)) => {
-                starved = Some(s.to_string());
+            // A starved loop, and a board that lost its host (its watchdog fired, or it went
+            // silent): the period is not held here.
+            Err(e @ (HwError::Starved(_) | HwError::Fault { .. } | HwError::Timeout { .. })) => {
+                starved = Some(e.to_string());
                 break;
             }
             Err(e) => {
@@ -407,6 +418,7 @@ pub fn probe_period(cfg: &QemuConfig, period_us: u32) -> Result<PeriodProbe, HwE
         period_us,
         samples: st.samples.saturating_sub(w.samples),
         missed: st.missed_deadlines.saturating_sub(w.missed_deadlines),
+        rtt_p99_s: st.rtt_p99_s,
         starved,
     })
 }

@@ -10,12 +10,15 @@
 //! Safety: the host applies the same [`SafetyLimits`] as the board (voltage clip, over-current,
 //! soft position limits) on every sample; a trip is an error and the caller must call
 //! [`Backend::stop`] (0 V). So is a loop that cannot keep the board's period
-//! ([`crate::starvation`], [`HwError::Starved`]): watched from the first samples of each run. A board that stays silent longer than `timeout_s` is an error too.
+//! ([`crate::starvation`], [`HwError::Starved`]): watched from the first samples of each run,
+//! which the host answers with 0 V for a short settle phase
+//! ([`crate::starvation::settle_samples`]) before the caller sees any, so that such a loop is
+//! refused before any voltage. A board that stays silent longer than `timeout_s` is an error too.
 //! Dropping the backend sends Stop (best effort).
 
 pub use crate::backend::LinkStats;
 use crate::backend::{Backend, BoardInfo, HwError, Sample};
-use crate::starvation::StarvationWatch;
+use crate::starvation::{StarvationWatch, Starved};
 use serialport::{ClearBuffer, SerialPort};
 use servo_core::math;
 use servo_core::protocol::{flags, Decoder, Frame, HelloAck, Message, PROTOCOL_VERSION};
@@ -86,6 +89,9 @@ pub struct SerialBackend {
     stats: LinkStats,
     /// Whether the run keeps the board's period (reset at each Start).
     watch: StarvationWatch,
+    /// Board time at the end of the run's 0 V settle phase [s]: the caller's samples are timed
+    /// from there.
+    settle_end_s: f64,
 }
 
 impl std::fmt::Debug for SerialBackend {
@@ -151,6 +157,7 @@ impl SerialBackend {
             rtt_s: Vec::new(),
             stats: LinkStats::default(),
             watch: StarvationWatch::new(1.0),
+            settle_end_s: 0.0,
             cfg,
         };
         me.handshake()?;
@@ -350,34 +357,39 @@ impl SerialBackend {
     }
 }
 
-fn port_error(port: &str, e: std::io::Error) -> HwError {
-    HwError::Protocol(format!(
-        "serial port {port} failed (vanished or closed?): {e}"
-    ))
-}
-
-impl Backend for SerialBackend {
-    fn info(&self) -> BoardInfo {
-        self.info
-    }
-
-    fn link_stats(&self) -> Option<LinkStats> {
-        Some(self.stats())
-    }
-
-    fn missed_deadlines(&self) -> Option<u64> {
-        Some(self.stats.missed_deadlines)
-    }
-
-    fn sample(&mut self) -> Result<Sample, HwError> {
-        if self.stopped {
-            return Err(HwError::Protocol("the run was stopped".into()));
+impl SerialBackend {
+    /// The settle phase after Start ([`crate::starvation::settle_samples`]): every sample answered
+    /// with 0 V while the watch judges the loop, so that a loop that cannot keep the board's
+    /// period is refused before the host commands any voltage ([`Starved::at_rest`]).
+    fn settle(&mut self) -> Result<(), HwError> {
+        self.settle_end_s = 0.0;
+        for _ in 0..crate::starvation::settle_samples(self.info.sample_period_s) {
+            match self.next_sample() {
+                Ok(s) => {
+                    self.apply(0.0)?;
+                    self.settle_end_s = s.time_s + self.info.sample_period_s;
+                }
+                Err(HwError::Starved(s)) => {
+                    return Err(HwError::Starved(Starved { at_rest: true, ..s }))
+                }
+                // The board's watchdog fired while the host answered 0 V: it cannot answer in
+                // time here either.
+                Err(HwError::Fault { code, text }) => {
+                    return Err(HwError::Fault {
+                        code,
+                        text: format!("{text} (in the 0 V settle phase, before the loop moved)"),
+                    })
+                }
+                Err(e) => return Err(e),
+            }
         }
-        if !self.started {
-            self.started = true;
-            self.watch = StarvationWatch::new(self.info.sample_period_s);
-            self.send(&Message::Start)?;
-        }
+        self.watch
+            .settle_verdict()
+            .map_err(|s| HwError::Starved(Starved { at_rest: true, ..s }))
+    }
+
+    /// The board's next sample, answered by the caller (the body of [`Backend::sample`]).
+    fn next_sample(&mut self) -> Result<Sample, HwError> {
         let timeout =
             Duration::from_secs_f64(self.cfg.timeout_s.max(2.0 * self.info.sample_period_s));
         let mut deadline = Instant::now() + timeout;
@@ -422,6 +434,44 @@ impl Backend for SerialBackend {
                 _ => {}
             }
         }
+    }
+}
+
+fn port_error(port: &str, e: std::io::Error) -> HwError {
+    HwError::Protocol(format!(
+        "serial port {port} failed (vanished or closed?): {e}"
+    ))
+}
+
+impl Backend for SerialBackend {
+    fn info(&self) -> BoardInfo {
+        self.info
+    }
+
+    fn link_stats(&self) -> Option<LinkStats> {
+        Some(self.stats())
+    }
+
+    fn missed_deadlines(&self) -> Option<u64> {
+        Some(self.stats.missed_deadlines)
+    }
+
+    fn sample(&mut self) -> Result<Sample, HwError> {
+        if self.stopped {
+            return Err(HwError::Protocol("the run was stopped".into()));
+        }
+        if !self.started {
+            self.started = true;
+            self.watch = StarvationWatch::new(self.info.sample_period_s);
+            self.send(&Message::Start)?;
+            self.settle_end_s = 0.0;
+            if self.cfg.watch_starvation {
+                self.settle()?;
+            }
+        }
+        let mut s = self.next_sample()?;
+        s.time_s -= self.settle_end_s;
+        Ok(s)
     }
 
     fn apply(&mut self, u_v: f64) -> Result<(), HwError> {
@@ -518,7 +568,13 @@ mod tests {
         be.stop().unwrap();
         let st = be.stats();
         eprintln!("{st}\nlast {last:?}");
-        assert!((last.time_s - 0.299).abs() < 1e-9);
+        // Timed from the end of the 0 V settle phase.
+        assert!((last.time_s - 0.299).abs() < 1e-9, "{last:?}");
+        assert!(
+            be.stats().samples as usize >= 300 + crate::starvation::settle_samples(1e-3),
+            "{:?}",
+            be.stats()
+        );
         assert!(last.theta_l_rad > 0.3, "{last:?}");
         stop.store(true, std::sync::atomic::Ordering::Relaxed);
         let rep = h.join().unwrap();

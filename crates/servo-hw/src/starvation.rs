@@ -39,6 +39,27 @@ pub const STARVED_BACKLOG_PERIODS: f64 = 10.0;
 pub const STARVED_BACKLOG_MIN_S: f64 = 0.02;
 /// The suggested period is this multiple of the time a sample really took (headroom).
 pub const SUGGESTED_HEADROOM: f64 = 2.0;
+/// How long the host answers 0 V after Start, watching the loop, before a run's first sample
+/// [s] ([`settle_samples`]): a loop that cannot keep its period is refused before any voltage.
+pub const SETTLE_S: f64 = 0.2;
+
+/// Share of missed deadlines in the 0 V settle phase above which a run is refused before it
+/// moves: a loop that misses this many at rest, with nothing to compute, has little room left
+/// for a busier moment. Half the running watch's [`STARVED_MISSED_FRACTION`]; a loop under a
+/// passing load (the odd scheduler hiccup: a tenth of the deadlines on a busy 2-core machine)
+/// still runs.
+pub const SETTLE_MAX_MISSED_FRACTION: f64 = 0.25;
+
+/// Samples of the 0 V settle phase at period `period_s` [s]: [`SETTLE_S`] worth, at least twice
+/// [`MIN_SAMPLES`] (two verdicts) and at most one [`WINDOW_SAMPLES`] window.
+pub fn settle_samples(period_s: f64) -> usize {
+    let n = if period_s.is_finite() && period_s > 0.0 {
+        (SETTLE_S / period_s).ceil()
+    } else {
+        0.0
+    };
+    (n.min(WINDOW_SAMPLES as f64) as usize).max(2 * MIN_SAMPLES)
+}
 
 /// Why the loop is starved, with the figures measured.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,6 +77,9 @@ pub struct Starved {
     pub time_per_sample_s: f64,
     /// A period the loop can hold here [ms].
     pub suggested_period_ms: f64,
+    /// Whether the watch tripped in the settle phase, while the host answered 0 V: the loop
+    /// never moved.
+    pub at_rest: bool,
 }
 
 impl std::fmt::Display for Starved {
@@ -64,14 +88,20 @@ impl std::fmt::Display for Starved {
             f,
             "the board is starved: use --period-ms {} (at {} ms, {} of the last {} samples missed \
              their deadline and answers lagged {:.1} ms behind the board's clock; a sample took \
-             {:.2} ms; stopped at sample {} before the error grew)",
+             {:.2} ms; {} at sample {} {})",
             self.suggested_period_ms,
             self.period_s * 1e3,
             self.missed_in_window,
             self.window,
             self.backlog_s * 1e3,
             self.time_per_sample_s * 1e3,
-            self.samples
+            if self.at_rest { "refused" } else { "stopped" },
+            self.samples,
+            if self.at_rest {
+                "of the 0 V settle phase, before the loop moved"
+            } else {
+                "before the error grew"
+            }
         )
     }
 }
@@ -99,6 +129,8 @@ pub struct StarvationWatch {
     first_arrival: Option<Instant>,
     /// Smallest (arrival - board time) so far [s].
     min_age_s: f64,
+    /// The last sample's (arrival - board time) [s].
+    last_age_s: f64,
     samples: u64,
 }
 
@@ -110,6 +142,7 @@ impl StarvationWatch {
             window: VecDeque::with_capacity(WINDOW_SAMPLES + 1),
             first_arrival: None,
             min_age_s: f64::INFINITY,
+            last_age_s: 0.0,
             samples: 0,
         }
     }
@@ -126,6 +159,7 @@ impl StarvationWatch {
         let arrival_s = at.duration_since(first).as_secs_f64();
         let age_s = arrival_s - board_time_s;
         self.min_age_s = self.min_age_s.min(age_s);
+        self.last_age_s = age_s;
         self.samples += 1;
         self.window.push_back((arrival_s, missed));
         if self.window.len() > WINDOW_SAMPLES {
@@ -134,11 +168,23 @@ impl StarvationWatch {
         if (self.samples as usize) < MIN_SAMPLES {
             return Ok(());
         }
+        self.verdict(STARVED_MISSED_FRACTION, age_s)
+    }
+
+    /// The verdict at the end of the 0 V settle phase ([`settle_samples`]): stricter than a
+    /// running loop's, at most [`SETTLE_MAX_MISSED_FRACTION`] of the samples so far missed, so
+    /// that a loop that only just keeps its period at rest is refused before it moves.
+    pub fn settle_verdict(&self) -> Result<(), Starved> {
+        let age_s = self.last_age_s;
+        self.verdict(SETTLE_MAX_MISSED_FRACTION, age_s)
+    }
+
+    fn verdict(&self, max_missed_fraction: f64, age_s: f64) -> Result<(), Starved> {
         let missed_n = self.window.iter().filter(|w| w.1).count();
         let n = self.window.len();
         let backlog_s = age_s - self.min_age_s;
         let backlog_limit_s = (STARVED_BACKLOG_PERIODS * self.period_s).max(STARVED_BACKLOG_MIN_S);
-        let missed_too_often = missed_n as f64 > STARVED_MISSED_FRACTION * n as f64;
+        let missed_too_often = missed_n as f64 > max_missed_fraction * n as f64;
         if !(missed_too_often || backlog_s > backlog_limit_s) {
             return Ok(());
         }
@@ -161,6 +207,7 @@ impl StarvationWatch {
             backlog_s,
             time_per_sample_s,
             suggested_period_ms: nice_period_ms(SUGGESTED_HEADROOM * needed_s * 1e3),
+            at_rest: false,
         })
     }
 }
@@ -169,6 +216,36 @@ impl StarvationWatch {
 mod tests {
     use super::*;
     use std::time::Duration;
+
+    #[test]
+    fn the_settle_phase_gives_the_watch_two_verdicts_within_a_window() {
+        let got: Vec<usize> = [1e-3, 2e-3, 5e-3, 10e-3, 0.1, f64::NAN]
+            .iter()
+            .map(|&p| settle_samples(p))
+            .collect();
+        assert_eq!(got, [100, 100, 40, 40, 40, 40]);
+    }
+
+    #[test]
+    fn a_settle_phase_with_a_few_misses_too_many_is_refused() {
+        let t0 = Instant::now();
+        let mut w = StarvationWatch::new(1e-3);
+        // One in three missed: a running loop goes on, a loop at rest is refused.
+        for k in 0..99 {
+            let at = t0 + Duration::from_secs_f64(k as f64 * 1e-3);
+            assert!(w.push(k as f64 * 1e-3, at, k % 3 == 1).is_ok());
+        }
+        let s = w.settle_verdict().unwrap_err();
+        assert_eq!((s.missed_in_window, s.window), (33, 99), "{s}");
+        assert!(s.at_rest || s.to_string().contains("--period-ms"), "{s}");
+        // One in five: a busy machine's hiccups, not a starved loop.
+        let mut busy = StarvationWatch::new(1e-3);
+        for k in 0..100 {
+            let at = t0 + Duration::from_secs_f64(k as f64 * 1e-3);
+            assert!(busy.push(k as f64 * 1e-3, at, k % 5 == 1).is_ok());
+        }
+        assert!(busy.settle_verdict().is_ok());
+    }
 
     #[test]
     fn nice_periods() {

@@ -275,11 +275,12 @@ impl Board {
         let Some(us) = chosen else {
             let last = servo_hw::qemu::PROBE_PERIODS_US[servo_hw::qemu::PROBE_PERIODS_US.len() - 1];
             bail!(
-                "the QEMU board cannot hold a period of {} ms or less on this machine (more than \
-                 {:.0} % of its deadlines missed: {}); free the machine or give a longer \
-                 --period-ms",
+                "the QEMU board cannot hold a period of {} ms or less on this machine (a period \
+                 is held with at most {:.0} % of its deadlines missed and the host's answer \
+                 within {:.0} % of it: {}); free the machine or give a longer --period-ms",
                 last as f64 * 1e-3,
                 servo_hw::qemu::PROBE_MAX_MISSED_FRACTION * 100.0,
+                servo_hw::qemu::PROBE_MAX_RTT_FRACTION * 100.0,
                 probes
                     .iter()
                     .map(|p| p.to_string())
