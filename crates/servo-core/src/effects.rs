@@ -519,10 +519,10 @@ pub trait EffectModel: Sync + Send {
     fn values_from_coefs(&self, c: &[f64], v: &mut [f64], tau_sf: f64) {
         let _ = (c, v, tau_sf);
     }
-    /// Standard error of parameter `key` from the standard errors `se` of the coefficients, if it
-    /// has one.
-    fn std_err(&self, key: &str, se: &[f64]) -> Option<f64> {
-        let _ = (key, se);
+    /// Standard error of parameter `key` from the fitted coefficients `coefs` and their
+    /// standard errors `se`, if it has one (`None`: the data do not give it an interval).
+    fn std_err(&self, key: &str, se: &[f64], coefs: &[f64]) -> Option<f64> {
+        let _ = (key, se, coefs);
         None
     }
 

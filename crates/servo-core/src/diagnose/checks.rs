@@ -38,9 +38,9 @@ pub fn constraints(
     out
 }
 
-/// One check per searched parameter of `kind` whose best fit sits at a bound of its search grid
-/// ([`crate::effects::EffectModel::search_grid`]) that is not the effect's "no effect" end
-/// ([`NoEffectAt`]): within [`Thresholds::search_bound_margin_pct`] of the range (of its
+/// One check per searched parameter of `kind` whose best fit sits at the top of its search grid
+/// ([`crate::effects::EffectModel::search_grid`]) when the top is not the effect's "no effect"
+/// end ([`NoEffectAt`]): within [`Thresholds::search_bound_margin_pct`] of the range (of its
 /// logarithm on a log grid) or beyond it. Such a value is not determined by these logs: the
 /// optimum may lie past the bound, or the effect is bent to soak up another mechanism. Integer
 /// searches (a harmonic order) are hypotheses each, not a range, and are not checked.
@@ -83,24 +83,23 @@ fn search_bounds_in(
         if !(margin > 0.0) {
             continue;
         }
-        let at_low = search.no_effect_at != NoEffectAt::First && map(v) <= map(lo) + margin;
-        let at_high = search.no_effect_at != NoEffectAt::Last && map(v) >= map(hi) - margin;
-        if !(at_low || at_high) {
+        // The top only: the bottom of a grid is where an effect vanishes (a gap, a delay or a
+        // dead band of zero: the effect's own checks judge it) or a start the refinement
+        // leaves freely (a limit below the smallest searched).
+        if search.no_effect_at == NoEffectAt::Last || map(v) < map(hi) - margin {
             continue;
         }
-        let (edge, which) = if at_high { (hi, "top") } else { (lo, "bottom") };
         out.push(Check {
             name: "inside its search range",
             passed: false,
             detail: alloc::format!(
-                "{} = {} {} sits at the {which} of its search ({} to {} {}, bound {}): not determined by these logs (the best fit may lie beyond it, or the effect stands in for another mechanism); to determine it: {}",
+                "{} = {} {} sits at the top of its search ({} to {} {}): not determined by these logs (the best fit may lie beyond it, or the effect stands in for another mechanism); to determine it: {}",
                 spec.key,
                 math::sig(v, 4),
                 spec.unit,
                 math::sig(lo, 4),
                 math::sig(hi, 4),
                 spec.unit,
-                math::sig(edge, 4),
                 model.experiment()
             ),
         });
@@ -448,8 +447,9 @@ mod tests {
         assert!(far.detail.contains("differs"), "{}", far.detail);
     }
 
-    /// Every searched parameter of the catalogue: a best fit in the middle of its grid passes,
-    /// at a bound that is not the effect's "no effect" end (or past it) it is not determined.
+    /// Every searched parameter of the catalogue: a best fit in the middle or at the bottom of its
+    /// grid passes, at the top (or past it) it is not determined unless the top is the effect's
+    /// "no effect" end.
     #[test]
     fn a_searched_parameter_at_its_search_bound_is_not_determined() {
         let ctx = GridContext {
@@ -489,13 +489,11 @@ mod tests {
                     0.5 * (lo + hi)
                 };
                 assert!(at(mid).is_empty(), "{kind}.{} = {mid}", spec.key);
-                for (v, no_effect) in [
-                    (hi, NoEffectAt::Last),
-                    (1.05 * hi, NoEffectAt::Last),
-                    (lo, NoEffectAt::First),
-                ] {
+                // The bottom is where an effect vanishes or a refinement starts: not judged.
+                assert!(at(lo).is_empty(), "{kind}.{} = {lo}", spec.key);
+                for v in [hi, 1.05 * hi] {
                     let found = at(v);
-                    if search.no_effect_at == no_effect {
+                    if search.no_effect_at == NoEffectAt::Last {
                         assert!(found.is_empty(), "{kind}.{} = {v}: {found:?}", spec.key);
                     } else {
                         assert_eq!(found.len(), 1, "{kind}.{} = {v}", spec.key);
@@ -510,6 +508,6 @@ mod tests {
                 }
             }
         }
-        assert!(checked >= 5, "only {checked} bounds checked");
+        assert!(checked >= 6, "only {checked} bounds checked");
     }
 }

@@ -9,7 +9,7 @@ use super::{
     SimRole, Span,
 };
 use super::periodic::{
-    amplitude_phase, amplitude_std_err, pair, periodic_regressor, phasor_pow, taper,
+    amplitude_phase, amplitude_std_err, phase_std_err, pair, periodic_regressor, phasor_pow, taper,
 };
 use crate::math;
 
@@ -138,8 +138,12 @@ impl EffectModel for Cogging {
     fn values_from_coefs(&self, c: &[f64], v: &mut [f64], _tau_sf: f64) {
         (v[0], v[2]) = amplitude_phase(c);
     }
-    fn std_err(&self, key: &str, se: &[f64]) -> Option<f64> {
-        (key == "amplitude").then(|| amplitude_std_err(se))
+    fn std_err(&self, key: &str, se: &[f64], coefs: &[f64]) -> Option<f64> {
+        match key {
+            "amplitude" => Some(amplitude_std_err(se)),
+            "phase" => phase_std_err(coefs, se),
+            _ => None,
+        }
     }
     fn experiment(&self) -> &str {
         "turn the motor slowly at constant speed over several revolutions and log the current"

@@ -4,7 +4,7 @@
 //! Linear in (amplitude cos(phase), amplitude sin(phase)): the fit estimates the pair by least
 //! squares (no search).
 
-use super::periodic::{amplitude_phase, amplitude_std_err, periodic_regressor};
+use super::periodic::{amplitude_phase, amplitude_std_err, phase_std_err, periodic_regressor};
 use super::{spec, ActsOn, CoefSign, EffectModel, ParamSpec, Sample, Signals, SimRole, Span};
 use crate::math;
 
@@ -98,8 +98,12 @@ impl EffectModel for Imbalance {
     fn values_from_coefs(&self, c: &[f64], v: &mut [f64], _tau_sf: f64) {
         (v[0], v[1]) = amplitude_phase(c);
     }
-    fn std_err(&self, key: &str, se: &[f64]) -> Option<f64> {
-        (key == "amplitude").then(|| amplitude_std_err(se))
+    fn std_err(&self, key: &str, se: &[f64], coefs: &[f64]) -> Option<f64> {
+        match key {
+            "amplitude" => Some(amplitude_std_err(se)),
+            "phase" => phase_std_err(coefs, se),
+            _ => None,
+        }
     }
     fn schedule_rank(&self) -> u8 {
         4

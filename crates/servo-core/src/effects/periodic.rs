@@ -53,6 +53,17 @@ pub fn amplitude_std_err(se: &[f64]) -> f64 {
     math::sqrt(0.5 * (a * a + b * b))
 }
 
+/// Standard error of the phase [rad] from the fitted pair `c` and its standard errors `se`
+/// (the amplitude's error turned through the amplitude: se_A / A for a round error ellipse);
+/// `None` when the amplitude is within twice its error of zero, where the phase is not
+/// determined.
+#[inline]
+pub fn phase_std_err(c: &[f64], se: &[f64]) -> Option<f64> {
+    let (a, _) = amplitude_phase(c);
+    let s = amplitude_std_err(se);
+    (s > 0.0 && a > 2.0 * s).then(|| s / a)
+}
+
 /// The taper of a periodic regressor turning at `speed` [rad/s] with `harmonic` cycles per turn
 /// (see [`periodic_regressor`]): 1 below twice the filter cut-off, 0 beyond four times.
 #[inline]

@@ -122,7 +122,7 @@ impl EffectModel for Stribeck {
     fn values_from_coefs(&self, c: &[f64], v: &mut [f64], tau_sf: f64) {
         v[0] = tau_sf + c.first().copied().unwrap_or(0.0).max(0.0);
     }
-    fn std_err(&self, key: &str, se: &[f64]) -> Option<f64> {
+    fn std_err(&self, key: &str, se: &[f64], _coefs: &[f64]) -> Option<f64> {
         (key == "tau_s").then(|| se.first().copied()).flatten()
     }
     fn schedule_rank(&self) -> u8 {

@@ -988,10 +988,10 @@ impl Dataset {
                     }
                     _ => {
                         let m = s.kind.model();
-                        let se: Vec<f64> = (0..m.linear_coefs())
-                            .map(|j| solved.mech.coef(Coef::Effect(si, j)).map_or(0.0, |c| c.1))
-                            .collect();
-                        m.std_err(spec.key, &se)
+                        let (coefs, se): (Vec<f64>, Vec<f64>) = (0..m.linear_coefs())
+                            .map(|j| solved.mech.coef(Coef::Effect(si, j)).unwrap_or((0.0, 0.0)))
+                            .unzip();
+                        m.std_err(spec.key, &se, &coefs)
                     }
                 }
                 .filter(|v| *v > 0.0);

@@ -224,13 +224,21 @@ pub fn identify_with_model(
         }
         let se = e.std_err.unwrap_or(f64::NAN);
         let se0 = if se.is_finite() { se } else { 0.0 };
+        // An effect's parameter the least squares give no error for (a searched value, a
+        // phase of a pair within its error of zero) has no interval: the drive constants'
+        // tolerance alone would print a tight one.
+        let total = if base_key || se.is_finite() {
+            math::sqrt(se0 * se0 + shifts[j])
+        } else {
+            f64::NAN
+        };
         out.push(UDrivenEstimate {
             effect: (!base_key).then_some(e.effect).flatten(),
             key: e.key,
             unit: e.unit,
             value,
             std_err: se,
-            std_err_total: math::sqrt(se0 * se0 + shifts[j]),
+            std_err_total: total,
         });
     }
     let mut declared_out = declared;
@@ -266,7 +274,7 @@ pub fn describe_effects(id: &UDrivenIdentification) -> Vec<String> {
                         )
                     } else {
                         format!(
-                            "{} = {:.4e} {} (at its bound: not determined by these logs)",
+                            "{} = {:.4e} {} (no interval: not determined by these logs)",
                             e.key, e.value, e.unit
                         )
                     }
