@@ -67,7 +67,7 @@ impl EffectModel for TestSpring {
     fn values_from_coefs(&self, c: &[f64], v: &mut [f64], _tau_sf: f64) {
         v[0] = c.first().copied().unwrap_or(0.0);
     }
-    fn std_err(&self, key: &str, se: &[f64]) -> Option<f64> {
+    fn std_err(&self, key: &str, se: &[f64], _coefs: &[f64]) -> Option<f64> {
         (key == "k").then(|| se.first().copied()).flatten()
     }
     fn experiment(&self) -> &str {
