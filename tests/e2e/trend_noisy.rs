@@ -101,9 +101,6 @@ fn trend_names_the_one_drifting_parameter_on_calibrated_intervals() {
     let fleet = tmp.path().join("fleet");
     let started = std::time::Instant::now();
     write_fleet(&fleet);
-    if let Ok(keep) = std::env::var("H5_KEEP_FLEET") {
-        write_fleet(Path::new(&keep));
-    }
     let model = tmp.path().join("fleet.toml");
     write_model(&model);
     let cache = tmp.path().join("cache");
