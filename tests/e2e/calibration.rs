@@ -94,6 +94,14 @@ pub fn draw_plant(rng: &mut SplitMix64) -> PlantParams {
     }
 }
 
+/// What a case simulates: the plant and, for the effect cases, an imbalance at the load
+/// (amplitude [N m], phase [rad]: amplitude sin(theta_l + phase) opposing the motion's drive).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rig {
+    pub p: PlantParams,
+    pub imbalance: Option<(f64, f64)>,
+}
+
 /// The independent simulator: state [u_drv, i_a, omega_m, theta_m], RK4 at 50 us.
 pub struct OtherSim {
     p: PlantParams,
@@ -112,9 +120,19 @@ pub struct OtherSim {
     tach: f64,
     last_u: f64,
     rng: SplitMix64,
+    /// An eccentric load: amplitude [N m] and phase [rad] of its torque at the load.
+    imbalance: Option<(f64, f64)>,
 }
 
 impl OtherSim {
+    /// The rig `rig` (its plant and its imbalance, if any).
+    pub fn rig(rig: &Rig, rng: &mut SplitMix64) -> OtherSim {
+        OtherSim {
+            imbalance: rig.imbalance,
+            ..OtherSim::new(rig.p, rng)
+        }
+    }
+
     pub fn new(p: PlantParams, rng: &mut SplitMix64) -> OtherSim {
         let u = |rng: &mut SplitMix64, lo: f64, hi: f64| lo + (hi - lo) * rng.uniform();
         OtherSim {
@@ -131,6 +149,7 @@ impl OtherSim {
             tach: 0.0,
             last_u: 0.0,
             rng: SplitMix64(rng.next_u64()),
+            imbalance: None,
         }
     }
 
@@ -139,10 +158,13 @@ impl OtherSim {
         let (n, j, b) = (p.n, p.j_eq(), p.b_eq());
         let w_l = x[2] / n;
         let coulomb = p.tau_sf() * (w_l / self.omega_s).tanh() / n;
+        let eccentric = self
+            .imbalance
+            .map_or(0.0, |(a, ph)| a * (x[3] / n + ph).sin() / n);
         [
             (p.k_drv * u - x[0]) / p.t_drv(),
             (x[0] - p.r_eq() * x[1] - p.k_e * x[2]) / p.l_a,
-            (p.k_t * x[1] - b * x[2] - coulomb) / j,
+            (p.k_t * x[1] - b * x[2] - coulomb - eccentric) / j,
             x[2],
         ]
     }
@@ -213,10 +235,18 @@ impl Backend for OtherSim {
 }
 
 /// The backend of one log: servo's simulator or the other one.
-fn backend(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Box<dyn Backend> {
+fn backend(sim: SimKind, rig: &Rig, rng: &mut SplitMix64) -> Box<dyn Backend> {
     match sim {
         SimKind::Servo => {
-            let plant = Plant::from_params(*p).unwrap();
+            let mut plant = Plant::from_params(rig.p).unwrap();
+            if let Some((a, ph)) = rig.imbalance {
+                plant.effects.insert(
+                    servo_core::effects::Effect::parse(&format!(
+                        "imbalance:amplitude={a},phase={ph}"
+                    ))
+                    .unwrap(),
+                );
+            }
             let sensors = SensorConfig {
                 seed: rng.next_u64(),
                 current_noise_a: 1e-3 + 3e-3 * rng.uniform(),
@@ -224,13 +254,14 @@ fn backend(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Box<dyn Backe
             };
             Box::new(SimBackend::new(&plant, sensors, DT).unwrap())
         }
-        SimKind::Other => Box::new(OtherSim::new(*p, rng)),
+        SimKind::Other => Box::new(OtherSim::rig(rig, rng)),
     }
 }
 
 /// The speed-loop experiments of `identify --ramp` (staircase both ways, up/down ramps), with a
 /// random number of speeds, hold time, cycles and acceleration.
-fn ramp_logs(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Vec<Record> {
+fn ramp_logs(sim: SimKind, rig: &Rig, rng: &mut SplitMix64) -> Vec<Record> {
+    let p = &rig.p;
     let n = p.n;
     let levels = 4 + (rng.next_u64() % 4) as usize;
     let top = 450.0 + 250.0 * rng.uniform();
@@ -261,7 +292,7 @@ fn ramp_logs(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Vec<Record>
     .unwrap();
     let mut out = Vec::new();
     for (profile, name) in [(stair, "friction"), (ramps, "inertia")] {
-        let mut b = backend(sim, p, rng);
+        let mut b = backend(sim, rig, rng);
         let cfg = RunConfig::speed(profile, speed_loop);
         let mut rec = run_loop(&mut *b, &cfg, None).unwrap().record;
         rec.source = format!("{sim:?} {name}");
@@ -273,7 +304,7 @@ fn ramp_logs(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Vec<Record>
 /// An open-loop voltage log of `secs` seconds: `u(t, rng)` is the voltage.
 fn open_loop_log(
     sim: SimKind,
-    p: &PlantParams,
+    rig: &Rig,
     rng: &mut SplitMix64,
     secs: f64,
     name: &str,
@@ -284,7 +315,7 @@ fn open_loop_log(
     let mut urng = SplitMix64(rng.next_u64());
     match sim {
         SimKind::Servo => {
-            let mut b = backend(sim, p, rng);
+            let mut b = backend(sim, rig, rng);
             for k in 0..steps {
                 let s = b.sample().unwrap();
                 let uk = u(k as f64 * DT, &mut urng);
@@ -296,7 +327,7 @@ fn open_loop_log(
             }
         }
         SimKind::Other => {
-            let mut s = OtherSim::new(*p, rng);
+            let mut s = OtherSim::rig(rig, rng);
             for k in 0..steps {
                 let (thk, _, ik, wk) = s.measure();
                 let uk = u(k as f64 * DT, &mut urng);
@@ -321,7 +352,7 @@ fn open_loop_log(
 }
 
 /// A voltage sine: amplitude 3-8 V, 0.3-1.5 Hz, 20 s.
-fn sine_log(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Record {
+fn sine_log(sim: SimKind, p: &Rig, rng: &mut SplitMix64) -> Record {
     let amp = 3.0 + 5.0 * rng.uniform();
     let f = 0.3 + 1.2 * rng.uniform();
     open_loop_log(sim, p, rng, 20.0, "sine", move |t, _| {
@@ -330,7 +361,7 @@ fn sine_log(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Record {
 }
 
 /// Random voltage levels (+-1 to +-8 V) held 0.3-0.8 s, 20 s.
-fn prbs_log(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Record {
+fn prbs_log(sim: SimKind, p: &Rig, rng: &mut SplitMix64) -> Record {
     let (mut level, mut until) = (0.0, 0.0);
     open_loop_log(sim, p, rng, 20.0, "prbs", move |t, r| {
         if t >= until {
@@ -344,7 +375,7 @@ fn prbs_log(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Record {
 
 /// A position PID tracking a reference whose speed swings around a random level without
 /// reversing (load 10-30 rad/s, +-60 % at 0.2-1 Hz, either direction), 20 s.
-fn closed_loop_log(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Record {
+fn closed_loop_log(sim: SimKind, p: &Rig, rng: &mut SplitMix64) -> Record {
     let gains = PidGains {
         kp: 7.5244,
         ki: 94.0379,
@@ -382,6 +413,15 @@ fn closed_loop_log(sim: SimKind, p: &PlantParams, rng: &mut SplitMix64) -> Recor
 
 /// The logs of one case.
 pub fn logs(sim: SimKind, input: InputKind, p: &PlantParams, rng: &mut SplitMix64) -> Vec<Record> {
+    let rig = Rig {
+        p: *p,
+        imbalance: None,
+    };
+    rig_logs(sim, input, &rig, rng)
+}
+
+/// The logs of one case on `rig`.
+pub fn rig_logs(sim: SimKind, input: InputKind, p: &Rig, rng: &mut SplitMix64) -> Vec<Record> {
     match input {
         InputKind::Ramps => ramp_logs(sim, p, rng),
         InputKind::RampsSine => {
@@ -597,6 +637,206 @@ fn intervals_cover_the_truth_on_a_fast_subset() {
             100.0 * t.coverage(k),
             t.covered[k],
             t.total[k]
+        );
+    }
+}
+
+// ---- A catalogue effect: the base and an imbalance fitted as `servo compare --add` does ----
+
+/// The parameters of an effect case: the base, then the imbalance's main parameter.
+pub const EFFECT_NAMES: [&str; 4] = ["J_eq", "B_eq", "tau_sf", "imbalance.amplitude"];
+
+/// One fit of the base with an added imbalance, as `servo compare --add imbalance` makes it
+/// ([`servo_core::fit::fit_model`], default options, the model's base as the start): per
+/// parameter of [`EFFECT_NAMES`] the estimate and its printed 95 % half-width (1.96 se), and the
+/// truth. This is also the fit `servo trend` makes of each log (with the model's effects).
+#[derive(Debug, Clone)]
+pub struct EffectOutcome {
+    pub sim: SimKind,
+    pub input: InputKind,
+    pub seed: u64,
+    /// (value, 95 % half-width); `None`: no value or no interval.
+    pub est: [Option<(f64, f64)>; 4],
+    pub truth: [f64; 4],
+    pub refused: Option<String>,
+}
+
+/// A random plant with an imbalance of 0.5-2.5 x its Coulomb level at a random phase, the
+/// logs of `input` on `sim`, and the fit of the base with `--add imbalance`.
+pub fn run_effect_case(sim: SimKind, input: InputKind, seed: u64) -> EffectOutcome {
+    use servo_core::fit::{fit_model, EffectToFit, FitOptions};
+    let mut rng = SplitMix64(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x00EF_FEC7);
+    let p = draw_plant(&mut rng);
+    let amp = p.tau_sf() * (0.5 + 2.0 * rng.uniform());
+    let phase = TAU * rng.uniform() - std::f64::consts::PI;
+    let rig = Rig {
+        p,
+        imbalance: Some((amp, phase)),
+    };
+    let recs = rig_logs(sim, input, &rig, &mut rng);
+    // The model the user compares against: the true electrical constants, the lab's mechanics.
+    let lab = PlantParams::LAB;
+    let start = Plant::from_params(PlantParams {
+        j_eq: lab.j_eq,
+        b_eq: lab.b_eq,
+        tau_sf: lab.tau_sf,
+        ..p
+    })
+    .unwrap();
+    let truth = [p.j_eq(), p.b_eq(), p.tau_sf(), amp];
+    let add = [EffectToFit::parse("imbalance").unwrap()];
+    let (est, refused) = match fit_model(&recs, &start, &add, &FitOptions::default()) {
+        Ok(f) => {
+            let get = |effect: Option<&str>, key: &str| {
+                f.params
+                    .iter()
+                    .find(|e| {
+                        e.key == key && effect.is_none_or(|n| e.effect.map(|k| k.name()) == Some(n))
+                    })
+                    .and_then(|e| Some((e.value, 1.96 * e.std_err?)))
+            };
+            (
+                [
+                    get(None, "j_eq"),
+                    get(None, "b_eq"),
+                    get(None, "tau_sf"),
+                    get(Some("imbalance"), "amplitude"),
+                ],
+                None,
+            )
+        }
+        Err(e) => ([None; 4], Some(e.to_string())),
+    };
+    EffectOutcome {
+        sim,
+        input,
+        seed,
+        est,
+        truth,
+        refused,
+    }
+}
+
+/// Per parameter of [`EFFECT_NAMES`]: (covered, with an interval), over `outcomes`.
+pub fn effect_coverage(outcomes: &[&EffectOutcome]) -> [(usize, usize); 4] {
+    let mut c = [(0, 0); 4];
+    for o in outcomes {
+        for k in 0..4 {
+            if let Some((v, hw)) = o.est[k] {
+                c[k].1 += 1;
+                if (v - o.truth[k]).abs() <= hw {
+                    c[k].0 += 1;
+                }
+            }
+        }
+    }
+    c
+}
+
+fn effect_line(label: &str, outcomes: &[&EffectOutcome]) -> String {
+    let mut s = format!("{label:<24}");
+    for (k, (a, n)) in effect_coverage(outcomes).iter().enumerate() {
+        s.push_str(&format!(
+            " | {} {a}/{n} {:5.1} %",
+            EFFECT_NAMES[k],
+            100.0 * *a as f64 / (*n).max(1) as f64
+        ));
+    }
+    s
+}
+
+/// `per` seeds of every (simulator, input) pair from `seed0`; prints the misses and tables.
+pub fn run_effect_grid(per: u64, seed0: u64) -> Vec<EffectOutcome> {
+    let mut out = Vec::new();
+    for sim in [SimKind::Servo, SimKind::Other] {
+        for input in INPUTS {
+            for s in 0..per {
+                out.push(run_effect_case(sim, input, seed0 + s));
+            }
+        }
+    }
+    for o in &out {
+        if let Some(r) = &o.refused {
+            eprintln!("{:?} {:?} seed {}: refused: {r}", o.sim, o.input, o.seed);
+        }
+        for k in 0..4 {
+            if let Some((v, hw)) = o.est[k] {
+                if (v - o.truth[k]).abs() > hw {
+                    eprintln!(
+                        "  miss {:?} {:?} seed {} {}: {v:.4e} +/- {hw:.2e} truth {:.4e} ({:+.2} %)",
+                        o.sim,
+                        o.input,
+                        o.seed,
+                        EFFECT_NAMES[k],
+                        o.truth[k],
+                        100.0 * (v / o.truth[k] - 1.0)
+                    );
+                }
+            }
+        }
+    }
+    for sim in [SimKind::Servo, SimKind::Other] {
+        for input in INPUTS {
+            let sel: Vec<&EffectOutcome> = out
+                .iter()
+                .filter(|o| o.sim == sim && o.input == input)
+                .collect();
+            eprintln!("{}", effect_line(&format!("{sim:?} {input:?}"), &sel));
+        }
+    }
+    let all: Vec<&EffectOutcome> = out.iter().collect();
+    eprintln!("{}", effect_line("ALL", &all));
+    out
+}
+
+/// The effect benchmark: 2 simulators x 5 inputs x 24 seeds = 240 fits with an imbalance
+/// (`SERVO_CALIBRATION_SEEDS` seeds per pair).
+#[test]
+#[ignore]
+fn effect_calibration_benchmark() {
+    let _machine = servo_e2e::shared();
+    let per = std::env::var("SERVO_CALIBRATION_SEEDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(24);
+    let start = std::time::Instant::now();
+    let out = run_effect_grid(per, 1000);
+    eprintln!(
+        "{} fits in {:.1} s",
+        out.len(),
+        start.elapsed().as_secs_f64()
+    );
+    let all: Vec<&EffectOutcome> = out.iter().collect();
+    for (k, (a, n)) in effect_coverage(&all).iter().enumerate() {
+        let c = *a as f64 / (*n).max(1) as f64;
+        assert!(
+            (0.90..=0.98).contains(&c),
+            "{}: coverage {:.1} %",
+            EFFECT_NAMES[k],
+            100.0 * c
+        );
+    }
+}
+
+/// A fast subset of the effect benchmark (both simulators, every input, other seeds): below
+/// 85 % coverage of any parameter, the imbalance's amplitude included, fails.
+#[test]
+fn effect_intervals_cover_the_truth_on_a_fast_subset() {
+    let _machine = servo_e2e::shared();
+    let start = std::time::Instant::now();
+    let out = run_effect_grid(2, 1);
+    eprintln!(
+        "{} fits in {:.1} s",
+        out.len(),
+        start.elapsed().as_secs_f64()
+    );
+    let all: Vec<&EffectOutcome> = out.iter().collect();
+    for (k, (a, n)) in effect_coverage(&all).iter().enumerate() {
+        assert!(
+            *n >= out.len() * 3 / 4 && *a as f64 >= 0.85 * *n as f64,
+            "{}: {a} of {n} intervals hold the truth ({} fits)",
+            EFFECT_NAMES[k],
+            out.len()
         );
     }
 }

@@ -35,6 +35,7 @@ mod smart_servo;
 mod student;
 mod transmission;
 mod trend;
+mod trend_noisy;
 mod two_mass;
 mod util;
 mod window;

@@ -147,6 +147,12 @@ pub fn change_words(a: &Actuator, p: &ParamTrend) -> String {
             "; it is already past the {} {u} limit ({from})",
             num(limit)
         )),
+        (Some(Crossing::AtLimit { lo, hi }), Some((limit, from))) => s.push_str(&format!(
+            "; at the last log it is at the {} {u} limit ({from}) within its 95 % interval ({} to {}): these logs cannot tell whether it is past",
+            num(limit),
+            num(lo),
+            num(hi)
+        )),
         (Some(Crossing::Never), Some((limit, from))) => s.push_str(&format!(
             "; it moves away from the {} {u} limit ({from})",
             num(limit)

@@ -109,8 +109,10 @@ fn fmt_params(params: &[ParamEstimate]) -> String {
             s.push_str(", ");
         }
         let _ = write!(s, "{} = {:.4} {}", p.key, p.value, p.unit);
+        // The 95 % interval (robust standard error, see crate::fit::lsq); a parameter found
+        // by a search has none and shows its value alone.
         if let Some(e) = p.std_err {
-            let _ = write!(s, " (+/- {e:.2e})");
+            let _ = write!(s, " (95 %: +/- {:.2e})", 1.96 * e);
         }
     }
     s

@@ -4,6 +4,12 @@
 //! different magnitudes (accelerations of 1e4 rad/s^2 next to unit sign functions) stay well
 //! conditioned. Sign constraints are enforced by an active set: a coefficient that comes out with
 //! the wrong sign is fixed at zero and the rest refitted, until every sign is physical.
+//!
+//! Besides the classical standard errors (white residuals), every solution carries robust ones
+//! ([`LsSolution::std_err_robust`]): the cluster-robust sandwich over contiguous blocks of rows
+//! (the rows of a log are in time order, and the residuals of filtered signals at a 100 Hz row
+//! rate are correlated over many rows), at least the classical ones, and scaled so that
+//! +/- 1.96 of them is the Student-t 95 % interval on the blocks' degrees of freedom.
 
 use crate::math;
 use alloc::vec::Vec;
@@ -21,8 +27,11 @@ pub enum Sign {
 pub struct LsSolution {
     /// Coefficients, one per column (0 for columns held at zero by a constraint).
     pub theta: Vec<f64>,
-    /// Standard errors (0 for constrained-out columns).
+    /// Standard errors (0 for constrained-out columns), residuals taken as white.
     pub std_err: Vec<f64>,
+    /// Standard errors robust to correlated residuals (block sandwich, see the module's doc),
+    /// at least `std_err`, as a 1.96-sigma half-width of the 95 % interval.
+    pub std_err_robust: Vec<f64>,
     /// Residual sum of squares.
     pub rss: f64,
     /// Rows used.
@@ -61,7 +70,7 @@ pub fn solve(cols: &[Vec<f64>], y: &[f64], signs: &[Sign]) -> Option<LsSolution>
     let mut active: Vec<bool> = alloc::vec![true; p_all];
     for _ in 0..=p_all {
         let idx: Vec<usize> = (0..p_all).filter(|&j| active[j]).collect();
-        let (theta_a, se_a, rss) = solve_unconstrained(cols, y, &idx)?;
+        let (theta_a, se_a, rob_a, rss) = solve_unconstrained(cols, y, &idx)?;
         let mut worst: Option<(usize, f64)> = None;
         for (t, &j) in theta_a.iter().zip(&idx) {
             if signs.get(j) == Some(&Sign::NonNegative) && *t < 0.0 {
@@ -77,13 +86,16 @@ pub fn solve(cols: &[Vec<f64>], y: &[f64], signs: &[Sign]) -> Option<LsSolution>
             None => {
                 let mut theta = alloc::vec![0.0; p_all];
                 let mut std_err = alloc::vec![0.0; p_all];
+                let mut std_err_robust = alloc::vec![0.0; p_all];
                 for (q, &j) in idx.iter().enumerate() {
                     theta[j] = theta_a[q];
                     std_err[j] = se_a[q];
+                    std_err_robust[j] = rob_a[q].max(se_a[q]);
                 }
                 return Some(LsSolution {
                     theta,
                     std_err,
+                    std_err_robust,
                     rss,
                     n,
                     p: idx.len(),
@@ -94,16 +106,36 @@ pub fn solve(cols: &[Vec<f64>], y: &[f64], signs: &[Sign]) -> Option<LsSolution>
     None
 }
 
-fn solve_unconstrained(
-    cols: &[Vec<f64>],
-    y: &[f64],
-    idx: &[usize],
-) -> Option<(Vec<f64>, Vec<f64>, f64)> {
+/// Rows per block of the robust covariance (half a second at the fits' 100 Hz row rate).
+pub const ROWS_PER_BLOCK: usize = 50;
+/// Most blocks of the robust covariance.
+pub const MAX_BLOCKS: usize = 40;
+
+/// Two-sided 95 % normal quantile.
+pub const Z95: f64 = 1.959_964;
+
+/// Two-sided 95 % Student-t quantile on `dof` degrees of freedom (within 0.5 % from 3 on).
+pub fn t95(dof: usize) -> f64 {
+    match dof {
+        0 => f64::INFINITY,
+        1 => 12.706,
+        2 => 4.303,
+        d => {
+            let d = d as f64;
+            Z95 + 2.37 / d + 2.8 / (d * d)
+        }
+    }
+}
+
+/// (theta, classical se, robust se, RSS) of the columns `idx`.
+type Unconstrained = (Vec<f64>, Vec<f64>, Vec<f64>, f64);
+
+fn solve_unconstrained(cols: &[Vec<f64>], y: &[f64], idx: &[usize]) -> Option<Unconstrained> {
     let n = y.len();
     let p = idx.len();
     if p == 0 {
         let rss = y.iter().map(|v| v * v).sum();
-        return Some((Vec::new(), Vec::new(), rss));
+        return Some((Vec::new(), Vec::new(), Vec::new(), rss));
     }
     if n <= p {
         return None;
@@ -132,6 +164,23 @@ fn solve_unconstrained(
     let rss = resid.norm_squared();
     let sigma2 = rss / (n - p) as f64;
     let rinv = r.solve_upper_triangular(&DMatrix::identity(p, p))?;
+    // Block sandwich: (R^T R)^-1 (sum_b g_b g_b^T) (R^T R)^-1 b/(b-1), g_b = X_b^T e_b.
+    let b = (n / ROWS_PER_BLOCK).clamp(2, MAX_BLOCKS);
+    let mut rob = alloc::vec![0.0; p];
+    if n >= 2 * b {
+        let mut meat = DMatrix::<f64>::zeros(p, p);
+        for k in 0..b {
+            let (s, e) = (k * n / b, (k + 1) * n / b);
+            let g = x.rows(s, e - s).transpose() * resid.rows(s, e - s);
+            meat += &g * g.transpose();
+        }
+        let bread = &rinv * rinv.transpose();
+        let cov = &bread * meat * &bread * (b as f64 / (b as f64 - 1.0));
+        let widen = t95(b - 1) / Z95;
+        for (q, r) in rob.iter_mut().enumerate() {
+            *r = math::sqrt(cov[(q, q)].max(0.0)) / scale[q] * widen;
+        }
+    }
     let mut theta = Vec::with_capacity(p);
     let mut se = Vec::with_capacity(p);
     for q in 0..p {
@@ -139,7 +188,7 @@ fn solve_unconstrained(
         theta.push(beta[q] / scale[q]);
         se.push(math::sqrt(var) / scale[q]);
     }
-    Some((theta, se, rss))
+    Some((theta, se, rob, rss))
 }
 
 #[cfg(test)]

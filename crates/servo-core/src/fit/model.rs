@@ -109,7 +109,10 @@ pub struct EqSolution {
     pub equation: Equation,
     pub coefs: Vec<Coef>,
     pub theta: Vec<f64>,
+    /// Standard errors with the residuals taken as white (0 for fixed coefficients).
     pub std_err: Vec<f64>,
+    /// Standard errors robust to correlated residuals ([`super::lsq::LsSolution::std_err_robust`]).
+    pub std_err_robust: Vec<f64>,
     /// Residual at every row of the equation (fit and held out).
     pub resid: Vec<f64>,
     /// Residual sum of squares on fit rows / held-out rows, and their counts.
@@ -243,8 +246,25 @@ fn torque_current(ds: &Dataset, cfg: &Config, rows: &super::dataset::Rows) -> Ve
     out
 }
 
+/// Which of the fit rows a solution uses: all, the first or second half of them in time order,
+/// or the slower or faster half by motor speed (the halves' disagreement is folded into the
+/// printed intervals).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Half {
+    All,
+    First,
+    Second,
+    Slow,
+    Fast,
+}
+
 /// Solves the mechanical (torque or combined) equation of `cfg`.
 pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
+    solve_mech_on(ds, cfg, Half::All)
+}
+
+/// [`solve_mech`] on `half` of the fit rows.
+pub fn solve_mech_on(ds: &Dataset, cfg: &Config, half: Half) -> Option<EqSolution> {
     let rows = &ds.mech_rows;
     let p = &cfg.base.params;
     let n = p.n;
@@ -351,7 +371,7 @@ pub fn solve_mech(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
     };
     let (mut y, mut terms) = (y, terms);
     mask_gap_crossings(cfg, rows, &mut y, &mut terms);
-    solve_terms(equation, rows, y, terms)
+    solve_terms(equation, rows, y, terms, half)
 }
 
 /// With a gear play in the model, the rigid-body torque balance does not hold while the motor
@@ -477,6 +497,11 @@ pub fn electrical_residual(
 
 /// Solves the electrical equation of `cfg` (current logged).
 pub fn solve_elec(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
+    solve_elec_on(ds, cfg, Half::All)
+}
+
+/// [`solve_elec`] on `half` of the fit rows.
+pub fn solve_elec_on(ds: &Dataset, cfg: &Config, half: Half) -> Option<EqSolution> {
     if !ds.has_current {
         return None;
     }
@@ -516,7 +541,7 @@ pub fn solve_elec(ds: &Dataset, cfg: &Config) -> Option<EqSolution> {
             }
         }
     }
-    solve_terms(Equation::Electrical, rows, y, terms)
+    solve_terms(Equation::Electrical, rows, y, terms, half)
 }
 
 fn solve_terms(
@@ -524,6 +549,7 @@ fn solve_terms(
     rows: &Rows,
     mut y: Vec<f64>,
     terms: Vec<Term>,
+    half: Half,
 ) -> Option<EqSolution> {
     for t in &terms {
         if let Some(v) = t.fixed {
@@ -533,7 +559,26 @@ fn solve_terms(
         }
     }
     let free: Vec<&Term> = terms.iter().filter(|t| t.fixed.is_none()).collect();
-    let fit_idx: Vec<usize> = (0..rows.len()).filter(|&i| rows.fit[i]).collect();
+    let mut fit_idx: Vec<usize> = (0..rows.len()).filter(|&i| rows.fit[i]).collect();
+    let mid = fit_idx.len() / 2;
+    match half {
+        Half::All => {}
+        Half::First => fit_idx.truncate(mid),
+        Half::Second => {
+            fit_idx.drain(..mid);
+        }
+        Half::Slow | Half::Fast => {
+            // The speed is the viscous (torque) or back-EMF (electrical) column.
+            let w = terms
+                .iter()
+                .find(|t| matches!(t.coef, Coef::BEq | Coef::KeOverK))?;
+            let mut speeds: Vec<f64> = fit_idx.iter().map(|&i| w.col[i].abs()).collect();
+            speeds.sort_by(f64::total_cmp);
+            let median = speeds.get(mid).copied()?;
+            let slow = half == Half::Slow;
+            fit_idx.retain(|&i| (w.col[i].abs() < median) == slow);
+        }
+    }
     let cols: Vec<Vec<f64>> = free
         .iter()
         .map(|t| fit_idx.iter().map(|&i| t.col[i]).collect())
@@ -560,6 +605,7 @@ fn solve_terms(
     let mut coefs = Vec::new();
     let mut theta = Vec::new();
     let mut std_err = Vec::new();
+    let mut std_err_robust = Vec::new();
     let mut fi = 0;
     for t in &terms {
         coefs.push(t.coef);
@@ -567,10 +613,12 @@ fn solve_terms(
             Some(v) => {
                 theta.push(v);
                 std_err.push(0.0);
+                std_err_robust.push(0.0);
             }
             None => {
                 theta.push(sol.theta[fi]);
                 std_err.push(sol.std_err[fi]);
+                std_err_robust.push(sol.std_err_robust[fi]);
                 fi += 1;
             }
         }
@@ -580,6 +628,7 @@ fn solve_terms(
         coefs,
         theta,
         std_err,
+        std_err_robust,
         resid,
         rss_fit,
         rss_hold,

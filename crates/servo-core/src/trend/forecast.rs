@@ -1,8 +1,11 @@
 //! When a trend reaches a limit: the time the line crosses it, with the interval that the
 //! slope's 95 % interval gives (the line anchored at its weighted mean time, where its value and
-//! slope are uncorrelated).
+//! slope are uncorrelated). A limit is passed only when the line's 95 % interval at the last log
+//! is past it; a line past it whose interval still holds it is only at the limit.
 
 use super::LinearTrend;
+use crate::ident::student_t::t95;
+use crate::math;
 
 /// The line's crossing of a limit.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -14,8 +17,11 @@ pub enum Crossing {
         earliest_day: f64,
         latest_day: f64,
     },
-    /// The line was already past the limit at the last log.
+    /// The line was already past the limit at the last log, its 95 % interval there too.
     Passed,
+    /// At the last log the line's 95 % interval (`lo`, `hi`) holds the limit: it may have
+    /// reached it or not, these logs cannot tell.
+    AtLimit { lo: f64, hi: f64 },
     /// The line moves away from the limit (or is flat).
     Never,
 }
@@ -26,9 +32,22 @@ pub fn forecast_crossing(line: &LinearTrend, limit: f64) -> Crossing {
     let gap = limit - line.value_at_ref;
     let slope = line.slope_per_day;
     let before = limit - line.at(line.t_first_day);
-    // Past it at the last log, having moved towards it.
-    if (limit - last) * before <= 0.0 && before != 0.0 {
-        return Crossing::Passed;
+    // The line's 95 % interval at the last log (value and slope uncorrelated at t_ref).
+    let dt = line.t_last_day - line.t_ref_day;
+    let se_last = math::sqrt(
+        line.value_at_ref_std_err * line.value_at_ref_std_err
+            + dt * dt * line.slope_std_err * line.slope_std_err,
+    );
+    let half = t95((line.n.max(3) - 2) as f64) * se_last;
+    let (lo, hi) = (last - half, last + half);
+    // Past it at the last log, having moved towards it: passed when the interval is past too.
+    let past = |x: f64| (limit - x) * before <= 0.0;
+    if past(last) && before != 0.0 {
+        return if past(lo) && past(hi) {
+            Crossing::Passed
+        } else {
+            Crossing::AtLimit { lo, hi }
+        };
     }
     if slope == 0.0 || gap * slope <= 0.0 {
         return Crossing::Never;
