@@ -22,6 +22,7 @@
 //!   in `--columns`, Simulink Scope structures.
 //! * [`markup`]: HTML and SVG escaped by construction (the reports and charts).
 
+pub mod bam_log;
 pub mod chart_axes;
 pub mod columns;
 pub mod compensation;
@@ -48,6 +49,7 @@ pub mod output;
 pub mod recipe_file;
 pub mod reference_file;
 pub mod smart_log;
+pub mod smart_model;
 pub mod text_file;
 pub mod units;
 
@@ -69,10 +71,11 @@ use std::path::Path;
 /// The log formats servo reads ([`log_reader`]), in the order of the "expected ..." message: one
 /// line per format. (Here, at the crate's root, so that the readers' files and the registry's
 /// do not import each other.)
-pub static BUILT_IN: [&dyn LogReader; 3] = [
+pub static BUILT_IN: [&dyn LogReader; 4] = [
     &crate::mat_log::MatReader,
     &crate::mcap_read::McapReader,
     &crate::csv_read::CsvReader,
+    &crate::bam_log::BamReader,
 ];
 
 /// What a log says about the run besides its samples.
