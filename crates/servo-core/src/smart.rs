@@ -296,6 +296,22 @@ fn goal_at(log: &SmartLog, t0: f64, dt: f64, t: f64) -> f64 {
     g[(x as usize).min(g.len() - 1)]
 }
 
+/// The mean of the held goal over [t, t + h] (h at most the log's period): a goal written
+/// within the loop's step weighs by the part of the step after it, so the replay moves
+/// continuously with the latency.
+fn goal_over(log: &SmartLog, t0: f64, dt: f64, t: f64, h: f64) -> f64 {
+    let g = &log.goal_rad;
+    let at = |x: f64| g[(libm::floor(x).max(0.0) as usize).min(g.len() - 1)];
+    let x0 = (t - t0) / dt + 1e-9;
+    let x1 = x0 + h / dt;
+    let b = libm::floor(x0) + 1.0;
+    if x1 <= b || x1 <= x0 {
+        return at(x0);
+    }
+    let f = (x1 - b) / (x1 - x0);
+    at(x0) * (1.0 - f) + at(b) * f
+}
+
 /// Replays `log` on the model in closed loop through the firmware's loop, from the measured
 /// angle and speed at row 0 and the logged goals. Row k of the replay is the state at t_k.
 ///
@@ -335,7 +351,7 @@ pub fn replay(
         for s in 0..subs {
             let t = log.time_s[k] + s as f64 * h;
             let (drive_nm, c, motor_nm) = if on {
-                let d = drive.duty(goal_at(log, t0, dt, t - p.latency_s), th);
+                let d = drive.duty(goal_over(log, t0, dt, t - p.latency_s, h), th);
                 if s == 0 {
                     d_row = d;
                 }
@@ -792,7 +808,17 @@ fn levenberg_marquardt(
         if !jac_ok {
             return None;
         }
-        let inv = (jac.transpose() * &jac).try_inverse()?;
+        // Scaled to unit columns (the coordinates differ by orders of magnitude); a column of
+        // zero (a parameter pinned at a bound, or without effect) leaves the fit's curvature
+        // singular: nothing is determined by it.
+        let jtj = jac.transpose() * &jac;
+        let d: Vec<f64> = (0..k).map(|i| libm::sqrt(jtj[(i, i)])).collect();
+        if d.iter().any(|x| !(x.is_finite() && *x > 0.0)) {
+            return None;
+        }
+        let c = DMatrix::from_fn(k, k, |i, j| jtj[(i, j)] / (d[i] * d[j]));
+        let ci = c.try_inverse()?;
+        let inv = DMatrix::from_fn(k, k, |i, j| ci[(i, j)] / (d[i] * d[j]));
         let mean = r.iter().sum::<f64>() / m as f64;
         let var = r.iter().map(|e| (e - mean) * (e - mean)).sum::<f64>();
         let lag: f64 = r.windows(2).map(|w| (w[0] - mean) * (w[1] - mean)).sum();
