@@ -715,6 +715,50 @@ impl ModelFile {
         }
     }
 
+    /// The model file of fitted output-shaft parameters `p` on the firmware `fw`: `base`'s
+    /// motor constants and gear ratio (R_a set so that k_t N / (R_a + R_s) is the fitted
+    /// k_t / R), J_eq, B_eq, tau_sf at the file's sides, the gravity as the catalogue's effect,
+    /// the drive a position drive on `fw`'s supply and duty limit.
+    pub fn with_smart_fit(
+        &self,
+        p: &servo_core::smart::SmartParams,
+        fw: &servo_core::smart::PositionLoop,
+    ) -> anyhow::Result<ModelFile> {
+        use servo_core::effects::{Effect, GRAVITY};
+        let mut m = self.clone();
+        let n = m.params.n;
+        m.params.j_eq = Some(p.j_eq / (n * n));
+        m.params.b_eq = Some(p.b_eq / (n * n));
+        m.params.tau_sf = Some(p.tau_sf);
+        let r_eq = m.params.k_t * n / p.k_t_per_r;
+        m.params.r_a = r_eq - m.params.r_s;
+        m.effects.remove(servo_core::effects::EffectKind::Viscous);
+        m.effects.remove(servo_core::effects::EffectKind::Coulomb);
+        let mut g = Effect::unset(GRAVITY);
+        g.set("amplitude", p.gravity_nm)
+            .and_then(|_| g.set("phase", p.phase_rad))
+            .map_err(|e| crate::error::anyhow!("gravity: {e}"))?;
+        m.effects.remove(GRAVITY);
+        m.effects.insert(g);
+        m.drive = Drive {
+            duty_limit: Some(fw.duty_limit),
+            ..Drive::duty(Some(fw.v_supply_v), None)
+        };
+        m.smart_servo = Some(crate::smart_model::SmartServo {
+            kp_fw: fw.kp_fw,
+            duty_per_rad_per_kp: fw.duty_per_rad_per_kp,
+            encoder_counts: fw.encoder_counts,
+            period_s: fw.period_s,
+            latency_s: p.latency_s,
+            supply_from_log: fw.supply_from_log,
+            load_friction: p.load_friction,
+        });
+        m.params
+            .validate()
+            .map_err(|e| crate::error::anyhow!("identified parameters are not physical: {e}"))?;
+        Ok(m)
+    }
+
     /// A model file describing `plant` (friction written as effects).
     pub fn from_plant(plant: &Plant) -> ModelFile {
         ModelFile {

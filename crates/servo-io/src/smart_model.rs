@@ -19,7 +19,8 @@
 //! ```
 //!
 //! Everything else is the model's: `[params]` (J_eq, B_eq, tau_sf, k_t, k_e, R_a, N) and the
-//! gravity of an arm as `[effects.imbalance]` (amplitude m g L, phase).
+//! gravity of an arm as the catalogue's gravity effect (`servo_core::effects::GRAVITY`:
+//! amplitude m g L, phase).
 
 use crate::error::{self as anyhow, bail};
 use servo_core::drive::Drive;
@@ -105,11 +106,16 @@ impl SmartServo {
         }
     }
 
-    /// The output-shaft parameters of `model` with this table's latency and gearbox friction.
-    pub fn params(&self, model: &crate::model_file::ModelFile) -> SmartParams {
+    /// The output-shaft parameters of a model's `plant` and `effects` with this table's latency
+    /// and gearbox friction.
+    pub fn params(
+        &self,
+        plant: &servo_core::PlantParams,
+        effects: &servo_core::effects::Effects,
+    ) -> SmartParams {
         SmartParams {
             load_friction: self.load_friction,
-            ..SmartParams::from_model(&model.params, &model.effects, self.latency_s)
+            ..SmartParams::from_model(plant, effects, self.latency_s)
         }
     }
 
@@ -145,49 +151,5 @@ impl SmartServo {
             self.supply_from_log, self.load_friction
         ));
         s
-    }
-
-    /// The model file of fitted output-shaft parameters `p` on the firmware `fw`: `base`'s
-    /// motor constants and gear ratio (R_a set so that k_t N / (R_a + R_s) is the fitted
-    /// k_t / R), J_eq, B_eq, tau_sf at the file's sides, the gravity as the catalogue's effect,
-    /// the drive a position drive on `fw`'s supply and duty limit.
-    pub fn identified_model(
-        base: &crate::model_file::ModelFile,
-        p: &SmartParams,
-        fw: &PositionLoop,
-    ) -> anyhow::Result<crate::model_file::ModelFile> {
-        use servo_core::effects::{Effect, GRAVITY};
-        let mut m = base.clone();
-        let n = m.params.n;
-        m.params.j_eq = Some(p.j_eq / (n * n));
-        m.params.b_eq = Some(p.b_eq / (n * n));
-        m.params.tau_sf = Some(p.tau_sf);
-        let r_eq = m.params.k_t * n / p.k_t_per_r;
-        m.params.r_a = r_eq - m.params.r_s;
-        m.effects.remove(servo_core::effects::EffectKind::Viscous);
-        m.effects.remove(servo_core::effects::EffectKind::Coulomb);
-        let mut g = Effect::unset(GRAVITY);
-        g.set("amplitude", p.gravity_nm)
-            .and_then(|_| g.set("phase", p.phase_rad))
-            .map_err(|e| crate::error::anyhow!("gravity: {e}"))?;
-        m.effects.remove(GRAVITY);
-        m.effects.insert(g);
-        m.drive = Drive {
-            duty_limit: Some(fw.duty_limit),
-            ..Drive::duty(Some(fw.v_supply_v), None)
-        };
-        m.smart_servo = Some(SmartServo {
-            kp_fw: fw.kp_fw,
-            duty_per_rad_per_kp: fw.duty_per_rad_per_kp,
-            encoder_counts: fw.encoder_counts,
-            period_s: fw.period_s,
-            latency_s: p.latency_s,
-            supply_from_log: fw.supply_from_log,
-            load_friction: p.load_friction,
-        });
-        m.params
-            .validate()
-            .map_err(|e| crate::error::anyhow!("identified parameters are not physical: {e}"))?;
-        Ok(m)
     }
 }

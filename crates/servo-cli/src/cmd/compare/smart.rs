@@ -55,7 +55,7 @@ pub fn run(cmd: &Compare, model: &ModelFile) -> anyhow::Result<()> {
     if let Some(k) = kp.iter().find(|k| !(**k > 0.0 && k.is_finite())) {
         bail!("--kp-fw must be a positive gain, got {k}");
     }
-    let params = sm.params(model);
+    let params = sm.params(&model.params, &model.effects);
     let mut rows = Vec::new();
     let mut parts = Vec::new();
     for (i, path) in cmd.logs.iter().enumerate() {

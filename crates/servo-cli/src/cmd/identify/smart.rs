@@ -189,8 +189,7 @@ impl super::Identify {
             out!("{}", text(&v, &f, &prior));
         }
         if let Some(out) = &self.output {
-            let mut m =
-                servo_io::smart_model::SmartServo::identified_model(&params, &fitted, &loops[0])?;
+            let mut m = params.with_smart_fit(&fitted, &loops[0])?;
             let mut prov = toml::Table::new();
             prov.insert(
                 "method".into(),
