@@ -151,6 +151,8 @@ pub struct SmartLog {
     pub v_supply_v: Option<Vec<f64>>,
     /// Torque enable (false: the bridge is open), when logged.
     pub torque_enable: Option<Vec<bool>>,
+    /// The firmware gain the log was taken at (vendor units), when the log says it.
+    pub kp_fw: Option<f64>,
 }
 
 impl SmartLog {
@@ -282,20 +284,32 @@ impl PositionError {
     }
 }
 
-/// The goal at time `t` by linear interpolation on the log's grid (held before the start and
-/// after the end).
+/// The goal the firmware holds at time `t`: the last one written at or before `t` (the host
+/// writes a goal at each poll and the firmware keeps it until the next; held before the start
+/// and after the end).
 fn goal_at(log: &SmartLog, t0: f64, dt: f64, t: f64) -> f64 {
     let g = &log.goal_rad;
-    let x = (t - t0) / dt;
+    let x = (t - t0) / dt + 1e-9;
     if x <= 0.0 {
         return g[0];
     }
-    let i = x as usize;
-    if i + 1 >= g.len() {
-        return g[g.len() - 1];
+    g[(x as usize).min(g.len() - 1)]
+}
+
+/// The mean of the held goal over [t, t + h] (h at most the log's period): a goal written
+/// within the loop's step weighs by the part of the step after it, so the replay moves
+/// continuously with the latency.
+fn goal_over(log: &SmartLog, t0: f64, dt: f64, t: f64, h: f64) -> f64 {
+    let g = &log.goal_rad;
+    let at = |x: f64| g[(libm::floor(x).max(0.0) as usize).min(g.len() - 1)];
+    let x0 = (t - t0) / dt + 1e-9;
+    let x1 = x0 + h / dt;
+    let b = libm::floor(x0) + 1.0;
+    if x1 <= b || x1 <= x0 {
+        return at(x0);
     }
-    let f = x - i as f64;
-    g[i] + f * (g[i + 1] - g[i])
+    let f = (x1 - b) / (x1 - x0);
+    at(x0) * (1.0 - f) + at(b) * f
 }
 
 /// Replays `log` on the model in closed loop through the firmware's loop, from the measured
@@ -337,7 +351,7 @@ pub fn replay(
         for s in 0..subs {
             let t = log.time_s[k] + s as f64 * h;
             let (drive_nm, c, motor_nm) = if on {
-                let d = drive.duty(goal_at(log, t0, dt, t - p.latency_s), th);
+                let d = drive.duty(goal_over(log, t0, dt, t - p.latency_s, h), th);
                 if s == 0 {
                     d_row = d;
                 }
@@ -398,22 +412,51 @@ pub struct SmartPrior {
     pub load_friction: bool,
 }
 
-/// The equation-error estimate: least squares of the torque balance on the logged duty,
-/// J alpha + B omega + tau_sf sign(omega) + a sin(theta) + b cos(theta) = (k_t/R)(V d - k_e omega),
-/// with k_t / R from the prior, on the rows with the torque on. The speed is the logged one
+/// The equation-error estimate: least squares of the torque balance
+/// J alpha + B omega + (tau_sf + l |m|) sign(omega) + a sin(theta) + b cos(theta) = m,
+/// m = (k_t/R)(V d - k_e omega) the motor's torque, with k_t / R from the prior, on the rows with
+/// the torque on (l, the load-dependent friction, when the prior fits it). The duty d is the
+/// logged one; a log without it gets the firmware's duty rebuilt from its goals and angles
+/// (the latency then chosen on a grid by the smallest residual). The speed is the logged one
 /// (else the central difference of the angle) and the acceleration its central difference.
-/// `None` when no log has a logged duty or the system is singular.
+/// `None` when no log gives rows or the system is singular.
 pub fn equation_error(
     prior: &SmartPrior,
     drive_of: &dyn Fn(&SmartLog) -> PositionLoop,
     logs: &[SmartLog],
 ) -> Option<SmartParams> {
+    let rebuilt = logs.iter().any(|l| l.duty.is_none());
+    let grid = if rebuilt { 12 } else { 0 };
+    let mut best: Option<(f64, SmartParams)> = None;
+    for i in 0..=grid {
+        let lat = prior.latency_max_s * i as f64 / grid.max(1) as f64;
+        if let Some((sse, mut p)) = equation_error_at(prior, drive_of, logs, lat) {
+            if rebuilt {
+                p.latency_s = lat;
+            }
+            if best.as_ref().is_none_or(|b| sse < b.0) {
+                best = Some((sse, p));
+            }
+        }
+    }
+    best.map(|b| b.1)
+}
+
+/// [`equation_error`] at one latency of the rebuilt duty: the residual's sum of squares and the
+/// estimate.
+fn equation_error_at(
+    prior: &SmartPrior,
+    drive_of: &dyn Fn(&SmartLog) -> PositionLoop,
+    logs: &[SmartLog],
+    latency_s: f64,
+) -> Option<(f64, SmartParams)> {
     use nalgebra::{DMatrix, DVector};
-    let mut rows: Vec<[f64; 6]> = Vec::new();
+    let cols = if prior.load_friction { 6 } else { 5 };
+    let mut rows: Vec<[f64; 7]> = Vec::new();
     for l in logs {
-        let Some(d) = &l.duty else { continue };
         let dt = l.dt_s();
         let n = l.time_s.len();
+        let t0 = l.time_s[0];
         let drive = drive_of(l);
         let w: Vec<f64> = match &l.omega_rad_s {
             Some(o) => o.clone(),
@@ -429,38 +472,65 @@ pub fn equation_error(
                 continue;
             }
             let v = match (&l.v_supply_v, drive.supply_from_log) {
-                (Some(vs), true) => vs[k],
+                (Some(vs), true) if vs[k].is_finite() && vs[k] > 0.0 => vs[k],
                 _ => drive.v_supply_v,
             };
-            let alpha = (w[k + 1] - w[k - 1]) / (2.0 * dt);
             let th = l.theta_rad[k];
-            let y = prior.k_t_per_r * (v * d[k] - prior.k_e * w[k]);
+            let d = match &l.duty {
+                Some(d) => d[k],
+                None => drive.duty(goal_at(l, t0, dt, l.time_s[k] - latency_s), th),
+            };
+            let alpha = (w[k + 1] - w[k - 1]) / (2.0 * dt);
+            let m = prior.k_t_per_r * (v * d - prior.k_e * w[k]);
             let sg = if w[k].abs() > 1e-3 {
                 w[k].signum()
             } else {
                 0.0
             };
-            rows.push([alpha, w[k], sg, libm::sin(th), libm::cos(th), y]);
+            let r = [
+                alpha,
+                w[k],
+                sg,
+                sg * m.abs(),
+                libm::sin(th),
+                libm::cos(th),
+                m,
+            ];
+            if r.iter().all(|x| x.is_finite()) {
+                rows.push(r);
+            }
         }
     }
     if rows.len() < 10 {
         return None;
     }
-    let a = DMatrix::from_fn(rows.len(), 5, |i, j| rows[i][j]);
-    let y = DVector::from_fn(rows.len(), |i, _| rows[i][5]);
-    let x = (a.transpose() * &a).lu().solve(&(a.transpose() * y))?;
-    let (ga, gb) = (x[3], x[4]);
-    Some(SmartParams {
-        j_eq: x[0],
-        b_eq: x[1],
-        tau_sf: x[2],
-        load_friction: 0.0,
-        k_t_per_r: prior.k_t_per_r,
-        k_e: prior.k_e,
-        gravity_nm: libm::hypot(ga, gb),
-        phase_rad: libm::atan2(gb, ga),
-        latency_s: 0.0,
-    })
+    // The regressors (the load-dependent column only when fitted) and the motor's torque.
+    let pick = |i: usize, j: usize| -> f64 {
+        let r = &rows[i];
+        match (cols, j) {
+            (5, 3..) => r[j + 1],
+            _ => r[j],
+        }
+    };
+    let a = DMatrix::from_fn(rows.len(), cols, pick);
+    let y = DVector::from_fn(rows.len(), |i, _| rows[i][6]);
+    let x = (a.transpose() * &a).lu().solve(&(a.transpose() * &y))?;
+    let sse = (&a * &x - &y).norm_squared();
+    let (ga, gb) = (x[cols - 2], x[cols - 1]);
+    Some((
+        sse,
+        SmartParams {
+            j_eq: x[0],
+            b_eq: x[1],
+            tau_sf: x[2],
+            load_friction: if cols == 6 { x[3] } else { 0.0 },
+            k_t_per_r: prior.k_t_per_r,
+            k_e: prior.k_e,
+            gravity_nm: libm::hypot(ga, gb),
+            phase_rad: libm::atan2(gb, ga),
+            latency_s: 0.0,
+        },
+    ))
 }
 
 /// A Nelder-Mead simplex search of `f` from `x0` with initial steps `step`, at most `max_evals`
@@ -597,6 +667,181 @@ pub struct SmartFit {
     pub candidates: Vec<Candidate>,
     /// Replays run by the output-error search.
     pub evaluations: usize,
+    /// Whether the logs determine the gravity amplitude (when it was fitted).
+    pub gravity: GravityFit,
+}
+
+/// The gravity amplitude's standing after [`fit`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum GravityFit {
+    /// Given by the prior (it set the torques' scale), not fitted.
+    Given,
+    /// Fitted and determined by the logs: `rel_se` is its relative standard error (from the
+    /// output-error fit's curvature, the residuals' correlation counted).
+    Determined { rel_se: f64 },
+    /// Fitted, but the logs do not determine it (the angle does not move the gravity torque
+    /// enough, or it trades with another parameter): its value is not to be used.
+    NotDetermined { rel_se: f64 },
+}
+
+impl GravityFit {
+    /// Whether a fitted amplitude may be reported as a value.
+    pub fn determined(self) -> bool {
+        matches!(self, GravityFit::Given | GravityFit::Determined { .. })
+    }
+}
+
+/// The largest relative standard error of a fitted gravity amplitude reported as determined
+/// [-] (10 %: an amplitude known to within a few tenths of itself is not a value a user should
+/// design on; the error is the fit's curvature with the residuals' lag-1 correlation counted).
+pub const GRAVITY_MAX_REL_SE: f64 = 0.10;
+
+/// The outcome of [`levenberg_marquardt`].
+#[derive(Debug, Clone)]
+struct LmResult {
+    x: Vec<f64>,
+    /// Mean squared residual.
+    cost: f64,
+    /// The covariance of the free coordinates (full-size, zero for fixed ones), the residuals'
+    /// variance and correlation counted; `None` when singular.
+    cov: Option<nalgebra::DMatrix<f64>>,
+}
+
+impl LmResult {
+    fn std_error(&self, i: usize) -> Option<f64> {
+        let c = self.cov.as_ref()?;
+        let v = c[(i, i)];
+        (v.is_finite() && v > 0.0).then(|| libm::sqrt(v))
+    }
+}
+
+/// Levenberg-Marquardt on the residuals `res(x)` over the coordinates marked `free`, the
+/// Jacobian by forward differences of steps `fd`, at most `max_evals` evaluations of `res`.
+/// `None` when the start does not evaluate.
+fn levenberg_marquardt(
+    res: &mut dyn FnMut(&[f64]) -> Option<Vec<f64>>,
+    x0: &[f64],
+    fd: &[f64],
+    free: &[bool],
+    max_evals: usize,
+) -> Option<LmResult> {
+    use nalgebra::{DMatrix, DVector};
+    let idx: Vec<usize> = (0..x0.len()).filter(|&i| free[i]).collect();
+    let k = idx.len();
+    let mut x = x0.to_vec();
+    let mut r = res(&x)?;
+    let m = r.len().max(1);
+    let ss = |r: &[f64]| r.iter().map(|e| e * e).sum::<f64>();
+    let mut cost = ss(&r);
+    let mut evals = 1usize;
+    let mut lambda = 1e-2;
+    let mut jac = DMatrix::<f64>::zeros(m, k);
+    let mut jac_ok = false;
+    while evals + k + 1 <= max_evals {
+        if !jac_ok {
+            for (c, &i) in idx.iter().enumerate() {
+                let mut xp = x.clone();
+                xp[i] += fd[i];
+                evals += 1;
+                let rp = res(&xp)?;
+                for row in 0..m {
+                    jac[(row, c)] = (rp[row] - r[row]) / fd[i];
+                }
+            }
+            jac_ok = true;
+        }
+        let jt = jac.transpose();
+        let jtj = &jt * &jac;
+        let g = &jt * DVector::from_column_slice(&r);
+        let mut a = jtj.clone();
+        for d in 0..k {
+            a[(d, d)] += lambda * jtj[(d, d)].max(1e-12);
+        }
+        let Some(step) = a.lu().solve(&(-g)) else {
+            lambda *= 10.0;
+            if lambda > 1e8 {
+                break;
+            }
+            continue;
+        };
+        let mut xn = x.clone();
+        for (c, &i) in idx.iter().enumerate() {
+            xn[i] += step[c];
+        }
+        evals += 1;
+        let rn = res(&xn);
+        let cn = rn.as_ref().map_or(f64::INFINITY, |r| ss(r));
+        if cn < cost {
+            let gain = (cost - cn) / cost.max(1e-300);
+            x = xn;
+            cost = cn;
+            r = rn.unwrap_or_default();
+            jac_ok = false;
+            lambda = (lambda / 3.0).max(1e-9);
+            if gain < 1e-6 {
+                break;
+            }
+        } else {
+            lambda *= 4.0;
+            if lambda > 1e8 {
+                break;
+            }
+        }
+    }
+    // The covariance at the optimum: s^2 (J'J)^-1 with the residuals' lag-1 correlation rho
+    // shrinking the rows to an effective m (1 - rho) / (1 + rho).
+    if !jac_ok {
+        jac_ok = true;
+        for (c, &i) in idx.iter().enumerate() {
+            let mut xp = x.clone();
+            xp[i] += fd[i];
+            let Some(rp) = res(&xp) else {
+                jac_ok = false;
+                break;
+            };
+            for row in 0..m {
+                jac[(row, c)] = (rp[row] - r[row]) / fd[i];
+            }
+        }
+    }
+    let cov = (|| {
+        if !jac_ok {
+            return None;
+        }
+        // Scaled to unit columns (the coordinates differ by orders of magnitude); a column of
+        // zero (a parameter pinned at a bound, or without effect) leaves the fit's curvature
+        // singular: nothing is determined by it.
+        let jtj = jac.transpose() * &jac;
+        let d: Vec<f64> = (0..k).map(|i| libm::sqrt(jtj[(i, i)])).collect();
+        if d.iter().any(|x| !(x.is_finite() && *x > 0.0)) {
+            return None;
+        }
+        let c = DMatrix::from_fn(k, k, |i, j| jtj[(i, j)] / (d[i] * d[j]));
+        let ci = c.try_inverse()?;
+        let inv = DMatrix::from_fn(k, k, |i, j| ci[(i, j)] / (d[i] * d[j]));
+        let mean = r.iter().sum::<f64>() / m as f64;
+        let var = r.iter().map(|e| (e - mean) * (e - mean)).sum::<f64>();
+        let lag: f64 = r.windows(2).map(|w| (w[0] - mean) * (w[1] - mean)).sum();
+        let rho = if var > 0.0 {
+            (lag / var).clamp(0.0, 0.999)
+        } else {
+            0.0
+        };
+        let m_eff = (m as f64 * (1.0 - rho) / (1.0 + rho)).max(k as f64 + 1.0);
+        let s2 = cost / (m as f64 - k as f64).max(1.0);
+        let mut full = DMatrix::<f64>::zeros(x.len(), x.len());
+        for (a, &i) in idx.iter().enumerate() {
+            for (b, &j) in idx.iter().enumerate() {
+                full[(i, j)] = inv[(a, b)] * s2 * m as f64 / m_eff;
+            }
+        }
+        Some(full)
+    })();
+    Some(LmResult {
+        x,
+        cost: cost / m as f64,
+        cov,
+    })
 }
 
 impl SmartFit {
@@ -638,6 +883,11 @@ fn physical(p: &SmartParams, prior: &SmartPrior) -> SmartParams {
         tau_sf: p.tau_sf.max(1e-4),
         gravity_nm: p.gravity_nm.max(1e-4),
         latency_s: p.latency_s.clamp(0.0, prior.latency_max_s),
+        load_friction: if prior.load_friction {
+            p.load_friction.clamp(0.02, 0.9)
+        } else {
+            0.0
+        },
         ..*p
     }
 }
@@ -646,7 +896,8 @@ fn physical(p: &SmartParams, prior: &SmartPrior) -> SmartParams {
 /// tau_sf = e^x2, k_t/R = e^x3, m g L = e^x4, phase = x5, latency = L_max (1 + sin x6) / 2
 /// (no flat end where the search could stall), the load friction 1 / (1 + e^-x7).
 fn to_x(p: &SmartParams, prior: &SmartPrior) -> [f64; 8] {
-    let lat = (p.latency_s / prior.latency_max_s).clamp(0.0, 1.0);
+    // Off the ends, where the sine's slope vanishes and a search would stall.
+    let lat = (p.latency_s / prior.latency_max_s).clamp(0.02, 0.98);
     [
         libm::log((p.j_eq - prior.j_min).max(1e-4 * p.j_eq.max(1e-9))),
         libm::log(p.b_eq.max(1e-6)),
@@ -723,58 +974,90 @@ pub fn fit(
     let ee = equation_error(prior, drive_of, fit_logs);
     let start = physical(ee.as_ref().unwrap_or(&default_start), prior);
     let mut evals = 0usize;
-    let mut cost = |x: &[f64]| -> f64 {
+    let mut residuals = |x: &[f64]| -> Option<Vec<f64>> {
         evals += 1;
         let p = from_x(x, prior, prior.k_e);
-        let mut s = 0.0;
-        let mut n = 0usize;
+        let mut r = Vec::new();
         for l in fit_logs {
-            match replay(&p, &drive_of(l), l) {
-                Ok(r) => {
-                    for (a, b) in r.theta_rad.iter().zip(&l.theta_rad) {
-                        s += (a - b) * (a - b);
-                    }
-                    n += l.theta_rad.len();
-                }
-                Err(_) => return f64::INFINITY,
-            }
+            let rep = replay(&p, &drive_of(l), l).ok()?;
+            r.extend(rep.theta_rad.iter().zip(&l.theta_rad).map(|(a, b)| a - b));
         }
-        s / n.max(1) as f64
+        Some(r)
     };
-    // Latency from the middle of its range, the phase from the estimate.
-    let mut x = to_x(
-        &SmartParams {
-            latency_s: 0.5 * prior.latency_max_s,
-            load_friction: 0.05,
-            ..start
-        },
-        prior,
-    )
-    .to_vec();
-    let mut step = alloc::vec![0.5, 0.7, 0.7, 0.0, 0.3, 0.05, 1.0, 1.0];
+    // The coordinates searched (see [`to_x`]) and their finite-difference steps; one of k_t / R
+    // and m g L is known and not searched.
+    let mut free = [
+        true,
+        true,
+        true,
+        false,
+        true,
+        true,
+        true,
+        prior.load_friction,
+    ];
     if prior.gravity_nm.is_some() {
-        step[3] = 0.3;
-        step[4] = 0.0;
+        free[3] = true;
+        free[4] = false;
     }
-    if !prior.load_friction {
-        x.truncate(7);
-        step.truncate(7);
-    }
-    let per = (max_evals / 3).max(50);
-    let mut best = f64::INFINITY;
-    for round in 0..3 {
-        let scale = if round == 0 { 1.0 } else { 0.3 };
-        let st: Vec<f64> = step.iter().map(|s| s * scale).collect();
-        let (xb, fb) = nelder_mead(&mut cost, &x, &st, per, 1e-7);
-        let done = fb >= best * (1.0 - 1e-4);
-        if fb < best {
-            best = fb;
-            x = xb;
+    let fd = [0.01, 0.01, 0.01, 0.005, 0.005, 0.002, 0.02, 0.02];
+    // Several starts that split the friction differently between the Coulomb and the
+    // load-dependent parts (a search from one split can stop in a local minimum), each refined
+    // by Levenberg-Marquardt on the whole trajectories; the best kept.
+    // The first start is the equation-error estimate's own split and latency (mid-range when
+    // it has none); the others move the friction's split.
+    let splits: &[(f64, Option<f64>)] = if prior.load_friction {
+        &[
+            (1.0, None),
+            (1.0, Some(0.02)),
+            (0.5, Some(0.15)),
+            (0.2, Some(0.4)),
+        ]
+    } else {
+        &[(1.0, None)]
+    };
+    let per = (max_evals / splits.len()).max(30);
+    let mut best: Option<LmResult> = None;
+    for &(coulomb_share, lf) in splits {
+        let lat = if start.latency_s > 0.0 {
+            start.latency_s
+        } else {
+            0.5 * prior.latency_max_s
+        };
+        let x0 = to_x(
+            &SmartParams {
+                latency_s: lat,
+                load_friction: lf.unwrap_or(start.load_friction),
+                tau_sf: start.tau_sf * coulomb_share,
+                ..start
+            },
+            prior,
+        );
+        let Some(r) = levenberg_marquardt(&mut residuals, &x0, &fd, &free, per) else {
+            continue;
+        };
+        if best.as_ref().is_none_or(|b| r.cost < b.cost) {
+            best = Some(r);
         }
-        if done {
-            break;
-        }
     }
+    let Some(best) = best else {
+        return Err(SmartError::Diverged {
+            log: fit_logs[0].name.clone(),
+            row: 0,
+        });
+    };
+    let x = best.x.clone();
+    let gravity = if prior.gravity_nm.is_some() {
+        GravityFit::Given
+    } else {
+        // x4 = ln(m g L): its standard error is the relative one of the amplitude.
+        match best.std_error(4) {
+            Some(se) if se <= GRAVITY_MAX_REL_SE => GravityFit::Determined { rel_se: se },
+            se => GravityFit::NotDetermined {
+                rel_se: se.unwrap_or(f64::INFINITY),
+            },
+        }
+    };
     let oe = from_x(&x, prior, prior.k_e);
     let mut candidates = Vec::new();
     if let Some(p) = ee {
@@ -828,6 +1111,7 @@ pub fn fit(
         kept,
         candidates,
         evaluations: evals,
+        gravity,
     })
 }
 

@@ -137,8 +137,17 @@ impl ColumnMap {
         let mut ignored = Vec::new();
         // Columns that look like a signal already taken: guessing one would drop the other.
         let mut twice: Vec<(Signal, String)> = Vec::new();
+        // A smart servo's log (a goal position and the firmware's duty): its voltages are the
+        // duty times the supply, derived, and the duty is the measured command.
+        let smart = header
+            .iter()
+            .any(|h| unitless_column(h.trim()) == Some((Signal::Duty, Unit::Fraction)))
+            && header
+                .iter()
+                .any(|h| matches!(guess_column(h.trim()), Some((Signal::Ref, _))));
         for h in header {
-            match guess_column(h.trim()) {
+            let guess = guess_column(h.trim()).or_else(|| unitless_column(h.trim()));
+            match guess.filter(|(s, _)| !(smart && *s == Signal::U)) {
                 Some((signal, unit)) if !entries.iter().any(|e| e.signal == signal) => entries
                     .push(ColumnSpec {
                         signal,
@@ -282,13 +291,25 @@ fn signal_from_word(word: &str) -> Option<Signal> {
         "t" | "time" => Signal::Time,
         "u" | "v" | "volt" | "voltage" | "uin" => Signal::U,
         "thl" | "thetal" | "theta" | "pos" | "position" | "angle" | "ql" | "x" => Signal::ThetaL,
-        "vx" | "xdot" | "vel" | "velocity" => Signal::OmegaL,
+        "vx" | "xdot" | "vel" | "velocity" | "omega" | "speed" => Signal::OmegaL,
+        "goal" => Signal::ThetaL,
         "thm" | "thetam" => Signal::ThetaM,
         "wl" | "omegal" => Signal::OmegaL,
         "wm" | "omegam" => Signal::OmegaM,
         "ia" | "i" | "current" | "cur" | "curr" => Signal::IA,
         _ => return None,
     })
+}
+
+/// A column named without a unit suffix that still says what it holds: a duty (`duty`, `pwm`,
+/// `present_pwm`, never a commanded or computed one: `duty_cmd`) as a fraction, a torque
+/// enable (`torque_enable`, `enable`) as a flag.
+fn unitless_column(name: &str) -> Option<(Signal, Unit)> {
+    match name.to_ascii_lowercase().as_str() {
+        "duty" | "pwm" | "present_pwm" | "duty_cycle" => Some((Signal::Duty, Unit::Fraction)),
+        "torque_enable" | "enable" | "enabled" | "torque_on" => Some((Signal::Enable, Unit::Flag)),
+        _ => None,
+    }
 }
 
 /// Guesses (signal, unit) of one header name, or `None`.
@@ -315,7 +336,7 @@ pub(crate) fn guess_column(name: &str) -> Option<(Signal, Unit)> {
     let is_ref = words.iter().any(|w| {
         matches!(
             *w,
-            "ref" | "reference" | "setpoint" | "sp" | "target" | "des" | "desired"
+            "ref" | "reference" | "setpoint" | "sp" | "target" | "des" | "desired" | "goal"
         )
     });
     // A supply voltage is never the command u: `v_supply_V`, `vin_meas_V`, `vbus_V`,
@@ -376,6 +397,55 @@ pub(crate) fn guess_column(name: &str) -> Option<(Signal, Unit)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_smart_servos_columns_are_guessed_and_its_supply_is_never_u() {
+        let header = [
+            "t_s",
+            "theta_rad",
+            "omega_rad_s",
+            "goal_rad",
+            "duty",
+            "duty_cmd",
+            "u_V",
+            "u_cmd_V",
+            "vin_meas_V",
+            "torque_enable",
+            "temp_C",
+        ];
+        let (m, ignored) = ColumnMap::guess(&header).unwrap();
+        let col = |s: Signal| m.get(s).map(|e| e.column.as_str());
+        assert_eq!(col(Signal::ThetaL), Some("theta_rad"));
+        assert_eq!(col(Signal::OmegaL), Some("omega_rad_s"));
+        assert_eq!(col(Signal::Ref), Some("goal_rad"));
+        assert_eq!(col(Signal::Duty), Some("duty"));
+        assert_eq!(col(Signal::VSupply), Some("vin_meas_V"));
+        assert_eq!(col(Signal::Enable), Some("torque_enable"));
+        assert_eq!(col(Signal::U), None);
+        assert!(ignored.contains(&"temp_C".to_string()), "{ignored:?}");
+        // Dynamixel-style names.
+        let (m, _) = ColumnMap::guess(&[
+            "time_s",
+            "present_position_rad",
+            "goal_position_rad",
+            "present_pwm",
+            "input_voltage_V",
+        ])
+        .unwrap();
+        assert_eq!(
+            m.get(Signal::Ref).map(|e| e.column.as_str()),
+            Some("goal_position_rad")
+        );
+        assert_eq!(
+            m.get(Signal::ThetaL).map(|e| e.column.as_str()),
+            Some("present_position_rad")
+        );
+        assert_eq!(
+            m.get(Signal::VSupply).map(|e| e.column.as_str()),
+            Some("input_voltage_V")
+        );
+        assert!(m.get(Signal::U).is_none());
+    }
 
     #[test]
     fn parse_and_display() {

@@ -23,6 +23,7 @@
 //! * [`markup`]: HTML and SVG escaped by construction (the reports and charts).
 //! * [`mjcf`]: a model file as a MuJoCo model (MJCF), with what MuJoCo cannot express.
 
+pub mod bam_log;
 pub mod chart_axes;
 pub mod columns;
 pub mod compensation;
@@ -50,6 +51,7 @@ pub mod output;
 pub mod recipe_file;
 pub mod reference_file;
 pub mod smart_log;
+pub mod smart_model;
 pub mod text_file;
 pub mod units;
 
@@ -71,10 +73,11 @@ use std::path::Path;
 /// The log formats servo reads ([`log_reader`]), in the order of the "expected ..." message: one
 /// line per format. (Here, at the crate's root, so that the readers' files and the registry's
 /// do not import each other.)
-pub static BUILT_IN: [&dyn LogReader; 3] = [
+pub static BUILT_IN: [&dyn LogReader; 4] = [
     &crate::mat_log::MatReader,
     &crate::mcap_read::McapReader,
     &crate::csv_read::CsvReader,
+    &crate::bam_log::BamReader,
 ];
 
 /// What a log says about the run besides its samples.

@@ -39,6 +39,8 @@ struct Raw {
     params: RawParams,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     drive: Option<RawDrive>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    smart_servo: Option<crate::smart_model::SmartServo>,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     effects: BTreeMap<String, BTreeMap<String, f64>>,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
@@ -244,6 +246,9 @@ enum RawDriveKind {
     Voltage,
     Current,
     Duty,
+    /// A smart servo: the firmware's position loop drives a PWM bridge (a duty drive) from the
+    /// goal position; its firmware in `[smart_servo]` ([`crate::smart_model`]).
+    Position,
 }
 
 /// The `[drive]` table as written ([`servo_core::drive`]).
@@ -276,7 +281,7 @@ impl RawDrive {
             kind: match self.kind {
                 RawDriveKind::Voltage => DriveKind::Voltage,
                 RawDriveKind::Current => DriveKind::Current,
-                RawDriveKind::Duty => DriveKind::Duty,
+                RawDriveKind::Duty | RawDriveKind::Position => DriveKind::Duty,
             },
             bandwidth_hz: self.bandwidth_hz,
             i_limit_a: self.i_limit_a,
@@ -475,6 +480,9 @@ pub struct ModelFile {
     /// equivalent voltage chain ([`Drive::equivalent`]), what the simulator, the fits and the
     /// design compute with; the file holds the keys the drive uses.
     pub drive: Drive,
+    /// The smart servo's firmware and gearbox (`[drive] kind = "position"` with a
+    /// `[smart_servo]` table; `drive` is then its PWM bridge, a duty drive).
+    pub smart_servo: Option<crate::smart_model::SmartServo>,
     pub sensors: Option<SensorConfig>,
     /// Free-form provenance (log, method, date, ...).
     pub provenance: Option<toml::Table>,
@@ -506,6 +514,7 @@ impl Default for ModelFile {
             custom: CustomSlots::NONE,
             transmission: Transmission::GEAR,
             drive: Drive::VOLTAGE,
+            smart_servo: None,
             sensors: None,
             provenance: None,
             limits: BTreeMap::new(),
@@ -534,6 +543,20 @@ impl ModelFile {
             Some(d) => d.drive()?,
             None => Drive::VOLTAGE,
         };
+        let position = raw
+            .drive
+            .as_ref()
+            .is_some_and(|d| d.kind == RawDriveKind::Position);
+        match (&raw.smart_servo, position) {
+            (Some(s), true) => s.validate(&drive)?,
+            (None, true) => bail!(
+                "[drive] kind = \"position\" needs a [smart_servo] table (kp_fw, duty_per_rad_per_kp, latency_s, ...)"
+            ),
+            (Some(_), false) => bail!(
+                "[smart_servo] is the firmware of a smart servo: it needs [drive] kind = \"position\""
+            ),
+            (None, false) => {}
+        }
         let mut params = raw.params.params(&drive)?;
         let transmission = match &raw.transmission {
             Some(t) => {
@@ -590,6 +613,7 @@ impl ModelFile {
             custom,
             transmission,
             drive,
+            smart_servo: raw.smart_servo,
             sensors: raw.sensors,
             provenance: raw.provenance,
             limits: parse_limits(raw.limits.as_ref())?,
@@ -691,6 +715,50 @@ impl ModelFile {
         }
     }
 
+    /// The model file of fitted output-shaft parameters `p` on the firmware `fw`: `base`'s
+    /// motor constants and gear ratio (R_a set so that k_t N / (R_a + R_s) is the fitted
+    /// k_t / R), J_eq, B_eq, tau_sf at the file's sides, the gravity as the catalogue's effect,
+    /// the drive a position drive on `fw`'s supply and duty limit.
+    pub fn with_smart_fit(
+        &self,
+        p: &servo_core::smart::SmartParams,
+        fw: &servo_core::smart::PositionLoop,
+    ) -> anyhow::Result<ModelFile> {
+        use servo_core::effects::{Effect, GRAVITY};
+        let mut m = self.clone();
+        let n = m.params.n;
+        m.params.j_eq = Some(p.j_eq / (n * n));
+        m.params.b_eq = Some(p.b_eq / (n * n));
+        m.params.tau_sf = Some(p.tau_sf);
+        let r_eq = m.params.k_t * n / p.k_t_per_r;
+        m.params.r_a = r_eq - m.params.r_s;
+        m.effects.remove(servo_core::effects::EffectKind::Viscous);
+        m.effects.remove(servo_core::effects::EffectKind::Coulomb);
+        let mut g = Effect::unset(GRAVITY);
+        g.set("amplitude", p.gravity_nm)
+            .and_then(|_| g.set("phase", p.phase_rad))
+            .map_err(|e| crate::error::anyhow!("gravity: {e}"))?;
+        m.effects.remove(GRAVITY);
+        m.effects.insert(g);
+        m.drive = Drive {
+            duty_limit: Some(fw.duty_limit),
+            ..Drive::duty(Some(fw.v_supply_v), None)
+        };
+        m.smart_servo = Some(crate::smart_model::SmartServo {
+            kp_fw: fw.kp_fw,
+            duty_per_rad_per_kp: fw.duty_per_rad_per_kp,
+            encoder_counts: fw.encoder_counts,
+            period_s: fw.period_s,
+            latency_s: p.latency_s,
+            supply_from_log: fw.supply_from_log,
+            load_friction: p.load_friction,
+        });
+        m.params
+            .validate()
+            .map_err(|e| crate::error::anyhow!("identified parameters are not physical: {e}"))?;
+        Ok(m)
+    }
+
     /// A model file describing `plant` (friction written as effects).
     pub fn from_plant(plant: &Plant) -> ModelFile {
         ModelFile {
@@ -699,6 +767,7 @@ impl ModelFile {
             custom: plant.custom,
             transmission: Transmission::GEAR,
             drive: Drive::VOLTAGE,
+            smart_servo: None,
             sensors: None,
             provenance: None,
             limits: BTreeMap::new(),
@@ -747,7 +816,13 @@ impl ModelFile {
         let transmission = RawTransmission::of(&self.transmission, &mut params);
         Raw {
             params: RawParams::of(&params, &self.drive),
-            drive: RawDrive::of(&self.drive),
+            drive: RawDrive::of(&self.drive).map(|mut d| {
+                if self.smart_servo.is_some() {
+                    d.kind = RawDriveKind::Position;
+                }
+                d
+            }),
+            smart_servo: self.smart_servo,
             effects,
             custom,
             transmission,
@@ -924,7 +999,12 @@ impl ModelFile {
             s.push_str(&transmission_toml(&t));
         }
         if self.drive != Drive::VOLTAGE {
-            s.push_str(&drive_toml(&self.drive));
+            let mut d = drive_toml(&self.drive);
+            if let Some(sm) = &self.smart_servo {
+                d = d.replacen("kind = \"duty\"", "kind = \"position\"", 1);
+                d.push_str(&sm.toml_section());
+            }
+            s.push_str(&d);
         }
         for e in self.effects.iter().filter(|e| !Self::in_params(e.kind)) {
             s.push_str(&format!(

@@ -24,6 +24,29 @@ const DUTY: [&str; 2] = ["duty", "pwm"];
 const SUPPLY: [&str; 4] = ["vin_meas_V", "v_supply_V", "vin_V", "input_voltage_V"];
 const ENABLE: [&str; 1] = ["torque_enable"];
 
+/// Reads a smart servo's log: a BAM JSON log (`.json`, [`crate::bam_log`]) or a smart-servo
+/// CSV ([`read_smart_csv`]).
+pub fn read_smart(path: &Path) -> Result<SmartLog, Error> {
+    if crate::log_reader::extension(path) != "json" {
+        return read_smart_csv(path);
+    }
+    let b = crate::bam_log::read_bam(path)?;
+    let r = b.record;
+    let log = SmartLog {
+        name: r.source,
+        goal_rad: r.ref_rad.unwrap_or_default(),
+        theta_rad: r.theta_l_rad.unwrap_or_default(),
+        omega_rad_s: r.omega_l_rad_s,
+        duty: r.duty,
+        v_supply_v: r.v_supply_v,
+        torque_enable: r.enable.map(|e| e.iter().map(|x| *x != 0.0).collect()),
+        time_s: r.time_s,
+        kp_fw: b.kp_fw,
+    };
+    log.validate().map_err(|e| Error::Invalid(e.to_string()))?;
+    Ok(log)
+}
+
 /// Reads a smart-servo CSV log (see the module for its columns).
 pub fn read_smart_csv(path: &Path) -> Result<SmartLog, Error> {
     let name = path.display().to_string();

@@ -20,14 +20,12 @@ mod prepare;
 mod report_json;
 mod report_text;
 mod save;
+mod smart;
 mod tracking;
 
 pub use added::{Added, ParseAdded};
 pub use plots::{compare_figures_svg, compare_figures_svg_on, stack_svg};
-use report_json::*;
-use report_text::*;
 pub use report_text::{controller_description, controller_words, plant_and_controller};
-
 pub use servo_core::compare::logs::LadderStep;
 use servo_core::compare::logs::{
     choose_mode, error_ladder, rebuild_u, ErrorLadder, LadderError, LogReplay, ModeRefusal,
@@ -36,6 +34,7 @@ pub use servo_core::compare::{pooled, ModeChoice, ModelComparison, ReplayControl
 use servo_core::compare::{
     CompareOptions, CompareReport, Figures, Measured, ReplayMode, SignalKind,
 };
+use {report_json::*, report_text::*};
 
 /// The replay controller of `log` (None when the log's controller is unknown).
 pub fn replay_controller(log: &LogData) -> anyhow::Result<Option<ReplayController<'_>>> {
@@ -128,6 +127,8 @@ pub struct Compare {
     /// Write the figures (measurement vs model, residual, residual vs speed and position) as one SVG.
     #[arg(long, value_name = "out.svg")]
     pub plot: Option<PathBuf>,
+    #[command(flatten)]
+    pub smart: smart::SmartCompareArgs,
 }
 
 /// One log, read and checked.
@@ -172,7 +173,10 @@ impl LogData {
 
 impl Compare {
     pub fn run(self) -> anyhow::Result<()> {
-        self.run_report().map(|_| ())
+        match ModelFile::load(&self.model)? {
+            m if smart::applies(&m) => smart::run(&self, &m),
+            _ => self.run_report().map(|_| ()),
+        }
     }
 
     /// As [`Compare::run`] (prints the same output, writes the same files), also returning the

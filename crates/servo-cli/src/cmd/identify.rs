@@ -15,6 +15,7 @@
 mod options;
 mod plot;
 mod report;
+mod smart;
 mod without_current;
 
 use options::parse_window;
@@ -145,6 +146,8 @@ pub struct Identify {
     /// The backend, recipes, progress and log directory of `--ramp`.
     #[command(flatten)]
     pub ramp_args: crate::cmd::identify_ramp::RampArgs,
+    #[command(flatten)]
+    pub smart: smart::SmartArgs,
 }
 
 /// Everything identified, with where it came from.
@@ -153,6 +156,9 @@ pub type Report = Identification;
 
 impl Identify {
     pub fn run(self) -> anyhow::Result<()> {
+        if self.smart.drive.is_some() {
+            return self.run_smart();
+        }
         // Where the motor's constants come from, said where they are used (the report and the
         // file written): --params, the simulated motor of --ramp --plant, or Table 2.
         let mut defaults: Option<String> = None;
