@@ -89,7 +89,7 @@ fn log_reader_registry_takes_a_format_from_outside_in_one_line() {
     assert_eq!(
         err.to_string(),
         format!(
-            "{}: unknown log format `.ws`; expected a .mat, .mcap or .csv file",
+            "{}: unknown log format `.ws`; expected a .mat, .mcap, .csv or .wpilog file",
             log.display()
         )
     );

@@ -195,7 +195,7 @@ fn bad_csv_inputs_name_file_line_column() {
     );
     assert!(e.contains("/nonexistent/x.csv"), "{e}");
     let e = format!("{:#}", read_log(Path::new("x.dat"), None).unwrap_err());
-    assert!(e.contains(".mcap or .csv"), "{e}");
+    assert!(e.contains(".mcap, .csv or .wpilog"), "{e}");
 }
 
 // ---------------------------------------------------------------------------------------------
