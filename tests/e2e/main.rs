@@ -26,6 +26,7 @@ mod mat;
 mod outputs;
 mod promises;
 mod registry;
+mod robotics_logs;
 mod run_log;
 mod schemas;
 mod serial;

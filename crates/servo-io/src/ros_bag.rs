@@ -123,9 +123,9 @@ impl<'a> Cdr<'a> {
     }
 }
 
-/// A decoded JointState: the header stamp [s] (None when zero) and per joint its position,
+/// A decoded JointState: the header stamp [ns] (None when zero) and per joint its position,
 /// velocity and effort (NaN where the array is shorter).
-pub fn joint_state(b: &[u8]) -> Result<(Option<f64>, Vec<(String, [f64; 3])>), String> {
+pub fn joint_state(b: &[u8]) -> Result<(Option<i64>, Vec<(String, [f64; 3])>), String> {
     let mut c = Cdr::new(b)?;
     let sec = c.u32("header.stamp.sec")? as i32;
     let nsec = c.u32("header.stamp.nanosec")?;
@@ -133,7 +133,7 @@ pub fn joint_state(b: &[u8]) -> Result<(Option<f64>, Vec<(String, [f64; 3])>), S
     let n = c.count(4, "name")?;
     let names: Vec<String> = (0..n).map(|_| c.string("name")).collect::<Result<_, _>>()?;
     let arrays = [c.f64s("position")?, c.f64s("velocity")?, c.f64s("effort")?];
-    let stamp = (sec != 0 || nsec != 0).then(|| f64::from(sec) + f64::from(nsec) * 1e-9);
+    let stamp = (sec != 0 || nsec != 0).then(|| i64::from(sec) * 1_000_000_000 + i64::from(nsec));
     let joints = names
         .into_iter()
         .enumerate()
@@ -163,6 +163,8 @@ pub struct Topic {
 pub struct Bag {
     pub topics: Vec<Topic>,
     pub series: Vec<Series>,
+    /// The first message's log time [ns]: times are counted from it.
+    pub base_ns: Option<i64>,
 }
 
 const JOINT_STATE: &str = "sensor_msgs/msg/JointState";
@@ -261,14 +263,18 @@ pub fn decode_into(bag: &mut Bag, bytes: &[u8], source: &str) -> anyhow::Result<
                 let Some(&k) = channels.get(&header.channel_id) else {
                     continue;
                 };
-                let log_t = header.log_time as f64 * 1e-9;
+                // Times in integer ns from the bag's first message (an epoch time in f64
+                // seconds would keep only 0.2 us).
+                let base = *bag.base_ns.get_or_insert(header.log_time as i64);
+                let secs = |ns: i64| ns.wrapping_sub(base) as f64 * 1e-9;
+                let log_t = secs(header.log_time as i64);
                 let topic = &bag.topics[k];
                 let (name, ty) = (topic.name.clone(), topic.type_name.clone());
                 let at = topic.messages;
                 let err = |e: String| anyhow!("{source}: topic {name}, message {at}: {e}");
                 let t = if ty == JOINT_STATE {
                     let (stamp, joints) = joint_state(&data).map_err(err)?;
-                    let t = stamp.unwrap_or(log_t);
+                    let t = stamp.map_or(log_t, secs);
                     for (j, vals) in joints {
                         for (f, v) in FIELDS.iter().zip(vals) {
                             if v.is_finite() {
@@ -357,8 +363,27 @@ impl Bag {
             .iter()
             .filter(|t| t.type_name.starts_with("std_msgs/msg/"))
             .collect();
-        if let [u] = scalars.as_slice() {
-            map.push_str(&format!(",u={}/data:V", u.name));
+        // The voltage: the one scalar topic, or the one named for a voltage; the current: the
+        // one named for a current.
+        let named = |words: &[&str]| -> Vec<&Topic> {
+            scalars
+                .iter()
+                .copied()
+                .filter(|t| {
+                    words
+                        .iter()
+                        .any(|w| t.name.to_ascii_lowercase().contains(w))
+                })
+                .collect()
+        };
+        match (scalars.as_slice(), named(&["volt"]).as_slice()) {
+            ([u], _) | (_, [u]) => map.push_str(&format!(",u={}/data:V", u.name)),
+            _ => {}
+        }
+        if let [i] = named(&["current", "amp"]).as_slice() {
+            if scalars.len() > 1 {
+                map.push_str(&format!(",i_a={}/data:A", i.name));
+            }
         }
         Ok(map)
     }
@@ -495,7 +520,7 @@ mod tests {
     fn decodes_a_joint_state() {
         let b = joint_state_cdr(3, 500_000_000, &["arm", "wrist"], &[0.25, -1.5]);
         let (stamp, joints) = joint_state(&b).unwrap();
-        assert_eq!(stamp, Some(3.5));
+        assert_eq!(stamp, Some(3_500_000_000));
         assert_eq!(joints[0].0, "arm");
         assert_eq!(joints[1].1[0], -1.5);
         assert!(joints[1].1[1].is_nan());

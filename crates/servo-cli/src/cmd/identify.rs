@@ -15,6 +15,7 @@
 mod options;
 mod plot;
 mod report;
+pub mod sysid;
 mod without_current;
 
 use options::parse_window;
@@ -141,6 +142,8 @@ pub struct Identify {
     /// The backend, recipes, progress and log directory of `--ramp`.
     #[command(flatten)]
     pub ramp_args: crate::cmd::identify_ramp::RampArgs,
+    #[command(flatten)]
+    pub sysid: sysid::SysIdArgs,
 }
 
 /// Everything identified, with where it came from.
@@ -148,7 +151,7 @@ pub struct Identify {
 pub type Report = Identification;
 
 impl Identify {
-    pub fn run(self) -> anyhow::Result<()> {
+    pub fn run(mut self) -> anyhow::Result<()> {
         // Where the motor's constants come from, said where they are used (the report and the
         // file written): --params, the simulated motor of --ramp --plant, or Table 2.
         let mut defaults: Option<String> = None;
@@ -265,6 +268,11 @@ impl Identify {
             };
             let mut rec = crate::io::read_log_model(path, cols, &params)
                 .with_context(|| format!("reading log {}", path.display()))?;
+            (self.sysid).collect(
+                &rec,
+                path,
+                params.effects.contains(servo_core::effects::GRAVITY),
+            );
             parts.push(self.part.apply(&mut rec, path, k, self.logs.len())?);
             records.push(rec);
             logs.push(path.clone());
@@ -319,9 +327,10 @@ impl Identify {
         if self.json {
             let mut v = self.json_report(&report, &logs, &params);
             v["log_parts"] = crate::log_part::json(&parts);
+            v["sysid"] = self.sysid.json();
             crate::json_out::emit(&v)?;
         } else {
-            out!("{}", crate::log_part::text(&parts));
+            out!("{}{}", crate::log_part::text(&parts), self.sysid.text());
             out!("{}", self.text_report(&report, &logs, &params));
         }
         if let Some(path) = &self.plot {
