@@ -213,6 +213,16 @@ pub fn is_ros2(bytes: &[u8]) -> bool {
     false
 }
 
+/// The first 64 KiB of `path` (its header, schema and channel records).
+fn prefix(path: &Path) -> anyhow::Result<Vec<u8>> {
+    use std::io::Read;
+    let mut b = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(1 << 16).read_to_end(&mut b))
+        .with_context(|| format!("reading {}", path.display()))?;
+    Ok(b)
+}
+
 /// Decodes the messages of one bag file into `bag`.
 pub fn decode_into(bag: &mut Bag, bytes: &[u8], source: &str) -> anyhow::Result<()> {
     let mut schemas: BTreeMap<u16, String> = BTreeMap::new();
@@ -309,6 +319,13 @@ pub fn decode_into(bag: &mut Bag, bytes: &[u8], source: &str) -> anyhow::Result<
 pub fn read_bag(path: &Path) -> anyhow::Result<Bag> {
     let mut bag = Bag::default();
     for f in bag_files(path)? {
+        // servo's own MCAP is told from a bag by its first records: not read twice.
+        if f == path && !is_ros2(&prefix(&f)?) {
+            return Err(crate::Error::Incompatible {
+                path: path.to_path_buf(),
+                format: "ROS 2 bag",
+            });
+        }
         let bytes = crate::mcap_read::read_mcap_bytes(&f)?;
         if !is_ros2(&bytes) {
             if f == path {

@@ -268,11 +268,7 @@ impl Identify {
             };
             let mut rec = crate::io::read_log_model(path, cols, &params)
                 .with_context(|| format!("reading log {}", path.display()))?;
-            (self.sysid).collect(
-                &rec,
-                path,
-                params.effects.contains(servo_core::effects::GRAVITY),
-            );
+            self.sysid.collect(&rec, path, &params);
             parts.push(self.part.apply(&mut rec, path, k, self.logs.len())?);
             records.push(rec);
             logs.push(path.clone());

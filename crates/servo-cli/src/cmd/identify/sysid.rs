@@ -65,11 +65,13 @@ pub struct Gains {
 }
 
 impl SysIdArgs {
-    /// Fits the gains of `rec` (read whole, before any window) when `path` is a `.wpilog`.
-    pub fn collect(&mut self, rec: &Record, path: &Path, gravity: bool) {
+    /// Fits the gains of `rec` (read whole, before any window) when `path` is a `.wpilog`;
+    /// `params` says whether the axis carries a gravity load.
+    pub fn collect(&mut self, rec: &Record, path: &Path, params: &crate::model_file::ModelFile) {
         if servo_cli_ext(path) != "wpilog" {
             return;
         }
+        let gravity = params.effects.contains(servo_core::effects::GRAVITY);
         let m = self.mechanism.unwrap_or(if gravity {
             Mechanism::Arm
         } else {
