@@ -137,7 +137,7 @@ fn bags_and_datalogs_of_a_simulated_run_identify_as_its_mcap() {
         err.contains("guessed the column map --columns theta_l=/joint_states/arm/position"),
         "{err}"
     );
-    assert!(out.contains("b_eq"), "{out}");
+    assert!(out.contains("B_eq"), "{out}");
 
     // inspect: topics, types, joints, rates; entries, types, metadata.
     let bag = run(&["inspect", &bags[0]]);
