@@ -115,7 +115,7 @@ fn log_reader_registry_takes_a_format_from_outside_in_one_line() {
             .read(&other, None, None, &servo_core::Transmission::GEAR)
             .expect_err(".xyz is nobody's")
             .to_string()
-            .ends_with("expected a .mat, .mcap, .csv or .ws file"),
+            .ends_with("expected a .mat, .mcap, .csv, .wpilog or .ws file"),
         "{:?}",
         registry
             .read(&other, None, None, &servo_core::Transmission::GEAR)

@@ -123,9 +123,12 @@ impl<'a> Cdr<'a> {
     }
 }
 
+/// One joint of a JointState: its name and its position, velocity and effort.
+pub type Joint = (String, [f64; 3]);
+
 /// A decoded JointState: the header stamp [ns] (None when zero) and per joint its position,
 /// velocity and effort (NaN where the array is shorter).
-pub fn joint_state(b: &[u8]) -> Result<(Option<i64>, Vec<(String, [f64; 3])>), String> {
+pub fn joint_state(b: &[u8]) -> Result<(Option<i64>, Vec<Joint>), String> {
     let mut c = Cdr::new(b)?;
     let sec = c.u32("header.stamp.sec")? as i32;
     let nsec = c.u32("header.stamp.nanosec")?;
@@ -506,7 +509,7 @@ mod tests {
     pub fn joint_state_cdr(sec: i32, nsec: u32, names: &[&str], pos: &[f64]) -> Vec<u8> {
         let mut b = vec![0, 1, 0, 0];
         let pad = |b: &mut Vec<u8>, n: usize| {
-            while (b.len() - 4) % n != 0 {
+            while !(b.len() - 4).is_multiple_of(n) {
                 b.push(0);
             }
         };

@@ -174,7 +174,7 @@ fn control(log: &mut DataLog, ids: &mut HashMap<u32, usize>, p: &[u8]) -> Result
 
 fn data(e: &mut Entry, ts: u64, p: &[u8]) -> Result<(), String> {
     let fixed = |n: usize| -> Result<(), String> {
-        if p.len() % n != 0 {
+        if !p.len().is_multiple_of(n) {
             Err(format!(
                 "entry `{}` ({}): a payload of {} bytes is not a multiple of {n}",
                 e.name,

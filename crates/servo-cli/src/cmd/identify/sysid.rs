@@ -253,7 +253,7 @@ mod tests {
     /// driven by ramps and steps both ways, in two parts.
     #[test]
     fn recovers_the_gains_of_an_exact_model() {
-        let (ks, kv, ka, kg, t) = (0.3, 2.0, 0.25, 0.8, 0.005);
+        let (ks, kv, ka, kg, t): (f64, f64, f64, f64, f64) = (0.3, 2.0, 0.25, 0.8, 0.005);
         let alpha = (-kv / ka * t).exp();
         let beta = (1.0 - alpha) / kv;
         let mut rec = Record::default();
