@@ -89,7 +89,7 @@ fn log_reader_registry_takes_a_format_from_outside_in_one_line() {
     assert_eq!(
         err.to_string(),
         format!(
-            "{}: unknown log format `.ws`; expected a .mat, .mcap, .csv or .json file",
+            "{}: unknown log format `.ws`; expected a .mat, .mcap, .csv, .json or .wpilog file",
             log.display()
         )
     );
@@ -115,7 +115,7 @@ fn log_reader_registry_takes_a_format_from_outside_in_one_line() {
             .read(&other, None, None, &servo_core::Transmission::GEAR)
             .expect_err(".xyz is nobody's")
             .to_string()
-            .ends_with("expected a .mat, .mcap, .csv, .json or .ws file"),
+            .ends_with("expected a .mat, .mcap, .csv, .json, .wpilog or .ws file"),
         "{:?}",
         registry
             .read(&other, None, None, &servo_core::Transmission::GEAR)

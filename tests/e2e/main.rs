@@ -27,6 +27,7 @@ mod mjcf;
 mod outputs;
 mod promises;
 mod registry;
+mod robotics_logs;
 mod run_log;
 mod schemas;
 mod serial;

@@ -20,6 +20,8 @@
 //! * [`output`]: every file servo writes: atomic replacement, numbered backups, `.partial` logs.
 //! * [`mat_read`], [`mat_path`], [`mat_log`]: MATLAB MAT-files (Level 5, -v6/-v7), MATLAB paths
 //!   in `--columns`, Simulink Scope structures.
+//! * [`ros_bag`]: ROS 2 bags (rosbag2, MCAP storage, CDR messages); [`wpilog`]: WPILib DataLogs;
+//!   [`series`]: their named series on one time grid.
 //! * [`markup`]: HTML and SVG escaped by construction (the reports and charts).
 //! * [`mjcf`]: a model file as a MuJoCo model (MJCF), with what MuJoCo cannot express.
 
@@ -50,10 +52,13 @@ pub mod model_file;
 pub mod output;
 pub mod recipe_file;
 pub mod reference_file;
+pub mod ros_bag;
+pub mod series;
 pub mod smart_log;
 pub mod smart_model;
 pub mod text_file;
 pub mod units;
+pub mod wpilog;
 
 pub use loop_msg::LoopMsg;
 pub use mcap_write::{LogEncoding, McapLog, McapLogOptions};
@@ -73,11 +78,14 @@ use std::path::Path;
 /// The log formats servo reads ([`log_reader`]), in the order of the "expected ..." message: one
 /// line per format. (Here, at the crate's root, so that the readers' files and the registry's
 /// do not import each other.)
-pub static BUILT_IN: [&dyn LogReader; 4] = [
+pub static BUILT_IN: [&dyn LogReader; 6] = [
     &crate::mat_log::MatReader,
+    // Before servo's MCAP reader: it passes on an `.mcap` that is not a ROS 2 bag.
+    &crate::ros_bag::RosBagReader,
     &crate::mcap_read::McapReader,
     &crate::csv_read::CsvReader,
     &crate::bam_log::BamReader,
+    &crate::wpilog::WpilogReader,
 ];
 
 /// What a log says about the run besides its samples.

@@ -139,11 +139,17 @@ impl Registry {
     }
 
     fn unknown(&self, path: &Path) -> Error {
-        let names: Vec<String> = self
+        let mut names: Vec<String> = Vec::new();
+        for n in self
             .readers
             .iter()
             .filter_map(|r| r.extensions().first().map(|e| format!(".{e}")))
-            .collect();
+        {
+            // Two readers of one extension (a ROS 2 bag and servo's MCAP) name it once.
+            if !names.contains(&n) {
+                names.push(n);
+            }
+        }
         let expected = match names.split_last() {
             Some((last, [])) => last.clone(),
             Some((last, rest)) => format!("{} or {last}", rest.join(", ")),

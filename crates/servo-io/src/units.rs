@@ -2,8 +2,8 @@
 //!
 //! Signal names are the ones users type in `--columns`: `time`, `u`, `theta_l`, `theta_m`,
 //! `omega_l`, `omega_m`, `i_a`, `ref`. Units (after a colon in `--columns`; SI when omitted):
-//! time `s`, `ms`, `us`; angle `rad`, `deg`, `rev`, `counts:N` (N counts per revolution); angular
-//! speed `rad/s`, `deg/s`, `rpm`, `rev/s`; voltage `V`, `mV`; current `A`, `mA`. The `enable`
+//! time `s`, `ms`, `us`; angle `rad`, `deg`, `rev` (also `rot`, WPILib's rotations), `counts:N` (N
+//! counts per revolution); angular speed `rad/s`, `deg/s`, `rpm`, `rev/s` (also `rot/s`); voltage `V`, `mV`; current `A`, `mA`. The `enable`
 //! signal (drive on / torque on: nonzero = on, 0 = off) has no unit (`flag`).
 //!
 //! On a linear axis (a screw or a belt, [`servo_core::transmission`]) the load position may be
@@ -83,8 +83,8 @@ impl Dimension {
     pub fn unit_list(self) -> &'static str {
         match self {
             Dimension::Time => "s, ms, us",
-            Dimension::Angle => "rad, deg, rev, counts:N (N counts per revolution)",
-            Dimension::AngularSpeed => "rad/s, deg/s, rpm, rev/s",
+            Dimension::Angle => "rad, deg, rev (or rot), counts:N (N counts per revolution)",
+            Dimension::AngularSpeed => "rad/s, deg/s, rpm, rev/s (or rot/s)",
             Dimension::Voltage => "V, mV",
             Dimension::Current => "A, mA",
             Dimension::Flag => "flag (no unit: nonzero = on, 0 = off)",
@@ -284,7 +284,7 @@ pub enum Unit {
 /// Why a unit string could not be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum UnitError {
-    #[error("unknown unit `{0}`; known units: s, ms, us, rad, deg, rev, counts:N, rad/s, deg/s, rpm, rev/s, V, mV, A, mA, m, mm, um, m/s, mm/s, N, flag, fraction, %")]
+    #[error("unknown unit `{0}`; known units: s, ms, us, rad, deg, rev (rot), counts:N, rad/s, deg/s, rpm, rev/s (rot/s), V, mV, A, mA, m, mm, um, m/s, mm/s, N, flag, fraction, %")]
     Unknown(String),
     #[error("`counts:N` needs N, the counts per revolution (> 0), got `{0}`")]
     BadCounts(String),
@@ -314,11 +314,11 @@ impl Unit {
             "ns" => Unit::Nanosecond,
             "rad" => Unit::Rad,
             "deg" => Unit::Deg,
-            "rev" => Unit::Rev,
+            "rev" | "rot" | "rotation" | "rotations" => Unit::Rev,
             "rad/s" | "rad_per_s" | "rad_s" => Unit::RadPerS,
             "deg/s" | "deg_per_s" | "deg_s" => Unit::DegPerS,
             "rpm" => Unit::Rpm,
-            "rev/s" | "rps" => Unit::RevPerS,
+            "rev/s" | "rps" | "rot/s" | "rotations/s" => Unit::RevPerS,
             "v" => Unit::Volt,
             "mv" => Unit::Millivolt,
             "a" => Unit::Ampere,
@@ -468,6 +468,8 @@ mod tests {
         assert!((Unit::parse("ms").unwrap().to_si(5.0) - 0.005).abs() < 1e-15);
         assert_eq!(Unit::parse("V").unwrap().to_si(3.5), 3.5);
         assert_eq!(Unit::parse("deg/s").unwrap(), Unit::DegPerS);
+        assert_eq!(Unit::parse("rot").unwrap(), Unit::Rev);
+        assert_eq!(Unit::parse("rot/s").unwrap(), Unit::RevPerS);
         assert_eq!(
             Unit::parse("counts:4096").unwrap().to_string(),
             "counts:4096"

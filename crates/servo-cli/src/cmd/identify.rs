@@ -16,6 +16,7 @@ mod options;
 mod plot;
 mod report;
 mod smart;
+pub mod sysid;
 mod without_current;
 
 use options::parse_window;
@@ -148,6 +149,7 @@ pub struct Identify {
     pub ramp_args: crate::cmd::identify_ramp::RampArgs,
     #[command(flatten)]
     pub smart: smart::SmartArgs,
+    pub sysid: sysid::SysIdArgs,
 }
 
 /// Everything identified, with where it came from.
@@ -155,7 +157,7 @@ pub struct Identify {
 pub type Report = Identification;
 
 impl Identify {
-    pub fn run(self) -> anyhow::Result<()> {
+    pub fn run(mut self) -> anyhow::Result<()> {
         if self.smart.drive.is_some() {
             return self.run_smart();
         }
@@ -275,6 +277,7 @@ impl Identify {
             };
             let mut rec = crate::io::read_log_model(path, cols, &params)
                 .with_context(|| format!("reading log {}", path.display()))?;
+            self.sysid.collect(&rec, path, &params);
             parts.push(self.part.apply(&mut rec, path, k, self.logs.len())?);
             records.push(rec);
             logs.push(path.clone());
@@ -329,9 +332,10 @@ impl Identify {
         if self.json {
             let mut v = self.json_report(&report, &logs, &params);
             v["log_parts"] = crate::log_part::json(&parts);
+            v["sysid"] = self.sysid.json();
             crate::json_out::emit(&v)?;
         } else {
-            out!("{}", crate::log_part::text(&parts));
+            out!("{}{}", crate::log_part::text(&parts), self.sysid.text());
             out!("{}", self.text_report(&report, &logs, &params));
         }
         if let Some(path) = &self.plot {

@@ -104,6 +104,7 @@ impl super::Identify {
                 "logs": logs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
                 "not_identified": [],
                 "log_parts": crate::log_part::json(parts),
+                "sysid": self.sysid.json(),
             });
             for e in &est {
                 // keys of the JSON convention (docs/schemas/README.md): quantity and SI unit
@@ -142,7 +143,7 @@ impl super::Identify {
             }
             crate::json_out::emit(&v)?;
         } else {
-            out!("{}", crate::log_part::text(parts));
+            out!("{}{}", crate::log_part::text(parts), self.sysid.text());
             for note in &notes {
                 outln!("{note}.");
             }
