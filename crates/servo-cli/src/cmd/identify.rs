@@ -149,11 +149,11 @@ pub struct Identify {
     pub ramp_args: crate::cmd::identify_ramp::RampArgs,
     #[command(flatten)]
     pub smart: smart::SmartArgs,
+    #[command(flatten)]
     pub sysid: sysid::SysIdArgs,
 }
 
-/// Everything identified, with where it came from.
-/// What the methods gave (servo_core::ident::auto).
+/// Everything identified, with where it came from (servo_core::ident::auto).
 pub type Report = Identification;
 
 impl Identify {
