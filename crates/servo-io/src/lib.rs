@@ -237,6 +237,19 @@ pub fn check_against_model(
     crate::crosscheck::check_current_units(rec, &model.params, columns)
 }
 
+/// [`read_log_on`] on the axis of `model`, the log checked against it
+/// ([`check_against_model`]: its notes join the log's).
+pub fn read_log_checked(
+    path: &Path,
+    columns: Option<&str>,
+    model: &crate::model_file::ModelFile,
+) -> anyhow::Result<(Record, LogMeta)> {
+    let (rec, mut meta) = read_log_on(path, columns, None, &model.transmission)?;
+    let notes = check_against_model(&rec, meta.columns.as_deref().or(columns), model)?;
+    meta.notes.extend(notes);
+    Ok((rec, meta))
+}
+
 /// [`read_log_axis`] on the axis and the drive of `model`: the log's input column (`u`,
 /// `i_ref`, `duty` with `v_supply`) is checked against the model's drive and turned into the
 /// input of its equivalent voltage chain ([`servo_core::drive::Drive::prepare`]).
@@ -245,11 +258,8 @@ pub fn read_log_model(
     columns: Option<&str>,
     model: &crate::model_file::ModelFile,
 ) -> anyhow::Result<Record> {
-    let (mut rec, meta) = read_log_on(path, columns, None, &model.transmission)?;
+    let (mut rec, meta) = read_log_checked(path, columns, model)?;
     for n in &meta.notes {
-        eprintln!("note: {n}");
-    }
-    for n in check_against_model(&rec, meta.columns.as_deref().or(columns), model)? {
         eprintln!("note: {n}");
     }
     model

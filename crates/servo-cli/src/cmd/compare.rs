@@ -215,17 +215,9 @@ impl Compare {
         self.part.check(self.logs.len())?;
         let mut parts = Vec::new();
         for (k, path) in self.logs.iter().enumerate() {
-            let (mut record, mut meta) = crate::io::read_log_on(
-                path,
-                self.columns.as_deref(),
-                None,
-                &model_file.transmission,
-            )
-            .with_context(|| format!("reading log {}", path.display()))?;
-            let checked =
-                crate::io::check_against_model(&record, meta.columns.as_deref(), &model_file)
+            let (mut record, mut meta) =
+                crate::io::read_log_checked(path, self.columns.as_deref(), &model_file)
                     .with_context(|| format!("reading log {}", path.display()))?;
-            meta.notes.extend(checked);
             model_file
                 .drive
                 .prepare(&mut record)

@@ -65,10 +65,7 @@ pub fn fit_log(
     columns: Option<&str>,
     time_column: Option<&str>,
 ) -> anyhow::Result<LogFit> {
-    let (record, mut meta) = crate::io::read_log_on(path, columns, None, &model.transmission)?;
-    let checked =
-        crate::io::check_against_model(&record, meta.columns.as_deref().or(columns), model)?;
-    meta.notes.extend(checked);
+    let (record, meta) = crate::io::read_log_checked(path, columns, model)?;
     let plant = model.plant()?;
     let fit = fit_model(
         std::slice::from_ref(&record),
