@@ -55,7 +55,6 @@ pub fn speed_ratio(time_s: &[f64], angle: &[f64], speed: &[f64]) -> Option<(f64,
         return None;
     }
     let m = ((WINDOW_S / dt).round() as usize).clamp(1, (n / (2 * MIN_WINDOWS)).max(1));
-    let (mut sxy, mut sxx, mut syy, mut count) = (0.0, 0.0, 0.0, 0usize);
     let mut pairs = Vec::new();
     let mut k = 0;
     while k + m < n {
@@ -69,11 +68,19 @@ pub fn speed_ratio(time_s: &[f64], angle: &[f64], speed: &[f64]) -> Option<(f64,
         k += m;
     }
     // Windows at rest carry nothing: the largest motion sets the scale.
+    ratio_through_origin(&pairs, 1e-3)
+}
+
+/// The least-squares ratio y / x through the origin over the `(x, y)` pairs whose |x| exceeds
+/// `min_share` of the largest, and the R^2 of that fit; `None` with fewer than [`MIN_WINDOWS`]
+/// such pairs or nothing to compare.
+fn ratio_through_origin(pairs: &[(f64, f64)], min_share: f64) -> Option<(f64, f64)> {
     let scale = pairs.iter().map(|(x, _)| x.abs()).fold(0.0, f64::max);
     if scale <= 0.0 {
         return None;
     }
-    for &(x, y) in pairs.iter().filter(|(x, _)| x.abs() > 1e-3 * scale) {
+    let (mut sxy, mut sxx, mut syy, mut count) = (0.0, 0.0, 0.0, 0usize);
+    for &(x, y) in pairs.iter().filter(|(x, _)| x.abs() > min_share * scale) {
         sxy += x * y;
         sxx += x * x;
         syy += y * y;
@@ -313,23 +320,8 @@ pub fn current_ratio(rec: &Record, params: &servo_core::PlantParams) -> Option<(
         }
         k += m;
     }
-    let scale = pairs.iter().map(|(x, _)| x.abs()).fold(0.0, f64::max);
-    if scale <= 0.0 {
-        return None;
-    }
-    let (mut sxy, mut sxx, mut syy, mut count) = (0.0, 0.0, 0.0, 0usize);
-    for &(x, y) in pairs.iter().filter(|(x, _)| x.abs() > 0.05 * scale) {
-        sxy += x * y;
-        sxx += x * x;
-        syy += y * y;
-        count += 1;
-    }
-    if count < MIN_WINDOWS || sxx <= 0.0 || syy <= 0.0 {
-        return None;
-    }
-    let ratio = sxy / sxx;
-    let rss = syy - 2.0 * ratio * sxy + ratio * ratio * sxx;
-    Some((ratio, 1.0 - rss / syy))
+    // Windows with little current carry mostly the constants' errors and noise.
+    ratio_through_origin(&pairs, 0.05)
 }
 
 /// Checks a voltage drive's logged current against its voltage balance ([`current_ratio`]):
