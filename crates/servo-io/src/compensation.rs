@@ -289,9 +289,15 @@ fn custom_refusal(model: &ModelFile, e: &servo_core::custom::CustomActive) -> Op
 }
 
 /// Why `e` is doubtful: a parameter that sizes it (linear in the torque or voltage) whose
-/// interval in the model file holds zero.
+/// interval in the model file holds zero. An angle (a periodic torque's phase, in rad) places
+/// the effect, it does not size it: its interval may hold zero.
 fn doubtful(model: &ModelFile, e: &servo_core::effects::Effect) -> Option<String> {
-    for spec in e.kind.params().iter().filter(|s| !s.nonlinear) {
+    for spec in e
+        .kind
+        .params()
+        .iter()
+        .filter(|s| !s.nonlinear && s.unit != "rad")
+    {
         let key = format!("{}.{}", e.kind.name(), spec.key);
         if let Some((lo, hi)) = model.interval(&key) {
             if lo < 0.0 && hi > 0.0 {

@@ -62,9 +62,9 @@ fn search_bounds_in(
 ) -> Vec<Check> {
     let model = kind.model();
     let mut out = Vec::new();
-    // The main searched parameter: the first nonlinear one (a gap, a delay, a dead band's
-    // width, a Stribeck speed); the others of an effect (a play's contact stiffness) are sized
-    // around their defaults, not over the grid.
+    // The main searched parameter: the first nonlinear one (a play's width, an input's lag, a
+    // dead band's width, a breakaway's speed); the others of an effect (a play's contact
+    // stiffness) are sized around their defaults, not over the grid.
     for spec in model.params().iter().filter(|p| p.nonlinear).take(1) {
         let search = model.search(spec.key);
         if search.scale == SearchScale::Integer {
@@ -86,7 +86,7 @@ fn search_bounds_in(
         if !(margin > 0.0) {
             continue;
         }
-        // The top only: the bottom of a grid is where an effect vanishes (a gap, a delay or a
+        // The top only: the bottom of a grid is where an effect vanishes (a play, a lag or a
         // dead band of zero: the effect's own checks judge it) or a start the refinement
         // leaves freely (a limit below the smallest searched).
         if search.no_effect_at == NoEffectAt::Last || map(v) < map(hi) - margin {
@@ -132,7 +132,7 @@ fn refit_on(
     }
     let solved = sub.fit_config(model, &[to_fit]).ok()?;
     Some(
-        sub.estimates(&solved)
+        sub.estimates_plain(&solved)
             .into_iter()
             .filter(|p| {
                 p.effect == Some(kind) || (kind == EffectKind::Coulomb && p.key == "tau_sf")

@@ -971,23 +971,46 @@ impl Dataset {
         spread
     }
 
-    /// Estimates of every parameter of a solved configuration.
+    /// Estimates of every parameter of a solved configuration, with the standard errors behind
+    /// the printed 95 % intervals (block-robust, widened by the halves' disagreement).
     pub fn estimates(&self, solved: &Solved) -> Vec<ParamEstimate> {
+        self.estimates_with(solved, true)
+    }
+
+    /// [`Dataset::estimates`] with the plain least-squares standard errors: what a comparison
+    /// of two parts of the data weighs their difference against (the printed intervals fold
+    /// in that very disagreement, so a halves check on them would pass itself).
+    pub fn estimates_plain(&self, solved: &Solved) -> Vec<ParamEstimate> {
+        self.estimates_with(solved, false)
+    }
+
+    fn estimates_with(&self, solved: &Solved, widened: bool) -> Vec<ParamEstimate> {
         let mut out = Vec::new();
         let p = &solved.plant.params;
         let refit = solved.cfg.refit_base;
-        let mech_spread = self.halves_spread(solved, &solved.mech);
-        let elec_spread = solved
-            .elec
-            .as_ref()
-            .map(|e| self.halves_spread(solved, e))
-            .unwrap_or_default();
-        let mech_se = |c: Coef| interval_se(&solved.mech, &mech_spread, c);
+        let spread = |eq: &EqSolution| {
+            if widened {
+                self.halves_spread(solved, eq)
+            } else {
+                Vec::new()
+            }
+        };
+        let mech_spread = spread(&solved.mech);
+        let elec_spread = solved.elec.as_ref().map(spread).unwrap_or_default();
+        let mech_se = |c: Coef| {
+            if widened {
+                interval_se(&solved.mech, &mech_spread, c)
+            } else {
+                solved.mech.coef(c).map(|(_, s)| s)
+            }
+        };
         let se = |eq: &EqSolution, c: Coef| {
             let s = if eq.equation == solved.mech.equation {
                 mech_se(c)
-            } else {
+            } else if widened {
                 interval_se(eq, &elec_spread, c)
+            } else {
+                eq.coef(c).map(|(_, s)| s)
             };
             s.filter(|s| *s > 0.0)
         };
@@ -995,7 +1018,7 @@ impl Dataset {
         // end ([`dataset::torque_current_f`]); that correction moves J_eq by
         // k_t w (k_e / R_eq) T_s, and its doubt is folded into J_eq's standard error.
         let j_se = se(&solved.mech, Coef::JEq).map(|s| {
-            if solved.mech.equation != Equation::Torque {
+            if solved.mech.equation != Equation::Torque || !widened {
                 return s;
             }
             let dt = self
