@@ -737,7 +737,7 @@ fn levenberg_marquardt(
     let mut lambda = 1e-2;
     let mut jac = DMatrix::<f64>::zeros(m, k);
     let mut jac_ok = false;
-    while evals + k + 1 <= max_evals {
+    while evals + k < max_evals {
         if !jac_ok {
             for (c, &i) in idx.iter().enumerate() {
                 let mut xp = x.clone();

@@ -83,7 +83,7 @@ fn search_bounds_in(
         let log = search.scale == SearchScale::Log && lo > 0.0 && v > 0.0;
         let map = |x: f64| if log { math::ln(x) } else { x };
         let margin = frac(th.search_bound_margin_pct) * (map(hi) - map(lo));
-        if !(margin > 0.0) {
+        if margin.is_nan() || margin <= 0.0 {
             continue;
         }
         // The top only: the bottom of a grid is where an effect vanishes (a play, a lag or a
